@@ -571,6 +571,12 @@ def _neg_reml(
 
 
 class _FittedGP(_Fitted):
+    """A fitted GP. Attributes for reports: length_scale (local units) and length_scale_mm, noise_ratio
+    g = sigma_n^2 / sigma_f^2, signal_var (3,) sigma_f^2 per component (mm^2), signal_std_mm and noise_std_mm (3,),
+    beta ((dim+1) x 3 trend coefficients in local coordinates). Fitting costs O(N^3) per likelihood evaluation
+    (about a hundred evaluations), prediction O(N^2) per query.
+    """
+
     method = "gp"
 
     def __init__(self, points, values, kernel: str, noise_mm: float | None):
@@ -590,7 +596,7 @@ class _FittedGP(_Fitted):
         resid = values - f @ np.linalg.lstsq(f, values, rcond=None)[0]
         size = float(np.max(np.abs(values))) if np.any(values) else 1.0
         floor = max((_GP_FLOOR_REL * size) ** 2, 1e-300)
-        self._x, self._f, self._y = x, f, values
+        self._x = x
 
         if noise_mm is None:
             lb = np.log([_GP_ELL_BOUNDS[0], _GP_G_BOUNDS[0]])
@@ -645,7 +651,6 @@ class _FittedGP(_Fitted):
         ell, h = np.exp(best_theta)
         if noise_mm is None:
             g = h
-            s2 = None
         else:
             sf2 = h
             g = noise_mm**2 / sf2 + _GP_FIXED_JITTER

@@ -9,7 +9,7 @@ fiducial) and are measured twice (start and end of the session); the 12 other gr
 from its edge.
 
 Truth: p_robot = R p_sensor + t + bias(R p_sensor + t), with R = Rz(30°) Ry(1.5°) Rx(-2°), t = (850, -320, -880)
-mm, and bias a smooth robot-side field: per axis a sum of two products of sines of wavelength 400 mm in robot x
+mm, and bias a smooth robot-side field: per axis a sum of two products of sines of wavelength 800 mm (four fiducial spacings) in robot x
 and y with seeded phases, scaled to 0.3 mm RMS (over the three components) on a 61 x 46 grid of the plate region.
 Sensor rows carry isotropic noise 0.02 mm per axis; robot-measured rows (both, fiducial) too; check rows carry the
 noise-free robot truth (rigid transform of the true point plus the same bias: the robot takes its bias to the
@@ -31,7 +31,7 @@ PARAMETERS = dict(
     rotation_deg_zyx=(30.0, 1.5, -2.0),
     translation_mm=(850.0, -320.0, -880.0),
     bias_rms_mm=0.3,
-    bias_wavelength_mm=400.0,
+    bias_wavelength_mm=800.0,
     noise_mm=0.02,
     n_targets=6,
     n_checks=10,
@@ -142,7 +142,7 @@ def make_example(**overrides):
         "scene: 4x4 fiducial grid on a 600 x 450 mm plate at sensor z = 900 mm; corners role both (measured twice),",
         "  others fiducial; 6 targets and 10 check points inside the grid.",
         "truth: robot = R sensor + t + bias(R sensor + t), R = Rz(30) Ry(1.5) Rx(-2) deg, t = (850, -320, -880) mm,",
-        "  bias = smooth sum of sine products (wavelength 400 mm) scaled to 0.3 mm RMS.",
+        f"  bias = smooth sum of sine products (wavelength {p['bias_wavelength_mm']:g} mm) scaled to 0.3 mm RMS.",
         "noise: 0.02 mm per axis on sensor rows and robot-measured rows; check rows hold the noise-free robot truth.",
     ]
     return mset, comments
