@@ -61,6 +61,16 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=int, default=0, help="seed for annealing and clustering (default 0)")
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(run=_cmd_correct)
+
+    m = sub.add_parser("simulate", help="simulate a scene: Monte Carlo statistics and synthetic data",
+                       description="Simulate a scene's robot and sensor with its error model.")
+    m.add_argument("scene", help="scene TOML file (scenes/README.md)")
+    m.add_argument("--trials", type=_positive_int, default=200, help="Monte Carlo trials (default 200)")
+    m.add_argument("--seed", type=int, default=0, help="seed of the noise, the check points and annealing (default 0)")
+    m.add_argument("--out", default=None, help="write one synthetic measured data set (measurement CSV) here")
+    m.add_argument("--layout", default=None, help="use a named layout of the scene (e.g. large_5pt)")
+    m.add_argument("--json", action="store_true", help="print one JSON object")
+    m.set_defaults(run=_cmd_simulate)
     return p
 
 
@@ -141,6 +151,63 @@ def _cmd_correct(args) -> str:
     if args.json:
         return json.dumps(result.to_json(), allow_nan=False) + "\n"
     return _table(result)
+
+
+def _simulate_table(res) -> str:
+    lines = [
+        f"scene: {res.scene}   trials: {res.trials}   seed: {res.seed}   {res.seconds:.1f} s",
+        f"points: {res.n_registration} registration, {res.n_fiducials} fiducials, {res.n_checks} check points"
+        + (f"; hidden from the sensor: {', '.join(res.occluded)}" if res.occluded else ""),
+        "",
+        "rigid registration (TRE at check points, mm) and RRBC with IDW (k=4, p=2):",
+        f"  {'strategy':<15} {'mean':>8} {'rms':>8} {'max':>8} {'r(dist)':>8}   {'rmst_rrbc':>9} {'max_rrbc':>9}",
+    ]
+    for st in res.strategies:
+        lines.append(
+            f"  {st.name:<15} {st.tre_mean_mm:8.4f} {st.tre_rms_mm:8.4f} {st.tre_max_mm:8.4f} {st.r_distance:8.3f}"
+            f"   {st.rmst_rrbc_mm:9.4f} {st.max_rrbc_mm:9.4f}"
+        )
+    if res.interpolations:
+        lines += ["", "least-squares registration + RRBC by interpolation method (mm):",
+                  f"  {'method':<8} {'rmst':>8} {'mean':>8} {'max':>8}"]
+        for it in res.interpolations:
+            lines.append(f"  {it.name:<8} {it.rmst_mm:8.4f} {it.mean_mm:8.4f} {it.max_mm:8.4f}")
+    return "\n".join(lines) + "\n"
+
+
+def _cmd_simulate(args) -> str:
+    import numpy as np
+
+    from .measurements import write_measurements
+    from .progress import ProgressBar
+    from .scene import load_scene
+    from .simulation import INTERPOLATION_NAMES, STRATEGY_NAMES, measure, measurement_set, monte_carlo, work_cell_from_scene
+
+    scene = load_scene(args.scene)
+    if args.layout:
+        scene = scene.with_layout(args.layout)
+    cell = work_cell_from_scene(scene, seed=args.seed)
+    bar = ProgressBar(args.trials * (len(STRATEGY_NAMES) + len(INTERPOLATION_NAMES)), "simulating")
+    try:
+        res = monte_carlo(cell, args.trials, seed=args.seed, progress=lambda n, label: bar.update(n, label))
+    finally:
+        bar.close()
+    if args.out:
+        data = measure(cell, np.random.default_rng([args.seed, 1]), 1)
+        mset = measurement_set(cell, data)
+        write_measurements(args.out, mset, comments=[
+            f"simulated by: rrbc simulate {args.scene} --seed {args.seed}" + (f" --layout {args.layout}" if args.layout else ""),
+            f"scene: {scene.name}; check rows carry the robot-frame truth (the command that reaches the point)",
+        ])
+    if args.json:
+        out = res.to_json()
+        if args.out:
+            out["out"] = str(args.out)
+        return json.dumps(out, allow_nan=False) + "\n"
+    text = _simulate_table(res)
+    if args.out:
+        text += f"\nwrote one simulated data set to {args.out}\n"
+    return text
 
 
 def main(argv=None) -> int:

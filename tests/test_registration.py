@@ -31,13 +31,16 @@ def test_every_strategy_recovers_exact_transform_from_noise_free_data(sensor, tr
 @settings(max_examples=40, deadline=None)
 @given(point_layouts(min_points=3, max_points=8), transforms(), st.integers(0, 10_000))
 def test_least_squares_never_reflects_on_noisy_coplanar_points(sensor, true, seed):
-    """Coplanar sets make the plain SVD solution V Uᵀ a reflection about half the time; Umeyama's fix must hold."""
+    """Coplanar sets make the plain SVD solution V Uᵀ a reflection about half the time; Umeyama's fix must hold.
+    Noise is 1e-3 of the set's RMS radius f, so the rotation error is of order σ/f ~ 1e-3 rad and a flipped
+    solution (error ~π) is far beyond the 0.05 rad bound."""
     rng = np.random.default_rng(seed)
     plate = sensor.copy()
     plate -= plate.mean(0)
     _, _, vt = np.linalg.svd(plate)
     plate = plate - np.outer(plate @ vt[2], vt[2])  # project exactly onto a plane
-    robot = true.apply(plate) + rng.normal(0, 0.5, plate.shape)
+    radius = np.sqrt(np.mean(np.sum(plate**2, axis=1)))
+    robot = true.apply(plate) + rng.normal(0, 1e-3 * radius, plate.shape)
     r = reg.least_squares(plate, robot)
     assert np.linalg.det(r.mapping.rotation) == pytest.approx(1.0)
     assert Rotation.from_matrix(r.mapping.rotation.T @ true.rotation).magnitude() < 0.05
