@@ -8,9 +8,11 @@ printed, so a failure never leaves partial output.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
+import time
 
 from .errors import InputError
 
@@ -33,6 +35,16 @@ def _positive_int(text):
         raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+def _non_negative_int(text):
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be at least 0, got {v}")
     return v
 
 
@@ -69,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--seed", type=int, default=0, help="seed of the noise, the check points and annealing (default 0)")
     m.add_argument("--out", default=None, help="write one synthetic measured data set (measurement CSV) here")
     m.add_argument("--layout", default=None, help="use a named layout of the scene (e.g. large_5pt)")
+    m.add_argument("--icp", type=_non_negative_int, default=0, metavar="N",
+                   help="also register by ICP of a simulated point cloud against the mesh, over N trials (~1 s each)")
     m.add_argument("--json", action="store_true", help="print one JSON object")
     m.set_defaults(run=_cmd_simulate)
     return p
@@ -181,15 +195,21 @@ def _cmd_simulate(args) -> str:
     from .measurements import write_measurements
     from .progress import ProgressBar
     from .scene import load_scene
-    from .simulation import INTERPOLATION_NAMES, STRATEGY_NAMES, measure, measurement_set, monte_carlo, work_cell_from_scene
+    from .simulation import (INTERPOLATION_NAMES, STRATEGY_NAMES, icp_statistics, measure, measurement_set,
+                             monte_carlo, work_cell_from_scene)
 
     scene = load_scene(args.scene)
     if args.layout:
         scene = scene.with_layout(args.layout)
     cell = work_cell_from_scene(scene, seed=args.seed)
-    bar = ProgressBar(args.trials * (len(STRATEGY_NAMES) + len(INTERPOLATION_NAMES)), "simulating")
+    start = time.perf_counter()
+    bar = ProgressBar(args.trials * (len(STRATEGY_NAMES) + len(INTERPOLATION_NAMES)) + args.icp, "simulating")
     try:
         res = monte_carlo(cell, args.trials, seed=args.seed, progress=lambda n, label: bar.update(n, label))
+        if args.icp:
+            icp = icp_statistics(scene, cell, args.icp, seed=args.seed, progress=lambda n, label: bar.update(n, label))
+            res = dataclasses.replace(res, strategies=res.strategies + (icp,), icp_trials=args.icp,
+                                      seconds=time.perf_counter() - start)
     finally:
         bar.close()
     if args.out:
