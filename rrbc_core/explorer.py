@@ -1,0 +1,626 @@
+"""The interactive RRBC session behind the browser app: everything the app shows is computed (and tested) here.
+
+A session holds an editable layout (registration points, fiducials, targets: ids and positions) and settings
+(registration strategy, interpolation and its parameters, noise and bias sizes, seed, excluded fiducials).
+`evaluate()` runs the nine RRBC steps on the current layout and returns an `Evaluation`: the registration,
+fiducial corrections, each target's correction, where it lands rigid-only and with RRBC, its error against
+the truth (scene mode), whether it is extrapolated, and the fiducials' hull.
+
+Two sources:
+- a scene (`from_scene`): positions are PHYSICAL points in the robot frame (mm). Each point is "measured"
+  from the scene's error model: sensor s = T⁻¹(p) + b·β_s(p) + n·ν_s, robot b = p + b·β_r(p) + n·η_r, truth
+  (the command that reaches p) = p + b·β_r(p), with b, n the bias and noise sizes (multipliers, 1 = the
+  scene's model). Bias is re-evaluated wherever a point moves; a point's noise is drawn from a generator seeded
+  by (seed, point id), so dragging a point keeps its noise draw and a new seed redraws every point.
+- a measurement file (`from_measurements`): readings as measured, no error model. Registration points and
+  fiducials cannot be re-measured elsewhere (moving them is refused); a target can be moved: its new robot-frame
+  position is taken to the sensor frame with the current registration, and the interpolated correction and
+  (for `gp`) its standard deviation there are reported. Check rows keep their truth while not moved.
+
+Display positions are robot-frame (mm): scene mode shows physical points, measurement mode shows robot
+readings (registration, fiducials) and rigidly mapped sensor readings (targets).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import interpolation, metrics, registration
+from .errors import InputError
+from .rrbc import correct_points, fiducial_corrections
+
+LAYERS = ("mesh", "frames", "registration", "fiducials", "corrections", "hull", "targets", "regions", "landing",
+          "labels", "heatmap")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What the user controls. noise_scale/bias_scale multiply the scene's random/deterministic error terms."""
+
+    registration: str = "least-squares"
+    interpolation: str = "idw"
+    neighbors: int = 4
+    power: float = 2.0
+    smoothing: float = 0.0
+    noise_scale: float = 1.0
+    bias_scale: float = 1.0
+    seed: int = 0
+    excluded: frozenset = frozenset()
+
+    def __post_init__(self):
+        if self.registration not in registration.STRATEGIES:
+            raise InputError(f"unknown registration '{self.registration}': choose one of {', '.join(registration.STRATEGIES)}")
+        if self.interpolation not in interpolation.METHODS:
+            raise InputError(f"unknown interpolation '{self.interpolation}': choose one of {', '.join(interpolation.METHODS)}")
+        for name in ("noise_scale", "bias_scale", "smoothing"):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v < 0:
+                raise InputError(f"{name} must be a finite number >= 0, got {v}")
+        if int(self.neighbors) < 1 or not self.power > 0:
+            raise InputError("neighbors must be >= 1 and power > 0")
+        object.__setattr__(self, "excluded", frozenset(self.excluded))
+
+    def interpolator(self):
+        if self.interpolation == "idw":
+            return interpolation.IDW(k=int(self.neighbors), power=float(self.power))
+        if self.interpolation == "tps":
+            return interpolation.TPS(smoothing=float(self.smoothing))
+        return interpolation.make_interpolator(self.interpolation)
+
+
+@dataclass(frozen=True, eq=False)
+class Group:
+    """Points of one kind: ids and robot-frame display positions (M, 3) mm."""
+
+    ids: tuple
+    positions: np.ndarray
+
+    def index(self, pid: str) -> int:
+        try:
+            return self.ids.index(pid)
+        except ValueError:
+            raise InputError(f"no point '{pid}' here; known: {', '.join(self.ids[:12])}") from None
+
+
+@dataclass(frozen=True, eq=False)
+class Readings:
+    """Measurements of M points: sensor (M,3) sensor frame, robot (M,3) robot frame (NaN if none), truth (M,3)
+    robot-frame command that reaches the point (NaN if unknown)."""
+
+    sensor: np.ndarray
+    robot: np.ndarray
+    truth: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class TargetResult:
+    """Per target (M,): robot-frame arrays (M,3) mm unless noted."""
+
+    ids: tuple
+    positions: np.ndarray  # display position
+    sensor: np.ndarray  # sensor reading (sensor frame)
+    correction: np.ndarray  # interpolated correction (sensor frame)
+    correction_robot: np.ndarray  # the same vector in the robot frame (R @ correction), for drawing
+    correction_std: np.ndarray | None  # (M,3) sensor frame, gp only
+    robot_rigid: np.ndarray
+    robot_rrbc: np.ndarray
+    truth: np.ndarray  # NaN where unknown
+    error_rigid: np.ndarray  # (M,) NaN where unknown
+    error_rrbc: np.ndarray
+    extrapolated: np.ndarray  # (M,) bool
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """The result of the nine RRBC steps for the current layout and settings (see the module docstring)."""
+
+    settings: Settings
+    registration: registration.Registration
+    registration_ids: tuple
+    registration_positions: np.ndarray
+    registration_readings: Readings
+    fiducial_ids: tuple
+    fiducial_positions: np.ndarray
+    fiducial_readings: Readings
+    included: np.ndarray  # (N,) bool
+    corrections: np.ndarray  # (N,3) sensor frame; NaN rows for excluded fiducials
+    corrections_robot: np.ndarray  # (N,3) robot frame, for drawing
+    targets: TargetResult
+    hull_edges: np.ndarray  # (E,2,3) robot frame: edges of the included fiducials' convex hull
+    summary: dict
+
+
+def _seed_for(seed: int, pid: str) -> list[int]:
+    return [int(seed) & 0x7FFFFFFF, zlib.crc32(pid.encode("utf-8"))]
+
+
+class ExplorerSession:
+    """Mutable session state (owned by one app); every method that changes it returns the new Evaluation."""
+
+    def __init__(self, *, kind, name, layout, settings, scene=None, mset=None, readings=None, regions=None,
+                 mesh_path=None, sensor_to_robot=None):
+        self.kind = kind  # "scene" or "measurements"
+        self.name = name
+        self.layout = layout  # dict: "registration"/"fiducials"/"targets" -> Group
+        self.settings = settings
+        self.scene = scene
+        self.mset = mset
+        self.regions = regions or {}  # target id -> Region (scene mode)
+        self.mesh_path = mesh_path
+        self.sensor_to_robot = sensor_to_robot  # true pose (scene mode) or None
+        self._readings = readings or {}  # (kind, id) -> (position key, sensor, robot, truth) at scale 1 parts
+        self._last: Evaluation | None = None
+        self._heat_cache: dict = {}
+
+    # ------------------------------------------------------------------------------------------------ sources
+    @classmethod
+    def from_scene(cls, scene, settings: Settings | None = None) -> "ExplorerSession":
+        layout = {
+            "registration": Group(tuple(scene.registration.ids), np.array(scene.registration.positions, float)),
+            "fiducials": Group(tuple(scene.fiducials.ids), np.array(scene.fiducials.positions, float)),
+            "targets": Group(tuple(t.id for t in scene.targets), np.array([t.position for t in scene.targets], float)),
+        }
+        return cls(kind="scene", name=scene.name, layout=layout, settings=settings or Settings(seed=scene.seed),
+                   scene=scene, regions={t.id: t.region for t in scene.targets}, mesh_path=scene.mesh_path,
+                   sensor_to_robot=scene.sensor_to_robot)
+
+    @classmethod
+    def from_measurements(cls, mset, mesh_path=None, settings: Settings | None = None) -> "ExplorerSession":
+        reg = mset.points("registration")
+        fid = mset.points("fiducial")
+        tgt = mset.points("target")
+        chk = mset.points("check")
+        settings = settings or Settings()
+        readings = {}
+        for kind, g in (("registration", reg), ("fiducials", fid)):
+            for i, pid in enumerate(g.ids):
+                readings[(kind, pid)] = (g.sensor[i], g.robot[i], np.full(3, np.nan))
+        ids = tuple(tgt.ids) + tuple(chk.ids)
+        sensor = np.vstack([tgt.sensor.reshape(-1, 3), chk.sensor.reshape(-1, 3)])
+        truth = np.vstack([np.full((len(tgt.ids), 3), np.nan), chk.robot.reshape(-1, 3)])
+        for i, pid in enumerate(ids):
+            readings[("targets", pid)] = (sensor[i], np.full(3, np.nan), truth[i])
+        reg_map = registration.register(settings.registration, reg.sensor, reg.robot,
+                                        **_reg_options(settings))
+        layout = {
+            "registration": Group(tuple(reg.ids), np.array(reg.robot, float)),
+            "fiducials": Group(tuple(fid.ids), np.array(fid.robot, float)),
+            "targets": Group(ids, reg_map.mapping.apply(sensor) if len(ids) else np.zeros((0, 3))),
+        }
+        return cls(kind="measurements", name=mset.source, layout=layout, settings=settings, mset=mset,
+                   readings=readings, mesh_path=mesh_path)
+
+    # ------------------------------------------------------------------------------------------- measuring
+    def _measure_scene(self, kind: str, ids, positions, noise: bool = True) -> Readings:
+        """Scene mode: readings of points at `positions` (robot frame), noise seeded per id, scaled by settings
+        (noise=False: the expected readings, bias only)."""
+        from .errormodels import PointSet
+        from .kinematics import tool_down
+
+        s = self.settings
+        sc = self.scene
+        positions = np.asarray(positions, float).reshape(-1, 3)
+        n = len(positions)
+        t_true = self.sensor_to_robot
+        yaw = np.full(n, sc.tool_yaw_deg)
+        pts = PointSet(robot=positions, sensor=t_true.apply_inverse(positions),
+                       time=np.zeros(n), tool_rotation=np.array([tool_down(y) for y in yaw]).reshape(n, 3, 3),
+                       joint_seed=sc.joint_seed)
+        model = sc.error_model
+        det = _split(model, False)
+        rnd = _split(model, True)
+        bias_r = det.sample(pts, "robot", None, 1)[0] if det.robot else np.zeros((n, 3))
+        bias_s = det.sample(pts, "sensor", None, 1)[0] if det.sensor else np.zeros((n, 3))
+        noise_r = np.zeros((n, 3))
+        noise_s = np.zeros((n, 3))
+        if noise and (rnd.robot or rnd.sensor):
+            for i, pid in enumerate(ids):
+                one = PointSet(robot=positions[i:i + 1], sensor=pts.sensor[i:i + 1], time=np.zeros(1),
+                               tool_rotation=pts.tool_rotation[i:i + 1], joint_seed=sc.joint_seed)
+                rng = np.random.default_rng(_seed_for(s.seed, f"{kind}:{pid}"))
+                if rnd.sensor:
+                    noise_s[i] = rnd.sample(one, "sensor", rng, 1)[0, 0]
+                if rnd.robot:
+                    noise_r[i] = rnd.sample(one, "robot", rng, 1)[0, 0]
+        sensor = pts.sensor + s.bias_scale * bias_s + s.noise_scale * noise_s
+        robot = positions + s.bias_scale * bias_r + s.noise_scale * noise_r
+        truth = positions + s.bias_scale * bias_r
+        return Readings(sensor, robot, truth)
+
+    def _readings_for(self, kind: str) -> Readings:
+        g = self.layout[kind]
+        if self.kind == "measurements":
+            rows = [self._readings[(kind, pid)] for pid in g.ids]
+            if not rows:
+                return Readings(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+            return Readings(*(np.array([r[k] for r in rows], float).reshape(-1, 3) for k in range(3)))
+        key_settings = (self.settings.seed, self.settings.noise_scale, self.settings.bias_scale)
+        out_s, out_r, out_t = [], [], []
+        missing = []
+        for i, pid in enumerate(g.ids):
+            key = (kind, pid)
+            cached = self._readings.get(key)
+            if cached is None or cached[0] != (key_settings, tuple(g.positions[i])):
+                missing.append(i)
+        if missing:
+            fresh = self._measure_scene(kind, [g.ids[i] for i in missing], g.positions[missing])
+            for j, i in enumerate(missing):
+                self._readings[(kind, g.ids[i])] = ((key_settings, tuple(g.positions[i])),
+                                                   fresh.sensor[j], fresh.robot[j], fresh.truth[j])
+        for pid in g.ids:
+            _, a, b, c = self._readings[(kind, pid)]
+            out_s.append(a), out_r.append(b), out_t.append(c)
+        n = len(g.ids)
+        return Readings(np.array(out_s).reshape(n, 3), np.array(out_r).reshape(n, 3), np.array(out_t).reshape(n, 3))
+
+    # -------------------------------------------------------------------------------------------- editing
+    def move(self, kind: str, pid: str, position) -> Evaluation:
+        """Move a point (robot frame, mm) and re-evaluate. kind: registration, fiducials or targets."""
+        if kind not in self.layout:
+            raise InputError(f"unknown point kind '{kind}': registration, fiducials or targets")
+        p = np.asarray(position, float).reshape(3)
+        if not np.all(np.isfinite(p)):
+            raise InputError("a position must be 3 finite numbers (mm)")
+        g = self.layout[kind]
+        i = g.index(pid)
+        old_layout, old_readings = self.layout, dict(self._readings)
+        if self.kind == "measurements":
+            if kind != "targets":
+                raise InputError(
+                    "measured registration points and fiducials cannot be moved: there is no error model to "
+                    "re-measure them elsewhere (load a scene to experiment with placement)")
+            mapping = (self._last or self.evaluate()).registration.mapping
+            sensor = mapping.apply_inverse(p[None])[0]
+            self._readings[(kind, pid)] = (sensor, np.full(3, np.nan), np.full(3, np.nan))
+        positions = g.positions.copy()
+        positions[i] = p
+        self.layout = {**self.layout, kind: Group(g.ids, positions)}
+        try:
+            return self.evaluate()
+        except InputError:  # e.g. out of the arm's reach: keep the last good layout
+            self.layout, self._readings = old_layout, old_readings
+            raise
+
+    def set_excluded(self, pid: str, excluded: bool) -> Evaluation:
+        self.layout["fiducials"].index(pid)
+        ex = set(self.settings.excluded)
+        (ex.add if excluded else ex.discard)(pid)
+        return self.update(excluded=frozenset(ex))
+
+    def update(self, **changes) -> Evaluation:
+        """Change settings (names as in Settings) and re-evaluate; invalid values raise InputError and leave
+        the session unchanged."""
+        new = dataclasses.replace(self.settings, **changes)
+        if self.kind == "measurements" and (new.noise_scale != 1.0 or new.bias_scale != 1.0):
+            raise InputError("noise and bias sizes apply to scenes; measured data are what they are")
+        old = self.settings
+        self.settings = new
+        try:
+            return self.evaluate()
+        except InputError:
+            self.settings = old
+            raise
+
+    # ----------------------------------------------------------------------------------------- evaluating
+    def evaluate(self) -> Evaluation:
+        s = self.settings
+        reg_r = self._readings_for("registration")
+        fid_r = self._readings_for("fiducials")
+        tgt_r = self._readings_for("targets")
+        reg = registration.register(s.registration, reg_r.sensor, reg_r.robot, **_reg_options(s))
+        fids = self.layout["fiducials"]
+        included = np.array([pid not in s.excluded for pid in fids.ids], dtype=bool)
+        corr = np.full((len(fids.ids), 3), np.nan)
+        if np.any(included):
+            corr[included] = fiducial_corrections(reg.mapping, fid_r.sensor[included], fid_r.robot[included])
+            fitted = s.interpolator().fit(fid_r.sensor[included], corr[included])
+        elif s.interpolation != "none":
+            raise InputError("every fiducial is excluded: include at least one, or choose interpolation 'none'")
+        else:
+            fitted = interpolation.NoCorrection().fit(reg_r.sensor, np.zeros_like(reg_r.sensor))
+        rot = _display_rotation(reg.mapping)
+        corr_robot = corr @ rot.T
+        tg = self.layout["targets"]
+        if len(tg.ids):
+            cp = correct_points(reg.mapping, fitted, tgt_r.sensor)
+            err_rigid = np.linalg.norm(cp.robot_rigid - tgt_r.truth, axis=1)
+            err_rrbc = np.linalg.norm(cp.robot_rrbc - tgt_r.truth, axis=1)
+            targets = TargetResult(tg.ids, tg.positions, tgt_r.sensor, cp.correction, cp.correction @ rot.T,
+                                   cp.correction_std, cp.robot_rigid, cp.robot_rrbc, tgt_r.truth, err_rigid,
+                                   err_rrbc, cp.extrapolated)
+        else:
+            z = np.zeros((0, 3))
+            targets = TargetResult((), z, z, z, z, None, z, z, z, np.zeros(0), np.zeros(0), np.zeros(0, bool))
+        hull = hull_edges(fids.positions[included]) if np.count_nonzero(included) >= 3 else np.zeros((0, 2, 3))
+        known = np.isfinite(targets.error_rigid)
+        summary = {
+            "fre_rms_mm": reg.fre_rms_mm,
+            "targets": len(tg.ids),
+            "scored": int(np.count_nonzero(known)),
+            "rmst_rigid_mm": metrics.rmst(targets.error_rigid[known]) if np.any(known) else None,
+            "rmst_rrbc_mm": metrics.rmst(targets.error_rrbc[known]) if np.any(known) else None,
+            "max_rigid_mm": float(targets.error_rigid[known].max()) if np.any(known) else None,
+            "max_rrbc_mm": float(targets.error_rrbc[known].max()) if np.any(known) else None,
+            "extrapolated": [pid for pid, e in zip(tg.ids, targets.extrapolated) if e],
+            "fiducials_used": int(np.count_nonzero(included)),
+        }
+        ev = Evaluation(s, reg, self.layout["registration"].ids, self.layout["registration"].positions, reg_r,
+                        fids.ids, fids.positions, fid_r, included, corr, corr_robot, targets, hull, summary)
+        self._last = ev
+        return ev
+
+    @property
+    def last(self) -> Evaluation:
+        return self._last or self.evaluate()
+
+    # ---------------------------------------------------------------------------------------------- heat map
+    def heat_map(self, samples_per_target: int = 200) -> "HeatMap":
+        """Predicted error over the targets' regions of variability (scene mode): samples (seeded, fixed per
+        target id) inside each region, each measured noise-free (expected sensor reading incl. sensor bias) and
+        corrected with the current fiducials; errors against the truth, rigid and RRBC. In measurement mode
+        (no truth) samples around each target report the interpolated correction's size and, for gp, its
+        standard deviation instead (error fields NaN)."""
+        ev = self.last
+        s = self.settings
+        tg = self.layout["targets"]
+        pos, owner, sens, truth = [], [], [], []
+        for i, pid in enumerate(tg.ids):
+            key = (tuple(tg.positions[i]), s.bias_scale, samples_per_target, s.seed)
+            cached = self._heat_cache.get(pid)
+            if cached is None or cached[0] != key:
+                region = self.regions.get(pid)
+                rng = np.random.default_rng(_seed_for(0, f"heat:{pid}"))
+                if region is not None:
+                    local = region.sample(rng, samples_per_target) - region.center
+                else:
+                    local = rng.normal(0.0, 5.0, (samples_per_target, 3))
+                p = tg.positions[i] + local
+                if self.kind == "scene":
+                    r = self._measure_scene("heat", [f"{pid}.{k}" for k in range(len(p))], p, noise=False)
+                    cached = (key, p, r.sensor, r.truth)
+                else:
+                    cached = (key, p, None, np.full_like(p, np.nan))
+                self._heat_cache[pid] = cached
+            _, p, sensor_i, truth_i = cached
+            if sensor_i is None:  # measurement mode: the sample's sensor position under the current registration
+                sensor_i = ev.registration.mapping.apply_inverse(p)
+            pos.append(p), sens.append(sensor_i), truth.append(truth_i)
+            owner += [pid] * len(p)
+        pos = np.vstack(pos) if pos else np.zeros((0, 3))
+        sensor = np.vstack(sens) if sens else np.zeros((0, 3))
+        truth = np.vstack(truth) if truth else np.zeros((0, 3))
+        fitted = self._fitted(ev)
+        cp = correct_points(ev.registration.mapping, fitted, sensor)
+        e_rigid = np.linalg.norm(cp.robot_rigid - truth, axis=1)
+        e_rrbc = np.linalg.norm(cp.robot_rrbc - truth, axis=1)
+        std = None if cp.correction_std is None else np.linalg.norm(cp.correction_std, axis=1)
+        return HeatMap(pos, tuple(owner), e_rigid, e_rrbc, np.linalg.norm(cp.correction, axis=1), std,
+                       cp.extrapolated)
+
+    def _fitted(self, ev: Evaluation):
+        inc = ev.included
+        if np.any(inc):
+            return self.settings.interpolator().fit(ev.fiducial_readings.sensor[inc], ev.corrections[inc])
+        return interpolation.NoCorrection().fit(ev.registration_readings.sensor,
+                                                np.zeros_like(ev.registration_readings.sensor))
+
+    # ----------------------------------------------------------------------------------------- Monte Carlo
+    def monte_carlo(self, trials: int = 200, checks_per_target: int = 10, seed: int | None = None) -> "MonteCarloPlots":
+        """Scene mode: Monte Carlo of the current layout and settings (noise redrawn, bias fixed, both scaled);
+        errors at check points sampled in the targets' regions, rigid vs RRBC, and their distance from the
+        scene's distance origin. Uses the current registration strategy and interpolation."""
+        from .simulation import WorkCell, measure, trial_errors
+
+        if self.kind != "scene":
+            raise InputError("Monte Carlo needs a scene (an error model); measured data have none")
+        from .kinematics import tool_down
+
+        s = self.settings
+        sc = self.scene
+        rng = np.random.default_rng(s.seed if seed is None else seed)
+        ids, roles, pos = [], [], []
+        reg_ids = set(self.layout["registration"].ids)
+        fid = self.layout["fiducials"]
+        for pid, p in zip(self.layout["registration"].ids, self.layout["registration"].positions):
+            both = pid in fid.ids and pid not in s.excluded
+            ids.append(pid), roles.append("both" if both else "registration"), pos.append(p)
+        for pid, p in zip(fid.ids, fid.positions):
+            if pid not in reg_ids and pid not in s.excluded:
+                ids.append(pid), roles.append("fiducial"), pos.append(p)
+        for pid, p in zip(self.layout["targets"].ids, self.layout["targets"].positions):
+            region = self.regions.get(pid)
+            for k in range(checks_per_target):
+                q = p if region is None else p + region.sample(rng, 1)[0] - region.center
+                ids.append(f"{pid}.c{k}"), roles.append("check"), pos.append(q)
+        robot = np.array(pos, float).reshape(-1, 3)
+        cell = WorkCell(name=sc.name, sensor_to_robot=sc.sensor_to_robot, ids=tuple(ids), roles=tuple(roles),
+                        robot=robot, time=np.arange(len(ids)) * float(sc.measurement_interval_s),
+                        tool_rotation=np.broadcast_to(tool_down(sc.tool_yaw_deg), (len(ids), 3, 3)).copy(),
+                        error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale), joint_seed=sc.joint_seed,
+                        distance_origin=np.asarray(sc.distance_origin, float))
+        m = measure(cell, rng, trials)
+        opts = {"k": int(s.neighbors), "power": float(s.power)} if s.interpolation == "idw" else (
+            {"smoothing": float(s.smoothing)} if s.interpolation == "tps" else {})
+        e = trial_errors(cell, m, s.registration, s.interpolation,
+                         seeds=rng.integers(0, 2**31 - 1, trials), **opts)
+        chk = cell.index("check")
+        dist = np.linalg.norm(cell.robot[chk] - cell.distance_origin, axis=1)
+        return MonteCarloPlots(e.rigid, e.rrbc, dist, trials)
+
+    # -------------------------------------------------------------------------------------------- exporting
+    def export_measurements(self):
+        """The current data as a MeasurementSet (scene mode: targets become `check` rows with their truth, so
+        `rrbc correct` on the export reproduces the app's numbers)."""
+        from .measurements import MeasurementSet
+
+        ev = self.last
+        ids, roles, sensor, robot = [], [], [], []
+        fid_ids = set(ev.fiducial_ids)
+        for i, pid in enumerate(ev.registration_ids):
+            both = pid in fid_ids and pid not in self.settings.excluded
+            ids.append(pid), roles.append("both" if both else "registration")
+            sensor.append(ev.registration_readings.sensor[i]), robot.append(ev.registration_readings.robot[i])
+        reg_ids = set(ev.registration_ids)
+        for i, pid in enumerate(ev.fiducial_ids):
+            if pid in reg_ids or not ev.included[i]:
+                continue
+            ids.append(pid), roles.append("fiducial")
+            sensor.append(ev.fiducial_readings.sensor[i]), robot.append(ev.fiducial_readings.robot[i])
+        t = ev.targets
+        for i, pid in enumerate(t.ids):
+            known = np.all(np.isfinite(t.truth[i]))
+            ids.append(pid), roles.append("check" if known else "target")
+            sensor.append(t.sensor[i]), robot.append(t.truth[i] if known else np.full(3, np.nan))
+        n = len(ids)
+        return MeasurementSet(ids=tuple(ids), roles=tuple(roles), sensor=np.array(sensor).reshape(n, 3),
+                              robot=np.array(robot).reshape(n, 3), time=np.full(n, np.nan),
+                              lines=tuple(0 for _ in ids), source=f"<{self.name}>")
+
+    def export_json(self) -> dict:
+        """Results as `rrbc correct --json` would give them for `export_measurements()`, plus the settings."""
+        from .pipeline import CorrectionOptions, correct_measurements
+
+        s = self.settings
+        opts = CorrectionOptions(registration=s.registration, interpolation=s.interpolation,
+                                 neighbors=int(s.neighbors) if s.interpolation == "idw" else None,
+                                 power=float(s.power) if s.interpolation == "idw" else None, seed=s.seed,
+                                 interpolation_options={"smoothing": s.smoothing} if s.interpolation == "tps" else {})
+        out = correct_measurements(self.export_measurements(), opts).to_json()
+        out["settings"] = {**dataclasses.asdict(s), "excluded": sorted(s.excluded)}
+        out["source"] = {"kind": self.kind, "name": self.name}
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class HeatMap:
+    """Samples (S,3) robot frame with their target, predicted errors rigid/RRBC (S,) mm (NaN without truth),
+    the correction size (S,) mm, its gp std (S,) or None, and extrapolation flags."""
+
+    positions: np.ndarray
+    target: tuple
+    error_rigid: np.ndarray
+    error_rrbc: np.ndarray
+    correction_mm: np.ndarray
+    std_mm: np.ndarray | None
+    extrapolated: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class MonteCarloPlots:
+    """Errors (T, C) mm at C check points over T trials, rigid and RRBC, and the checks' distances (C,)."""
+
+    rigid: np.ndarray
+    rrbc: np.ndarray
+    distance: np.ndarray
+    trials: int
+
+    def histogram(self, bins: int = 30) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(bin centres, rigid counts, RRBC counts) on a shared range, as fractions of all samples."""
+        hi = float(max(self.rigid.max(), self.rrbc.max(), 1e-9))
+        edges = np.linspace(0.0, hi, bins + 1)
+        a, _ = np.histogram(self.rigid.ravel(), edges)
+        b, _ = np.histogram(self.rrbc.ravel(), edges)
+        n = self.rigid.size
+        return 0.5 * (edges[1:] + edges[:-1]), a / n, b / n
+
+    def by_distance(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(distance sorted, mean rigid error, mean RRBC error) per check point."""
+        order = np.argsort(self.distance)
+        return self.distance[order], self.rigid.mean(0)[order], self.rrbc.mean(0)[order]
+
+
+def hull_edges(points) -> np.ndarray:
+    """Edges (E, 2, 3) of the convex hull of points (robot frame, mm): 3-D hull facets' edges, or the polygon
+    in the best-fit plane for (nearly) coplanar points, or the segment for collinear ones."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    from .geometry import LocalFrame
+
+    p = np.asarray(points, float)
+    if len(p) < 2:
+        return np.zeros((0, 2, 3))
+    frame = LocalFrame.of(p)
+    if frame.dim == 3:
+        try:
+            hull = ConvexHull(p)
+            edges = set()
+            for simplex in hull.simplices:
+                for a, b in ((0, 1), (1, 2), (0, 2)):
+                    i, j = sorted((simplex[a], simplex[b]))
+                    edges.add((i, j))
+            # drop edges inside coplanar facets (shared by two facets with the same normal)
+            keep = _feature_edges(hull, edges)
+            return np.array([[p[i], p[j]] for i, j in keep]).reshape(-1, 2, 3)
+        except QhullError:
+            pass
+    if frame.dim >= 2:
+        try:
+            hull = ConvexHull(frame.to_local(p)[:, :2])
+            v = hull.vertices
+            return np.array([[p[v[k]], p[v[(k + 1) % len(v)]]] for k in range(len(v))])
+        except QhullError:
+            pass
+    local = frame.to_local(p)[:, 0] if frame.dim >= 1 else np.zeros(len(p))
+    return np.array([[p[np.argmin(local)], p[np.argmax(local)]]])
+
+
+def _feature_edges(hull, edges):
+    normals = hull.equations[:, :3]
+    owners: dict = {}
+    for f, simplex in enumerate(hull.simplices):
+        for a, b in ((0, 1), (1, 2), (0, 2)):
+            owners.setdefault(tuple(sorted((simplex[a], simplex[b]))), []).append(f)
+    keep = []
+    for e in edges:
+        fs = owners.get(e, [])
+        if len(fs) == 2 and float(np.dot(normals[fs[0]], normals[fs[1]])) > 1 - 1e-9:
+            continue
+        keep.append(e)
+    return sorted(keep)
+
+
+def _display_rotation(mapping) -> np.ndarray:
+    return np.asarray(mapping.rotation, float)
+
+
+def _reg_options(s: Settings) -> dict:
+    return {"seed": int(s.seed)} if s.registration in ("annealing", "clustering") else {}
+
+
+def _split(model, random: bool):
+    from .errormodels import ErrorModel
+
+    return ErrorModel(robot=tuple(t for t in model.robot if t.random == random),
+                      sensor=tuple(t for t in model.sensor if t.random == random))
+
+
+@dataclass(frozen=True)
+class _Scaled:
+    """An error term whose displacements are multiplied by `factor` (noise or bias size in the app)."""
+
+    term: object
+    factor: float
+    kind: str = field(default="")
+    random: bool = field(default=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "kind", self.term.kind)
+        object.__setattr__(self, "random", self.term.random)
+
+    def sample(self, points, side, rng, trials):
+        return self.factor * self.term.sample(points, side, rng, trials)
+
+
+def _scaled(model, noise: float, bias: float):
+    """The model with random terms scaled by `noise` and deterministic ones by `bias`."""
+    from .errormodels import ErrorModel
+
+    def sc(t):
+        f = noise if t.random else bias
+        return t if f == 1.0 else _Scaled(t, f)
+
+    return ErrorModel(robot=tuple(sc(t) for t in model.robot), sensor=tuple(sc(t) for t in model.sensor))
