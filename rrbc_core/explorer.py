@@ -155,6 +155,7 @@ class ExplorerSession:
         self._readings = readings or {}  # (kind, id) -> (position key, sensor, robot, truth) at scale 1 parts
         self._last: Evaluation | None = None
         self._heat_cache: dict = {}
+        self._cache: dict = {}
 
     # ------------------------------------------------------------------------------------------------ sources
     @classmethod
@@ -311,13 +312,15 @@ class ExplorerSession:
         reg_r = self._readings_for("registration")
         fid_r = self._readings_for("fiducials")
         tgt_r = self._readings_for("targets")
-        reg = registration.register(s.registration, reg_r.sensor, reg_r.robot, **_reg_options(s))
+        reg = self._cached("registration", (s.registration, s.seed, reg_r.sensor.tobytes(), reg_r.robot.tobytes()),
+                           lambda: registration.register(s.registration, reg_r.sensor, reg_r.robot, **_reg_options(s)))
         fids = self.layout["fiducials"]
         included = np.array([pid not in s.excluded for pid in fids.ids], dtype=bool)
         corr = np.full((len(fids.ids), 3), np.nan)
         if np.any(included):
             corr[included] = fiducial_corrections(reg.mapping, fid_r.sensor[included], fid_r.robot[included])
-            fitted = s.interpolator().fit(fid_r.sensor[included], corr[included])
+            key = (s.interpolator(), fid_r.sensor[included].tobytes(), corr[included].tobytes())
+            fitted = self._cached("fitted", key, lambda: s.interpolator().fit(fid_r.sensor[included], corr[included]))
         elif s.interpolation != "none":
             raise InputError("every fiducial is excluded: include at least one, or choose interpolation 'none'")
         else:
@@ -352,6 +355,16 @@ class ExplorerSession:
                         fids.ids, fids.positions, fid_r, included, corr, corr_robot, targets, hull, summary)
         self._last = ev
         return ev
+
+    def _cached(self, name: str, key, compute):
+        """One-entry cache per name: a drag that leaves the registration points (or the fiducials) unchanged
+        reuses the registration (or the fitted interpolator) instead of recomputing it."""
+        hit = self._cache.get(name)
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        value = compute()
+        self._cache[name] = (key, value)
+        return value
 
     @property
     def last(self) -> Evaluation:
@@ -404,7 +417,9 @@ class ExplorerSession:
     def _fitted(self, ev: Evaluation):
         inc = ev.included
         if np.any(inc):
-            return self.settings.interpolator().fit(ev.fiducial_readings.sensor[inc], ev.corrections[inc])
+            key = (self.settings.interpolator(), ev.fiducial_readings.sensor[inc].tobytes(), ev.corrections[inc].tobytes())
+            return self._cached("fitted", key,
+                                lambda: self.settings.interpolator().fit(ev.fiducial_readings.sensor[inc], ev.corrections[inc]))
         return interpolation.NoCorrection().fit(ev.registration_readings.sensor,
                                                 np.zeros_like(ev.registration_readings.sensor))
 

@@ -322,7 +322,7 @@ class _FittedIDW(_Fitted):
         out = np.empty((m, 3))
         if m == 0:
             return out, None, None
-        d, idx = self.tree.query(q, k=k)
+        d, idx = self.tree.query(q, k=k, workers=-1 if m > 5000 else 1)  # large query sets: all cores
         d = np.asarray(d, dtype=float).reshape(m, k)
         idx = np.asarray(idx).reshape(m, k)
 
