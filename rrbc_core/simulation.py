@@ -299,6 +299,19 @@ def _nan_to_none(obj):
     return obj
 
 
+def _strategy_stats(name: str, rigid: np.ndarray, rrbc: np.ndarray, dist: np.ndarray) -> StrategyStats:
+    """Statistics of errors (T, C) at C check points over T trials; dist (C,) from the distance origin."""
+    return StrategyStats(
+        name=name,
+        tre_mean_mm=float(rigid.mean()),
+        tre_rms_mm=metrics.rmst(rigid.ravel()),
+        tre_max_mm=float(rigid.max()),
+        r_distance=_pearson(rigid.ravel(), np.broadcast_to(dist, rigid.shape).ravel()),
+        rmst_rrbc_mm=metrics.rmst(rrbc.ravel()),
+        max_rrbc_mm=float(rrbc.max()),
+    )
+
+
 def _pearson(a: np.ndarray, b: np.ndarray) -> float:
     if np.std(a) == 0 or np.std(b) == 0:
         return float("nan")
@@ -343,19 +356,8 @@ def monte_carlo(cell: WorkCell, trials: int, seed: int = 0, strategies=STRATEGY_
             if progress:
                 progress(n, f"least-squares + {name}")
         done += n
-    stats = []
-    for name in strategies:
-        rigid = np.concatenate(acc_s[name][0])
-        rrbc = np.concatenate(acc_s[name][1])
-        stats.append(StrategyStats(
-            name=name,
-            tre_mean_mm=float(rigid.mean()),
-            tre_rms_mm=metrics.rmst(rigid.ravel()),
-            tre_max_mm=float(rigid.max()),
-            r_distance=_pearson(rigid.ravel(), np.broadcast_to(dist, rigid.shape).ravel()),
-            rmst_rrbc_mm=metrics.rmst(rrbc.ravel()),
-            max_rrbc_mm=float(rrbc.max()),
-        ))
+    stats = [_strategy_stats(name, np.concatenate(acc_s[name][0]), np.concatenate(acc_s[name][1]), dist)
+             for name in strategies]
     istats = []
     for name in interpolations:
         e = np.concatenate(acc_i[name])
@@ -416,13 +418,4 @@ def icp_statistics(scene, cell: WorkCell, trials: int, seed: int = 0, start_erro
         rrbc.append(np.linalg.norm(out.robot_rrbc - m.truth[chk], axis=1))
         if progress:
             progress(1, "icp")
-    rigid, rrbc = np.array(rigid), np.array(rrbc)
-    return StrategyStats(
-        name="icp",
-        tre_mean_mm=float(rigid.mean()),
-        tre_rms_mm=metrics.rmst(rigid.ravel()),
-        tre_max_mm=float(rigid.max()),
-        r_distance=_pearson(rigid.ravel(), np.broadcast_to(dist, rigid.shape).ravel()),
-        rmst_rrbc_mm=metrics.rmst(rrbc.ravel()),
-        max_rrbc_mm=float(rrbc.max()),
-    )
+    return _strategy_stats("icp", np.array(rigid), np.array(rrbc), dist)
