@@ -177,7 +177,86 @@ def mc_throughput_annealing(quick: bool) -> list[dict]:
 
 
 # ------------------------------------------------------------------------------------------------------
-BENCHMARKS = [mc_throughput_ls_rrbc, mc_throughput_annealing]
+def _drag_times(app, kind: str, pid: str, start, steps: int, heat: bool) -> tuple[list[float], float]:
+    """Server-side seconds from a drag event to all scene updates sent (RunningApp.handle_drag under
+    server.atomic), for `steps` "update" events moving `pid` by 0.5 mm each, then one "end" event."""
+    app.set_layer("heatmap", heat)
+    app.handle_drag(kind, pid, start, phase="start")
+    times = []
+    for k in range(steps):
+        p = np.asarray(start, float) + [0.5 * (k + 1), 0.25 * (k % 3), 0.0]
+        t0 = time.perf_counter()
+        app.handle_drag(kind, pid, p, phase="update")
+        times.append(time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    app.handle_drag(kind, pid, p, phase="end")
+    return times, time.perf_counter() - t0
+
+
+def _full_recompute(source, heat_samples: int, repeats: int) -> float:
+    """Baseline in the same run: what a drag would cost with no caches and nothing kept between events —
+    a fresh session (scene loaded once) re-measuring every point, evaluating, and recomputing the heat map."""
+    from rrbc_core.explorer import ExplorerSession
+    from rrbc_core.scene import load_scene
+
+    scene = load_scene(source)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        ses = ExplorerSession.from_scene(scene)
+        ses.evaluate()
+        ses.heat_map(heat_samples)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def drag_latency(quick: bool) -> list[dict]:
+    """Issue 4: median server-side time from a drag event to all scene updates sent, default scene and a
+    stress scene (200 fiducials, 50 targets, 20 000 heat-map samples, heat map shown). Goal: median <= 10 ms.
+    Baseline: a full uncached recompute of the same state (see _full_recompute). ratio = baseline / value."""
+    import tempfile
+
+    from rrbc_core.scene import default_scene_path
+    from rrbc_viz.app import serve
+
+    from stress_scene import HEAT_SAMPLES_PER_TARGET, write_stress_scene
+
+    rows = []
+    steps = 15 if quick else 60
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, source, heat_n, target, fiducial in (
+            ("default", default_scene_path(), 200, "H1", "F5"),
+            ("stress", write_stress_scene(tmp), HEAT_SAMPLES_PER_TARGET, "T10", "S010"),
+        ):
+            app = serve(str(source))
+            try:
+                app.heat_samples_per_target = heat_n
+                app.set_layer("heatmap", True)  # computes the heat map once (all samples) before timing
+                samples = len(app.heat_map.positions) if app.heat_map is not None else 0
+                baseline = _full_recompute(str(source), heat_n, 3 if quick else 5)
+                for kind, pid in (("targets", target), ("fiducials", fiducial)):
+                    group = app.session.layout[kind]
+                    start = group.positions[group.index(pid)].copy()
+                    upd, end = _drag_times(app, kind, pid, start, steps, heat=True)
+                    med = float(np.median(upd))
+                    note = (f"median of {steps} drag updates of {kind[:-1]} {pid}; p95 {np.percentile(upd, 95) * 1e3:.1f} ms; "
+                            f"drag end (with heat-map refresh) {end * 1e3:.1f} ms; heat map shown, {samples} samples, "
+                            f"refreshed at most every {app_heat_interval()} s while dragging; "
+                            f"{len(app.session.layout['fiducials'].ids)} fiducials, {len(app.session.layout['targets'].ids)} targets; "
+                            "goal: median <= 10 ms; baseline: a full uncached recompute of the same state")
+                    rows.append(time_row(f"drag_{label}_{kind[:-1]}", med, baseline, note))
+            finally:
+                app.stop()
+    return rows
+
+
+def app_heat_interval() -> float:
+    from rrbc_viz.app import HEAT_INTERVAL_S
+
+    return HEAT_INTERVAL_S
+
+
+BENCHMARKS = [mc_throughput_ls_rrbc, mc_throughput_annealing, drag_latency]
 
 
 def _format_table(rows: list[dict]) -> str:

@@ -85,6 +85,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also register by ICP of a simulated point cloud against the mesh, over N trials (~1 s each)")
     m.add_argument("--json", action="store_true", help="print one JSON object")
     m.set_defaults(run=_cmd_simulate)
+
+    v = sub.add_parser("view", help="start the browser app",
+                       description="Start the browser app on a scene (default: the bundled demo scene) or a "
+                                   "measurement file; prints the URL and runs until interrupted.")
+    v.add_argument("scene", nargs="?", default=None, metavar="SCENE",
+                   help="scene TOML file or measurement CSV (default: the bundled default scene)")
+    v.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
+    v.add_argument("--port", type=_non_negative_int, default=8080, help="port (default 8080; 0 = any free port)")
+    v.add_argument("--mesh", default=None, help="work-cell mesh for a measurement CSV (any format trimesh reads)")
+    v.set_defaults(run=_cmd_view)
     return p
 
 
@@ -228,6 +238,29 @@ def _cmd_simulate(args) -> str:
     if args.out:
         text += f"\nwrote one simulated data set to {args.out}\n"
     return text
+
+
+def _cmd_view(args) -> str:
+    import signal
+
+    from rrbc_viz.app import serve
+
+    if args.port > 65535:
+        raise InputError(f"--port must be at most 65535, got {args.port}")
+    app = serve(args.scene, host=args.host, port=args.port, mesh=args.mesh)
+    try:
+        signal.signal(signal.SIGTERM, signal.default_int_handler)  # stop cleanly on SIGTERM too
+    except ValueError:  # not the main thread
+        pass
+    print(f"rrbc view: serving {app.loaded.label} at {app.url} (Ctrl+C to stop)", flush=True)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.stop()
+    return ""
 
 
 def main(argv=None) -> int:

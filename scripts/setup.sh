@@ -2,12 +2,26 @@
 # Idempotent set-up on Debian 12 as root: Debian packages, a virtual environment in .venv/ at the
 # repository root, and this project installed into it (editable, with the test extras).
 # Safe to run again: it skips what is already present.
+#   --browser   also install Debian's chromium (driven headless by Playwright in tests/browser and
+#               scripts/screenshots.py; never `playwright install`). The app itself does not need it.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
+browser=0
+for arg in "$@"; do
+  case "$arg" in
+    --browser) browser=1 ;;
+    *) echo "setup: unknown argument '$arg' (usage: setup.sh [--browser])" >&2; exit 2 ;;
+  esac
+done
+
 # Debian packages: open3d needs libusb-1.0-0, libegl1, libgl1, libx11-6 (see shared notes/stack.md).
 debs=(libusb-1.0-0 libegl1 libgl1 libx11-6 libgomp1 python3-venv)
+# Browser tests: chromium (software WebGL via SwiftShader, no GPU needed) and a font for headless text.
+if [ "$browser" -eq 1 ]; then
+  debs+=(chromium fonts-dejavu-core)
+fi
 missing=()
 for p in "${debs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -19,8 +33,19 @@ if [ "${#missing[@]}" -gt 0 ]; then
   fi
   echo "setup: installing Debian packages: ${missing[*]}" >&2
   export DEBIAN_FRONTEND=noninteractive
-  apt-get update -qq
-  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  # Quiet unless it fails (debconf chatter such as "delaying package configuration" goes to the log).
+  log="$(mktemp)"
+  if ! { apt-get update -qq && apt-get install -y -qq --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
+    cat "$log" >&2
+    echo "setup: apt-get failed (full log above)" >&2
+    rm -f "$log"
+    exit 1
+  fi
+  rm -f "$log"
+fi
+if [ "$browser" -eq 1 ] && [ ! -x /usr/bin/chromium ]; then
+  echo "setup: /usr/bin/chromium is missing although the chromium package is installed" >&2
+  exit 1
 fi
 
 py="${PYTHON:-python3}"

@@ -1,0 +1,524 @@
+"""The RRBC browser app: a viser server over one `rrbc_core.explorer.ExplorerSession`.
+
+    app = serve()                      # bundled default scene, 127.0.0.1, a free port; returns at once
+    print(app.url)
+    app.handle_drag("targets", "H1", [400, -150, 40], "end")
+    app.stop()
+
+Shared state, by design. ONE session, one scene and one control panel are shared by every browser tab
+(viser's `server.scene` / `server.gui`): this is a teacher's demo, so every tab shows the same work cell, a drag
+or a setting made in one tab is seen live in all of them, and a tab opened later joins the current state.
+Notifications (a refused move, a file that did not load) go to the tab that caused them (to every tab when the
+change came from Python); the status line at the top of the panel shows the last message to everyone.
+Per-student state would mean one session per `ClientHandle` built in `on_client_connect` (client-scoped
+scene and GUI); it is not done.
+
+Concurrency. viser runs gizmo callbacks (async) on its event loop and GUI callbacks on a thread pool; every
+change to the session and the scene goes through one re-entrant lock, and scene updates of one change are
+sent in one `server.atomic()` block. A drag update re-evaluates the session (milliseconds) and updates node
+properties in place; the heat map is recomputed at most every `HEAT_INTERVAL_S` during a drag and at its end;
+Monte Carlo runs in a background thread (`montecarlo.MonteCarloRunner`) after a setting changes, a drag ends or
+the seed changes. (A heat map that takes longer than `HEAT_LIVE_MAX_S` waits for the drag's end.)
+
+Frames and units: the scene is drawn in the robot frame, in millimetres (see `nodes`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import io
+import json
+import re
+import socket
+import threading
+import time
+import traceback
+from dataclasses import replace
+
+import numpy as np
+import viser
+
+from rrbc_core.errors import InputError
+from rrbc_core.explorer import LAYERS, Evaluation, ExplorerSession
+
+from . import files, tables, teaching
+from .colors import legend_markdown
+from .controls import HEAT_CHOICES, Controls
+from .montecarlo import MonteCarloRunner
+from .nodes import HANDLE_CHOICES, Display, SceneNodes, gizmo_name
+
+HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
+HEAT_INTERVAL_S = 0.3  # least time between heat-map recomputations while dragging
+HEAT_LIVE_MAX_S = 0.05  # a heat map slower than this to compute is refreshed only when a drag ends
+DEFAULT_LAYERS = {name: name not in ("labels", "heatmap") for name in LAYERS}
+_KINDS = {"target": "targets", "targets": "targets", "fiducial": "fiducials", "fiducials": "fiducials",
+          "registration": "registration"}
+
+
+def _all_points(ev: Evaluation) -> np.ndarray:
+    """Registration points, fiducials and targets (robot frame, mm), stacked."""
+    return np.vstack([ev.registration_positions.reshape(-1, 3), ev.fiducial_positions.reshape(-1, 3),
+                      ev.targets.positions.reshape(-1, 3)])
+
+
+def _nice(x: float) -> float:
+    """The 1-2-5 number nearest below x (x > 0)."""
+    e = 10.0 ** np.floor(np.log10(x))
+    for m in (5.0, 2.0, 1.0):
+        if m * e <= x:
+            return m * e
+    return e
+
+
+class RunningApp:
+    """A running app. `server` is the viser server, `session` the shared ExplorerSession (replaced when a file
+    is loaded), `port`/`url` where to point a browser. `stop()` frees the port."""
+
+    def __init__(self, server: viser.ViserServer, loaded: files.Loaded, host: str):
+        self.server = server
+        self.host = host
+        self.port = int(server.get_port())
+        self.url = f"http://{host if host not in ('0.0.0.0', '::', '') else 'localhost'}:{self.port}"
+        self._lock = threading.RLock()
+        self._stopped = False
+        self.heat_samples_per_target = HEAT_SAMPLES_PER_TARGET
+        self.loaded = loaded
+        self.session: ExplorerSession = loaded.session
+        self.display = Display()
+        self.layers = dict(DEFAULT_LAYERS)
+        self.messages: list[str] = []  # every message shown (status line / notifications), oldest first
+        self.lesson_index: int | None = None
+        self._lesson_saved_layers: dict[str, bool] | None = None
+        self._refused: set = set()  # (kind, id) whose refusal was already announced in the current drag
+        self._heat_time = 0.0
+        self._heat_cost = 0.0  # seconds the last heat map took
+        self._heat_stale = True
+        self.heat_map = None  # the last HeatMap shown
+        self.mc_plots = None  # the last MonteCarloPlots shown
+        self.mc_seconds = None
+        self.nodes = SceneNodes(server, self._on_gizmo, self._on_fiducial_click)
+        self.controls = Controls(server, self)
+        self.mc = MonteCarloRunner(self._mc_result, self._mc_started)
+        self._install(loaded, first=True)
+
+    # ------------------------------------------------------------------------------------------ lifecycle
+    def stop(self) -> None:
+        """Stop the Monte Carlo worker and the server (frees the port). Safe to call twice."""
+        if self._stopped:
+            return
+        self._stopped = True
+        self.mc.stop()
+        self.server.stop()
+
+    def _install(self, loaded: files.Loaded, first: bool = False) -> None:
+        """Make `loaded` the current source: rebuild the scene and resync the panel."""
+        with self._lock:
+            self.mc.cancel()
+            self.loaded = loaded
+            self.session = loaded.session
+            ev = self.session.last
+            self.lesson_index = None
+            self._lesson_saved_layers = None
+            self.nodes.target_arrows = True
+            self.heat_map = None
+            self.mc_plots = None
+            self._heat_stale = True
+            self.display = self._default_display(ev)
+            with self.server.atomic():
+                self.nodes.build(self.session, ev, loaded.mesh, self.display, self.layers)
+                self.controls.sync_settings(self.session.settings, self.session.kind)
+                self.controls.sync_display(self.display, self.session.kind)
+                self.controls.sync_layers(self.layers)
+                self.controls.source.content = (
+                    f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}.")
+                self.controls.lesson.content = ("The nine steps of RRBC, one at a time, each shown in the scene with "
+                                                "live numbers. Press **Next** to start.")
+                self._frame_camera(loaded.mesh, ev)
+                self._show(ev, heat=True)
+            if not first:
+                self._message(f"Loaded {loaded.label}", error=False)
+        self.request_monte_carlo()
+
+    def _default_display(self, ev: Evaluation) -> Display:
+        """Marker size from the points' extent; magnification so a typical correction is drawn ~8 % of it."""
+        pts = _all_points(ev)
+        extent = float(np.linalg.norm(pts.max(0) - pts.min(0))) if len(pts) else 1000.0
+        marker = float(np.clip(np.round(0.012 * extent * 2) / 2, 0.5, 50.0))
+        sizes = np.linalg.norm(ev.corrections[ev.included].reshape(-1, 3), axis=1)
+        sizes = sizes[np.isfinite(sizes) & (sizes > 0)]
+        mag = _nice(0.08 * extent / float(np.median(sizes))) if len(sizes) else 200.0
+        heat = "rrbc" if self.session.kind == "scene" else "correction"
+        # fiducial handles start hidden: at the overview they crowd the targets' (View -> Drag handles on)
+        return Display(magnification=float(np.clip(mag, 1, 2000)), marker_mm=marker, region_zoom=1.0,
+                       handles="targets", heat_value=heat)
+
+    def _frame_camera(self, mesh, ev: Evaluation) -> None:
+        """Initial camera (and that of open tabs): looking at the points' centre, far enough to see the cell."""
+        pts = _all_points(ev)
+        lo, hi = pts.min(0), pts.max(0)
+        if mesh is not None:
+            b = np.asarray(mesh.bounds, float)
+            lo, hi = np.minimum(lo, b[0]), np.maximum(hi, b[1])
+        look = 0.5 * (pts.min(0) + pts.max(0))
+        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 10.0)
+        cam = self.server.initial_camera
+        fov = float(cam.fov)
+        direction = np.array([0.25, -1.0, 0.75]) / np.linalg.norm([0.25, -1.0, 0.75])
+        position = look + direction * radius / np.tan(fov / 2) * 0.65
+        cam.near = max(radius * 3e-4, 0.05)  # mm: close enough to look at a region of variability
+        cam.far = radius * 30.0
+        cam.up = (0.0, 0.0, 1.0)
+        cam.look_at = look
+        cam.position = position
+        for client in self.server.get_clients().values():
+            client.camera.look_at = look
+            client.camera.position = position
+
+    # -------------------------------------------------------------------------------------------- showing
+    def _show(self, ev: Evaluation, heat: bool = False) -> None:
+        """Push an Evaluation to the scene and the panel (caller holds the lock, inside server.atomic())."""
+        self.nodes.update(ev)
+        c = self.controls
+        c.scale.content = tables.scale_line(self.display.magnification)
+        c.summary.content = tables.summary(ev, self.session.kind)
+        c.table.content = tables.target_table(ev)
+        if self.lesson_index is not None:
+            c.lesson.content = teaching.render(self.lesson_index, ev, self._lesson_context())
+        self._heat_stale = True
+        if heat:
+            self._update_heat()
+
+    def _update_heat(self) -> None:
+        """Recompute the heat map now if its layer is on (else leave it stale until shown)."""
+        if not self.layers.get("heatmap"):
+            return
+        start = time.perf_counter()
+        self.heat_map = self.session.heat_map(self.heat_samples_per_target)
+        self._heat_cost = time.perf_counter() - start
+        self._heat_time = time.monotonic()
+        self._heat_stale = False
+        legend = self.nodes.update_heatmap(self.heat_map, self.session.last)
+        self.controls.legend.content = ("Nothing to show." if legend is None else legend_markdown(*legend))
+
+    def _lesson_context(self) -> teaching.LessonContext:
+        return teaching.LessonContext(self.session.kind, self.display.magnification, dict(self.session.regions))
+
+    def _message(self, text: str, client=None, error: bool = True, title: str | None = None) -> None:
+        """Show a message: a notification to `client` (every tab if None) and the status line."""
+        line = " ".join(str(text).split())
+        self.messages.append(line)
+        self.controls.status.content = ("⚠ " if error else "✓ ") + line
+        targets = [client] if client is not None else list(self.server.get_clients().values())
+        for c in targets:
+            try:
+                c.add_notification(title or ("Not done" if error else "Done"), line, auto_close_seconds=10.0,
+                                   color="red" if error else "green")
+            except Exception:  # noqa: BLE001 - a closing tab must not break the app
+                pass
+
+    @property
+    def last_message(self) -> str | None:
+        return self.messages[-1] if self.messages else None
+
+    # ------------------------------------------------------------------------------------------- dragging
+    def _on_gizmo(self, kind: str, pid: str, position, phase: str, client=None) -> None:
+        try:
+            self.handle_drag(kind, pid, position, phase, client=client)
+        except Exception:  # noqa: BLE001 - keep the server alive; say so
+            traceback.print_exc()
+            self._message("internal error while dragging (see the server log)", client)
+
+    def handle_drag(self, kind: str, pid: str, position, phase: str = "update", client=None) -> Evaluation | None:
+        """Move point `pid` of `kind` ("targets" or "fiducials"; robot frame, mm) during a drag `phase`
+        ("start", "update" or "end") and update every node: what the gizmo callback calls. Returns the new
+        Evaluation, or None when the core refuses the move (the gizmo snaps back and a notification says why).
+        The heat map is refreshed at most every HEAT_INTERVAL_S while dragging and at "end"; Monte Carlo is
+        queued at "end"."""
+        kind = _KINDS.get(kind, kind)
+        key = (kind, pid)
+        with self._lock:
+            session = self.session
+            if phase == "start":
+                self._refused.discard(key)
+                return session.last
+            group = session.layout.get(kind)
+            before = None
+            if group is not None and pid in group.ids:
+                before = np.array(group.positions[group.index(pid)], float)
+            try:
+                ev = session.move(kind, pid, position)
+            except InputError as exc:
+                self._refuse(key, before, str(exc), client, phase)
+                return None
+            end = phase == "end"
+            heat_due = end or (self.layers.get("heatmap") and self._heat_cost <= HEAT_LIVE_MAX_S
+                               and time.monotonic() - self._heat_time >= HEAT_INTERVAL_S)
+            with self.server.atomic():
+                self._show(ev, heat=bool(heat_due))
+            if end:
+                self._refused.discard(key)
+        if end:
+            self.request_monte_carlo()
+        return ev
+
+    def _refuse(self, key, before, message: str, client, phase: str) -> None:
+        kind, pid = key
+        session = self.session
+        if before is not None:
+            group = session.layout.get(kind)
+            if group is not None and not np.allclose(group.positions[group.index(pid)], before):
+                try:  # the core changed the layout before refusing: put the point back
+                    session.move(kind, pid, before)
+                except InputError:
+                    pass
+            if (kind, pid) in self.nodes.gizmos:
+                self.nodes.snap(kind, pid, before)
+        if key not in self._refused:
+            self._message(message, client, title=f"Cannot move {pid}")
+            self._refused.add(key)
+        if phase == "end":
+            self._refused.discard(key)
+
+    # ------------------------------------------------------------------------------------------- settings
+    def _on_fiducial_click(self, pid: str, client=None) -> None:
+        try:
+            self.toggle_fiducial(pid, client=client)
+        except Exception:  # noqa: BLE001
+            traceback.print_exc()
+            self._message("internal error (see the server log)", client)
+
+    def toggle_fiducial(self, pid: str, client=None) -> Evaluation | None:
+        """Exclude an included fiducial or include an excluded one (what clicking its sphere does)."""
+        with self._lock:
+            excluded = pid in self.session.settings.excluded
+            return self._apply(lambda s: s.set_excluded(pid, not excluded), client)
+
+    def change_settings(self, client=None, **changes) -> Evaluation | None:
+        """Change session settings (names as in explorer.Settings); None (and a message) if refused."""
+        with self._lock:
+            return self._apply(lambda s: s.update(**changes), client)
+
+    def new_seed(self, client=None) -> Evaluation | None:
+        with self._lock:
+            seed = int(np.random.default_rng().integers(1, 2**31 - 1))
+            return self._apply(lambda s: s.update(seed=seed), client)
+
+    def _apply(self, change, client) -> Evaluation | None:
+        with self._lock:
+            try:
+                ev = change(self.session)
+            except InputError as exc:
+                self._message(str(exc), client, title="Setting refused")
+                ev = None
+            except Exception as exc:  # noqa: BLE001 - keep serving; the session keeps its last evaluation
+                traceback.print_exc()
+                self._message(f"internal error: {type(exc).__name__}: {exc}", client, title="Setting failed")
+                ev = None
+            with self.server.atomic():
+                self.controls.sync_settings(self.session.settings, self.session.kind)
+                if ev is not None:
+                    self._show(ev, heat=True)
+        if ev is not None:
+            self.request_monte_carlo()
+        return ev
+
+    def set_display(self, client=None, **changes) -> None:
+        """Display-only options (Display fields): magnification, marker_mm, region_zoom, handles, heat_value."""
+        with self._lock:
+            new = replace(self.display, **changes)
+            heat_values = [v for _, v in HEAT_CHOICES[self.session.kind]]
+            if new.handles not in HANDLE_CHOICES:
+                raise InputError(f"handles must be one of {', '.join(HANDLE_CHOICES)}, got {new.handles!r}")
+            if new.heat_value not in heat_values:
+                raise InputError(f"heat_value must be one of {', '.join(heat_values)} here, got {new.heat_value!r}")
+            if not (new.magnification > 0 and new.marker_mm > 0 and new.region_zoom > 0):
+                raise InputError("magnification, marker_mm and region_zoom must be > 0")
+            self.display = new
+            self.nodes.display = self.display
+            with self.server.atomic():
+                if "handles" in changes:
+                    self.nodes.set_handles(self.display.handles)
+                if "marker_mm" in changes or "region_zoom" in changes:
+                    self.nodes.apply_sizes()
+                self.controls.sync_display(self.display, self.session.kind)
+                heat = any(k in changes for k in ("region_zoom", "heat_value"))
+                self._show(self.session.last, heat=heat)
+
+    def set_layer(self, layer: str, visible: bool) -> None:
+        """Show or hide a layer (explorer.LAYERS) in the scene and on its checkbox."""
+        if layer not in LAYERS:
+            raise InputError(f"unknown layer '{layer}': {', '.join(LAYERS)}")
+        with self._lock:
+            self.layers[layer] = bool(visible)
+            with self.server.atomic():
+                self.nodes.set_layer(layer, visible)
+                self.controls.sync_layers({layer: bool(visible)})
+                if layer == "heatmap" and visible and (self._heat_stale or self.heat_map is None):
+                    self._update_heat()
+
+    # --------------------------------------------------------------------------------------------- lesson
+    def lesson_go(self, index: int) -> str:
+        """Show lesson step `index` (0-based, clamped): its layers and its text. Returns the text."""
+        with self._lock:
+            index = int(np.clip(index, 0, len(teaching.STEPS) - 1))
+            if self.lesson_index is None:
+                self._lesson_saved_layers = dict(self.layers)
+            self.lesson_index = index
+            step = teaching.STEPS[index]
+            with self.server.atomic():
+                for name in LAYERS:
+                    self.set_layer(name, name in step.layers)
+                self.nodes.target_arrows = step.target_arrows
+                self.nodes.update(self.session.last)
+                text = teaching.render(index, self.session.last, self._lesson_context())
+                self.controls.lesson.content = text
+            return text
+
+    def lesson_step(self, delta: int) -> str:
+        """Next (+1) or previous (-1) step; the first press of either starts the lesson at step 1."""
+        return self.lesson_go(0 if self.lesson_index is None else self.lesson_index + delta)
+
+    def lesson_stop(self) -> None:
+        with self._lock:
+            saved = self._lesson_saved_layers
+            self.lesson_index = None
+            self._lesson_saved_layers = None
+            with self.server.atomic():
+                for name, visible in (saved or {}).items():
+                    self.set_layer(name, visible)
+                self.nodes.target_arrows = True
+                self.nodes.update(self.session.last)
+                self.controls.lesson.content = "Lesson ended. Press **Next** to start again."
+
+    # ---------------------------------------------------------------------------------------- Monte Carlo
+    def request_monte_carlo(self) -> bool:
+        """Queue a Monte Carlo run of the current setup (scene mode); False when there is no error model."""
+        with self._lock:
+            if self.session.kind != "scene":
+                self.mc.cancel()
+                self.controls.mc_info.content = ("Monte Carlo needs a scene (an error model to simulate); "
+                                                 "measured data have none.")
+                self.controls.mc_hist.visible = self.controls.mc_dist.visible = False
+                return False
+            snapshot = copy.copy(self.session)  # settings and layout are immutable values
+            self.controls.mc_hist.visible = self.controls.mc_dist.visible = True
+            self.mc.request(snapshot, int(self.controls.mc_trials.value))
+            return True
+
+    def _mc_started(self) -> None:
+        self.controls.mc_info.content = "Monte Carlo: running…"
+
+    def _mc_result(self, plots, error: str | None, seconds: float) -> None:
+        c = self.controls
+        if plots is None:
+            c.mc_info.content = f"Monte Carlo failed: {error}"
+            return
+        centres, rigid, rrbc = plots.histogram()
+        dist, mean_rigid, mean_rrbc = plots.by_distance()
+        with self._lock, self.server.atomic():
+            self.mc_plots = plots
+            self.mc_seconds = seconds
+            c.mc_hist.data = (centres, rigid, rrbc)
+            c.mc_dist.data = (dist, mean_rigid, mean_rrbc)
+            s = self.session.settings
+            c.mc_info.content = (f"{plots.trials} trials × {plots.rigid.shape[1]} check points in the targets' "
+                                 f"regions; {s.registration} + {s.interpolation}; noise ×{s.noise_scale:g}, "
+                                 f"bias ×{s.bias_scale:g} ({seconds:.1f} s). Updates after a setting changes, a "
+                                 "drag ends or the seed changes.")
+
+    # --------------------------------------------------------------------------------------------- files
+    def load(self, source=None, mesh=None, client=None) -> bool:
+        """Open a scene (.toml) or measurement file (.csv; optional mesh). On bad input the current session
+        stays and a message says why; returns whether the file was loaded."""
+        try:
+            loaded = files.load_source(source, mesh)
+        except InputError as exc:
+            self._message(str(exc), client, title="File not loaded")
+            return False
+        except Exception as exc:  # noqa: BLE001 - e.g. OSError: keep serving
+            self._message(f"{source}: cannot open: {type(exc).__name__}: {exc}", client, title="File not loaded")
+            return False
+        self._install(loaded)
+        return True
+
+    def load_upload(self, name: str, content: bytes, client=None) -> bool:
+        try:
+            loaded = files.load_upload(name, content)
+        except InputError as exc:
+            self._message(str(exc), client, title="Upload not loaded")
+            return False
+        except Exception as exc:  # noqa: BLE001
+            self._message(f"{name}: cannot open: {type(exc).__name__}: {exc}", client, title="Upload not loaded")
+            return False
+        self._install(loaded)
+        return True
+
+    def export(self, what: str) -> tuple[str, bytes]:
+        """(file name, content) of "csv" (session.export_measurements() as a measurement file) or "json"
+        (session.export_json())."""
+        with self._lock:
+            slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", self.session.name).strip("-.") or "rrbc"
+            if what == "csv":
+                s = self.session.settings
+                text = files.measurements_csv(self.session.export_measurements(), comments=[
+                    f"exported by the rrbc browser app from {self.session.name}",
+                    f"settings: registration {s.registration}, interpolation {s.interpolation}, noise x{s.noise_scale:g}, "
+                    f"bias x{s.bias_scale:g}, seed {s.seed}",
+                ])
+                return f"rrbc-{slug}.csv", text.encode("utf-8")
+            if what == "json":
+                return f"rrbc-{slug}-results.json", (json.dumps(self.session.export_json(), indent=2) + "\n").encode("utf-8")
+        raise InputError(f"unknown export '{what}': csv or json")
+
+    def download(self, what: str, client=None) -> tuple[str, bytes] | None:
+        """Send an export to `client` (every tab if None) as a file download."""
+        try:
+            name, content = self.export(what)
+        except (InputError, ValueError) as exc:
+            self._message(str(exc), client, title="Export failed")
+            return None
+        if client is not None:
+            client.send_file_download(name, content)
+        else:
+            self.server.send_file_download(name, content)
+        return name, content
+
+    # ------------------------------------------------------------------------------------------ for tests
+    def gizmo(self, kind: str, pid: str) -> viser.TransformControlsHandle:
+        return self.nodes.gizmos[(_KINDS.get(kind, kind), pid)]
+
+    @staticmethod
+    def gizmo_name(kind: str, pid: str) -> str:
+        return gizmo_name(_KINDS.get(kind, kind), pid)
+
+
+def _check_host(host: str) -> None:
+    """Fail early on an address this machine cannot listen on (viser 1.1.1 would wait forever)."""
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as probe:
+            probe.bind(address)
+    except OSError as exc:
+        raise InputError(f"cannot listen on host {host!r}: {exc.strerror or exc}") from None
+
+
+def serve(source=None, host: str = "127.0.0.1", port: int = 0, mesh=None, quiet: bool = True) -> RunningApp:
+    """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
+    .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
+    raises InputError before any server starts. `quiet` hides viser's start-up banner."""
+    if isinstance(source, ExplorerSession):
+        loaded = files.Loaded(source, files.load_mesh(mesh) if mesh else None, f"session {source.name}")
+        source.evaluate()
+    else:
+        loaded = files.load_source(source, mesh)
+    _check_host(host)
+    out = io.StringIO() if quiet else None
+    with contextlib.redirect_stdout(out) if quiet else contextlib.nullcontext():
+        server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)
+    try:
+        server.scene.set_up_direction("+z")
+        return RunningApp(server, loaded, host)
+    except BaseException:
+        server.stop()
+        raise

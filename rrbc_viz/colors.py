@@ -1,0 +1,65 @@
+"""Colours of the browser app and the heat-map colour scale (display only: no RRBC numbers are made here).
+
+Colours are RGB tuples of ints 0..255; arrays handed to viser are uint8 (floats would be read as 0..1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+Rgb = tuple[int, int, int]
+
+REGISTRATION: Rgb = (150, 90, 220)
+FIDUCIAL: Rgb = (255, 150, 30)
+FIDUCIAL_EXCLUDED: Rgb = (150, 150, 150)
+TARGET: Rgb = (40, 120, 255)
+TARGET_EXTRAPOLATED: Rgb = (235, 30, 200)
+REGION: Rgb = (80, 170, 255)
+HULL: Rgb = (240, 190, 40)
+CORRECTION_FIDUCIAL: Rgb = (255, 110, 0)
+CORRECTION_TARGET: Rgb = (0, 175, 255)
+LAND_RIGID: Rgb = (220, 40, 40)
+LAND_RRBC: Rgb = (30, 180, 60)
+LAND_ANCHOR: Rgb = (40, 40, 40)
+FRAME_ORIGIN: Rgb = (236, 236, 0)
+NO_VALUE: Rgb = (128, 128, 128)
+
+#: The heat-map scale, low → high (viridis-like stops, perceptually ordered, colour-blind safe).
+SCALE_STOPS = np.array(
+    [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=float
+)
+
+
+def hex_color(rgb) -> str:
+    """'#rrggbb' for an RGB triple (0..255)."""
+    r, g, b = (int(round(float(c))) for c in rgb)
+    return f"#{r:02x}{g:02x}{b:02x}"
+
+
+def scale_colors(values, lo: float, hi: float) -> np.ndarray:
+    """Colours (N, 3) uint8 of `values` on the heat-map scale from lo to hi; NaN values are grey."""
+    v = np.asarray(values, dtype=float).reshape(-1)
+    span = hi - lo if hi > lo else 1.0
+    t = np.clip((v - lo) / span, 0.0, 1.0)
+    t = np.where(np.isfinite(t), t, 0.0)
+    x = t * (len(SCALE_STOPS) - 1)
+    i = np.minimum(np.floor(x).astype(int), len(SCALE_STOPS) - 2)
+    f = (x - i)[:, None]
+    out = SCALE_STOPS[i] * (1.0 - f) + SCALE_STOPS[i + 1] * f
+    out[~np.isfinite(v)] = NO_VALUE
+    return np.round(out).astype(np.uint8)
+
+
+HEAT_NOTE = ("Ring around each target: the mean over its region of variability, visible from afar. Dots: the "
+             "samples themselves, inside the region (zoom in, or raise View → Region zoom).")
+
+
+def legend_markdown(title: str, lo: float, hi: float, unit: str = "mm", note: str = HEAT_NOTE) -> str:
+    """A colour-scale legend: a gradient bar with its end values (markdown with inline HTML), then `note`."""
+    stops = ", ".join(hex_color(c) for c in SCALE_STOPS)
+    return (
+        f"**{title}**\n\n"
+        f'<div style="height:12px;border-radius:3px;background:linear-gradient(to right, {stops})"></div>\n\n'
+        f"{lo:.4f} {unit} (low) → {hi:.4f} {unit} (high)"
+        + (f"\n\n{note}" if note else "")
+    )

@@ -1,0 +1,245 @@
+"""The control panel (shared by every browser tab): settings, display, layers, lesson, Monte Carlo, files.
+
+The panel only forwards user input to the app (`rrbc_viz.app.RunningApp`) and shows what the app hands back;
+it holds no RRBC state of its own. Programmatic updates (`sync_*`) set `syncing` so that the value callbacks
+they re-enter (viser runs `on_update` when Python assigns `.value`) do nothing.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from typing import TYPE_CHECKING
+
+import numpy as np
+import viser
+
+from rrbc_core import interpolation, registration
+from rrbc_core.explorer import LAYERS, Settings
+
+from .nodes import HANDLE_CHOICES, Display
+
+if TYPE_CHECKING:
+    from .app import RunningApp
+
+LAYER_LABELS = {
+    "mesh": "Work-cell mesh", "frames": "Robot and sensor frames", "registration": "Registration points",
+    "fiducials": "Fiducials", "corrections": "Correction arrows", "hull": "Fiducials' hull", "targets": "Targets",
+    "regions": "Regions of variability", "landing": "Landing points (rigid vs RRBC)", "labels": "Labels",
+    "heatmap": "Heat map of predicted error",
+}
+HEAT_CHOICES = {
+    "scene": (("RRBC error", "rrbc"), ("rigid error", "rigid")),
+    "measurements": (("correction size", "correction"), ("correction std (gp)", "std")),
+}
+MAG_MAX = 2000
+
+
+def _series(label: str, color: str, points: bool = False) -> dict:
+    s: dict = {"label": label, "stroke": color, "width": 2}
+    if points:
+        s["width"] = 1
+        s["points"] = {"show": True, "size": 5, "fill": color}
+    return s
+
+
+class Controls:
+    def __init__(self, server: viser.ViserServer, app: "RunningApp"):
+        self.app = app
+        self.syncing = False
+        gui = server.gui
+        gui.configure_theme(show_share_button=False, control_width="large", brand_color=(40, 120, 255))
+        gui.set_panel_label("RRBC explorer")
+        self.status = gui.add_markdown("")
+        tabs = gui.add_tab_group()
+
+        # ---------------------------------------------------------------------------------------- Explore
+        with tabs.add_tab("Explore", icon=viser.Icon.ADJUSTMENTS):
+            self.source = gui.add_markdown("")
+            with gui.add_folder("Results"):
+                self.magnification = gui.add_slider("Arrow magnification", 1, MAG_MAX, 1, 200,
+                                                    hint="Correction arrows and landing offsets are drawn this many "
+                                                         "times longer than they are")
+                self.scale = gui.add_markdown("")
+                self.summary = gui.add_markdown("")
+                self.table = gui.add_markdown("")
+            with gui.add_folder("Method"):
+                self.registration = gui.add_dropdown("Registration", tuple(registration.STRATEGIES),
+                                                     initial_value="least-squares")
+                self.interpolation = gui.add_dropdown("Interpolation", tuple(interpolation.METHODS),
+                                                      initial_value="idw")
+                self.neighbors = gui.add_slider("IDW neighbours k", 1, 16, 1, 4)
+                self.power = gui.add_slider("IDW power p", 0.5, 6.0, 0.1, 2.0)
+                self.smoothing = gui.add_slider("TPS smoothing", 0.0, 1.0, 0.005, 0.0,
+                                                hint="scipy RBF smoothing in the fiducials' local units; 0 = exact")
+            with gui.add_folder("Errors (scene)"):
+                self.noise = gui.add_slider("Noise size ×", 0.0, 3.0, 0.05, 1.0,
+                                            hint="Multiplies the scene's random error terms")
+                self.bias = gui.add_slider("Bias size ×", 0.0, 3.0, 0.05, 1.0,
+                                           hint="Multiplies the scene's systematic error terms")
+                self.seed_md = gui.add_markdown("")
+                self.new_seed = gui.add_button("New random seed", icon=viser.Icon.DICE)
+            gui.add_markdown("Drag the arrows at a target or fiducial to move it (View → *Drag handles on* chooses "
+                             "which); click a fiducial to exclude or include it. Robot frame, mm.")
+
+        # ------------------------------------------------------------------------------------------- View
+        with tabs.add_tab("View", icon=viser.Icon.EYE):
+            self.handles = gui.add_dropdown("Drag handles on", HANDLE_CHOICES, initial_value="targets")
+            self.marker = gui.add_slider("Marker radius (mm)", 0.5, 50.0, 0.5, 8.0)
+            self.region_zoom = gui.add_slider("Region zoom ×", 1.0, 50.0, 0.5, 1.0,
+                                              hint="Regions of variability and heat-map samples drawn this many "
+                                                   "times larger about their target")
+            with gui.add_folder("Layers"):
+                self.layers = {name: gui.add_checkbox(LAYER_LABELS.get(name, name), True) for name in LAYERS}
+            with gui.add_folder("Heat map"):
+                self.heat_value = gui.add_dropdown("Colour by", tuple(k for k, _ in HEAT_CHOICES["scene"]))
+                self.legend = gui.add_markdown("Turn on the heat-map layer to see predicted error over the targets' "
+                                               "regions of variability.")
+
+        # ------------------------------------------------------------------------------------------ Learn
+        with tabs.add_tab("Learn", icon=viser.Icon.SCHOOL):
+            self.lesson = gui.add_markdown("The nine steps of RRBC, one at a time, each shown in the scene with "
+                                           "live numbers. Press **Next** to start.")
+            self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
+            self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
+            self.lesson_end = gui.add_button("End lesson (restore layers)")
+
+        # ------------------------------------------------------------------------------------ Monte Carlo
+        with tabs.add_tab("Monte Carlo", icon=viser.Icon.CHART_HISTOGRAM):
+            self.mc_info = gui.add_markdown("")
+            self.mc_trials = gui.add_slider("Trials", 20, 1000, 10, 200)
+            self.mc_run = gui.add_button("Run again")
+            z2 = (np.array([0.0, 1.0]), np.zeros(2), np.zeros(2))
+            self.mc_hist = gui.add_uplot(
+                z2, ({"label": "error (mm)"}, _series("rigid", "#dc2828"), _series("RRBC", "#1eb43c")),
+                title="Error at check points: histogram", scales={"x": {"time": False}},
+                axes=({"label": "error (mm)"}, {"label": "fraction"}), aspect=1.4)
+            self.mc_dist = gui.add_uplot(
+                z2, ({"label": "distance (mm)"}, _series("rigid", "#dc2828", True),
+                     _series("RRBC", "#1eb43c", True)),
+                title="Mean error vs distance from the origin", scales={"x": {"time": False}},
+                axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}), aspect=1.4)
+
+        # ------------------------------------------------------------------------------------------- File
+        with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
+            self.path = gui.add_text("Scene or data file", "", hint="A scene .toml or a measurement .csv on the server")
+            self.mesh_path = gui.add_text("Mesh (for .csv, optional)", "")
+            self.load = gui.add_button("Load file", icon=viser.Icon.FILE)
+            self.upload = gui.add_upload_button("Upload CSV or TOML", icon=viser.Icon.UPLOAD)
+            gui.add_markdown("An uploaded scene cannot bring its mesh along: open scenes with meshes by path.")
+            self.download_csv = gui.add_button("Download data (CSV)", icon=viser.Icon.DOWNLOAD)
+            self.download_json = gui.add_button("Download results (JSON)", icon=viser.Icon.DOWNLOAD)
+
+        self._wire()
+
+    # ---------------------------------------------------------------------------------------------- wiring
+    def _wire(self) -> None:
+        app = self.app
+
+        def setting(handle, name, cast):
+            @handle.on_update
+            def _(event: viser.GuiEvent) -> None:
+                if not self.syncing:
+                    app.change_settings(client=event.client, **{name: cast(handle.value)})
+
+        setting(self.registration, "registration", str)
+        setting(self.interpolation, "interpolation", str)
+        setting(self.neighbors, "neighbors", int)
+        setting(self.power, "power", float)
+        setting(self.smoothing, "smoothing", float)
+        setting(self.noise, "noise_scale", float)
+        setting(self.bias, "bias_scale", float)
+
+        def display(handle, name, cast):
+            @handle.on_update
+            def _(event: viser.GuiEvent) -> None:
+                if not self.syncing:
+                    app.set_display(client=event.client, **{name: cast(handle.value)})
+
+        display(self.magnification, "magnification", float)
+        display(self.marker, "marker_mm", float)
+        display(self.region_zoom, "region_zoom", float)
+        display(self.handles, "handles", str)
+
+        @self.heat_value.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if not self.syncing:
+                choices = dict(HEAT_CHOICES[app.session.kind])
+                app.set_display(client=event.client, heat_value=choices.get(self.heat_value.value, "rrbc"))
+
+        for name, box in self.layers.items():
+            def on_layer(event: viser.GuiEvent, name=name, box=box) -> None:
+                if not self.syncing:
+                    app.set_layer(name, bool(box.value))
+
+            box.on_update(on_layer)
+
+        self.new_seed.on_click(lambda event: app.new_seed(client=event.client))
+        self.lesson_next.on_click(lambda event: app.lesson_step(+1))
+        self.lesson_prev.on_click(lambda event: app.lesson_step(-1))
+        self.lesson_end.on_click(lambda event: app.lesson_stop())
+        self.mc_run.on_click(lambda event: app.request_monte_carlo())
+
+        @self.mc_trials.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if not self.syncing:
+                app.request_monte_carlo()
+
+        @self.load.on_click
+        def _(event: viser.GuiEvent) -> None:
+            path = self.path.value.strip()
+            mesh = self.mesh_path.value.strip() or None
+            app.load(path or None, mesh=mesh, client=event.client)
+
+        @self.upload.on_upload
+        def _(event: viser.GuiEvent) -> None:
+            f = self.upload.value
+            app.load_upload(f.name, f.content, client=event.client)
+
+        self.download_csv.on_click(lambda event: app.download("csv", client=event.client))
+        self.download_json.on_click(lambda event: app.download("json", client=event.client))
+
+    # -------------------------------------------------------------------------------------------- syncing
+    @contextmanager
+    def quiet(self):
+        """Assign GUI values without acting on them."""
+        was = self.syncing
+        self.syncing = True
+        try:
+            yield
+        finally:
+            self.syncing = was
+
+    def sync_settings(self, settings: Settings, kind: str) -> None:
+        with self.quiet():
+            self.registration.value = settings.registration
+            self.interpolation.value = settings.interpolation
+            self.neighbors.value = int(settings.neighbors)
+            self.power.value = float(settings.power)
+            self.smoothing.value = float(settings.smoothing)
+            self.noise.value = float(settings.noise_scale)
+            self.bias.value = float(settings.bias_scale)
+            scene = kind == "scene"
+            self.noise.disabled = not scene
+            self.bias.disabled = not scene
+            self.neighbors.visible = self.power.visible = settings.interpolation == "idw"
+            self.smoothing.visible = settings.interpolation == "tps"
+            self.seed_md.content = (f"Noise seed **{settings.seed}**." if scene else
+                                    f"Measured data: noise and bias are what they are (seed {settings.seed} only "
+                                    "seeds annealing and clustering).")
+
+    def sync_display(self, display: Display, kind: str) -> None:
+        with self.quiet():
+            self.magnification.value = float(min(max(display.magnification, 1), MAG_MAX))
+            self.marker.value = float(display.marker_mm)
+            self.region_zoom.value = float(display.region_zoom)
+            self.handles.value = display.handles
+            labels = HEAT_CHOICES[kind]
+            self.heat_value.options = tuple(k for k, _ in labels)
+            self.heat_value.value = next((k for k, v in labels if v == display.heat_value), labels[0][0])
+
+    def sync_layers(self, layers: dict[str, bool]) -> None:
+        """Show the layer visibilities on the checkboxes (the app applies them to the scene)."""
+        with self.quiet():
+            for name, box in self.layers.items():
+                if name in layers:
+                    box.value = bool(layers[name])

@@ -1,0 +1,112 @@
+"""Sources the app opens (scene TOML, measurement CSV, optional mesh) and the files it hands out.
+
+Every failure is an `InputError` with the core's one-line message; nothing here computes RRBC numbers.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from rrbc_core.errors import InputError
+from rrbc_core.explorer import ExplorerSession
+from rrbc_core.measurements import MeasurementSet, parse_measurements, read_measurements, write_measurements
+from rrbc_core.scene import default_scene_path, load_scene
+
+SCENE_SUFFIXES = (".toml",)
+
+
+@dataclass
+class Loaded:
+    """A freshly opened source: its session, the cell mesh (robot frame, mm; None if there is none) and a label."""
+
+    session: ExplorerSession
+    mesh: object | None  # trimesh.Trimesh
+    label: str
+
+
+def _is_scene(name: str, text_start: str = "") -> bool:
+    suffix = Path(name).suffix.lower()
+    if suffix in SCENE_SUFFIXES:
+        return True
+    if suffix == ".csv":
+        return False
+    return text_start.lstrip().startswith("[")
+
+
+def load_mesh(path) -> object:
+    """A mesh file (any format trimesh reads) as one trimesh.Trimesh, robot frame, mm."""
+    import trimesh
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{path}: mesh file not found")
+    try:
+        mesh = trimesh.load(str(p), force="mesh")
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise InputError(f"{path}: cannot load as a mesh: {exc.__class__.__name__}: {' '.join(str(exc).split())}") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(f"{path}: the file holds no triangles")
+    return mesh
+
+
+def load_source(source=None, mesh=None) -> Loaded:
+    """Open a scene (.toml; None = the bundled default scene) or a measurement file (.csv), with an optional
+    mesh file for measurement files (a scene names its own mesh)."""
+    if source is None:
+        source = default_scene_path()
+    path = os.fspath(source)
+    head = ""
+    if Path(path).suffix.lower() not in SCENE_SUFFIXES + (".csv",):
+        try:
+            with open(path, "r", encoding="utf-8", errors="replace") as fh:
+                head = fh.read(200)
+        except OSError:
+            head = ""
+    if _is_scene(path, head):
+        if mesh is not None:
+            raise InputError(f"{path}: a scene names its own mesh (scene.mesh); --mesh is for measurement files")
+        scene = load_scene(path)
+        return _from_scene(scene, f"scene {scene.name} ({Path(path).name})")
+    mset = read_measurements(path)
+    return _from_measurements(mset, mesh, f"measurements {Path(path).name}")
+
+
+def _from_scene(scene, label: str) -> Loaded:
+    session = ExplorerSession.from_scene(scene)
+    session.evaluate()
+    return Loaded(session, scene.load_mesh(), label)
+
+
+def _from_measurements(mset: MeasurementSet, mesh, label: str) -> Loaded:
+    mesh_obj = load_mesh(mesh) if mesh is not None else None
+    session = ExplorerSession.from_measurements(mset, mesh_path=None if mesh is None else Path(mesh))
+    session.evaluate()
+    return Loaded(session, mesh_obj, label)
+
+
+def load_upload(name: str, content: bytes) -> Loaded:
+    """Open an uploaded file: a measurement CSV is parsed as it is; a scene TOML is read from a temporary
+    directory, so a mesh it names by a relative path will not be found (open such scenes by path)."""
+    base = Path(name or "upload").name or "upload"
+    try:
+        text = content.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{base}: not UTF-8 text (byte {exc.start}); upload a measurement CSV or a scene TOML") from None
+    if _is_scene(base, text[:200]):
+        with tempfile.TemporaryDirectory(prefix="rrbc-upload-") as tmp:
+            path = Path(tmp) / (base if base.lower().endswith(".toml") else base + ".toml")
+            path.write_text(text, encoding="utf-8")
+            return _from_scene(load_scene(path), f"uploaded scene {base}")
+    return _from_measurements(parse_measurements(text, base), None, f"measurements {base} (uploaded)")
+
+
+def measurements_csv(mset: MeasurementSet, comments=()) -> str:
+    """A MeasurementSet as measurement-file text: written with the core's writer to a temporary file and read
+    back, so the download is byte-for-byte what `write_measurements` produces."""
+    with tempfile.TemporaryDirectory(prefix="rrbc-export-") as tmp:
+        path = Path(tmp) / "export.csv"
+        write_measurements(path, mset, comments=comments)
+        return path.read_text(encoding="utf-8")

@@ -1,0 +1,61 @@
+"""Markdown shown in the control panel: the drawing scale, the summary and the per-target table.
+
+Formatting only: every number comes from an `Evaluation` (lengths of its vectors are taken for display).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rrbc_core.explorer import Evaluation
+
+
+def _mm(x) -> str:
+    return "—" if x is None or not np.isfinite(x) else f"{float(x):.3f}"
+
+
+def scale_line(magnification: float) -> str:
+    """The drawing scale of correction arrows and landing offsets, said on screen."""
+    m = f"{magnification:g}"
+    return f"Arrows and landing offsets **×{m}**: 1 mm is drawn as {m} mm."
+
+
+def summary(ev: Evaluation, kind: str) -> str:
+    sm = ev.summary
+    s = ev.settings
+    interp = s.interpolation + (f" (k={s.neighbors}, p={s.power:g})" if s.interpolation == "idw" else
+                                f" (smoothing {s.smoothing:g})" if s.interpolation == "tps" else "")
+    lines = [
+        f"Registration **{ev.registration.method}**: FRE {ev.registration.fre_rms_mm:.3f} mm RMS "
+        f"({len(ev.registration_ids)} points). Interpolation **{interp}** over "
+        f"{sm['fiducials_used']} of {len(ev.fiducial_ids)} fiducials.",
+    ]
+    if sm.get("rmst_rigid_mm") is not None:
+        lines.append(
+            f"Target error over {sm['scored']} scored: RMS **{_mm(sm['rmst_rigid_mm'])} mm rigid → "
+            f"{_mm(sm['rmst_rrbc_mm'])} mm RRBC**; max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])} mm.")
+    elif kind == "measurements":
+        lines.append("No target carries a truth: errors cannot be scored (check rows would be).")
+    if sm.get("extrapolated"):
+        lines.append(f"⚠ **Extrapolated** (outside the fiducials' hull): {', '.join(sm['extrapolated'])}.")
+    return "\n\n".join(lines)
+
+
+def target_table(ev: Evaluation) -> str:
+    """Per target: error rigid, error RRBC (mm, — without truth), |correction|, gp std, extrapolation flag."""
+    t = ev.targets
+    has_std = t.correction_std is not None
+    head = "| target | rigid | RRBC | \\|ê\\| | " + ("std | " if has_std else "") + "hull |"
+    sep = "|---|---:|---:|---:|" + ("---:|" if has_std else "") + "---|"
+    rows = [head, sep]
+    corr = np.linalg.norm(t.correction.reshape(-1, 3), axis=1)
+    std = np.linalg.norm(t.correction_std.reshape(-1, 3), axis=1) if has_std else None
+    for i, pid in enumerate(t.ids):
+        flag = "⚠ extrapolated" if bool(t.extrapolated[i]) else "inside"
+        row = f"| {pid} | {_mm(t.error_rigid[i])} | {_mm(t.error_rrbc[i])} | {corr[i]:.3f} | "
+        if has_std:
+            row += f"{std[i]:.3f} | "
+        rows.append(row + f"{flag} |")
+    return "\n".join(rows) + (
+        "\n\nmm. *rigid*, *RRBC*: target error against the truth (— where there is none); |ê|: interpolated "
+        "correction" + ("; *std*: its 1σ from the Gaussian process." if has_std else "."))

@@ -1,0 +1,174 @@
+"""The lesson: NIST's nine RRBC steps, one screen each, with live numbers.
+
+Each `Step` names the scene layers that show its result (explorer.LAYERS) and renders one or two sentences as
+markdown. Every number quoted comes from the current `Evaluation` (or, for regions, the session's scene);
+nothing is computed here beyond picking, formatting and taking the length of vectors the Evaluation holds.
+Frames: robot frame for positions, sensor frame where a sentence says so; millimetres throughout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from rrbc_core.explorer import Evaluation
+
+
+@dataclass(frozen=True)
+class LessonContext:
+    """What a step may quote besides the Evaluation."""
+
+    kind: str  # "scene" or "measurements"
+    magnification: float  # arrows and landing offsets are drawn this many times longer
+    regions: dict = field(default_factory=dict)  # target id -> rrbc_core.scene.Region (scene mode)
+
+
+@dataclass(frozen=True)
+class Step:
+    title: str
+    layers: tuple[str, ...]  # layers shown at this step (the others are hidden)
+    text: Callable[[Evaluation, LessonContext], str]
+    target_arrows: bool = True  # with the "corrections" layer: also the targets' arrows (step 6 shows fiducials' only)
+
+
+def _v(x) -> str:
+    return "[" + ", ".join(f"{float(c):.3f}" for c in np.asarray(x).reshape(-1)) + "]"
+
+
+def _ids(ids, limit: int = 8) -> str:
+    ids = list(ids)
+    return ", ".join(ids[:limit]) + (f" … ({len(ids)} in all)" if len(ids) > limit else "")
+
+
+def _norms(a) -> np.ndarray:
+    return np.linalg.norm(np.asarray(a, float).reshape(-1, 3), axis=1)
+
+
+def _mm(x) -> str:
+    return "—" if x is None or not np.isfinite(x) else f"{float(x):.3f} mm"
+
+
+def _step1(ev: Evaluation, ctx: LessonContext) -> str:
+    n = len(ev.registration_ids)
+    return (f"The robot and the sensor both measure **{n} registration points** ({_ids(ev.registration_ids)}, purple). "
+            "At least 3 are needed; they should be well spread over the work volume, because the registration is "
+            "only as good as the volume they span.")
+
+
+def _step2(ev: Evaluation, ctx: LessonContext) -> str:
+    reg = ev.registration
+    res = _norms(reg.residuals)
+    worst = int(np.argmax(res)) if len(res) else 0
+    t = np.asarray(reg.mapping.translation, float)
+    s = (f"**{reg.method}** registration gives (R, t) taking sensor points to the robot frame; t = {_v(t)} mm. "
+         f"The fit leaves **FRE {reg.fre_rms_mm:.3f} mm** RMS over {len(res)} points"
+         + (f" (largest residual {res[worst]:.3f} mm at {ev.registration_ids[worst]})." if len(res) else ".")
+         + " A low FRE is no evidence of accuracy at the targets.")
+    if ctx.kind == "scene":
+        s += " The registered sensor frame is drawn beside the true one."
+    return s
+
+
+def _step3(ev: Evaluation, ctx: LessonContext) -> str:
+    t = ev.targets
+    s = f"**{len(t.ids)} targets** ({_ids(t.ids)}, blue): the places where the robot must act accurately."
+    if ctx.regions and len(t.ids):
+        r = ctx.regions.get(t.ids[0])
+        if r is not None:
+            dims = "×".join(f"{float(x):g}" for x in r.size)
+            what = "extents" if r.kind == "box" else "radii"
+            s += (f" Each has a region of variability where the part may really be; {t.ids[0]}'s is a {r.kind} with "
+                  f"{what} {dims} mm (translucent; enlarge it with *Region zoom* in the View tab).")
+    return s
+
+
+def _step4(ev: Evaluation, ctx: LessonContext) -> str:
+    used = int(np.count_nonzero(ev.included))
+    out = ev.summary.get("extrapolated", [])
+    s = (f"**{used} of {len(ev.fiducial_ids)} fiducials** (orange) are measured around the targets; their convex "
+         f"hull (yellow, {len(ev.hull_edges)} edges) must contain every target's region.")
+    if out:
+        verb, its = ("lies", "its correction") if len(out) == 1 else ("lie", "their corrections")
+        s += f" **{_ids(out)} {verb} outside the hull**: {its} will be extrapolated (magenta)."
+    else:
+        s += " Every target is inside the hull."
+    return s
+
+
+def _step5(ev: Evaluation, ctx: LessonContext) -> str:
+    inc = np.flatnonzero(ev.included)
+    if not len(inc):
+        return "Every fiducial is excluded: include one (click it) to see it mapped back."
+    i = int(inc[0])
+    b = ev.fiducial_readings.robot[i]
+    s = ev.fiducial_readings.sensor[i]
+    e = ev.corrections[i]
+    return (f"The robot's fiducial readings are taken back into the sensor frame with (R, t)⁻¹. For "
+            f"**{ev.fiducial_ids[i]}** the robot read b = {_v(b)} mm (robot frame); the sensor saw s = {_v(s)} mm "
+            f"(sensor frame). Mapped back, b lands **{float(np.linalg.norm(e)):.3f} mm** from s: the rigid-body "
+            "condition is broken there.")
+
+
+def _step6(ev: Evaluation, ctx: LessonContext) -> str:
+    inc = np.flatnonzero(ev.included)
+    if not len(inc):
+        return "Every fiducial is excluded: there are no corrections."
+    n = _norms(ev.corrections[inc])
+    hi, lo = int(inc[int(np.argmax(n))]), int(inc[int(np.argmin(n))])
+    return (f"The corrections e_i = Rᵀ(b_i − t) − s_i (orange arrows, ×{ctx.magnification:g}) range from "
+            f"**{n.min():.3f} mm** ({ev.fiducial_ids[lo]}) to **{n.max():.3f} mm** ({ev.fiducial_ids[hi]}). "
+            f"{ev.fiducial_ids[hi]}: e = {_v(ev.corrections[hi])} mm, sensor frame.")
+
+
+def _step7(ev: Evaluation, ctx: LessonContext) -> str:
+    t = ev.targets
+    if not len(t.ids):
+        return "There are no targets."
+    return (f"The sensor measures the {len(t.ids)} targets; **{t.ids[0]}** reads x = {_v(t.sensor[0])} mm "
+            "(sensor frame). Drag a target's handle to move it: everything below follows live.")
+
+
+def _step8(ev: Evaluation, ctx: LessonContext) -> str:
+    t = ev.targets
+    if not len(t.ids):
+        return "There are no targets."
+    n = _norms(t.correction)
+    s = (f"Each target's correction ê(x) is interpolated (**{ev.settings.interpolation}**) from the nearby fiducial "
+         f"corrections (blue arrows, ×{ctx.magnification:g}): {t.ids[0]} gets ê = {_v(t.correction[0])} "
+         f"(|ê| = {n[0]:.3f} mm); over all targets |ê| is {n.min():.3f}–{n.max():.3f} mm.")
+    if t.correction_std is not None:
+        s += f" The Gaussian process puts ±{float(np.linalg.norm(t.correction_std[0])):.3f} mm (1σ) on {t.ids[0]}'s."
+    return s
+
+
+def _step9(ev: Evaluation, ctx: LessonContext) -> str:
+    sm = ev.summary
+    if sm.get("rmst_rigid_mm") is None:
+        return ("b̂ = R(x + ê(x)) + t sends the robot to the corrected targets (green) instead of the rigid-only "
+                "ones (red). These data carry no truth for the targets, so the gain cannot be scored here; "
+                "add check rows to score it.")
+    return (f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (red) versus with RRBC (green), offsets "
+            f"×{ctx.magnification:g} from the truth (dark). Over {sm['scored']} scored targets the RMS error is "
+            f"**{_mm(sm['rmst_rigid_mm'])} rigid → {_mm(sm['rmst_rrbc_mm'])} with RRBC** "
+            f"(max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])}).")
+
+
+STEPS: tuple[Step, ...] = (
+    Step("Measure registration points", ("mesh", "frames", "registration", "labels"), _step1),
+    Step("Register the sensor to the robot", ("mesh", "frames", "registration"), _step2),
+    Step("Identify the targets", ("mesh", "targets", "regions", "labels"), _step3),
+    Step("Choose fiducials around the targets", ("mesh", "targets", "fiducials", "hull", "regions"), _step4),
+    Step("Map the robot's fiducials back", ("mesh", "frames", "fiducials", "labels"), _step5),
+    Step("Corrections at the fiducials", ("mesh", "fiducials", "corrections"), _step6, target_arrows=False),
+    Step("Measure the targets", ("mesh", "targets", "fiducials"), _step7),
+    Step("Interpolate corrections to the targets", ("mesh", "fiducials", "targets", "corrections"), _step8),
+    Step("Correct and map to the robot", ("mesh", "targets", "landing"), _step9),
+)
+
+
+def render(index: int, ev: Evaluation, ctx: LessonContext) -> str:
+    """Markdown for step `index` (0-based)."""
+    step = STEPS[index]
+    return f"**Step {index + 1} of {len(STEPS)}: {step.title}**\n\n{step.text(ev, ctx)}"

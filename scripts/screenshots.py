@@ -1,0 +1,226 @@
+#!/usr/bin/env python3
+"""Screenshots of the browser app in headless Chromium, for the docs.
+
+    .venv/bin/python scripts/screenshots.py [--out docs/screenshots] [--mesh-node /cell] [--only app_default.png]
+
+Starts the real app (``rrbc_viz.app.serve(port=0)``, local only) once per screenshot, so every shot begins from
+the same state, opens it at 1280x800 in Debian's /usr/bin/chromium (install it with
+``bash scripts/setup.sh --browser``; never ``playwright install``), closes viser's "Software WebGL rendering
+detected" notification, runs the shot's GUI actions, waits until the scene has rendered and the page has
+settled, and saves a PNG.
+
+Extend SHOTS below. Each entry is (file name, actions); an action is one of
+    ("click", "Label")      click the visible GUI element whose text is "Label" (page.get_by_text; exact match
+                            first, then substring) - buttons, tabs, checkbox labels, dropdowns then their options
+    ("wait_text", "Text")   wait until "Text" is visible on the page
+    ("wait_node", "/name")  wait until scene node "/name" is mounted in the browser
+    ("sleep", 0.5)          pause (seconds); prefer the waits above
+A shot whose click label does not exist in the app (yet) is skipped with a message, not an error.
+
+Exit status: 0 if app_default.png (the first shot) was written, 1 on failure, 2 if the app or the browser is
+not available.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+# (file name, actions). The labels follow rrbc_viz/controls.py as of writing (tabs "Explore", "View", "Learn";
+# the heat-map layer checkbox "Heat map of predicted error" in "View"); a label missing from the page skips the
+# shot, so renaming a control only loses a picture until this list is updated.
+SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
+    ("app_default.png", []),
+    ("app_teaching.png", [("click", "Learn")]),
+    ("app_heatmap.png", [("click", "View"), ("click", "Heat map of predicted error")]),
+]
+
+APP_ENTRY = "rrbc_viz.app:serve"
+CLICK_TIMEOUT_S = 5.0
+RENDER_TIMEOUT_S = 60.0
+SETTLE_TIMEOUT_S = 15.0
+
+
+class ShotSkipped(Exception):
+    pass
+
+
+def unavailable(message: str) -> None:
+    """Exit 2: the app or the browser is not there (as opposed to a failed screenshot, exit 1)."""
+    print(f"screenshots: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
+def load_serve(entry: str) -> tuple[Any, Callable[..., Any]]:
+    """Import ``module:function``; exit 2 with a clear message if the module itself does not exist yet."""
+    module_name, _, func_name = entry.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name in {"viser", "numpy", "playwright", "trimesh", "scipy"}:
+            unavailable(f"{exc}: run this with the project's .venv/bin/python (after `bash scripts/setup.sh`).")
+        if exc.name is not None and (module_name == exc.name or module_name.startswith(exc.name + ".")):
+            unavailable(
+                f"the app module {module_name!r} does not exist yet ({exc}); nothing to screenshot. "
+                f"It should provide {func_name or 'serve'}(source=None, host='127.0.0.1', port=0) -> RunningApp."
+            )
+        raise  # the app exists but one of its own imports failed: show the real traceback
+    serve = getattr(module, func_name or "serve", None)
+    if serve is None:
+        unavailable(f"{module_name} has no function {func_name or 'serve'!r} yet.")
+    return module, serve
+
+
+def click_label(page: Any, label: str) -> None:
+    for exact in (True, False):
+        loc = page.get_by_text(label, exact=exact).filter(visible=True).first
+        try:
+            loc.wait_for(state="visible", timeout=CLICK_TIMEOUT_S * 1000 if exact else 1000)
+        except Exception:  # noqa: BLE001 - try the looser match, then give up
+            continue
+        loc.click()
+        return
+    debug = Path(tempfile.gettempdir()) / f"screenshots-missing-{label.replace('/', '_')[:40]}.png"
+    page.screenshot(path=str(debug))
+    raise ShotSkipped(f"no visible GUI element labelled {label!r} (page as it was: {debug})")
+
+
+def run_action(page: Any, h: Any, action: tuple[str, Any]) -> None:
+    kind, arg = action
+    if kind == "click":
+        click_label(page, str(arg))
+    elif kind == "wait_text":
+        page.get_by_text(str(arg)).first.wait_for(state="visible", timeout=RENDER_TIMEOUT_S * 1000)
+    elif kind == "wait_node":
+        h.wait_for_node(page, str(arg), RENDER_TIMEOUT_S)
+    elif kind == "sleep":
+        page.wait_for_timeout(float(arg) * 1000)
+    else:
+        raise ValueError(f"unknown action {kind!r} (use click, wait_text, wait_node, sleep)")
+
+
+def wait_for_scene(page: Any, h: Any, mesh_node: str | None) -> str:
+    """Wait until the mesh node is mounted with geometry and its screen region is not blank. Returns its name."""
+
+    def ready() -> str | None:
+        name = mesh_node
+        if name is None:
+            names = h.mesh_node_names(page)
+            name = names[0] if names else None
+        elif not h.node_exists(page, name):
+            return None
+        if name is None:
+            return None
+        box = h.node_screen_box(page, name)
+        png = page.screenshot(clip=box) if box else h.canvas_png(page, inset=0.2)
+        return name if h.canvas_not_blank(png) else None
+
+    what = f"mesh node {mesh_node!r}" if mesh_node else "a mesh node (GLB or simple mesh)"
+    return h.wait_for(ready, RENDER_TIMEOUT_S, interval_s=0.2, message=f"{what} rendered, not blank")
+
+
+def wait_settled(page: Any, timeout_s: float = SETTLE_TIMEOUT_S, quiet_s: float = 1.0) -> bool:
+    """Full-page screenshots stay identical for ``quiet_s`` (GUI and scene updates, e.g. a heat map the server
+    takes a moment to compute, have arrived). False if the page is still changing after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    prev, since = page.screenshot(), time.monotonic()
+    while time.monotonic() < deadline:
+        page.wait_for_timeout(200)
+        cur = page.screenshot()
+        if cur != prev:
+            prev, since = cur, time.monotonic()
+        elif time.monotonic() - since >= quiet_s:
+            return True
+    return False
+
+
+def take_shot(browser: Any, h: Any, serve: Callable[..., Any], mesh_node: str | None, name: str,
+              actions: list[tuple[str, Any]], out: Path) -> Path:
+    app = serve(port=0)
+    try:
+        h.wait_for_port(int(app.port), timeout_s=30)
+        ctx = browser.new_context(viewport=dict(h.VIEWPORT))
+        try:
+            page = ctx.new_page()
+            page.set_default_timeout(RENDER_TIMEOUT_S * 1000)
+            page.goto(h.app_url(app), wait_until="domcontentloaded")
+            h.wait_client_ready(page, RENDER_TIMEOUT_S)
+            found = wait_for_scene(page, h, mesh_node)
+            h.dismiss_software_webgl_notification(page, timeout_s=2.0)
+            for action in actions:
+                run_action(page, h, action)
+            if actions:
+                page.wait_for_timeout(300)  # let the server's reaction arrive before checking for stillness
+                wait_for_scene(page, h, mesh_node or found)
+            if not wait_settled(page):
+                print(f"screenshots: {name}: page still changing after {SETTLE_TIMEOUT_S:.0f} s; saving anyway",
+                      file=sys.stderr)
+            h.dismiss_software_webgl_notification(page, timeout_s=0.2)  # in case it reappeared
+            path = out / name
+            page.screenshot(path=str(path))
+            return path
+        finally:
+            ctx.close()
+    finally:
+        app.stop()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "screenshots", help="output directory")
+    ap.add_argument("--mesh-node", default=None,
+                    help="scene node to wait for (default: the app module's MESH_NODE if it defines one, "
+                         "else any mesh node)")
+    ap.add_argument("--only", action="append", default=None, help="only this file name (repeatable)")
+    ap.add_argument("--app", default=APP_ENTRY, help=f"module:function that starts the app (default {APP_ENTRY})")
+    args = ap.parse_args(argv)
+
+    module, serve = load_serve(args.app)
+    mesh_node = args.mesh_node or getattr(module, "MESH_NODE", None)
+
+    from tests.browser import helpers as h
+
+    if not Path(h.CHROMIUM_PATH).exists():
+        unavailable(f"{h.CHROMIUM_PATH} is missing; run `bash scripts/setup.sh --browser` "
+                 "(not `playwright install`).")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        unavailable("playwright is not installed; run with .venv/bin/python after scripts/setup.sh")
+
+    shots = [s for s in SHOTS if not args.only or s[0] in args.only]
+    args.out.mkdir(parents=True, exist_ok=True)
+    written, failed = [], []
+    with sync_playwright() as pw:
+        browser = h.launch_chromium(pw)
+        try:
+            for name, actions in shots:
+                t0 = time.monotonic()
+                try:
+                    path = take_shot(browser, h, serve, mesh_node, name, actions, args.out)
+                except ShotSkipped as exc:
+                    print(f"screenshots: {name}: skipped ({exc})", file=sys.stderr)
+                    continue
+                except Exception as exc:  # noqa: BLE001 - report and go on with the other shots
+                    print(f"screenshots: {name}: FAILED: {type(exc).__name__}: {exc}", file=sys.stderr)
+                    failed.append(name)
+                    continue
+                written.append(name)
+                print(f"screenshots: wrote {path} ({time.monotonic() - t0:.1f} s)")
+        finally:
+            browser.close()
+    if failed or (shots and shots[0][0] == SHOTS[0][0] and SHOTS[0][0] not in written):
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
