@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Screenshots of the browser app in headless Chromium, for the docs.
 
-    .venv/bin/python scripts/screenshots.py [--out docs/screenshots] [--mesh-node /cell] [--only app_default.png]
+    .venv/bin/python scripts/screenshots.py [--out docs/screenshots] [--mesh-node /mesh/cell] [--only app_default.png]
 
 Starts the real app (``rrbc_viz.app.serve(port=0)``, local only) once per screenshot, so every shot begins from
 the same state, opens it at 1280x800 in Debian's /usr/bin/chromium (install it with
@@ -11,11 +11,20 @@ settled, and saves a PNG.
 
 Extend SHOTS below. Each entry is (file name, actions); an action is one of
     ("click", "Label")      click the visible GUI element whose text is "Label" (page.get_by_text; exact match
-                            first, then substring) - buttons, tabs, checkbox labels, dropdowns then their options
+                            first, then substring) - checkbox labels, folder titles, dropdowns then their options
+    ("tab", "Learn")        click the panel tab named "Learn" (get_by_role("tab"))
+    ("button", "Next")      click the button named "Next" (get_by_role("button"); "Next" also appears in text)
+    ("select", ("Label", "option"))   open the dropdown labelled "Label" and choose "option"
+    ("drag", (node, a, b))  real mouse drag of gizmo `node`'s X arrow from local x = a to x = b, in gizmo scales
+                            (the app's ``nodes._gizmo_scale()``); waits until the server has the drag's end
+    ("zoom", {"look_at": (x, y, z), "factor": f})   every tab's camera looks at (x, y, z) mm from f times its
+                            initial distance, along the initial viewing direction (like a user zooming in)
     ("wait_text", "Text")   wait until "Text" is visible on the page
     ("wait_node", "/name")  wait until scene node "/name" is mounted in the browser
     ("sleep", 0.5)          pause (seconds); prefer the waits above
 A shot whose click label does not exist in the app (yet) is skipped with a message, not an error.
+
+PNGs larger than --max-kb are quantised to 256 colours (Pillow; the UI and scene have few colours).
 
 Exit status: 0 if app_default.png (the first shot) was written, 1 on failure, 2 if the app or the browser is
 not available.
@@ -31,19 +40,37 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 # (file name, actions). The labels follow rrbc_viz/controls.py as of writing (tabs "Explore", "View", "Learn";
-# the heat-map layer checkbox "Heat map of predicted error" in "View"); a label missing from the page skips the
-# shot, so renaming a control only loses a picture until this list is updated.
+# the heat-map layer checkbox "Heat map of predicted error" in "View", folder "Layers"; lesson button "Next");
+# scene nodes follow rrbc_viz/nodes.py (/targets/<id>/gizmo). A label missing from the page skips the shot, so
+# renaming a control only loses a picture until this list is updated. Coordinates: the bundled default scene
+# (robot frame, mm; targets H1..H8 on the fixture plate around (475, 0, 15)).
 SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ("app_default.png", []),
-    ("app_teaching.png", [("click", "Learn")]),
-    ("app_heatmap.png", [("click", "View"), ("click", "Heat map of predicted error")]),
+    # Step 6 of the lesson: the fiducials' corrections drawn as arrows (x magnification), their numbers alongside.
+    ("app_teaching.png", [("tab", "Learn")] + [("button", "Next")] * 6 + [("wait_text", "Step 6 of 9"),
+                          ("zoom", {"look_at": (490.0, 0.0, 40.0), "factor": 0.6})]),
+    # Heat map on, coloured by the rigid-only error (the RRBC errors all sit at the low end of the shared scale);
+    # "Layers" folded so the legend (mm) shows; a little closer so the rings read.
+    ("app_heatmap.png", [("tab", "View"), ("click", "Heat map of predicted error"),
+                         ("select", ("Colour by", "rigid error")), ("click", "Layers"),
+                         ("zoom", {"look_at": (475.0, 0.0, 15.0), "factor": 0.5})]),
+    # H1 dragged 3.2 gizmo scales along -X, out of the fiducials' hull (magenta, "extrapolated" in the table);
+    # closer, so its correction arrow and landing points (rigid red, RRBC green, offsets x magnification) show.
+    # The work-cell mesh is hidden: H1's landing offsets point down, into the table top.
+    ("app_drag.png", [("tab", "View"), ("click", "Work-cell mesh"), ("tab", "Explore"),
+                      ("drag", ("/targets/H1/gizmo", 0.7, -2.5)),
+                      ("zoom", {"look_at": (450.0, -60.0, 0.0), "factor": 0.45})]),
 ]
 
 APP_ENTRY = "rrbc_viz.app:serve"
+DEFAULT_MESH_NODE = "/mesh/cell"  # rrbc_viz/nodes.py
+MAX_KB = 400
 CLICK_TIMEOUT_S = 5.0
 RENDER_TIMEOUT_S = 60.0
 SETTLE_TIMEOUT_S = 15.0
@@ -93,10 +120,76 @@ def click_label(page: Any, label: str) -> None:
     raise ShotSkipped(f"no visible GUI element labelled {label!r} (page as it was: {debug})")
 
 
-def run_action(page: Any, h: Any, action: tuple[str, Any]) -> None:
+def click_role(page: Any, role: str, name: str) -> None:
+    loc = page.get_by_role(role, name=name, exact=True).filter(visible=True).first
+    try:
+        loc.wait_for(state="visible", timeout=CLICK_TIMEOUT_S * 1000)
+    except Exception:  # noqa: BLE001
+        raise ShotSkipped(f"no visible {role} named {name!r}") from None
+    loc.click()
+    page.wait_for_timeout(150)  # let the server's reaction (e.g. the next lesson step) arrive
+
+
+def drag_gizmo(page: Any, h: Any, app: Any, node: str, a: float, b: float) -> None:
+    """Drag gizmo `node`'s X arrow with the real mouse and wait until the server's handle has moved (one retry
+    if the press missed the arrow)."""
+    scale = float(app.nodes._gizmo_scale())
+    h.wait_for_node(page, node, RENDER_TIMEOUT_S)
+    handle = app.server.scene.get_handle_by_name(node)
+    if handle is None:
+        raise ShotSkipped(f"no scene node {node!r} on the server")
+    p0 = np.array(handle.position, float)
+    messages = len(app.messages)
+    for _attempt in range(2):
+        start = h.node_screen_position(page, node, (a * scale, 0.0, 0.0))
+        end = h.node_screen_position(page, node, (b * scale, 0.0, 0.0))
+        h.drag(page, start, end, steps=20)
+        try:
+            h.wait_for(lambda: not np.allclose(handle.position, p0), 10, message=f"{node} to move", page=page)
+            break
+        except TimeoutError:
+            continue
+    else:
+        raise RuntimeError(f"dragging {node} did not move it")
+    page.wait_for_timeout(500)  # the drag's end: table, heat map, Monte Carlo request
+    if len(app.messages) > messages:
+        print(f"screenshots: the app said: {app.messages[-1]}", file=sys.stderr)
+
+
+def zoom(app: Any, look_at, factor: float) -> None:
+    """Every tab's camera: look at `look_at` from `factor` times the initial camera distance, same direction."""
+    cam = app.server.initial_camera
+    pos0, look0 = np.asarray(cam.position, float), np.asarray(cam.look_at, float)
+    look = np.asarray(look_at, float)
+    position = look + (pos0 - look0) * float(factor)
+    for client in app.server.get_clients().values():
+        with client.atomic():
+            client.camera.look_at = look
+            client.camera.position = position
+
+
+def run_action(page: Any, h: Any, app: Any, action: tuple[str, Any]) -> None:
     kind, arg = action
     if kind == "click":
         click_label(page, str(arg))
+    elif kind == "tab":
+        click_role(page, "tab", str(arg))
+    elif kind == "button":
+        click_role(page, "button", str(arg))
+    elif kind == "select":
+        label, option = arg
+        box = page.get_by_label(str(label), exact=True).filter(visible=True).first
+        try:
+            box.wait_for(state="visible", timeout=CLICK_TIMEOUT_S * 1000)
+        except Exception:  # noqa: BLE001
+            raise ShotSkipped(f"no visible dropdown labelled {label!r}") from None
+        box.click()
+        click_role(page, "option", str(option))
+    elif kind == "drag":
+        drag_gizmo(page, h, app, *arg)
+    elif kind == "zoom":
+        zoom(app, arg["look_at"], arg["factor"])
+        page.wait_for_timeout(500)
     elif kind == "wait_text":
         page.get_by_text(str(arg)).first.wait_for(state="visible", timeout=RENDER_TIMEOUT_S * 1000)
     elif kind == "wait_node":
@@ -104,7 +197,7 @@ def run_action(page: Any, h: Any, action: tuple[str, Any]) -> None:
     elif kind == "sleep":
         page.wait_for_timeout(float(arg) * 1000)
     else:
-        raise ValueError(f"unknown action {kind!r} (use click, wait_text, wait_node, sleep)")
+        raise ValueError(f"unknown action {kind!r} (use click, tab, button, drag, zoom, wait_text, wait_node, sleep)")
 
 
 def wait_for_scene(page: Any, h: Any, mesh_node: str | None) -> str:
@@ -142,8 +235,24 @@ def wait_settled(page: Any, timeout_s: float = SETTLE_TIMEOUT_S, quiet_s: float 
     return False
 
 
+def shrink_png(path: Path, max_kb: float) -> None:
+    """Quantise the PNG to 256 colours (then 128) if it is larger than `max_kb`."""
+    if path.stat().st_size <= max_kb * 1024:
+        return
+    from PIL import Image
+
+    with Image.open(path) as im:
+        rgb = im.convert("RGB")
+    for colours in (256, 128):
+        rgb.quantize(colors=colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
+            path, optimize=True)
+        if path.stat().st_size <= max_kb * 1024:
+            return
+    print(f"screenshots: {path.name} is still {path.stat().st_size / 1024:.0f} KB", file=sys.stderr)
+
+
 def take_shot(browser: Any, h: Any, serve: Callable[..., Any], mesh_node: str | None, name: str,
-              actions: list[tuple[str, Any]], out: Path) -> Path:
+              actions: list[tuple[str, Any]], out: Path, max_kb: float = MAX_KB) -> Path:
     app = serve(port=0)
     try:
         h.wait_for_port(int(app.port), timeout_s=30)
@@ -156,7 +265,7 @@ def take_shot(browser: Any, h: Any, serve: Callable[..., Any], mesh_node: str | 
             found = wait_for_scene(page, h, mesh_node)
             h.dismiss_software_webgl_notification(page, timeout_s=2.0)
             for action in actions:
-                run_action(page, h, action)
+                run_action(page, h, app, action)
             if actions:
                 page.wait_for_timeout(300)  # let the server's reaction arrive before checking for stillness
                 wait_for_scene(page, h, mesh_node or found)
@@ -166,6 +275,7 @@ def take_shot(browser: Any, h: Any, serve: Callable[..., Any], mesh_node: str | 
             h.dismiss_software_webgl_notification(page, timeout_s=0.2)  # in case it reappeared
             path = out / name
             page.screenshot(path=str(path))
+            shrink_png(path, max_kb)
             return path
         finally:
             ctx.close()
@@ -177,14 +287,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "screenshots", help="output directory")
     ap.add_argument("--mesh-node", default=None,
-                    help="scene node to wait for (default: the app module's MESH_NODE if it defines one, "
-                         "else any mesh node)")
+                    help=f"scene node to wait for (default: the app module's MESH_NODE if it defines one, "
+                         f"else {DEFAULT_MESH_NODE}; 'any' for any mesh node)")
+    ap.add_argument("--max-kb", type=float, default=MAX_KB, help=f"quantise PNGs above this size (default {MAX_KB})")
     ap.add_argument("--only", action="append", default=None, help="only this file name (repeatable)")
     ap.add_argument("--app", default=APP_ENTRY, help=f"module:function that starts the app (default {APP_ENTRY})")
     args = ap.parse_args(argv)
 
     module, serve = load_serve(args.app)
-    mesh_node = args.mesh_node or getattr(module, "MESH_NODE", None)
+    mesh_node = args.mesh_node or getattr(module, "MESH_NODE", None) or DEFAULT_MESH_NODE
+    if mesh_node == "any":
+        mesh_node = None
 
     from tests.browser import helpers as h
 
@@ -205,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
             for name, actions in shots:
                 t0 = time.monotonic()
                 try:
-                    path = take_shot(browser, h, serve, mesh_node, name, actions, args.out)
+                    path = take_shot(browser, h, serve, mesh_node, name, actions, args.out, args.max_kb)
                 except ShotSkipped as exc:
                     print(f"screenshots: {name}: skipped ({exc})", file=sys.stderr)
                     continue
@@ -214,7 +327,8 @@ def main(argv: list[str] | None = None) -> int:
                     failed.append(name)
                     continue
                 written.append(name)
-                print(f"screenshots: wrote {path} ({time.monotonic() - t0:.1f} s)")
+                print(f"screenshots: wrote {path} ({path.stat().st_size / 1024:.0f} KB, "
+                      f"{time.monotonic() - t0:.1f} s)")
         finally:
             browser.close()
     if failed or (shots and shots[0][0] == SHOTS[0][0] and SHOTS[0][0] not in written):
