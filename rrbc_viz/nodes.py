@@ -106,23 +106,38 @@ def _identity_wxyzs(n: int) -> np.ndarray:
     return q
 
 
+def fiducial_labels(ev: Evaluation) -> list[str]:
+    """Label texts of every fiducial (correction size, or 'excluded')."""
+    norms = np.linalg.norm(ev.corrections, axis=1)
+    return [f"{pid} · e {norms[i]:.3f} mm" if ev.included[i] else f"{pid} · excluded"
+            for i, pid in enumerate(ev.fiducial_ids)]
+
+
 def fiducial_label(pid: str, ev: Evaluation, i: int) -> str:
-    if not ev.included[i]:
-        return f"{pid} · excluded"
-    return f"{pid} · e {float(np.linalg.norm(ev.corrections[i])):.3f} mm"
+    return fiducial_labels(ev)[i]
+
+
+def target_labels(ev: Evaluation) -> list[str]:
+    """Label texts of every target (errors against the truth, or the correction and its std without truth)."""
+    t = ev.targets
+    corr = np.linalg.norm(t.correction, axis=1)
+    std = None if t.correction_std is None else np.linalg.norm(t.correction_std, axis=1)
+    out = []
+    for i, pid in enumerate(t.ids):
+        if np.isfinite(t.error_rigid[i]):
+            s = f"{pid} · rigid {t.error_rigid[i]:.3f} / RRBC {t.error_rrbc[i]:.3f} mm"
+        else:
+            s = f"{pid} · ê {corr[i]:.3f} mm"
+            if std is not None:
+                s += f" ± {std[i]:.3f}"
+        if bool(t.extrapolated[i]):
+            s += " ⚠ extrapolated"
+        out.append(s)
+    return out
 
 
 def target_label(pid: str, ev: Evaluation, i: int) -> str:
-    t = ev.targets
-    if np.isfinite(t.error_rigid[i]):
-        s = f"{pid} · rigid {t.error_rigid[i]:.3f} / RRBC {t.error_rrbc[i]:.3f} mm"
-    else:
-        s = f"{pid} · ê {float(np.linalg.norm(t.correction[i])):.3f} mm"
-        if t.correction_std is not None:
-            s += f" ± {float(np.linalg.norm(t.correction_std[i])):.3f}"
-    if bool(t.extrapolated[i]):
-        s += " ⚠ extrapolated"
-    return s
+    return target_labels(ev)[i]
 
 
 class SceneNodes:
@@ -138,6 +153,7 @@ class SceneNodes:
         self.gizmos: dict[tuple[str, str], viser.TransformControlsHandle] = {}
         self.spheres: dict[tuple[str, str], viser.IcosphereHandle] = {}
         self.labels: dict[str, viser.LabelHandle] = {}  # node name of the label -> handle
+        self._sent: dict = {}  # (id(handle), attribute) -> the value last assigned by update()
         self.regions: dict[str, viser.SceneNodeHandle] = {}
         self.region_kind: dict[str, tuple[str, np.ndarray]] = {}  # id -> (kind, size)
         self.nodes: dict[str, viser.SceneNodeHandle] = {}  # other nodes by name
@@ -158,6 +174,7 @@ class SceneNodes:
         self.groups.clear(), self.gizmos.clear(), self.spheres.clear(), self.labels.clear()
         self.regions.clear(), self.region_kind.clear(), self.nodes.clear()
         self._heat_rings_args = None
+        self._sent.clear()  # new handles may reuse ids of removed ones
 
     def build(self, session: ExplorerSession, ev: Evaluation, mesh, display: Display, layers: dict[str, bool]) -> None:
         """(Re)create every node for `session` (after a source is loaded)."""
@@ -324,12 +341,13 @@ class SceneNodes:
                 label = self.labels[f"/registration/labels/{node_key(pid)}"]
                 label.position = np.asarray(p, float) + (0.0, 0.0, 1.6 * self.display.marker_mm)
 
-        # fiducials
+        # fiducials (only what changed is assigned: viser's property setters cost ~40 µs each)
+        texts = fiducial_labels(ev)
         for i, pid in enumerate(ev.fiducial_ids):
             inc = bool(ev.included[i])
-            self.spheres[("fiducials", pid)].color = colors.FIDUCIAL if inc else colors.FIDUCIAL_EXCLUDED
-            self.gizmos[("fiducials", pid)].position = ev.fiducial_positions[i]
-            self.labels[f"{gizmo_name('fiducials', pid)}/label"].text = fiducial_label(pid, ev, i)
+            self._assign(self.spheres[("fiducials", pid)], "color", colors.FIDUCIAL if inc else colors.FIDUCIAL_EXCLUDED)
+            self._assign(self.gizmos[("fiducials", pid)], "position", tuple(ev.fiducial_positions[i]))
+            self._assign(self.labels[f"{gizmo_name('fiducials', pid)}/label"], "text", texts[i])
         inc = np.flatnonzero(ev.included)
         arrows = self.nodes["/corrections/fiducials"]
         if len(inc):
@@ -345,13 +363,15 @@ class SceneNodes:
 
         # targets
         t = ev.targets
+        texts = target_labels(ev)
         for i, pid in enumerate(t.ids):
-            self.spheres[("targets", pid)].color = colors.TARGET_EXTRAPOLATED if t.extrapolated[i] else colors.TARGET
-            self.gizmos[("targets", pid)].position = t.positions[i]
-            self.labels[f"{gizmo_name('targets', pid)}/label"].text = target_label(pid, ev, i)
+            self._assign(self.spheres[("targets", pid)], "color",
+                         colors.TARGET_EXTRAPOLATED if t.extrapolated[i] else colors.TARGET)
+            self._assign(self.gizmos[("targets", pid)], "position", tuple(t.positions[i]))
+            self._assign(self.labels[f"{gizmo_name('targets', pid)}/label"], "text", texts[i])
             region = self.regions.get(pid)
             if region is not None:
-                region.position = t.positions[i]
+                self._assign(region, "position", tuple(t.positions[i]))
         tarrows = self.nodes["/corrections/targets"]
         if len(t.ids):
             tarrows.points = np.stack([t.positions, t.positions + mag * t.correction_robot], axis=1).astype(np.float32)
@@ -369,6 +389,15 @@ class SceneNodes:
             self.nodes["/landing/rrbc"].batched_positions = rrbc.astype(np.float32)
             self.nodes["/landing/lines"].points = np.concatenate(
                 [np.stack([anchor, rigid], 1), np.stack([anchor, rrbc], 1)]).astype(np.float32)
+
+    def _assign(self, handle, attr: str, value) -> None:
+        """Set handle.attr = value unless it is the value this object last set there (tuples/str compare
+        exactly); a gizmo moved by the user is re-sent once, which viser itself skips when unchanged."""
+        key = (id(handle), attr)
+        if self._sent.get(key) == value:
+            return
+        setattr(handle, attr, np.asarray(value, float) if isinstance(value, tuple) and attr == "position" else value)
+        self._sent[key] = value
 
     def snap(self, kind: str, pid: str, position) -> None:
         """Put a gizmo back (a refused move)."""
