@@ -133,13 +133,7 @@ def _check_registration_batch(points: np.ndarray, what: str, minimum: int = 3) -
     suspicious = ~(d2.reshape(trials, n * n).min(axis=1) >= margin)
     # collinearity: with S = CᵀC (eigenvalues l1 >= l2 >= l3), c2 = sum of principal 2x2 minors <= 3 l1 l2 and
     # trace >= l1, so l2 / l1 >= c2 / (3 trace²).
-    s = np.matmul(np.swapaxes(c, 1, 2), c)
-    tr = s[:, 0, 0] + s[:, 1, 1] + s[:, 2, 2]
-    c2 = (
-        s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] ** 2
-        + s[:, 0, 0] * s[:, 2, 2] - s[:, 0, 2] ** 2
-        + s[:, 1, 1] * s[:, 2, 2] - s[:, 1, 2] ** 2
-    )
+    tr, c2 = _trace_and_minors(c)
     with np.errstate(invalid="ignore", divide="ignore"):
         bound = c2 / (3.0 * tr * tr)
     suspicious |= ~(bound >= (1.5 * geometry.COLLINEAR_RATIO) ** 2)
@@ -325,6 +319,18 @@ def three_point_batch(sensor, robot) -> tuple[np.ndarray, np.ndarray]:
 # ------------------------------------------------------------------------------------------------------
 # Combinatorial averaging
 # ------------------------------------------------------------------------------------------------------
+def _trace_and_minors(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For centred stacks c (K, n, 3): trace and sum of principal 2x2 minors of S = cᵀc, per stack."""
+    s = np.matmul(np.swapaxes(c, 1, 2), c)
+    tr = s[:, 0, 0] + s[:, 1, 1] + s[:, 2, 2]
+    c2 = (
+        s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] ** 2
+        + s[:, 0, 0] * s[:, 2, 2] - s[:, 0, 2] ** 2
+        + s[:, 1, 1] * s[:, 2, 2] - s[:, 1, 2] ** 2
+    )
+    return tr, c2
+
+
 def _subset_ok(triples: np.ndarray, ratio: float) -> np.ndarray:
     """collinear_ratio_batch(triples) >= ratio for a (K, 3, 3) stack, deciding borderline cases by the SVD.
 
@@ -333,13 +339,7 @@ def _subset_ok(triples: np.ndarray, ratio: float) -> np.ndarray:
     from the threshold) are decided by this closed form, the rest by `geometry.collinear_ratio_batch`.
     """
     c = triples - triples.mean(axis=1, keepdims=True)
-    s = np.matmul(np.swapaxes(c, 1, 2), c)
-    tr = s[:, 0, 0] + s[:, 1, 1] + s[:, 2, 2]
-    c2 = (
-        s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] ** 2
-        + s[:, 0, 0] * s[:, 2, 2] - s[:, 0, 2] ** 2
-        + s[:, 1, 1] * s[:, 2, 2] - s[:, 1, 2] ** 2
-    )
+    tr, c2 = _trace_and_minors(c)
     with np.errstate(invalid="ignore", divide="ignore"):
         l1 = 0.5 * tr + np.sqrt(np.maximum(0.25 * tr * tr - c2, 0.0))
         est = np.sqrt(np.maximum(c2, 0.0) / l1) / np.sqrt(l1)
