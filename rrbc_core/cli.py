@@ -28,24 +28,23 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
 
 
-def _positive_int(text):
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
-    return v
+def _int_at_least(minimum: int):
+    """argparse type: an integer >= minimum."""
+
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {v}")
+        return v
+
+    return parse
 
 
-def _non_negative_int(text):
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be at least 0, got {v}")
-    return v
+_positive_int = _int_at_least(1)
+_non_negative_int = _int_at_least(0)
 
 
 def _positive_float(text):
@@ -73,6 +72,16 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=int, default=0, help="seed for annealing and clustering (default 0)")
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(run=_cmd_correct)
+
+    g = sub.add_parser("diagnose", help="find what, beyond rigid + noise, is in measured point pairs",
+                       description="Say what, beyond a rigid transform plus isotropic noise, is in the measured data, "
+                                   "and whether RRBC will help.")
+    g.add_argument("measurements", help="measurement CSV (shared/spec/measurement-file.md)")
+    g.add_argument("--alpha", type=_positive_float, default=0.01,
+                   help="family-wise false-alarm rate over all tests (default 0.01)")
+    g.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
+    g.add_argument("--json", action="store_true", help="print one JSON object")
+    g.set_defaults(run=_cmd_diagnose)
 
     m = sub.add_parser("simulate", help="simulate a scene: Monte Carlo statistics and synthetic data",
                        description="Simulate a scene's robot and sensor with its error model.")
@@ -175,6 +184,33 @@ def _cmd_correct(args) -> str:
     if args.json:
         return json.dumps(result.to_json(), allow_nan=False) + "\n"
     return _table(result)
+
+
+def _diagnosis_table(dg) -> str:
+    sig = ", ".join(f"{v:.4g}" for v in dg.noise_sigma_mm)
+    lines = [f"{dg.n_points} paired points; noise sigma per axis ({dg.noise_source}): {sig} mm; "
+             f"bias RMS {dg.bias_rms_mm:.4g} mm"]
+    if not dg.effects:
+        lines.append("no effect found: the data are consistent with a rigid transform plus isotropic noise")
+    for e in dg.effects:
+        lines.append(f"{e.name} (p {e.p_value:.2g}): {e.evidence}")
+    verdict = "recommended" if dg.rrbc_recommended else "not recommended"
+    lines.append(f"RRBC {verdict}: expected RMST change {100 * dg.expected_rmst_change:+.1f} % (leave-one-out)")
+    lines += [f"limit: {text}" for text in dg.limits]
+    return "\n".join(lines) + "\n"
+
+
+def _cmd_diagnose(args) -> str:
+    from .diagnosis import diagnose
+    from .measurements import read_measurements
+
+    if not args.alpha < 1:
+        raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
+    mset = read_measurements(args.measurements)
+    dg = diagnose(mset, alpha=args.alpha, seed=args.seed)
+    if args.json:
+        return json.dumps(dg.to_json(), allow_nan=False) + "\n"
+    return _diagnosis_table(dg)
 
 
 def _simulate_table(res) -> str:
