@@ -256,7 +256,78 @@ def app_heat_interval() -> float:
     return HEAT_INTERVAL_S
 
 
-BENCHMARKS = [mc_throughput_ls_rrbc, mc_throughput_annealing, drag_latency]
+# ------------------------------------------------------------------------------------------------------
+# Issue 6: rrbc diagnose on 1000 points
+# ------------------------------------------------------------------------------------------------------
+def _diagnose_set(n: int, seed: int):
+    """A 1000-point measurement set (mm, s): points in a 800 x 600 x 500 mm volume, a large sensor->robot
+    rotation, a smooth robot bias (~0.3 mm), sensor noise 0.02 mm, random measurement order (10 s apart)."""
+    from rrbc_core.measurements import MeasurementSet
+
+    rng = np.random.default_rng(seed)
+    robot = rng.uniform([100, -300, 50], [900, 300, 550], (n, 3))
+    rot = Rotation.from_rotvec([2.2, -0.9, 0.6]).as_matrix()
+    sensor = (robot - [500.0, 0.0, 300.0]) @ rot + [0.0, 0.0, 2000.0] + rng.normal(0, 0.02, (n, 3))
+    biased = robot + 0.3 * np.sin(robot / np.array([410.0, 530.0, 370.0]))
+    time_s = rng.permutation(n) * 10.0
+    return MeasurementSet([f"P{i}" for i in range(n)], ["both"] * n, sensor, biased, time_s, [0] * n)
+
+
+def _baseline_loo_loop(sensor: np.ndarray, robot: np.ndarray) -> tuple[float, float]:
+    """Baseline: one least-squares registration of all points plus leave-one-out RRBC as a plain per-point loop
+    (per left-out point: scipy align_vectors on the others, IDW k=4 p=2 from its nearest others with argsort).
+    Returns the leave-one-out RMS of rigid and RRBC prediction errors."""
+    def fit(s, b):
+        cs, cb = s.mean(axis=0), b.mean(axis=0)
+        r, _ = Rotation.align_vectors(b - cb, s - cs)
+        r = r.as_matrix()
+        return r, cb - r @ cs
+
+    fit(sensor, robot)  # the registration of all points
+    n = len(sensor)
+    e_rigid, e_rrbc = np.empty((n, 3)), np.empty((n, 3))
+    for i in range(n):
+        keep = np.arange(n) != i
+        s, b = sensor[keep], robot[keep]
+        r, t = fit(s, b)
+        e = b - (s @ r.T + t)
+        d = np.linalg.norm(s - sensor[i], axis=1)
+        idx = np.argsort(d)[:4]
+        w = 1.0 / d[idx] ** 2
+        e_rigid[i] = robot[i] - (r @ sensor[i] + t)
+        e_rrbc[i] = e_rigid[i] - w @ e[idx] / w.sum()
+    rms = lambda x: float(np.sqrt(np.mean(np.sum(x**2, axis=1))))  # noqa: E731
+    return rms(e_rigid), rms(e_rrbc)
+
+
+def diagnose_1000_points(quick: bool) -> list[dict]:
+    """Issue 6: wall time of rrbc_core.diagnosis.diagnose on a 1000-point measurement set (median of runs),
+    against a baseline measured in the same run: one least-squares registration + leave-one-out RRBC as a plain
+    per-point loop (_baseline_loo_loop) on the same points. Goal: diagnose < 2 s."""
+    from rrbc_core.diagnosis import diagnose
+
+    repeats = 3 if quick else 5
+    mset = _diagnose_set(1000, 606)
+    sensor, robot = np.asarray(mset.sensor), np.asarray(mset.robot)
+    diagnose(_diagnose_set(50, 1))  # warm-up (lazy imports)
+    d_times, b_times = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        dg = diagnose(mset)
+        d_times.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        loo = _baseline_loo_loop(sensor, robot)
+        b_times.append(time.perf_counter() - t0)
+    value, base = float(np.median(d_times)), float(np.median(b_times))
+    note = (f"1000 points, smooth 0.3 mm bias, noise 0.02 mm; median of {repeats} runs; diagnose found "
+            f"{dg.names or 'nothing'}, LOO RMS rigid/RRBC {dg.loo_rms_rigid_mm:.4f}/{dg.loo_rms_rrbc_mm:.4f} mm "
+            f"(baseline loop {loo[0]:.4f}/{loo[1]:.4f} mm); baseline: one least-squares registration + "
+            f"leave-one-out RRBC (IDW k=4, p=2) as a per-point Python loop; goal: diagnose < 2 s "
+            f"({'met' if value < 2.0 else 'NOT met'})")
+    return [time_row("diagnose_1000_points", value, base, note)]
+
+
+BENCHMARKS = [mc_throughput_ls_rrbc, mc_throughput_annealing, drag_latency, diagnose_1000_points]
 
 
 def _format_table(rows: list[dict]) -> str:

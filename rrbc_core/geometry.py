@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .errors import InputError
 
@@ -42,7 +43,7 @@ def principal_spreads(points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centroid, singular values (descending) and principal axes (rows) of the centred points."""
     p = np.asarray(points, dtype=float)
     c = p.mean(axis=0)
-    _, s, vt = np.linalg.svd(p - c, full_matrices=True)
+    _, s, vt = np.linalg.svd(p - c, full_matrices=len(p) < 3)  # never an N x N U for large N
     s = np.concatenate([s, np.zeros(3 - len(s))])
     return c, s, vt
 
@@ -69,11 +70,9 @@ def check_registration_points(points, what: str = "registration points", minimum
     p = as_points(points, what)
     if len(p) < minimum:
         raise InputError(f"{what}: {len(p)} given, at least {minimum} distinct points are needed")
-    d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
-    i, j = np.triu_indices(len(p), k=1)
-    close = d[i, j] < COINCIDENT_MM
-    if np.any(close):
-        a, b = i[close][0], j[close][0]
+    pairs = cKDTree(p).query_pairs(COINCIDENT_MM, output_type="ndarray")  # O(N log N), not an N x N matrix
+    if len(pairs):
+        a, b = sorted(min(map(tuple, pairs)))
         raise InputError(
             f"{what}: points {a + 1} and {b + 1} coincide (closer than {COINCIDENT_MM} mm); "
             "use distinct, well-spread points"

@@ -19,6 +19,9 @@ sent in one `server.atomic()` block. A drag update re-evaluates the session (mil
 properties in place; the heat map is recomputed at most every `HEAT_INTERVAL_S` during a drag and at its end;
 Monte Carlo runs in a background thread (`montecarlo.MonteCarloRunner`) after a setting changes, a drag ends or
 the seed changes. (A heat map that takes longer than `HEAT_LIVE_MAX_S` waits for the drag's end.)
+The Diagnose tab runs `rrbc_core.diagnosis.diagnose` synchronously on a button press (~15 ms on the bundled
+scene) over the current registration and fiducial rows only (targets withheld: no truth); a change to those rows
+marks the verdict stale instead of recomputing it.
 
 Frames and units: the scene is drawn in the robot frame, in millimetres (see `nodes`).
 """
@@ -39,10 +42,11 @@ from dataclasses import replace
 import numpy as np
 import viser
 
+from rrbc_core.diagnosis import Diagnosis, diagnose
 from rrbc_core.errors import InputError
 from rrbc_core.explorer import LAYERS, Evaluation, ExplorerSession
 
-from . import files, tables, teaching
+from . import diagnosis_panel, files, tables, teaching
 from .colors import legend_markdown
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
@@ -97,6 +101,10 @@ class RunningApp:
         self.heat_map = None  # the last HeatMap shown
         self.mc_plots = None  # the last MonteCarloPlots shown
         self.mc_seconds = None
+        self.diagnosis: Diagnosis | None = None  # the last verdict shown in the Diagnose tab (None: none or an error)
+        self.diagnosis_stale = False  # the data changed since the Diagnose tab's content was computed
+        self._diagnosis_rows = None  # the rows it was computed from (MeasurementSet), None when nothing is shown
+        self._diagnosis_text = ""  # its content without the stale marker
         self.nodes = SceneNodes(server, self._on_gizmo, self._on_fiducial_click)
         self.controls = Controls(server, self)
         self.mc = MonteCarloRunner(self._mc_result, self._mc_started)
@@ -124,6 +132,9 @@ class RunningApp:
             self.heat_map = None
             self.mc_plots = None
             self._heat_stale = True
+            self.diagnosis = None
+            self.diagnosis_stale = False
+            self._diagnosis_rows = None
             self.display = self._default_display(ev)
             with self.server.atomic():
                 self.nodes.build(self.session, ev, loaded.mesh, self.display, self.layers)
@@ -134,6 +145,7 @@ class RunningApp:
                     f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}.")
                 self.controls.lesson.content = ("The nine steps of RRBC, one at a time, each shown in the scene with "
                                                 "live numbers. Press **Next** to start.")
+                self.controls.diagnosis.content = diagnosis_panel.PROMPT
                 self._frame_camera(loaded.mesh, ev)
                 self._show(ev, heat=True)
             if not first:
@@ -186,6 +198,7 @@ class RunningApp:
         if self.lesson_index is not None:
             c.lesson.content = teaching.render(self.lesson_index, ev, self._lesson_context())
         self._heat_stale = True
+        self._check_diagnosis()
         if heat:
             self._update_heat()
 
@@ -390,6 +403,49 @@ class RunningApp:
                 self.nodes.target_arrows = True
                 self.nodes.update(self.session.last)
                 self.controls.lesson.content = "Lesson ended. Press **Next** to start again."
+
+    # ------------------------------------------------------------------------------------------ diagnosis
+    def _diagnosis_input(self):
+        """The session's current data without its targets (roles registration, fiducial, both): no truth."""
+        return diagnosis_panel.diagnosis_rows(self.session.export_measurements())
+
+    def run_diagnosis(self, client=None) -> Diagnosis | None:
+        """Diagnose the current data (what the Diagnose button does) and show the verdict in the Diagnose tab.
+        Synchronous: ~15 ms on the bundled scene. Returns None (and says why in the tab) on InputError."""
+        with self._lock:
+            rows = self._diagnosis_input()
+            try:
+                result = diagnose(rows)
+            except InputError as exc:
+                result, text = None, diagnosis_panel.render_error(str(exc))
+            except Exception as exc:  # noqa: BLE001 - keep serving
+                traceback.print_exc()
+                result, text = None, diagnosis_panel.render_error(f"internal error: {type(exc).__name__}: {exc}")
+            else:
+                text = diagnosis_panel.render(result, self.session.name)
+            self.diagnosis = result
+            self.diagnosis_stale = False
+            self._diagnosis_rows = rows
+            self._diagnosis_text = text
+            with self.server.atomic():
+                self.controls.diagnosis.content = text
+        if result is None:
+            self._message("diagnosis failed: see the Diagnose tab", client, title="Not diagnosed")
+        return result
+
+    def _check_diagnosis(self) -> None:
+        """Mark the Diagnose tab's content stale once the rows it was computed from changed (caller holds the
+        lock). Compares data, so a target drag or a method change (which leave the diagnosed rows as they are)
+        keeps the verdict current; a fiducial drag, an exclusion or a noise/bias/seed change makes it stale."""
+        old = self._diagnosis_rows
+        if old is None or self.diagnosis_stale:
+            return
+        new = self._diagnosis_input()
+        same = (new.ids == old.ids and new.roles == old.roles and np.array_equal(new.sensor, old.sensor, equal_nan=True)
+                and np.array_equal(new.robot, old.robot, equal_nan=True))
+        if not same:
+            self.diagnosis_stale = True
+            self.controls.diagnosis.content = diagnosis_panel.STALE + "\n\n" + self._diagnosis_text
 
     # ---------------------------------------------------------------------------------------- Monte Carlo
     def request_monte_carlo(self) -> bool:

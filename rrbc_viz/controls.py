@@ -1,4 +1,5 @@
-"""The control panel (shared by every browser tab): settings, display, layers, lesson, Monte Carlo, files.
+"""The control panel (shared by every browser tab): settings, display, layers, lesson, diagnosis, Monte Carlo,
+files.
 
 The panel only forwards user input to the app (`rrbc_viz.app.RunningApp`) and shows what the app hands back;
 it holds no RRBC state of its own. Programmatic updates (`sync_*`) set `syncing` so that the value callbacks
@@ -16,6 +17,7 @@ import viser
 from rrbc_core import interpolation, registration
 from rrbc_core.explorer import LAYERS, Settings
 
+from .diagnosis_panel import PROMPT
 from .nodes import HANDLE_CHOICES, Display
 
 if TYPE_CHECKING:
@@ -119,6 +121,13 @@ class Controls:
                 title="Mean error vs distance from the origin", scales={"x": {"time": False}},
                 axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}), aspect=1.4)
 
+        # --------------------------------------------------------------------------------------- Diagnose
+        with tabs.add_tab("Diagnose", icon=viser.Icon.STETHOSCOPE):
+            self.diagnose = gui.add_button("Diagnose current data", icon=viser.Icon.STETHOSCOPE,
+                                           hint="Test the registration points and fiducials (not the targets) "
+                                                "for effects a rigid fit misses")
+            self.diagnosis = gui.add_markdown(PROMPT)
+
         # ------------------------------------------------------------------------------------------- File
         with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
             self.path = gui.add_text("Scene or data file", "", hint="A scene .toml or a measurement .csv on the server")
@@ -178,6 +187,7 @@ class Controls:
         self.lesson_prev.on_click(lambda event: app.lesson_step(-1))
         self.lesson_end.on_click(lambda event: app.lesson_stop())
         self.mc_run.on_click(lambda event: app.request_monte_carlo())
+        self.diagnose.on_click(lambda event: app.run_diagnosis(client=event.client))
 
         @self.mc_trials.on_update
         def _(event: viser.GuiEvent) -> None:

@@ -421,3 +421,114 @@ def test_cli_view_starts_and_prints_the_url():
             proc.kill()
             proc.wait()
     assert proc.returncode == 0
+
+
+# ------------------------------------------------------------------------------------------------- diagnose
+def _press(button) -> None:
+    """Call a GUI button's click callbacks as viser would for a press (private API of viser 1.1.1)."""
+    entries = button._impl.update_cb
+    assert entries, "the button has no click callback"
+    for cb in entries:
+        cb(viser.GuiEvent(client=None, client_id=None, target=button))
+
+
+def _rows_without_targets(app: RunningApp):
+    from rrbc_core.measurements import MeasurementSet
+
+    m = app.session.export_measurements()
+    keep = [i for i, role in enumerate(m.roles) if role in ("registration", "fiducial", "both")]
+    return MeasurementSet(ids=tuple(m.ids[i] for i in keep), roles=tuple(m.roles[i] for i in keep),
+                          sensor=m.sensor[keep], robot=m.robot[keep], time=m.time[keep],
+                          lines=tuple(0 for _ in keep), source=m.source)
+
+
+def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
+    from rrbc_core.diagnosis import diagnose
+
+    panel = app.controls.diagnosis
+    assert "Diagnose current data" in app.controls.diagnose.label and "Press" in panel.content
+    m = app.session.export_measurements()
+    assert "check" in m.roles  # the export holds the targets' truth: the diagnosis must not see it
+    rows = _rows_without_targets(app)
+    assert set(rows.roles) <= {"registration", "fiducial", "both"}
+    direct = diagnose(rows)
+    _press(app.controls.diagnose)
+    text = panel.content
+    assert app.diagnosis is not None and not app.diagnosis_stale
+    assert app.diagnosis.to_json() == direct.to_json()  # same rows, same verdict (targets withheld)
+    assert app.diagnosis.n_points == len(set(rows.ids)) and "check" not in app._diagnosis_rows.roles
+    assert f"Diagnosis of **{direct.n_points} points**" in text
+    # the verdict: effects most important first, each with parameters, p-value and evidence
+    assert direct.effects, "the default scene has a bias the diagnosis finds"
+    assert "Verdict:" in text and "consistent with rigid" not in text
+    labels = {"smooth_field": "Smooth field", "affine": "Affine", "scale": "Uniform scale", "outliers": "Outliers",
+              "drift": "Drift", "anisotropic_noise": "Anisotropic noise"}
+    at = [text.index(f"**{labels[e.name]}") for e in direct.effects]
+    assert at == sorted(at)
+    for e in direct.effects:
+        assert e.evidence in text
+        p = f"{e.p_value:.2g}" if e.p_value >= 1e-3 else f"{e.p_value:.1e}"
+        assert f"p = {p}" in text
+    if "smooth_field" in direct.names:
+        e = direct.effects[direct.names.index("smooth_field")]
+        assert f"RMS {e.parameters['rms_mm']:.3f} mm" in text
+    if "affine" in direct.names:
+        assert "ppm" in text
+    assert f"{', '.join(f'{s:.3f}' for s in direct.noise_sigma_mm)} mm" in text
+    assert f"Bias RMS: **{direct.bias_rms_mm:.3f} mm**" in text
+    rec = "recommended" if direct.rrbc_recommended else "not recommended"
+    assert f"RRBC **{rec}**" in text and f"**{100 * direct.expected_rmst_change:+.1f} %**" in text
+    for limit in direct.limits:
+        assert f"- {limit}" in text
+
+    # without bias: a different verdict, again that of diagnose() on the same rows
+    app.change_settings(bias_scale=0.0, noise_scale=1.0)
+    assert panel.content.startswith("**(data changed since — press again)**")
+    assert app.diagnosis_stale
+    _press(app.controls.diagnose)
+    text2 = panel.content
+    assert text2 != text and "data changed since" not in text2
+    direct2 = diagnose(_rows_without_targets(app))
+    assert app.diagnosis.to_json() == direct2.to_json()
+    if not direct2.effects:
+        assert "consistent with rigid + isotropic noise" in text2
+
+
+def test_diagnosis_goes_stale_when_its_data_change(app):
+    panel = app.controls.diagnosis
+    _press(app.controls.diagnose)
+    fresh = panel.content
+    # a target drag, a display or a method change leave the diagnosed rows (no targets) as they are
+    app.handle_drag("targets", "H1", [410.0, -150.0, 40.0], "end")
+    app.set_display(magnification=50.0)
+    app.change_settings(interpolation="tps")
+    assert panel.content == fresh and not app.diagnosis_stale
+    # a fiducial drag changes them: marked stale at once (during the drag), not recomputed
+    verdict = app.diagnosis
+    ev = app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "update")
+    assert ev is not None
+    assert app.diagnosis_stale and app.diagnosis is verdict
+    assert panel.content == "**(data changed since — press again)**\n\n" + fresh
+    app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
+    assert panel.content.count("data changed since") == 1
+    _press(app.controls.diagnose)
+    assert "data changed since" not in panel.content and not app.diagnosis_stale
+
+
+def test_diagnosis_says_why_it_cannot_run(measured):
+    panel = measured.controls.diagnosis
+    # measured data: the file's registration and fiducial rows, its targets withheld
+    _press(measured.controls.diagnose)
+    assert measured.diagnosis is not None and "Verdict:" in panel.content
+    assert "check" in measured.session.export_measurements().roles and "check" not in measured._diagnosis_rows.roles
+    # too few points (excluded fiducials are not part of the current data): the InputError's message in the panel
+    for pid in measured.session.last.fiducial_ids[:-1]:
+        measured.toggle_fiducial(pid)
+    assert "data changed since" in panel.content
+    assert len(set(measured._diagnosis_input().ids)) < 5
+    _press(measured.controls.diagnose)
+    assert measured.diagnosis is None
+    assert panel.content.startswith("⚠ Cannot diagnose:") and "at least 5 distinct points" in panel.content
+    # loading a file clears the tab
+    measured.load(EXAMPLE_CSV)
+    assert panel.content.startswith("Tests the current") and measured.diagnosis is None
