@@ -606,6 +606,10 @@ class ErrorModel:
         """Only the random=False terms: the bias the robot/sensor carries (the same in every trial)."""
         return ErrorModel(tuple(t for t in self.robot if not t.random), tuple(t for t in self.sensor if not t.random))
 
+    def random_terms(self) -> "ErrorModel":
+        """Only the random=True terms: noise and outliers (redrawn every trial)."""
+        return ErrorModel(tuple(t for t in self.robot if t.random), tuple(t for t in self.sensor if t.random))
+
     def without(self, *kinds: str) -> "ErrorModel":
         """The model with every term of the given kinds switched off."""
         ks = _check_kinds(kinds)

@@ -212,8 +212,8 @@ class ExplorerSession:
                        time=np.zeros(n), tool_rotation=np.array([tool_down(y) for y in yaw]).reshape(n, 3, 3),
                        joint_seed=sc.joint_seed)
         model = sc.error_model
-        det = _split(model, False)
-        rnd = _split(model, True)
+        det = model.deterministic()
+        rnd = model.random_terms()
         bias_r = det.sample(pts, "robot", None, 1)[0] if det.robot else np.zeros((n, 3))
         bias_s = det.sample(pts, "sensor", None, 1)[0] if det.sensor else np.zeros((n, 3))
         noise_r = np.zeros((n, 3))
@@ -604,13 +604,6 @@ def _display_rotation(mapping) -> np.ndarray:
 
 def _reg_options(s: Settings) -> dict:
     return {"seed": int(s.seed)} if s.registration in ("annealing", "clustering") else {}
-
-
-def _split(model, random: bool):
-    from .errormodels import ErrorModel
-
-    return ErrorModel(robot=tuple(t for t in model.robot if t.random == random),
-                      sensor=tuple(t for t in model.sensor if t.random == random))
 
 
 @dataclass(frozen=True)

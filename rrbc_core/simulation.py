@@ -145,13 +145,6 @@ def _check_cell(cell: WorkCell) -> None:
         raise InputError(f"scene '{cell.name}': {n_reg} registration points are visible to the sensor; at least 3 are needed{hidden}")
 
 
-def _split(model: ErrorModel, random: bool) -> ErrorModel:
-    return ErrorModel(
-        robot=tuple(t for t in model.robot if t.random == random),
-        sensor=tuple(t for t in model.sensor if t.random == random),
-    )
-
-
 @dataclass(frozen=True, eq=False)
 class Measured:
     """T simulated measurements of a cell. sensor: (T, P, 3) sensor readings (sensor frame); robot: (T, P, 3)
@@ -167,7 +160,7 @@ def measure(cell: WorkCell, rng: np.random.Generator, trials: int = 1) -> Measur
     if trials < 1:
         raise InputError(f"trials must be >= 1, got {trials}")
     pts = cell.point_set()
-    det, rnd = _split(cell.error_model, False), _split(cell.error_model, True)
+    det, rnd = cell.error_model.deterministic(), cell.error_model.random_terms()
     bias_r = det.sample(pts, "robot", rng, 1)
     bias_s = det.sample(pts, "sensor", rng, 1)
     sensor = pts.sensor[None] + bias_s + rnd.sample(pts, "sensor", rng, trials)
@@ -392,7 +385,7 @@ def icp_statistics(scene, cell: WorkCell, trials: int, seed: int = 0, start_erro
         raise InputError(f"ICP trials must be >= 1, got {trials}")
     mesh = scene.load_mesh()
     truth_pose = cell.sensor_to_robot
-    rnd = _split(cell.error_model, True)
+    rnd = cell.error_model.random_terms()
     rng = np.random.default_rng([seed, 2])
     fid, chk = cell.index("fiducial", "both"), cell.index("check")
     dist = np.linalg.norm(cell.robot[chk] - cell.distance_origin, axis=1)
