@@ -95,6 +95,17 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--json", action="store_true", help="print one JSON object")
     m.set_defaults(run=_cmd_simulate)
 
+    pl = sub.add_parser("plan", help="fiducial placement: coverage, predicted RMST, suggested fiducials",
+                        description="Whether the fiducials' hull contains each target's region of variability, the "
+                                    "predicted RMS target error (rigid and with RRBC) and K suggested fiducials "
+                                    "from the scene's candidate locations (docs/planning.md).")
+    pl.add_argument("scene", help="scene TOML file (scenes/README.md)")
+    pl.add_argument("--add", type=_non_negative_int, default=0, metavar="K",
+                    help="suggest K fiducials from the scene's usable candidates (default 0)")
+    pl.add_argument("--seed", type=int, default=0, help="seed of the region samples and the random baseline (default 0)")
+    pl.add_argument("--json", action="store_true", help="print one JSON object")
+    pl.set_defaults(run=_cmd_plan)
+
     v = sub.add_parser("view", help="start the browser app",
                        description="Start the browser app on a scene (default: the bundled demo scene) or a "
                                    "measurement file; prints the URL and runs until interrupted.")
@@ -274,6 +285,52 @@ def _cmd_simulate(args) -> str:
     if args.out:
         text += f"\nwrote one simulated data set to {args.out}\n"
     return text
+
+
+def _plan_table(res) -> str:
+    p0, p1 = res.predicted, res.predicted_after
+    lines = [f"scene: {res.scene}   coverage of the target regions by the fiducials' hull: "
+             f"{100 * res.overall_coverage():.1f} % (volume-weighted)"]
+    lines.append(f"  {'target':<12} {'coverage':>9}" + (f" {'after':>9}" if res.suggested_ids else ""))
+    for k, tid in enumerate(res.target_ids):
+        row = f"  {tid:<12} {100 * res.coverage[k]:8.1f}%"
+        if res.suggested_ids:
+            row += f" {100 * res.coverage_after[k]:8.1f}%"
+        lines.append(row)
+    lines += ["", f"predicted RMST over the regions ({p0.method}), mm:",
+              f"  {'fiducials':<28} {'rigid':>8} {'RRBC':>8} {'+-':>7}",
+              f"  {'current':<28} {p0.rigid_mm:8.4f} {p0.rrbc_mm:8.4f} {p0.rrbc_std_mm:7.4f}"]
+    if res.suggested_ids:
+        k = len(res.suggested_ids)
+        lines.append(f"  {f'+ {k} suggested':<28} {p1.rigid_mm:8.4f} {p1.rrbc_mm:8.4f} {p1.rrbc_std_mm:7.4f}")
+        for name, b in res.baselines.items():
+            lines.append(f"  {f'+ {k} by rule {name}':<28} {b.rigid_mm:8.4f} {b.rrbc_mm:8.4f} {b.rrbc_std_mm:7.4f}"
+                         + ("  (mean, sd over draws)" if name == "random" else ""))
+        lines += ["", f"suggested fiducials ({res.n_usable} usable candidates, {len(res.rejected)} rejected), "
+                      "robot frame, mm:"]
+        for pid, pos in zip(res.suggested_ids, res.suggested):
+            lines.append(f"  {pid:<12} {_fmt_vec(pos, 9, 1)}")
+    if res.rejected:
+        shown = list(res.rejected.items())[:5]
+        lines.append("rejected candidates: " + "; ".join(f"{i}: {r}" for i, r in shown)
+                     + (f"; and {len(res.rejected) - 5} more" if len(res.rejected) > 5 else ""))
+    return "\n".join(lines) + "\n"
+
+
+def _cmd_plan(args) -> str:
+    from .planning import plan
+    from .progress import ProgressBar
+    from .scene import load_scene
+
+    scene = load_scene(args.scene)
+    bar = ProgressBar(2 * args.add + 2, "planning")
+    try:
+        res = plan(scene, args.add, seed=args.seed, progress=lambda n, label: bar.update(n, label))
+    finally:
+        bar.close()
+    if args.json:
+        return json.dumps(res.to_json(), allow_nan=False) + "\n"
+    return _plan_table(res)
 
 
 def _cmd_view(args) -> str:

@@ -587,11 +587,15 @@ def usable_candidates(scene) -> tuple[np.ndarray, dict]:
 # ------------------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class _Pool:
-    """The base fiducials (always kept) and the usable candidates, with everything the fast objective needs."""
+    """The base fiducials (always kept) and the usable candidates, with everything the fast objective needs.
+    base_pos (B,3), cand_pos (C,3), query_pos (M,3): nominal positions, scene frame, mm (for the coverage)."""
 
     model: _Model
     base: tuple  # arrays for the base fiducials: sensor (B,3), corr, jac, cov, shared (B,)
     cand: tuple  # the same for the candidates (C, ...)
+    base_pos: np.ndarray
+    cand_pos: np.ndarray
+    query_pos: np.ndarray
 
     def stack(self, choices: np.ndarray) -> tuple:
         """Arrays for T fiducial sets: base + candidates `choices` (T, K) (indices into the candidates)."""
@@ -609,6 +613,16 @@ class _Pool:
                              for i in range(0, len(choices), _SETS_PER_CHUNK)])
         return self.model._rmst(sq)
 
+    def covered(self, choices: np.ndarray) -> np.ndarray:
+        """Fraction (T,) of the region samples (all targets weighted equally) inside the hull of each set."""
+        choices = np.asarray(choices, int).reshape(len(choices), -1)
+        return np.array([_covered(np.concatenate([self.base_pos, self.cand_pos[c]]), self.query_pos).mean()
+                         for c in choices])
+
+    def score(self, choices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(coverage, RRBC RMST) per set: the optimiser's lexicographic objective (more coverage first)."""
+        return self.covered(choices), self.rrbc(choices)[0]
+
 
 def _pool(scene, base: np.ndarray, cand: np.ndarray, samples_per_target: int, seed: int) -> _Pool:
     cell, fi = _cell(scene, np.concatenate([base, cand]), None, samples_per_target, seed)
@@ -616,23 +630,38 @@ def _pool(scene, base: np.ndarray, cand: np.ndarray, samples_per_target: int, se
     pos = cell.robot[fi]
     arrays = _fid_arrays(model, rd, fi) + (model.shared_index(pos),)
     nb = len(base)
-    return _Pool(model, tuple(a[:nb] for a in arrays), tuple(a[nb:] for a in arrays))
+    return _Pool(model, tuple(a[:nb] for a in arrays), tuple(a[nb:] for a in arrays), pos[:nb], pos[nb:],
+                 cell.robot[cell.index("check")])
+
+
+def _best(cov: np.ndarray, rmst: np.ndarray) -> int:
+    """Index of the best set: the largest coverage (to 1e-12), then the smallest RMST."""
+    top = cov >= cov.max() - 1e-12
+    return int(np.flatnonzero(top)[np.argmin(rmst[top])])
+
+
+def _better(cov: float, rmst: float, cov0: float, rmst0: float) -> bool:
+    if cov > cov0 + 1e-12:
+        return True
+    return cov >= cov0 - 1e-12 and rmst < rmst0 * (1 - _IMPROVE_REL)
 
 
 def _optimise(pool: _Pool, n_cand: int, add: int, progress=None) -> np.ndarray:
-    """Greedy forward selection, then exchange, minimising the predicted RRBC RMST. Returns candidate indices."""
+    """Greedy forward selection, then exchange (Fedorov-style swaps of one chosen candidate for an unused one
+    while the objective improves), on the lexicographic objective (coverage of the region samples by the hull,
+    then predicted RRBC RMST). Returns candidate indices (add,)."""
     chosen: list[int] = []
     for step in range(add):
         rest = np.array([i for i in range(n_cand) if i not in chosen], dtype=int)
         trial = np.column_stack([np.tile(chosen, (len(rest), 1)).reshape(len(rest), len(chosen)), rest])
-        val, _ = pool.rrbc(trial)
-        chosen.append(int(rest[int(np.argmin(val))]))
+        j = _best(*pool.score(trial))
+        chosen.append(int(rest[j]))
         if progress:
             progress(1, f"greedy {step + 1}/{add}")
     if add == 0:
         return np.zeros(0, dtype=int)
-    best, _ = pool.rrbc(np.array([chosen]))
-    best = float(best[0])
+    c0, r0 = pool.score(np.array([chosen]))
+    best = (float(c0[0]), float(r0[0]))
     for _ in range(_MAX_EXCHANGE_PASSES):
         improved = False
         for slot in range(add):
@@ -641,11 +670,11 @@ def _optimise(pool: _Pool, n_cand: int, add: int, progress=None) -> np.ndarray:
                 break
             trial = np.tile(chosen, (len(rest), 1))
             trial[:, slot] = rest
-            val, _ = pool.rrbc(trial)
-            j = int(np.argmin(val))
-            if val[j] < best * (1 - _IMPROVE_REL):
+            cov, val = pool.score(trial)
+            j = _best(cov, val)
+            if _better(float(cov[j]), float(val[j]), *best):
                 chosen[slot] = int(rest[j])
-                best = float(val[j])
+                best = (float(cov[j]), float(val[j]))
                 improved = True
         if progress:
             progress(1, "exchange")
