@@ -19,6 +19,9 @@ sent in one `server.atomic()` block. A drag update re-evaluates the session (mil
 properties in place; the heat map is recomputed at most every `HEAT_INTERVAL_S` during a drag and at its end;
 Monte Carlo runs in a background thread (`montecarlo.MonteCarloRunner`) after a setting changes, a drag ends or
 the seed changes. (A heat map that takes longer than `HEAT_LIVE_MAX_S` waits for the drag's end.)
+The Plan tab (`planning_panel`) shows the core's coverage and fast predicted RMST for the fiducials as they are
+now, recomputed like the heat map (at most every `planning_panel.PLAN_INTERVAL_S` during a drag, and at its end);
+Suggest runs the planner on a snapshot of the session outside the lock (drags go on meanwhile).
 The Diagnose tab runs `rrbc_core.diagnosis.diagnose` synchronously on a button press (~15 ms on the bundled
 scene) over the current registration and fiducial rows only (targets withheld: no truth); a change to those rows
 marks the verdict stale instead of recomputing it.
@@ -107,6 +110,7 @@ class RunningApp:
         self._diagnosis_text = ""  # its content without the stale marker
         self.nodes = SceneNodes(server, self._on_gizmo, self._on_fiducial_click)
         self.controls = Controls(server, self)
+        self.planning = self.controls.plan
         self.mc = MonteCarloRunner(self._mc_result, self._mc_started)
         self._install(loaded, first=True)
 
@@ -138,6 +142,7 @@ class RunningApp:
             self.display = self._default_display(ev)
             with self.server.atomic():
                 self.nodes.build(self.session, ev, loaded.mesh, self.display, self.layers)
+                self.planning.build(self.session)
                 self.controls.sync_settings(self.session.settings, self.session.kind)
                 self.controls.sync_display(self.display, self.session.kind)
                 self.controls.sync_layers(self.layers)
@@ -188,8 +193,9 @@ class RunningApp:
             client.camera.position = position
 
     # -------------------------------------------------------------------------------------------- showing
-    def _show(self, ev: Evaluation, heat: bool = False) -> None:
-        """Push an Evaluation to the scene and the panel (caller holds the lock, inside server.atomic())."""
+    def _show(self, ev: Evaluation, heat: bool = False, plan: bool = True) -> None:
+        """Push an Evaluation to the scene and the panel (caller holds the lock, inside server.atomic()). plan:
+        recompute the Plan tab now (else it is marked stale until the next due refresh)."""
         self.nodes.update(ev)
         c = self.controls
         c.scale.content = tables.scale_line(self.display.magnification)
@@ -199,6 +205,7 @@ class RunningApp:
             c.lesson.content = teaching.render(self.lesson_index, ev, self._lesson_context())
         self._heat_stale = True
         self._check_diagnosis()
+        self.planning.refresh(self.session, due=plan)
         if heat:
             self._update_heat()
 
@@ -267,8 +274,9 @@ class RunningApp:
             end = phase == "end"
             heat_due = end or (self.layers.get("heatmap") and self._heat_cost <= HEAT_LIVE_MAX_S
                                and time.monotonic() - self._heat_time >= HEAT_INTERVAL_S)
+            plan_due = end or self.planning.live_due()
             with self.server.atomic():
-                self._show(ev, heat=bool(heat_due))
+                self._show(ev, heat=bool(heat_due), plan=plan_due)
             if end:
                 self._refused.discard(key)
         if end:
@@ -446,6 +454,85 @@ class RunningApp:
         if not same:
             self.diagnosis_stale = True
             self.controls.diagnosis.content = diagnosis_panel.STALE + "\n\n" + self._diagnosis_text
+
+    # ------------------------------------------------------------------------------------------- planning
+    def set_coverage_colours(self, on: bool) -> None:
+        """Colour each target's region (and a halo around it) by coverage, or back to the region colour."""
+        with self._lock:
+            if bool(self.planning.colour.value) != bool(on):
+                with self.planning.quiet():
+                    self.planning.colour.value = bool(on)
+            with self.server.atomic():
+                self.planning.apply_colours(self.session)
+
+    def suggest_fiducials(self, k: int | None = None, client=None, seed: int | None = None):
+        """Suggest `k` (default: the tab's K) more fiducials for the session as it is now and show them as ghost
+        spheres. The planner runs on a snapshot of the session outside the app's lock (a drag meanwhile goes on;
+        the suggestion is then marked as made for the old layout). Returns the planning.PlanResult, or None (and
+        a visible message) when refused."""
+        panel = self.planning
+        with self._lock:
+            session = self.session
+            k = int(panel.k.value) if k is None else k
+            if session.kind != "scene":
+                self._message("planning needs a scene (an error model and candidate locations); measured data have "
+                              "none", client, title="Cannot plan")
+                return None
+            if not panel.begin():
+                self._message("a suggestion is already being computed", client, title="Planning")
+                return None
+            snapshot = copy.copy(session)  # settings and layout are immutable values
+        result, error = None, None
+        try:
+            result = snapshot.suggest_fiducials(k, seed=seed, progress=panel.progress)
+        except InputError as exc:
+            error = str(exc)
+        except Exception as exc:  # noqa: BLE001 - keep serving
+            traceback.print_exc()
+            error = f"internal error: {type(exc).__name__}: {exc}"
+        with self._lock:
+            panel.end(self.session)
+            if self.session is not session:  # another source was loaded meanwhile
+                return None
+            if error is not None:
+                panel.suggestion_md.content = f"⚠ Cannot suggest: {' '.join(error.split())}"
+                self._message(error, client, title="Cannot plan")
+                return None
+            session.suggestion, session._suggestion_key = snapshot.suggestion, snapshot._suggestion_key
+            with self.server.atomic():
+                panel.show_suggestion(session, result)
+        return result
+
+    def accept_suggestions(self, client=None) -> Evaluation | None:
+        """Add the suggested fiducials to the cell (measured from the error model), remove the ghosts, update
+        everything (planning included). None, and a message, when there is nothing to accept."""
+        with self._lock:
+            before = self.planning.state
+            known = set(self.session.layout["fiducials"].ids)
+            try:
+                ev = self.session.accept_suggestions()
+            except InputError as exc:
+                self._message(str(exc), client, title="Not accepted")
+                return None
+            new = [pid for pid in ev.fiducial_ids if pid not in known]
+            with self.server.atomic():
+                self.nodes.add_new_fiducials(ev)
+                self.planning.remove_ghosts(prompt=True)
+                self._show(ev, heat=True)
+            after = self.planning.state
+            text = f"Added {len(new)} fiducial{'s' if len(new) != 1 else ''}: {', '.join(new)}."
+            if before is not None and after is not None:
+                text += (f" Predicted RMST with RRBC {before.predicted.rrbc_mm:.3f} → {after.predicted.rrbc_mm:.3f} mm, "
+                         f"rigid {before.predicted.rigid_mm:.3f} → {after.predicted.rigid_mm:.3f} mm.")
+            self._message(text, client, error=False, title="Fiducials added")
+        self.request_monte_carlo()
+        return ev
+
+    def clear_suggestions(self) -> None:
+        with self._lock:
+            self.session.clear_suggestion()
+            with self.server.atomic():
+                self.planning.remove_ghosts(prompt=True)
 
     # ---------------------------------------------------------------------------------------- Monte Carlo
     def request_monte_carlo(self) -> bool:

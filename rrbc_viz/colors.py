@@ -63,3 +63,43 @@ def legend_markdown(title: str, lo: float, hi: float, unit: str = "mm", note: st
         f"{lo:.4f} {unit} (low) → {hi:.4f} {unit} (high)"
         + (f"\n\n{note}" if note else "")
     )
+
+
+# ------------------------------------------------------------------------------------------------ planning
+GHOST: Rgb = (0, 210, 200)  # suggested fiducials (translucent ghost spheres)
+GHOST_OPACITY = 0.45
+
+#: The coverage scale, 0 (no part of the region inside the fiducials' hull) → 1 (all of it): red through yellow
+#: to blue (ColorBrewer RdYlBu stops: readable with red-green colour blindness; full coverage is the blue end).
+COVERAGE_STOPS = np.array(
+    [[215, 48, 39], [252, 141, 89], [254, 224, 144], [145, 191, 219], [69, 117, 180]], dtype=float
+)
+
+
+def coverage_colors(values) -> np.ndarray:
+    """Colours (N, 3) uint8 of coverage fractions on the coverage scale (0 red … 1 blue); NaN is grey."""
+    v = np.asarray(values, dtype=float).reshape(-1)
+    t = np.where(np.isfinite(v), np.clip(v, 0.0, 1.0), 0.0)
+    x = t * (len(COVERAGE_STOPS) - 1)
+    i = np.minimum(np.floor(x).astype(int), len(COVERAGE_STOPS) - 2)
+    f = (x - i)[:, None]
+    out = COVERAGE_STOPS[i] * (1.0 - f) + COVERAGE_STOPS[i + 1] * f
+    out[~np.isfinite(v)] = NO_VALUE
+    return np.round(out).astype(np.uint8)
+
+
+def coverage_color(value: float) -> Rgb:
+    r, g, b = (int(c) for c in coverage_colors([value])[0])
+    return (r, g, b)
+
+
+def coverage_legend_markdown() -> str:
+    """The coverage legend: a gradient bar from 0 % to 100 % and what is coloured."""
+    stops = ", ".join(hex_color(c) for c in COVERAGE_STOPS)
+    return (
+        "**Coverage**: the fraction of a target's region of variability inside the fiducials' hull (NIST's rule: "
+        "all of it should be).\n\n"
+        f'<div style="height:12px;border-radius:3px;background:linear-gradient(to right, {stops})"></div>\n\n'
+        "0 % (red) → 100 % (blue). Coloured: each target's region (zoom in, or raise View → Region zoom) and a "
+        "translucent halo around the target, visible from afar."
+    )

@@ -1,5 +1,5 @@
-"""The control panel (shared by every browser tab): settings, display, layers, lesson, diagnosis, Monte Carlo,
-files.
+"""The control panel (shared by every browser tab): settings, display, layers, lesson, Monte Carlo, diagnosis,
+planning (`planning_panel`), files.
 
 The panel only forwards user input to the app (`rrbc_viz.app.RunningApp`) and shows what the app hands back;
 it holds no RRBC state of its own. Programmatic updates (`sync_*`) set `syncing` so that the value callbacks
@@ -19,6 +19,7 @@ from rrbc_core.explorer import LAYERS, Settings
 
 from .diagnosis_panel import PROMPT
 from .nodes import HANDLE_CHOICES, Display
+from .planning_panel import PlanningPanel
 
 if TYPE_CHECKING:
     from .app import RunningApp
@@ -127,6 +128,10 @@ class Controls:
                                            hint="Test the registration points and fiducials (not the targets) "
                                                 "for effects a rigid fit misses")
             self.diagnosis = gui.add_markdown(PROMPT)
+
+        # ------------------------------------------------------------------------------------------- Plan
+        with tabs.add_tab("Plan", icon=viser.Icon.MAP_PIN):
+            self.plan = PlanningPanel(server, app)
 
         # ------------------------------------------------------------------------------------------- File
         with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):

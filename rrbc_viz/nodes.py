@@ -282,6 +282,19 @@ class SceneNodes:
         self.set_layer("labels", self.layers["labels"])
         self.update(ev)
 
+    def add_new_fiducials(self, ev: Evaluation) -> list[str]:
+        """Create the nodes of fiducials `ev` has and the scene does not yet (accepted suggestions); returns
+        their ids. Their drag handles follow the current choice (View → Drag handles on)."""
+        texts = fiducial_labels(ev)
+        new = []
+        for i, pid in enumerate(ev.fiducial_ids):
+            if ("fiducials", pid) not in self.gizmos:
+                self._point("fiducials", pid, ev.fiducial_positions[i], colors.FIDUCIAL, texts[i])
+                new.append(pid)
+        if new:
+            self.set_handles(self.display.handles)
+        return new
+
     def _label(self, name: str, text: str, position) -> None:
         self.labels[name] = self.scene.add_label(name, text, position=np.asarray(position, float),
                                                  font_size_mode="screen", font_screen_scale=0.75,

@@ -1,0 +1,337 @@
+"""The Plan tab: fiducial placement (issue 7) shown over the core's planning (`rrbc_core.planning` through the
+session's `planning_state`, `suggest_fiducials` and `accept_suggestions`).
+
+What the user sees:
+- the predicted RMST over the targets' regions of variability, rigid only and with RRBC (± its 1σ), and each
+  target's coverage (the fraction of its region inside the included fiducials' hull), for the fiducials as they
+  are now: it follows drags of fiducials and targets (recomputed at most every `PLAN_INTERVAL_S` while dragging,
+  and at a drag's end; a prediction slower than `PLAN_LIVE_MAX_S` waits for the end), exclusions, noise/bias
+  sizes and accepted suggestions;
+- "Colour regions by coverage": each target's region, and a translucent halo around the target (visible from
+  afar, where a region of a few mm is a pixel), on the coverage scale of `colors.coverage_colors`;
+- "Suggest": K more fiducials from the scene's candidates (the planner's greedy + exchange), drawn as ghost
+  spheres labelled +1 … +K with the predicted gain; "Accept suggestions" makes them fiducials (measured from the
+  error model like any fiducial), "Clear suggestions" removes the ghosts.
+
+Measured data have no error model and no candidates: the tab says so and its buttons are disabled.
+
+Nodes: /plan (group), /plan/ghosts/<k> (icosphere) with /plan/ghosts/<k>/label, and per target
+/targets/<id>/gizmo/coverage (a halo that follows the target's gizmo in the browser with no round trip).
+Formatting only here: every number comes from the core.
+"""
+
+from __future__ import annotations
+
+import threading
+from contextlib import contextmanager
+import time
+import traceback
+from typing import TYPE_CHECKING
+
+import numpy as np
+import viser
+
+from rrbc_core.errors import InputError
+
+from . import colors
+from .nodes import gizmo_name
+
+if TYPE_CHECKING:
+    from rrbc_core.explorer import ExplorerSession, PlanningState
+
+    from .app import RunningApp
+
+PLAN_INTERVAL_S = 0.25  # least time between planning recomputations while dragging
+PLAN_LIVE_MAX_S = 0.05  # a planning update slower than this is refreshed only when a drag ends
+K_MAX = 10
+HALO_MARKERS = 1.5  # halo radius, in marker radii (the target sphere is 0.8)
+HALO_OPACITY = 0.3
+PROMPT_SUGGEST = ("Press **Suggest** for K more fiducials from the scene's candidate locations (those the sensor "
+                  "cannot see or that lie inside solid geometry are never suggested).")
+
+
+def pct(fraction: float) -> str:
+    """A coverage fraction as a percentage; 100 % only when it is complete (0.9995 shows as 99.9 %)."""
+    if not np.isfinite(fraction):
+        return "—"
+    v = float(fraction) * 100.0
+    if v < 100.0:
+        v = min(v, 99.9)
+    return f"{v:.1f} %" if v < 100.0 else "100 %"
+
+
+def rmst_pair(pred) -> tuple[str, str]:
+    """('0.530 ± 0.0004 mm', …) for rigid and RRBC of a planning.RmstPrediction (the std is often < 1 µm)."""
+    return (f"{pred.rigid_mm:.3f} ± {pred.rigid_std_mm:.4f} mm", f"{pred.rrbc_mm:.3f} ± {pred.rrbc_std_mm:.4f} mm")
+
+
+def rmst_line(pred) -> str:
+    """The one line the panel leads with (and tests look for)."""
+    rigid, rrbc = rmst_pair(pred)
+    return f"Predicted RMST: rigid **{rigid}**, RRBC **{rrbc}**"
+
+
+def render_state(state: "PlanningState", excluded: int = 0) -> str:
+    """Predicted RMST and per-target coverage for the fiducials as they are now."""
+    pred = state.predicted
+    n_full = int(np.sum(state.coverage >= 1.0))
+    lines = [
+        rmst_line(pred) + f" ({pred.method}; over the targets' regions of variability, {state.fiducials_used} "
+        f"fiducials{f', {excluded} excluded' if excluded else ''}; least squares + IDW k=4, p=2 as the planner "
+        "predicts). Follows drags, exclusions and the noise/bias sizes.",
+        f"Coverage: **{n_full} of {len(state.target_ids)} targets** fully inside the fiducials' hull.",
+        "| target | coverage |\n|---|---:|\n" + "\n".join(
+            f"| {pid} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |" for pid, c in zip(state.target_ids, state.coverage)),
+    ]
+    return "\n\n".join(lines)
+
+
+def _baseline_text(baselines: dict) -> str:
+    parts = []
+    for name, b in (baselines or {}).items():
+        rrbc = getattr(b, "rrbc_mm", None)
+        if rrbc is None and isinstance(b, dict):
+            rrbc = b.get("rrbc_mm")
+        if rrbc is not None and np.isfinite(rrbc):
+            parts.append(f"{name} {float(rrbc):.3f} mm")
+    return ", ".join(parts)
+
+
+def _rejected_text(rejected: dict) -> str:
+    if not rejected:
+        return ""
+    reasons: dict = {}
+    for reason in rejected.values():
+        key = str(reason).split(":")[0].strip() or "rejected"
+        reasons[key] = reasons.get(key, 0) + 1
+    return "; ".join(f"{n} {r}" for r, n in sorted(reasons.items(), key=lambda x: -x[1]))
+
+
+def render_suggestion(result, current: bool = True) -> str:
+    """The suggested fiducials (numbered as their ghosts), the predicted gain, coverage after, the rules it was
+    compared with and the candidates rejected."""
+    k = len(result.suggested_ids)
+    if k == 0:
+        return "⚠ The planner found no usable candidate to add (see the rejected candidates below)." + (
+            f"\n\nRejected candidates: {_rejected_text(result.rejected)}." if result.rejected else "")
+    b, a = result.predicted, result.predicted_after
+    rows = "\n".join(f"| +{i + 1} | {cid} | {p[0]:.0f}, {p[1]:.0f}, {p[2]:.0f} |"
+                     for i, (cid, p) in enumerate(zip(result.suggested_ids, np.asarray(result.suggested))))
+    cov_after = np.asarray(result.coverage_after, float)
+    short = [f"{pid} {pct(c)}" for pid, c in zip(result.target_ids, cov_after) if c < 1.0]
+    change = (a.rrbc_mm / b.rrbc_mm - 1.0) * 100.0 if b.rrbc_mm > 0 else 0.0
+    lines = [] if current else ["**(made for the fiducials as they were — press Suggest again)**"]
+    lines += [
+        f"**Suggested: {k} fiducial{'s' if k != 1 else ''}** (ghost spheres +1 … +{k}):",
+        "| # | candidate | x, y, z (mm) |\n|---|---|---|\n" + rows,
+        f"Predicted RMST after: rigid {b.rigid_mm:.3f} → **{a.rigid_mm:.3f} ± {a.rigid_std_mm:.4f} mm**, RRBC "
+        f"{b.rrbc_mm:.3f} → **{a.rrbc_mm:.3f} ± {a.rrbc_std_mm:.4f} mm** (RRBC {change:+.0f} %).",
+        "Coverage after: " + ("every target 100 %." if not short else ", ".join(short) + "."),
+    ]
+    base = _baseline_text(result.baselines)
+    if base:
+        lines.append(f"Simple rules with the same K (predicted RMST with RRBC): {base}.")
+    rej = _rejected_text(result.rejected)
+    if rej:
+        lines.append(f"Candidates never suggested: {rej}.")
+    return "\n\n".join(lines)
+
+
+class PlanningPanel:
+    """The Plan tab's widgets (built inside the tab by `Controls`) and its scene nodes (`build` per source)."""
+
+    def __init__(self, server: viser.ViserServer, app: "RunningApp"):
+        self.server = server
+        self.app = app
+        gui = server.gui
+        self.info = gui.add_markdown("")
+        self.colour = gui.add_checkbox("Colour regions by coverage", False,
+                                       hint="Each target's region of variability and a halo around the target, "
+                                            "coloured by the fraction of the region inside the fiducials' hull")
+        self.legend = gui.add_markdown(colors.coverage_legend_markdown())
+        self.k = gui.add_slider("Fiducials to add (K)", 1, K_MAX, 1, 4)
+        self.suggest_button = gui.add_button("Suggest", icon=viser.Icon.WAND,
+                                             hint="Choose K more fiducials from the scene's candidate locations")
+        self.suggestion_md = gui.add_markdown(PROMPT_SUGGEST)
+        self.accept_button = gui.add_button("Accept suggestions", icon=viser.Icon.CHECK, disabled=True,
+                                            hint="Add the suggested fiducials to the cell")
+        self.clear_button = gui.add_button("Clear suggestions", icon=viser.Icon.TRASH, disabled=True)
+
+        self.state: PlanningState | None = None  # the last planning state shown
+        self.cost_s = 0.0  # seconds the last (uncached) planning update took
+        self.stale = False  # a drag changed the fiducials since the state shown was computed
+        self._time = 0.0
+        self._busy = False  # a Suggest is running
+        self._busy_lock = threading.Lock()
+        self._progress_time = 0.0
+        self.ghosts: list = []  # icosphere handles of the suggested fiducials
+        self.ghost_labels: list = []
+        self.halos: dict = {}  # target id -> halo handle
+        self._sent: dict = {}  # (id(handle), attr) -> value last assigned
+        self._group = None
+
+        self._syncing = False
+
+        @self.colour.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if not self._syncing:
+                self.app.set_coverage_colours(bool(self.colour.value))
+
+        self.suggest_button.on_click(lambda event: self.app.suggest_fiducials(client=event.client))
+        self.accept_button.on_click(lambda event: self.app.accept_suggestions(client=event.client))
+        self.clear_button.on_click(lambda event: self.app.clear_suggestions())
+
+    @contextmanager
+    def quiet(self):
+        """Assign GUI values without acting on them."""
+        was, self._syncing = self._syncing, True
+        try:
+            yield
+        finally:
+            self._syncing = was
+
+    # ------------------------------------------------------------------------------------------ building
+    def build(self, session: "ExplorerSession") -> None:
+        """(Re)create the tab's nodes for a newly installed source (call after SceneNodes.build, in atomic())."""
+        self._sent.clear()
+        self.state = None
+        self.stale = False
+        self.ghosts, self.ghost_labels = [], []
+        if self._group is not None:
+            try:
+                self._group.remove()
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        self._group = self.server.scene.add_frame("/plan", show_axes=False)
+        self.halos = {}
+        scene_mode = session.kind == "scene"
+        if scene_mode:
+            r = self.app.display.marker_mm
+            for pid in session.layout["targets"].ids:
+                if pid in session.regions:
+                    self.halos[pid] = self.server.scene.add_icosphere(
+                        f"{gizmo_name('targets', pid)}/coverage", radius=HALO_MARKERS * r, color=colors.REGION,
+                        subdivisions=2, opacity=HALO_OPACITY, visible=bool(self.colour.value), cast_shadow=False,
+                        receive_shadow=False)
+        for h in (self.k, self.suggest_button, self.colour):
+            h.disabled = not scene_mode
+        self.accept_button.disabled = self.clear_button.disabled = True
+        self.suggestion_md.content = PROMPT_SUGGEST if scene_mode else ""
+
+    def _assign(self, handle, attr: str, value) -> None:
+        key = (id(handle), attr)
+        if self._sent.get(key) == value:
+            return
+        setattr(handle, attr, value)
+        self._sent[key] = value
+
+    # ------------------------------------------------------------------------------------------ refreshing
+    def live_due(self) -> bool:
+        """Whether a drag update should recompute planning now (throttled; slow predictions wait for the end)."""
+        return self.cost_s <= PLAN_LIVE_MAX_S and time.monotonic() - self._time >= PLAN_INTERVAL_S
+
+    def refresh(self, session: "ExplorerSession", due: bool = True) -> None:
+        """Recompute (or take from the session's cache) and show the planning state (caller holds the app lock,
+        inside atomic()). due=False marks it stale instead (a drag update between throttled refreshes)."""
+        if session.kind != "scene":
+            self.info.content = ("Planning needs a scene (an error model to predict with and candidate locations "
+                                 "to choose from); measured data have none. Load a scene in the File tab.")
+            self.state = None
+            return
+        if not due:
+            self.stale = True
+            return
+        start = time.perf_counter()
+        self._time = time.monotonic()
+        try:
+            state = session.planning_state()
+        except InputError as exc:
+            self.info.content = f"⚠ Cannot plan: {' '.join(str(exc).split())}"
+            self.state = None
+            return
+        except Exception as exc:  # noqa: BLE001 - keep serving; say so in the tab
+            traceback.print_exc()
+            self.info.content = f"⚠ Planning failed: internal error {type(exc).__name__}: {exc}"
+            self.state = None
+            return
+        if state is not self.state:  # a cache hit costs nothing and says nothing about the cost
+            self.cost_s = time.perf_counter() - start
+        self._time = time.monotonic()
+        self.stale = False
+        self.state = state
+        excluded = sum(1 for pid in session.layout["fiducials"].ids if pid in session.settings.excluded)
+        self._assign(self.info, "content", render_state(state, excluded))
+        self.apply_colours(session)
+        if session.suggestion is not None and self.ghosts:
+            self._assign(self.suggestion_md, "content", render_suggestion(session.suggestion,
+                                                                          session.suggestion_current))
+
+    def apply_colours(self, session: "ExplorerSession") -> None:
+        """Regions and halos on the coverage scale when the toggle is on; regions back to their colour when off."""
+        on = bool(self.colour.value) and self.state is not None
+        cov = dict(zip(self.state.target_ids, self.state.coverage)) if self.state is not None else {}
+        r = self.app.display.marker_mm
+        for pid, region in self.app.nodes.regions.items():
+            c = colors.coverage_color(cov[pid]) if on and pid in cov else colors.REGION
+            self._assign(region, "color", c)
+        for pid, halo in self.halos.items():
+            self._assign(halo, "visible", on and pid in cov)
+            if on and pid in cov:
+                self._assign(halo, "color", colors.coverage_color(cov[pid]))
+            self._assign(halo, "radius", HALO_MARKERS * r)
+
+    # ------------------------------------------------------------------------------------------ suggesting
+    def begin(self) -> bool:
+        """Mark a Suggest as running (False if one already is)."""
+        with self._busy_lock:
+            if self._busy:
+                return False
+            self._busy = True
+        self.suggest_button.disabled = True
+        self.suggestion_md.content = f"Planning: choosing {int(self.k.value)} of the scene's candidate locations…"
+        return True
+
+    def end(self, session: "ExplorerSession") -> None:
+        with self._busy_lock:
+            self._busy = False
+        self.suggest_button.disabled = session.kind != "scene"
+
+    def progress(self, *args) -> None:
+        """The planner's progress callback: shows its last label (at most 5 times a second)."""
+        now = time.monotonic()
+        if now - self._progress_time < 0.2:
+            return
+        self._progress_time = now
+        label = next((a for a in args if isinstance(a, str)), None)
+        nums = [a for a in args if isinstance(a, (int, float)) and not isinstance(a, bool)]
+        extra = label or (" / ".join(f"{x:g}" for x in nums[:2]) if nums else "")
+        self.suggestion_md.content = (f"Planning: choosing {int(self.k.value)} of the scene's candidate "
+                                      f"locations… {extra}").rstrip()
+
+    def show_suggestion(self, session: "ExplorerSession", result) -> None:
+        """Ghost spheres +1 … +K at the suggested places and the suggestion's text (caller holds the lock)."""
+        self.remove_ghosts()
+        r = self.app.display.marker_mm
+        for i, (cid, p) in enumerate(zip(result.suggested_ids, np.asarray(result.suggested, float).reshape(-1, 3))):
+            name = f"/plan/ghosts/{i}"
+            self.ghosts.append(self.server.scene.add_icosphere(
+                name, radius=r, color=colors.GHOST, subdivisions=2, opacity=colors.GHOST_OPACITY,
+                position=np.asarray(p, float), cast_shadow=False, receive_shadow=False))
+            self.ghost_labels.append(self.server.scene.add_label(
+                f"{name}/label", f"+{i + 1} {cid}", position=(0.0, 0.0, 1.6 * r), font_size_mode="screen",
+                font_screen_scale=0.75, anchor="bottom-left"))
+        self.suggestion_md.content = render_suggestion(result, session.suggestion_current)
+        has = len(self.ghosts) > 0
+        self.accept_button.disabled = not has
+        self.clear_button.disabled = not has
+
+    def remove_ghosts(self, prompt: bool = False) -> None:
+        for h in self.ghost_labels + self.ghosts:
+            try:
+                h.remove()
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        self.ghosts, self.ghost_labels = [], []
+        self.accept_button.disabled = self.clear_button.disabled = True
+        if prompt:
+            self.suggestion_md.content = PROMPT_SUGGEST
