@@ -67,7 +67,7 @@ def legend_markdown(title: str, lo: float, hi: float, unit: str = "mm", note: st
 
 # ------------------------------------------------------------------------------------------------ planning
 GHOST: Rgb = (0, 210, 200)  # suggested fiducials (translucent ghost spheres)
-GHOST_OPACITY = 0.45
+GHOST_OPACITY = 0.6
 
 #: The coverage scale, 0 (no part of the region inside the fiducials' hull) → 1 (all of it): red through yellow
 #: to blue (ColorBrewer RdYlBu stops: readable with red-green colour blindness; full coverage is the blue end).

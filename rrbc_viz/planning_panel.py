@@ -44,8 +44,9 @@ if TYPE_CHECKING:
 PLAN_INTERVAL_S = 0.25  # least time between planning recomputations while dragging
 PLAN_LIVE_MAX_S = 0.05  # a planning update slower than this is refreshed only when a drag ends
 K_MAX = 10
-HALO_MARKERS = 1.5  # halo radius, in marker radii (the target sphere is 0.8)
-HALO_OPACITY = 0.3
+HALO_MARKERS = 1.8  # halo radius, in marker radii (the target sphere is 0.8)
+HALO_OPACITY = 0.45
+GHOST_MARKERS = 1.4  # ghost sphere radius, in marker radii (a fiducial is 1)
 PROMPT_SUGGEST = ("Press **Suggest** for K more fiducials from the scene's candidate locations (those the sensor "
                   "cannot see or that lie inside solid geometry are never suggested).")
 
@@ -72,18 +73,24 @@ def rmst_line(pred) -> str:
 
 
 def render_state(state: "PlanningState", excluded: int = 0) -> str:
-    """Predicted RMST and per-target coverage for the fiducials as they are now."""
+    """Predicted RMST and how many targets are covered, for the fiducials as they are now."""
     pred = state.predicted
     n_full = int(np.sum(state.coverage >= 1.0))
+    short = [f"{pid} {pct(c)}" for pid, c in zip(state.target_ids, state.coverage) if c < 1.0]
     lines = [
         rmst_line(pred) + f" ({pred.method}; over the targets' regions of variability, {state.fiducials_used} "
         f"fiducials{f', {excluded} excluded' if excluded else ''}; least squares + IDW k=4, p=2 as the planner "
         "predicts). Follows drags, exclusions and the noise/bias sizes.",
-        f"Coverage: **{n_full} of {len(state.target_ids)} targets** fully inside the fiducials' hull.",
-        "| target | coverage |\n|---|---:|\n" + "\n".join(
-            f"| {pid} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |" for pid, c in zip(state.target_ids, state.coverage)),
+        f"Coverage: **{n_full} of {len(state.target_ids)} targets** fully inside the fiducials' hull"
+        + (f"; ⚠ {', '.join(short)}." if short else "."),
     ]
     return "\n\n".join(lines)
+
+
+def render_coverage(state: "PlanningState") -> str:
+    """Per target: the fraction of its region of variability inside the fiducials' hull."""
+    return "| target | coverage |\n|---|---:|\n" + "\n".join(
+        f"| {pid} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |" for pid, c in zip(state.target_ids, state.coverage))
 
 
 def _baseline_text(baselines: dict) -> str:
@@ -145,10 +152,6 @@ class PlanningPanel:
         self.app = app
         gui = server.gui
         self.info = gui.add_markdown("")
-        self.colour = gui.add_checkbox("Colour regions by coverage", False,
-                                       hint="Each target's region of variability and a halo around the target, "
-                                            "coloured by the fraction of the region inside the fiducials' hull")
-        self.legend = gui.add_markdown(colors.coverage_legend_markdown())
         self.k = gui.add_slider("Fiducials to add (K)", 1, K_MAX, 1, 4)
         self.suggest_button = gui.add_button("Suggest", icon=viser.Icon.WAND,
                                              hint="Choose K more fiducials from the scene's candidate locations")
@@ -156,6 +159,12 @@ class PlanningPanel:
         self.accept_button = gui.add_button("Accept suggestions", icon=viser.Icon.CHECK, disabled=True,
                                             hint="Add the suggested fiducials to the cell")
         self.clear_button = gui.add_button("Clear suggestions", icon=viser.Icon.TRASH, disabled=True)
+        with gui.add_folder("Coverage"):
+            self.colour = gui.add_checkbox("Colour regions by coverage", False,
+                                           hint="Each target's region of variability and a halo around the target, "
+                                                "coloured by the fraction of the region inside the fiducials' hull")
+            self.legend = gui.add_markdown(colors.coverage_legend_markdown())
+            self.coverage_md = gui.add_markdown("")
 
         self.state: PlanningState | None = None  # the last planning state shown
         self.cost_s = 0.0  # seconds the last (uncached) planning update took
@@ -236,6 +245,7 @@ class PlanningPanel:
         if session.kind != "scene":
             self.info.content = ("Planning needs a scene (an error model to predict with and candidate locations "
                                  "to choose from); measured data have none. Load a scene in the File tab.")
+            self.coverage_md.content = ""
             self.state = None
             return
         if not due:
@@ -247,11 +257,13 @@ class PlanningPanel:
             state = session.planning_state()
         except InputError as exc:
             self.info.content = f"⚠ Cannot plan: {' '.join(str(exc).split())}"
+            self.coverage_md.content = ""
             self.state = None
             return
         except Exception as exc:  # noqa: BLE001 - keep serving; say so in the tab
             traceback.print_exc()
             self.info.content = f"⚠ Planning failed: internal error {type(exc).__name__}: {exc}"
+            self.coverage_md.content = ""
             self.state = None
             return
         if state is not self.state:  # a cache hit costs nothing and says nothing about the cost
@@ -261,6 +273,7 @@ class PlanningPanel:
         self.state = state
         excluded = sum(1 for pid in session.layout["fiducials"].ids if pid in session.settings.excluded)
         self._assign(self.info, "content", render_state(state, excluded))
+        self._assign(self.coverage_md, "content", render_coverage(state))
         self.apply_colours(session)
         if session.suggestion is not None and self.ghosts:
             self._assign(self.suggestion_md, "content", render_suggestion(session.suggestion,
@@ -315,10 +328,10 @@ class PlanningPanel:
         for i, (cid, p) in enumerate(zip(result.suggested_ids, np.asarray(result.suggested, float).reshape(-1, 3))):
             name = f"/plan/ghosts/{i}"
             self.ghosts.append(self.server.scene.add_icosphere(
-                name, radius=r, color=colors.GHOST, subdivisions=2, opacity=colors.GHOST_OPACITY,
+                name, radius=GHOST_MARKERS * r, color=colors.GHOST, subdivisions=2, opacity=colors.GHOST_OPACITY,
                 position=np.asarray(p, float), cast_shadow=False, receive_shadow=False))
             self.ghost_labels.append(self.server.scene.add_label(
-                f"{name}/label", f"+{i + 1} {cid}", position=(0.0, 0.0, 1.6 * r), font_size_mode="screen",
+                f"{name}/label", f"+{i + 1} {cid}", position=(0.0, 0.0, 2.0 * r), font_size_mode="screen",
                 font_screen_scale=0.75, anchor="bottom-left"))
         self.suggestion_md.content = render_suggestion(result, session.suggestion_current)
         has = len(self.ghosts) > 0

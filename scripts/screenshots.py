@@ -19,6 +19,7 @@ Extend SHOTS below. Each entry is (file name, actions); an action is one of
                             (the app's ``nodes._gizmo_scale()``); waits until the server has the drag's end
     ("zoom", {"look_at": (x, y, z), "factor": f})   every tab's camera looks at (x, y, z) mm from f times its
                             initial distance, along the initial viewing direction (like a user zooming in)
+    ("call", fn)            call fn(app) on the server (e.g. a drag from Python: app.handle_drag(...))
     ("wait_text", "Text")   wait until "Text" is visible on the page
     ("wait_node", "/name")  wait until scene node "/name" is mounted in the browser
     ("sleep", 0.5)          pause (seconds); prefer the waits above
@@ -66,6 +67,15 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ("app_drag.png", [("tab", "View"), ("click", "Work-cell mesh"), ("tab", "Explore"),
                       ("drag", ("/targets/H1/gizmo", 0.7, -2.5)),
                       ("zoom", {"look_at": (450.0, -60.0, 0.0), "factor": 0.45})]),
+    # Plan tab: F1 slid in under the plate (as a fiducial drag does), so H1's region leaves the hull (red halo;
+    # the others blue, covered); regions coloured by coverage; Suggest's four ghost spheres (+1 … +4) with the
+    # predicted gain in the panel. Drag handles, correction arrows and landing points hidden (less clutter).
+    ("planning.png", [("tab", "View"), ("select", ("Drag handles on", "none")), ("click", "Correction arrows"),
+                      ("click", "Landing points (rigid vs RRBC)"), ("tab", "Plan"),
+                      ("click", "Colour regions by coverage"),
+                      ("call", lambda app: app.handle_drag("fiducials", "F1", [400.0, -60.0, 0.0], "end")),
+                      ("button", "Suggest"), ("wait_text", "Suggested: 4 fiducials"),
+                      ("zoom", {"look_at": (500.0, -20.0, 15.0), "factor": 0.45})]),
 ]
 
 APP_ENTRY = "rrbc_viz.app:serve"
@@ -190,6 +200,9 @@ def run_action(page: Any, h: Any, app: Any, action: tuple[str, Any]) -> None:
     elif kind == "zoom":
         zoom(app, arg["look_at"], arg["factor"])
         page.wait_for_timeout(500)
+    elif kind == "call":
+        arg(app)
+        page.wait_for_timeout(300)
     elif kind == "wait_text":
         page.get_by_text(str(arg)).first.wait_for(state="visible", timeout=RENDER_TIMEOUT_S * 1000)
     elif kind == "wait_node":
@@ -197,7 +210,8 @@ def run_action(page: Any, h: Any, app: Any, action: tuple[str, Any]) -> None:
     elif kind == "sleep":
         page.wait_for_timeout(float(arg) * 1000)
     else:
-        raise ValueError(f"unknown action {kind!r} (use click, tab, button, drag, zoom, wait_text, wait_node, sleep)")
+        raise ValueError(f"unknown action {kind!r} (use click, tab, button, select, drag, zoom, call, wait_text, "
+                         "wait_node, sleep)")
 
 
 def wait_for_scene(page: Any, h: Any, mesh_node: str | None) -> str:

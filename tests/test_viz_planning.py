@@ -45,7 +45,7 @@ def shown_rmst(app) -> tuple[float, float, float, float]:
 
 
 def shown_coverage(app) -> dict[str, str]:
-    return dict(re.findall(r"\| (H\d) \| ([0-9.]+ %)", app.planning.info.content))
+    return dict(re.findall(r"\| (H\d) \| ([0-9.]+ %)", app.planning.coverage_md.content))
 
 
 def test_plan_tab_shows_the_sessions_planning(app):
@@ -77,8 +77,8 @@ def test_coverage_colours_follow_a_fiducial_drag_out_of_the_hull(app):
     assert c != full
     assert tuple(regions["H1"].color) == c and tuple(panel.halos["H1"].color) == c
     assert tuple(regions["H5"].color) == full  # far from F1: still covered
-    assert shown_coverage(app)["H1"] != "100 %" and "| H1 |" in panel.info.content
-    assert "⚠" in panel.info.content.split("| H1 |")[1].split("\n")[0]
+    assert shown_coverage(app)["H1"] != "100 %" and f"⚠ H1 {shown_coverage(app)['H1']}" in panel.info.content
+    assert "⚠" in panel.coverage_md.content.split("| H1 |")[1].split("\n")[0]
     # toggle off: the regions get their own colour back, the halos go
     panel.colour.value = False
     assert tuple(regions["H1"].color) == colors.REGION and not panel.halos["H1"].visible
