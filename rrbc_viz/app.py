@@ -20,7 +20,8 @@ properties in place; the heat map is recomputed at most every `HEAT_INTERVAL_S` 
 Monte Carlo runs in a background thread (`montecarlo.MonteCarloRunner`) after a setting changes, a drag ends or
 the seed changes. (A heat map that takes longer than `HEAT_LIVE_MAX_S` waits for the drag's end.)
 The Plan tab (`planning_panel`) shows the core's coverage and fast predicted RMST for the fiducials as they are
-now, recomputed like the heat map (at most every `planning_panel.PLAN_INTERVAL_S` during a drag, and at its end);
+now, recomputed like the heat map (at most every `planning_panel.PLAN_INTERVAL_S` during a drag, and at its end;
+on scenes where it takes longer than `PLAN_LIVE_MAX_S`, drags hand it to a background thread instead);
 Suggest runs the planner on a snapshot of the session outside the lock (drags go on meanwhile).
 The Diagnose tab runs `rrbc_core.diagnosis.diagnose` synchronously on a button press (~15 ms on the bundled
 scene) over the current registration and fiducial rows only (targets withheld: no truth); a change to those rows
@@ -121,6 +122,7 @@ class RunningApp:
             return
         self._stopped = True
         self.mc.stop()
+        self.planning.stop()
         self.server.stop()
 
     def _install(self, loaded: files.Loaded, first: bool = False) -> None:
@@ -274,9 +276,12 @@ class RunningApp:
             end = phase == "end"
             heat_due = end or (self.layers.get("heatmap") and self._heat_cost <= HEAT_LIVE_MAX_S
                                and time.monotonic() - self._heat_time >= HEAT_INTERVAL_S)
-            plan_due = end or self.planning.live_due()
+            slow_plan = self.planning.slow
+            plan_due = not slow_plan and (end or self.planning.live_due())
             with self.server.atomic():
                 self._show(ev, heat=bool(heat_due), plan=plan_due)
+            if slow_plan:  # a slow scene: planning follows in the background, the drag does not wait
+                self.planning.request_background(session)
             if end:
                 self._refused.discard(key)
         if end:

@@ -5,8 +5,9 @@ What the user sees:
 - the predicted RMST over the targets' regions of variability, rigid only and with RRBC (± its 1σ), and each
   target's coverage (the fraction of its region inside the included fiducials' hull), for the fiducials as they
   are now: it follows drags of fiducials and targets (recomputed at most every `PLAN_INTERVAL_S` while dragging,
-  and at a drag's end; a prediction slower than `PLAN_LIVE_MAX_S` waits for the end), exclusions, noise/bias
-  sizes and accepted suggestions;
+  and at a drag's end; when an update takes longer than `PLAN_LIVE_MAX_S` (large scenes), drags hand it to a
+  background thread instead, which shows the newest result it has), exclusions, noise/bias sizes and accepted
+  suggestions;
 - "Colour regions by coverage": each target's region, and a translucent halo around the target (visible from
   afar, where a region of a few mm is a pixel), on the coverage scale of `colors.coverage_colors`;
 - "Suggest": K more fiducials from the scene's candidates (the planner's greedy + exchange), drawn as ghost
@@ -22,6 +23,7 @@ Formatting only here: every number comes from the core.
 
 from __future__ import annotations
 
+import copy
 import threading
 from contextlib import contextmanager
 import time
@@ -178,6 +180,12 @@ class PlanningPanel:
         self.halos: dict = {}  # target id -> halo handle
         self._sent: dict = {}  # (id(handle), attr) -> value last assigned
         self._group = None
+        self._cond = threading.Condition()  # background planning (slow scenes, during drags)
+        self._pending = None  # (generation, live session, snapshot)
+        self._generation = 0  # bumped by every synchronous refresh
+        self._working = False
+        self._stopped = False
+        self._thread: threading.Thread | None = None
 
         self._syncing = False
 
@@ -236,8 +244,13 @@ class PlanningPanel:
 
     # ------------------------------------------------------------------------------------------ refreshing
     def live_due(self) -> bool:
-        """Whether a drag update should recompute planning now (throttled; slow predictions wait for the end)."""
-        return self.cost_s <= PLAN_LIVE_MAX_S and time.monotonic() - self._time >= PLAN_INTERVAL_S
+        """Whether a drag update should recompute planning now, synchronously (throttled)."""
+        return not self.slow and time.monotonic() - self._time >= PLAN_INTERVAL_S
+
+    @property
+    def slow(self) -> bool:
+        """The last planning update took longer than PLAN_LIVE_MAX_S: during drags it runs in the background."""
+        return self.cost_s > PLAN_LIVE_MAX_S
 
     def refresh(self, session: "ExplorerSession", due: bool = True) -> None:
         """Recompute (or take from the session's cache) and show the planning state (caller holds the app lock,
@@ -251,24 +264,36 @@ class PlanningPanel:
         if not due:
             self.stale = True
             return
+        with self._cond:
+            self._generation += 1  # a background result computed before this is older: it will be dropped
         start = time.perf_counter()
         self._time = time.monotonic()
+        state = self._compute(session)
+        if state is not self.state and not isinstance(state, Exception):  # a cache hit says nothing about the cost
+            self.cost_s = time.perf_counter() - start
+        self._show_state(session, state)
+
+    @staticmethod
+    def _compute(session: "ExplorerSession"):
+        """session.planning_state(), or the exception that says why not."""
         try:
-            state = session.planning_state()
+            return session.planning_state()
         except InputError as exc:
-            self.info.content = f"⚠ Cannot plan: {' '.join(str(exc).split())}"
-            self.coverage_md.content = ""
-            self.state = None
-            return
+            return exc
         except Exception as exc:  # noqa: BLE001 - keep serving; say so in the tab
             traceback.print_exc()
-            self.info.content = f"⚠ Planning failed: internal error {type(exc).__name__}: {exc}"
+            return exc
+
+    def _show_state(self, session: "ExplorerSession", state) -> None:
+        self._time = time.monotonic()
+        if isinstance(state, Exception):
+            what = "Cannot plan" if isinstance(state, InputError) else (
+                f"Planning failed: internal error {type(state).__name__}")
+            self.info.content = f"⚠ {what}: {' '.join(str(state).split())}"
             self.coverage_md.content = ""
             self.state = None
+            self._sent.clear()
             return
-        if state is not self.state:  # a cache hit costs nothing and says nothing about the cost
-            self.cost_s = time.perf_counter() - start
-        self._time = time.monotonic()
         self.stale = False
         self.state = state
         excluded = sum(1 for pid in session.layout["fiducials"].ids if pid in session.settings.excluded)
@@ -278,6 +303,67 @@ class PlanningPanel:
         if session.suggestion is not None and self.ghosts:
             self._assign(self.suggestion_md, "content", render_suggestion(session.suggestion,
                                                                           session.suggestion_current))
+
+    # ------------------------------------------------------------------------------------------ background
+    def request_background(self, session: "ExplorerSession") -> None:
+        """Recompute planning on a snapshot of `session` in the worker thread (caller holds the app lock); drag
+        updates of a slow scene do this instead of waiting. Requests coalesce: only the newest waits; a result
+        is shown unless a synchronous refresh came after its request or another source was loaded."""
+        if session.kind != "scene":
+            return
+        self.stale = True
+        with self._cond:
+            self._pending = (self._generation, session, copy.copy(session))
+            self._cond.notify_all()
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._loop, name="rrbc-planning", daemon=True)
+                self._thread.start()
+
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Block until no background planning is queued or running (tests, scripts). True if idle in time."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while self._pending is not None or self._working:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+            return True
+
+    def stop(self) -> None:
+        with self._cond:
+            self._stopped = True
+            self._pending = None
+            self._cond.notify_all()
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while self._pending is None and not self._stopped:
+                    self._cond.wait()
+                if self._stopped:
+                    return
+                generation, live, snapshot = self._pending
+                self._pending = None
+                self._working = True
+            try:
+                start = time.perf_counter()
+                state = self._compute(snapshot)
+                cost = time.perf_counter() - start
+                with self.app._lock:
+                    with self._cond:
+                        fresh = generation == self._generation and not self._stopped
+                    if fresh and self.app.session is live:
+                        if not isinstance(state, Exception):
+                            self.cost_s = cost
+                        with self.server.atomic():
+                            self._show_state(snapshot, state)
+            except Exception:  # noqa: BLE001 - a display hiccup must not kill the worker
+                traceback.print_exc()
+            finally:
+                with self._cond:
+                    self._working = False
+                    self._cond.notify_all()
 
     def apply_colours(self, session: "ExplorerSession") -> None:
         """Regions and halos on the coverage scale when the toggle is on; regions back to their colour when off."""

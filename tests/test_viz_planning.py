@@ -37,6 +37,12 @@ def app():
         a.stop()
 
 
+def settled(app):
+    """Wait for background planning (used when an update is slow, e.g. on a loaded machine); returns app."""
+    assert app.planning.wait_idle(30)
+    return app
+
+
 def shown_rmst(app) -> tuple[float, float, float, float]:
     """(rigid, rigid std, RRBC, RRBC std) mm as the Plan tab says them."""
     m = _RMST.search(app.planning.info.content)
@@ -71,6 +77,7 @@ def test_coverage_colours_follow_a_fiducial_drag_out_of_the_hull(app):
     # drag F1 away (start, updates, end through viser's gizmo handlers): H1's region leaves the hull
     p0 = np.array(app.gizmo("fiducials", "F1").position, float)
     _gizmo_drag(app, "fiducials", "F1", [p0 + (np.asarray(F1_AWAY) - p0) * f for f in (0.3, 0.7, 1.0)])
+    settled(app)
     st = app.session.planning_state()
     assert st.coverage_of("H1") < 1.0
     c = colors.coverage_color(st.coverage_of("H1"))
@@ -91,6 +98,7 @@ def test_predicted_rmst_text_changes_while_dragging(app):
     time.sleep(PLAN_INTERVAL_S + 0.05)  # a refresh is due: the next drag update recomputes (no drag end needed)
     ev = app.handle_drag("fiducials", "F1", F1_AWAY, "update")
     assert ev is not None
+    settled(app)
     st = app.session.planning_state()
     assert app.planning.state is st and app.planning.info.content != before
     assert shown_rmst(app) != rmst0
@@ -99,12 +107,14 @@ def test_predicted_rmst_text_changes_while_dragging(app):
     # an update right after is throttled (marked stale), the drag's end always refreshes
     app.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "update")
     app.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "end")
+    settled(app)
     assert app.planning.state is app.session.planning_state() and not app.planning.stale
 
 
 def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(app):
     panel = app.planning
     app.handle_drag("fiducials", "F1", F1_AWAY, "end")
+    settled(app)
     cov0 = app.session.planning_state().coverage
     rmst0 = shown_rmst(app)
     assert panel.accept_button.disabled and panel.clear_button.disabled and not panel.ghosts
@@ -164,6 +174,7 @@ def test_clear_and_refusals_are_visible(app):
     # a suggestion made before a drag says so
     _press(panel.suggest_button)
     app.handle_drag("fiducials", "F2", [300.0, 230.0, 10.0], "end")
+    settled(app)
     assert "press Suggest again" in panel.suggestion_md.content
 
 
@@ -181,3 +192,25 @@ def test_measured_data_get_a_message_not_a_plan():
         assert set(panel.halos) == set(app.session.layout["targets"].ids)
     finally:
         app.stop()
+
+
+def test_a_slow_scene_plans_in_the_background_during_drags(app):
+    panel = app.planning
+    rmst0 = shown_rmst(app)
+    panel.cost_s = 10.0  # as if each planning update took 10 s (a large scene): drags must not wait for it
+    assert panel.slow and not panel.live_due()
+    p0 = np.array(app.gizmo("fiducials", "F1").position, float)
+    app.handle_drag("fiducials", "F1", p0, "start")
+    t0 = time.perf_counter()
+    assert app.handle_drag("fiducials", "F1", F1_AWAY, "update") is not None
+    assert panel.stale  # the tab still shows the old numbers, marked as following
+    assert panel.wait_idle(30)
+    st = app.session.planning_state()
+    assert panel.state is st and not panel.stale  # the worker's result for the dragged layout is shown
+    assert shown_rmst(app) != rmst0 and shown_coverage(app)["H1"] != "100 %"
+    assert panel.cost_s < 10.0  # the worker measured the real cost
+    panel.cost_s = 10.0
+    app.handle_drag("fiducials", "F1", p0, "end")  # the end too goes to the background
+    assert panel.wait_idle(30)
+    assert shown_rmst(app) == rmst0 and shown_coverage(app)["H1"] == "100 %"
+    assert time.perf_counter() - t0 < 30
