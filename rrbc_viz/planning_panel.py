@@ -6,8 +6,8 @@ What the user sees:
   target's coverage (the fraction of its region inside the included fiducials' hull), for the fiducials as they
   are now: it follows drags of fiducials and targets (recomputed at most every `PLAN_INTERVAL_S` while dragging,
   and at a drag's end; when an update takes longer than `PLAN_LIVE_MAX_S` (large scenes), drags hand it to a
-  background thread instead, which shows the newest result it has), exclusions, noise/bias sizes and accepted
-  suggestions;
+  background thread instead, which computes it whenever the drag pauses for `PLAN_QUIET_S` or ends), exclusions,
+  noise/bias sizes and accepted suggestions;
 - "Colour regions by coverage": each target's region, and a translucent halo around the target (visible from
   afar, where a region of a few mm is a pixel), on the coverage scale of `colors.coverage_colors`;
 - "Suggest": K more fiducials from the scene's candidates (the planner's greedy + exchange), drawn as ghost
@@ -44,7 +44,9 @@ if TYPE_CHECKING:
     from .app import RunningApp
 
 PLAN_INTERVAL_S = 0.25  # least time between planning recomputations while dragging
-PLAN_LIVE_MAX_S = 0.05  # a planning update slower than this is refreshed only when a drag ends
+PLAN_LIVE_MAX_S = 0.05  # a planning update slower than this runs in the background during drags …
+PLAN_QUIET_S = 0.15  # … once the drag has paused (no update) this long, or ended: computing it while the drag
+#                      goes on would slow every drag update (the worker holds the GIL for much of its time)
 K_MAX = 10
 HALO_MARKERS = 1.8  # halo radius, in marker radii (the target sphere is 0.8)
 HALO_OPACITY = 0.45
@@ -170,6 +172,7 @@ class PlanningPanel:
 
         self.state: PlanningState | None = None  # the last planning state shown
         self.cost_s = 0.0  # seconds the last (uncached) planning update took
+        self._measured = False  # the first computation for the current source was done (its cost is not typical)
         self.stale = False  # a drag changed the fiducials since the state shown was computed
         self._time = 0.0
         self._busy = False  # a Suggest is running
@@ -184,6 +187,7 @@ class PlanningPanel:
         self._pending = None  # (generation, live session, snapshot)
         self._generation = 0  # bumped by every synchronous refresh
         self._working = False
+        self._last_request = 0.0
         self._stopped = False
         self._thread: threading.Thread | None = None
 
@@ -211,6 +215,7 @@ class PlanningPanel:
     def build(self, session: "ExplorerSession") -> None:
         """(Re)create the tab's nodes for a newly installed source (call after SceneNodes.build, in atomic())."""
         self._sent.clear()
+        self.cost_s, self._measured = 0.0, False
         self.state = None
         self.stale = False
         self.ghosts, self.ghost_labels = [], []
@@ -270,7 +275,9 @@ class PlanningPanel:
         self._time = time.monotonic()
         state = self._compute(session)
         if state is not self.state and not isinstance(state, Exception):  # a cache hit says nothing about the cost
-            self.cost_s = time.perf_counter() - start
+            if self._measured:  # the first computation for a source pays one-off start-up costs (up to ~5x): skip it
+                self.cost_s = time.perf_counter() - start
+            self._measured = True
         self._show_state(session, state)
 
     @staticmethod
@@ -307,14 +314,18 @@ class PlanningPanel:
     # ------------------------------------------------------------------------------------------ background
     def request_background(self, session: "ExplorerSession") -> None:
         """Recompute planning on a snapshot of `session` in the worker thread (caller holds the app lock); drag
-        updates of a slow scene do this instead of waiting. Requests coalesce: only the newest waits; a result
-        is shown unless a synchronous refresh came after its request or another source was loaded."""
+        updates of a slow scene do this instead of waiting. Requests coalesce: the newest starts once none has
+        come for PLAN_QUIET_S (the drag paused or ended); a result is shown unless a synchronous refresh came
+        after its request or another source was loaded."""
         if session.kind != "scene":
             return
         self.stale = True
         with self._cond:
+            waiting = self._pending is not None  # the worker is already counting down to it: no wake-up needed
             self._pending = (self._generation, session, copy.copy(session))
-            self._cond.notify_all()
+            self._last_request = time.monotonic()
+            if not waiting:
+                self._cond.notify_all()
             if self._thread is None:
                 self._thread = threading.Thread(target=self._loop, name="rrbc-planning", daemon=True)
                 self._thread.start()
@@ -339,8 +350,14 @@ class PlanningPanel:
     def _loop(self) -> None:
         while True:
             with self._cond:
-                while self._pending is None and not self._stopped:
-                    self._cond.wait()
+                while not self._stopped:
+                    if self._pending is None:
+                        self._cond.wait()
+                        continue
+                    quiet_for = time.monotonic() - self._last_request
+                    if quiet_for >= PLAN_QUIET_S:
+                        break
+                    self._cond.wait(PLAN_QUIET_S - quiet_for)
                 if self._stopped:
                     return
                 generation, live, snapshot = self._pending
