@@ -214,3 +214,19 @@ def test_a_slow_scene_plans_in_the_background_during_drags(app):
     assert panel.wait_idle(30)
     assert shown_rmst(app) == rmst0 and shown_coverage(app)["H1"] == "100 %"
     assert time.perf_counter() - t0 < 30
+
+
+def test_a_layout_the_planner_refuses_gives_a_message_not_a_crash(app):
+    panel = app.planning
+    f1 = np.array(app.gizmo("fiducials", "F1").position, float)
+    assert app.handle_drag("fiducials", "F2", f1, "end") is not None  # two fiducials at one place
+    settled(app)
+    assert panel.info.content.startswith("⚠ Cannot plan:") and "coincide" in panel.info.content
+    assert panel.state is None and panel.coverage_md.content == ""
+    assert app.suggest_fiducials(2) is None
+    assert "coincide" in app.last_message and panel.suggestion_md.content.startswith("⚠ Cannot suggest:")
+    assert not panel.ghosts and not panel.suggest_button.disabled  # the user can fix it and try again
+    app.handle_drag("fiducials", "F2", [300.0, 230.0, 0.0], "end")
+    settled(app)
+    assert "Predicted RMST: rigid" in panel.info.content and panel.state is not None
+    assert len(shown_coverage(app)) == 8
