@@ -25,9 +25,9 @@ from __future__ import annotations
 
 import copy
 import threading
-from contextlib import contextmanager
 import time
 import traceback
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 import numpy as np
