@@ -76,8 +76,23 @@ def rmst_line(pred) -> str:
     return f"Predicted RMST: rigid **{rigid}**, RRBC **{rrbc}**"
 
 
-def render_state(state: "PlanningState", excluded: int = 0) -> str:
-    """Predicted RMST and how many targets are covered, for the fiducials as they are now."""
+def method_note(settings) -> str:
+    """A warning when the session's method is not the one the planner predicts (least squares + IDW k=4, p=2)."""
+    if settings is None:
+        return ""
+    same = (settings.registration == "least-squares" and settings.interpolation == "idw"
+            and int(settings.neighbors) == 4 and float(settings.power) == 2.0)
+    if same:
+        return ""
+    interp = settings.interpolation + (f" (k={settings.neighbors}, p={settings.power:g})"
+                                       if settings.interpolation == "idw" else "")
+    return (f"⚠ The session uses {settings.registration} + {interp}; this prediction is for least squares + IDW "
+            "(k=4, p=2), the planner's model.")
+
+
+def render_state(state: "PlanningState", excluded: int = 0, settings=None) -> str:
+    """Predicted RMST and how many targets are covered, for the fiducials as they are now (and a note when the
+    session's method differs from the planner's)."""
     pred = state.predicted
     n_full = int(np.sum(state.coverage >= 1.0))
     short = [f"{pid} {pct(c)}" for pid, c in zip(state.target_ids, state.coverage) if c < 1.0]
@@ -88,7 +103,8 @@ def render_state(state: "PlanningState", excluded: int = 0) -> str:
         f"Coverage: **{n_full} of {len(state.target_ids)} targets** fully inside the fiducials' hull"
         + (f"; ⚠ {', '.join(short)}." if short else "."),
     ]
-    return "\n\n".join(lines)
+    note = method_note(settings)
+    return "\n\n".join(lines + ([note] if note else []))
 
 
 def render_coverage(state: "PlanningState") -> str:
@@ -304,7 +320,7 @@ class PlanningPanel:
         self.stale = False
         self.state = state
         excluded = sum(1 for pid in session.layout["fiducials"].ids if pid in session.settings.excluded)
-        self._assign(self.info, "content", render_state(state, excluded))
+        self._assign(self.info, "content", render_state(state, excluded, session.settings))
         self._assign(self.coverage_md, "content", render_coverage(state))
         self.apply_colours(session)
         if session.suggestion is not None and self.ghosts:

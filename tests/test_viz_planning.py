@@ -63,6 +63,10 @@ def test_plan_tab_shows_the_sessions_planning(app):
     assert shown_coverage(app) == {pid: "100 %" for pid in st.target_ids}
     assert f"**{len(st.target_ids)} of {len(st.target_ids)} targets**" in app.planning.info.content
     assert "Coverage" in app.planning.legend.content and "0 % (red)" in app.planning.legend.content
+    assert "⚠ The session uses" not in app.planning.info.content
+    app.controls.interpolation.value = "tps"  # not the planner's model: the tab says so (numbers unchanged)
+    assert "⚠ The session uses least-squares + tps" in app.planning.info.content
+    assert shown_rmst(app) == pytest.approx((p.rigid_mm, p.rigid_std_mm, p.rrbc_mm, p.rrbc_std_mm), abs=5e-4)
 
 
 def test_coverage_colours_follow_a_fiducial_drag_out_of_the_hull(app):
