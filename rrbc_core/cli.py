@@ -106,6 +106,20 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--json", action="store_true", help="print one JSON object")
     pl.set_defaults(run=_cmd_plan)
 
+    rp = sub.add_parser("reproduce", help="hold the simulation against published measurements",
+                        description="Hold the simulation against the measured tables of Van Wyk & Marvel (2018): "
+                                    "baseline and extended error models, cross-validated misfit, peg success, "
+                                    "layout sensitivity. Writes a Markdown report with PNG figures to --out.")
+    rp.add_argument("paper", choices=["vanwyk2018"], help="the published experiment (vanwyk2018)")
+    rp.add_argument("--out", default=None, metavar="DIR", help="write report.md, figures and summary.json here")
+    rp.add_argument("--replicates", type=_int_at_least(5), default=200,
+                    help="simulated experiments per model and direction (default 200; ~15 min on 2 cores)")
+    rp.add_argument("--layouts", default="A,B,C,D", help="comma-separated assumed layouts (default A,B,C,D)")
+    rp.add_argument("--no-confusion", action="store_true", help="skip the planted-table confusion study")
+    rp.add_argument("--seed", type=int, default=0, help="seed of every simulated draw (default 0)")
+    rp.add_argument("--json", action="store_true", help="print one JSON object")
+    rp.set_defaults(run=_cmd_reproduce)
+
     v = sub.add_parser("view", help="start the browser app",
                        description="Start the browser app on a scene (default: the bundled demo scene) or a "
                                    "measurement file; prints the URL and runs until interrupted.")
@@ -331,6 +345,58 @@ def _cmd_plan(args) -> str:
     if args.json:
         return json.dumps(res.to_json(), allow_nan=False) + "\n"
     return _plan_table(res)
+
+
+def _cmd_reproduce(args) -> str:
+    from . import reproduction, vanwyk2018
+    from .progress import ProgressBar
+    from .vanwyk2018_report import json_safe, write_report
+
+    names = [x.strip() for x in args.layouts.split(",") if x.strip()]
+    if not names:
+        raise InputError("--layouts must name at least one layout, e.g. A,B,C")
+    for name in names:
+        reproduction.layout_by_name(name)
+    if args.out is not None:
+        from pathlib import Path
+
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise InputError(f"--out {out}: exists and is not a directory")
+        if not out.resolve().parent.exists():
+            raise InputError(f"--out {out}: parent directory {out.resolve().parent} does not exist")
+    rep = vanwyk2018.run(
+        replicates=args.replicates, seed=args.seed, layout_names=names, confusion=not args.no_confusion,
+        progress_factory=lambda total: ProgressBar(total, "reproducing vanwyk2018"),
+    )
+    command = "rrbc reproduce vanwyk2018" + (f" --out {args.out}" if args.out else "")
+    if args.replicates != 200:
+        command += f" --replicates {args.replicates}"
+    if names != ["A", "B", "C", "D"]:
+        command += f" --layouts {','.join(names)}"
+    if args.no_confusion:
+        command += " --no-confusion"
+    if args.seed:
+        command += f" --seed {args.seed}"
+    report = write_report(rep, args.out, command) if args.out else None
+    if args.json:
+        out = json_safe(rep.to_json())
+        if report is not None:
+            out["report"] = str(report)
+        return json.dumps(out, allow_nan=False) + "\n"
+    j = rep.to_json()
+    m = j["misfit"]
+    lines = [
+        f"Van Wyk & Marvel (2018): {j['samples_per_method']} samples per method; layouts {', '.join(names)}",
+        f"misfit (deviance; lower is better)   in sample   cross-validated",
+        f"  baseline                          {m['baseline']:9.1f}   {m['baseline_cv']:9.1f}",
+        f"  {j['extended_model']:<32}  {m['extended']:9.1f}   {m['extended_cv']:9.1f}",
+        "",
+        "cause: " + j["cause"],
+    ]
+    if report is not None:
+        lines += ["", f"report: {report}"]
+    return "\n".join(lines) + "\n"
 
 
 def _cmd_view(args) -> str:

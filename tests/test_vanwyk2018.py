@@ -1,0 +1,40 @@
+"""The reproduction's orchestration: registrations per experiment, RRBC on the plate, the cause sentence."""
+
+import numpy as np
+
+from rrbc_core import reproduction as rp
+
+
+def test_each_repetition_uses_its_own_registration_in_layout_d():
+    """Layout D registers once per repetition: a perturbation of ONE registration's readings must move exactly
+    the check samples of that repetition (and nothing else) for every method that uses those readings."""
+    geo = rp.geometry_for(rp.layout_by_name("D"))
+    pert = np.zeros((1, len(geo.slot_point), 3))
+    g = 2
+    pert[0, geo.reg_slots["large3"][g]] = [[0.3, -0.2, 0.1], [0.0, 0.25, -0.2], [-0.1, 0.0, 0.3]]
+    err = np.linalg.norm(rp.method_errors(geo, pert), axis=-1)[0]  # (7, 80)
+    moved = err > 1e-9
+    m = rp.METHODS.index("Large 3-point")
+    assert np.array_equal(moved[m], geo.check_reg == g)
+    assert np.array_equal(moved[rp.METHODS.index("SA Large 3-point")], geo.check_reg == g)
+    for other in ("Small 3-point", "Large 5-point", "Clustering"):
+        assert not moved[rp.METHODS.index(other)].any(), other
+
+
+def test_layout_a_uses_one_registration_for_all_80_samples():
+    geo = rp.geometry_for(rp.layout_by_name("A"))
+    assert geo.reg_slots["large5"].shape == (1, 5)
+    assert np.all(geo.check_reg == 0)
+    assert geo.check_slots.shape == (7, 80)
+
+
+def test_rrbc_gain_helps_against_bias_more_than_against_noise():
+    """Noise-free smooth bias (flatness field): RRBC must lower the held-out RMS error (what is left is IDW's
+    interpolation error on a 250 x 175 mm grid, large at the edge sites); with noise of the same rigid RMS the
+    change must be clearly less favourable, because each correction then carries a fiducial's noise."""
+    geo = rp.geometry_for(rp.layout_by_name("A"))
+    biased = rp.rrbc_gain(geo, rp.model_by_name("flatness"), 0.3, np.pi / 2, 40, 3)
+    assert biased["change"] < -0.1
+    noisy = rp.rrbc_gain(geo, rp.model_by_name("baseline"), 0.2, 0.0, 40, 3)
+    assert noisy["change"] > biased["change"] + 0.1
+    assert noisy["rmst_rigid_mm"] > 0.2 * np.sqrt(3) * 0.9  # the fresh reading's own noise is in the error
