@@ -38,3 +38,28 @@ def test_rrbc_gain_helps_against_bias_more_than_against_noise():
     noisy = rp.rrbc_gain(geo, rp.model_by_name("baseline"), 0.2, 0.0, 40, 3)
     assert noisy["change"] > biased["change"] + 0.1
     assert noisy["rmst_rigid_mm"] > 0.2 * np.sqrt(3) * 0.9  # the fresh reading's own noise is in the error
+
+
+def test_run_reports_progress_up_to_its_total_and_closes_the_bar():
+    from rrbc_core import vanwyk2018
+
+    class Recorder:
+        def __init__(self, total):
+            self.total, self.done, self.closed = total, 0, False
+
+        def update(self, n=1, label=None):
+            self.done += n
+
+        def close(self):
+            self.closed = True
+
+    bars = []
+
+    def factory(total):
+        bars.append(Recorder(total))
+        return bars[-1]
+
+    rep = vanwyk2018.run(replicates=6, layout_names=["A"], confusion=False, progress_factory=factory)
+    assert len(bars) == 1 and bars[0].closed
+    assert bars[0].done == bars[0].total == sum(max(len(m.phis), 1) for m in rp.MODELS)
+    assert rep.samples_per_method == 80
