@@ -34,7 +34,6 @@ from scipy import stats
 from . import batch, registration
 from .errors import InputError
 from .kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, inverse_path, tool_down
-from .registration import LinearMap
 from .transforms import RigidTransform
 
 #: Table II order.
@@ -181,11 +180,15 @@ def layouts() -> tuple[Layout, ...]:
     return (a, b, c, d)
 
 
+def _by_name(items, name: str, what: str):
+    for item in items:
+        if item.name == name:
+            return item
+    raise InputError(f"unknown {what} {name!r}; choose one of {', '.join(i.name for i in items)}")
+
+
 def layout_by_name(name: str) -> Layout:
-    for lay in layouts():
-        if lay.name == name:
-            return lay
-    raise InputError(f"unknown layout {name!r}; choose one of {', '.join(lay.name for lay in layouts())}")
+    return _by_name(layouts(), name, "layout")
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -509,10 +512,7 @@ MODELS = (
 
 
 def model_by_name(name: str) -> Model:
-    for m in MODELS:
-        if m.name == name:
-            return m
-    raise InputError(f"unknown model {name!r}; choose one of {', '.join(m.name for m in MODELS)}")
+    return _by_name(MODELS, name, "model")
 
 
 @dataclass(frozen=True)

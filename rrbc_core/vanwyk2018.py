@@ -49,10 +49,16 @@ def nearest_direction(ds, phi) -> int:
     return int(np.argmin(np.abs(np.asarray(ds.phis) - phi)))
 
 
+def fitted_errors(ds, fit: model_fit.Fit, kind: str = "norms") -> np.ndarray:
+    """Simulated error norms ('norms') or horizontal norms ('horizontal') (R, 7, 80), mm, at the fit: the
+    nearest simulated direction, scaled by the fitted rho."""
+    return getattr(ds, kind)[nearest_direction(ds, fit.phi)] * np.exp(fit.log_rho)
+
+
 def peg_prediction(ds, fit: model_fit.Fit, successes: np.ndarray) -> PegPrediction:
     """Fit one capture radius to the published success counts (binomial likelihood, 160 tries per method)
     from the model's horizontal errors at its fitted parameters (nearest simulated direction)."""
-    h = ds.horizontal[nearest_direction(ds, fit.phi)] * np.exp(fit.log_rho)
+    h = fitted_errors(ds, fit, "horizontal")
     n = reference_data.PEG_TRIES
     grid = np.linspace(0.005, 3.0, 600)
     p = np.clip(reproduction.success_probability(h, grid), 1e-9, 1 - 1e-9)  # (C, 7)

@@ -17,7 +17,7 @@ import numpy as np
 from . import reference_data
 from .errors import InputError
 from .reproduction import METHODS, STATISTICS
-from .vanwyk2018 import Reproduction, best_extension, nearest_direction
+from .vanwyk2018 import Reproduction, best_extension, fitted_errors, nearest_direction
 
 _STAT_LABEL = {"mean_mm": "mean (mm)", "var_mm2": "variance (mm²)", "max_mm": "max (mm)", "r": "r (distance)"}
 SHORT = ("S3", "L3", "SA S3", "SA L3", "Clust", "L5", "SA L5")
@@ -72,9 +72,8 @@ def _fig_error_vs_distance(rep: Reproduction, path: Path) -> None:
     d = geo.distance
     fig, axes = plt.subplots(2, 7, figsize=(18, 5.2), sharex=True, sharey="row")
     for row, name in enumerate(("baseline", ext)):
-        ds = main.directions[name]
         f = sel.assessments[name].fit
-        norms = ds.norms[nearest_direction(ds, f.phi)] * np.exp(f.log_rho)  # (R, 7, 80)
+        norms = fitted_errors(main.directions[name], f)  # (R, 7, 80)
         for m in range(7):
             ax = axes[row, m]
             for k in range(min(3, norms.shape[0])):
@@ -99,9 +98,7 @@ def _fig_error_ranges(rep: Reproduction, path: Path) -> None:
     ext = best_extension(sel)
     fig, ax = plt.subplots(figsize=(11, 4.2))
     for j, (name, colour, off) in enumerate((("baseline", "tab:red", -0.18), (ext, "tab:blue", 0.18))):
-        ds = main.directions[name]
-        f = sel.assessments[name].fit
-        norms = ds.norms[nearest_direction(ds, f.phi)] * np.exp(f.log_rho)
+        norms = fitted_errors(main.directions[name], sel.assessments[name].fit)
         data = [norms[:, m].ravel() for m in range(7)]
         bp = ax.boxplot(data, positions=np.arange(7) + off, widths=0.3, whis=(0, 100), patch_artist=True,
                         showfliers=False)
@@ -271,6 +268,15 @@ def markdown(rep: Reproduction, command: str) -> str:
         mark = " **(chosen)**" if name == sel.chosen else ""
         w(f"| {name}{mark} | {model_by_name(name).cause} | {params} | {asm.fit.deviance:.1f} | {asm.cv_deviance:.1f} | "
           f"{asm.fit.chi2:.1f} | {asm.fit.outside()} |")
+    w("")
+    from .reproduction import COMPONENTS
+
+    w("What one unit of each component is (parameters above are these units times the fitted weight):")
+    w("")
+    w("| component | unit | drawn anew per simulated experiment |")
+    w("|---|---|---|")
+    for comp in COMPONENTS.values():
+        w(f"| {comp.name} | {comp.unit} | {'yes' if comp.random else 'no'} |")
     w("")
     if main.intervals:
         w("Profile ranges of the " + ext + " parameters (deviance within 1 of the best): "
