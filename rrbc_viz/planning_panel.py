@@ -37,6 +37,7 @@ from rrbc_core.errors import InputError
 
 from . import colors
 from .nodes import gizmo_name
+from .worker import CoalescingWorker
 
 if TYPE_CHECKING:
     from rrbc_core.explorer import ExplorerSession, PlanningState
@@ -199,13 +200,8 @@ class PlanningPanel:
         self.halos: dict = {}  # target id -> halo handle
         self._sent: dict = {}  # (id(handle), attr) -> value last assigned
         self._group = None
-        self._cond = threading.Condition()  # background planning (slow scenes, during drags)
-        self._pending = None  # (generation, live session, snapshot)
-        self._generation = 0  # bumped by every synchronous refresh
-        self._working = False
-        self._last_request = 0.0
-        self._stopped = False
-        self._thread: threading.Thread | None = None
+        # background planning (slow scenes, during drags); every synchronous refresh makes its work stale
+        self._worker = CoalescingWorker(self._background, PLAN_QUIET_S, name="rrbc-planning")
 
         self._syncing = False
 
@@ -285,8 +281,7 @@ class PlanningPanel:
         if not due:
             self.stale = True
             return
-        with self._cond:
-            self._generation += 1  # a background result computed before this is older: it will be dropped
+        self._worker.invalidate()  # a background result requested before this is older: it will be dropped
         start = time.perf_counter()
         self._time = time.monotonic()
         state = self._compute(session)
@@ -336,67 +331,27 @@ class PlanningPanel:
         if session.kind != "scene":
             return
         self.stale = True
-        with self._cond:
-            waiting = self._pending is not None  # the worker is already counting down to it: no wake-up needed
-            self._pending = (self._generation, session, copy.copy(session))
-            self._last_request = time.monotonic()
-            if not waiting:
-                self._cond.notify_all()
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._loop, name="rrbc-planning", daemon=True)
-                self._thread.start()
+        self._worker.submit((session, copy.copy(session)))  # the thread starts with the first request
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
         """Block until no background planning is queued or running (tests, scripts). True if idle in time."""
-        end = time.monotonic() + timeout
-        with self._cond:
-            while self._pending is not None or self._working:
-                left = end - time.monotonic()
-                if left <= 0:
-                    return False
-                self._cond.wait(left)
-            return True
+        return self._worker.wait_idle(timeout)
 
     def stop(self) -> None:
-        with self._cond:
-            self._stopped = True
-            self._pending = None
-            self._cond.notify_all()
+        self._worker.stop()
 
-    def _loop(self) -> None:
-        while True:
-            with self._cond:
-                while not self._stopped:
-                    if self._pending is None:
-                        self._cond.wait()
-                        continue
-                    quiet_for = time.monotonic() - self._last_request
-                    if quiet_for >= PLAN_QUIET_S:
-                        break
-                    self._cond.wait(PLAN_QUIET_S - quiet_for)
-                if self._stopped:
-                    return
-                generation, live, snapshot = self._pending
-                self._pending = None
-                self._working = True
-            try:
-                start = time.perf_counter()
-                state = self._compute(snapshot)
-                cost = time.perf_counter() - start
-                with self.app._lock:
-                    with self._cond:
-                        fresh = generation == self._generation and not self._stopped
-                    if fresh and self.app.session is live:
-                        if not isinstance(state, Exception):
-                            self.cost_s = cost
-                        with self.server.atomic():
-                            self._show_state(snapshot, state)
-            except Exception:  # noqa: BLE001 - a display hiccup must not kill the worker
-                traceback.print_exc()
-            finally:
-                with self._cond:
-                    self._working = False
-                    self._cond.notify_all()
+    def _background(self, job, fresh) -> None:
+        """The worker's job: compute on the snapshot, show it if still wanted (under the app lock)."""
+        live, snapshot = job
+        start = time.perf_counter()
+        state = self._compute(snapshot)
+        cost = time.perf_counter() - start
+        with self.app._lock:
+            if fresh() and self.app.session is live:
+                if not isinstance(state, Exception):
+                    self.cost_s = cost
+                with self.server.atomic():
+                    self._show_state(snapshot, state)
 
     def apply_colours(self, session: "ExplorerSession") -> None:
         """Regions and halos on the coverage scale when the toggle is on; regions back to their colour when off."""
