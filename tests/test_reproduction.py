@@ -527,7 +527,7 @@ def test_fit_recovers_a_planted_model_from_its_own_predictive_distribution(momen
 @pytest.mark.xfail(strict=True, reason=(
     "known limit, stated in the report: on tables the simulation produces, sigma's level-4 interval misses the "
     "truth far more often than 5 % (a single table's Gaussian-likelihood estimate of the noise is biased low "
-    "when bias dominates: 0.10-0.14 mm for a planted 0.15 mm at 3000 ppm, layout A, moments from 200 experiments)"))
+    "when bias dominates: 0.115 +- 0.028 mm for a planted 0.15 mm at 3000 ppm in scripts/identification_study.py)"))
 def test_profile_intervals_cover_the_truth_on_simulated_tables(moments):
     """The coverage check on tables the simulation produces (what the pipeline meets): 30 experiments of the
     scale model at sigma 0.2 mm, 1000 ppm."""
@@ -539,18 +539,20 @@ def test_profile_intervals_cover_the_truth_on_simulated_tables(moments):
 
 
 # Planted cases, parameters drawn from a seeded generator (TABLE_SEED), in the range where the identification
-# study found single tables reliable (layout A, full-covariance fit, moments from 200 experiments, 20 tables
-# per point, run before these cases were drawn): scale named 20 of 20 at sigma 0.15 mm + 3000 ppm, 16 of 20 at
-# 0.2 mm + 2000 ppm, 11 of 20 at 0.2 mm + 1000 ppm. Every other candidate was named in at most 17 of 20 even
-# with its extension 6-7 times the noise (kinematic 15, flatness 17, anisotropic 11-15, seating 9 of 20), so
-# single-table naming is only tested for scale; the report's confusion study gives those rates for all.
-# Recovery: scale_ppm (the effect's own parameter) must fall inside the level-4 profile interval widened by
-# the 3-sigma spread of single-table estimates measured in the same study (sd 65 ppm = 2.2 % at 3000 ppm);
-# sigma is only required to be of the right size (a factor 2), because its single-table estimate is biased low
-# when bias dominates (see the xfail above).
+# study (`scripts/identification_study.py`, docs/vanwyk2018_identification.md: layout A, full-covariance fit,
+# moments from 200 experiments, 20 planted tables per row) found single tables most reliable: scale named 18 of
+# 20 at sigma 0.15 mm + 3000 ppm and at 0.2 mm + 2000 ppm, 13 of 20 at 0.2 mm + 1000 ppm; the other candidates
+# were named in at most 18 of 20 even with the extension 4-6 times the noise (kinematic 14, flatness 14-18,
+# anisotropic 11-17, reach noise 16, seating 8), so single-table naming is only tested for scale, on these four
+# seeded cases (a ~90 % rate per table: the test pins these cases, the study gives the rate); the report's
+# confusion study gives rates for every model. Recovery: scale_ppm (the effect's own parameter) must fall inside
+# the level-4 profile interval widened by 3 x the spread of single-table estimates in the same study (sd 83 ppm
+# = 2.8 % at 3000 ppm); sigma is only required to be of the right size (a factor 2), because its single-table
+# estimate is biased low when bias dominates (0.115 +- 0.028 mm for a planted 0.15 mm in the study; the xfail
+# above).
 N_PLANTED = 4
 N_BASELINE = 10
-PPM_SPREAD = 0.022
+PPM_SPREAD = 0.028
 
 
 def _planted_cases():
