@@ -28,13 +28,7 @@ F1_AWAY = [400.0, -60.0, 0.0]  # F1 (table corner next to H1) slid in under the 
 _RMST = re.compile(r"Predicted RMST: rigid \*\*([0-9.]+) ± ([0-9.]+) mm\*\*, RRBC \*\*([0-9.]+) ± ([0-9.]+) mm\*\*")
 
 
-@pytest.fixture
-def app():
-    a = serve(port=0)
-    try:
-        yield a
-    finally:
-        a.stop()
+from .test_viz import app  # noqa: E402,F401 - the same fixture: the default scene on a free port, stopped after
 
 
 def settled(app):
