@@ -15,23 +15,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
-# Single-threaded BLAS unless the caller says otherwise: both sides of every comparison then run on one core,
-# and idle BLAS worker threads cannot spin against the timed code on a busy machine. Must precede numpy.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
-from scipy.spatial.transform import Rotation  # noqa: E402
+from scipy.spatial.transform import Rotation
 
-from rrbc_core import batch, registration  # noqa: E402
+from rrbc_core import batch, registration
 
 
 # ------------------------------------------------------------------------------------------------------

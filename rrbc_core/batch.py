@@ -66,6 +66,7 @@ from . import interpolation as interp_mod
 from .errors import InputError
 from .interpolation import EXACT_MM
 from .rrbc import correct_points, fiducial_corrections
+from .threads import thread_limited
 from .transforms import project_to_so3
 
 #: Elements per temporary array: trials are processed in chunks so memory stays bounded (and in cache).
@@ -667,6 +668,7 @@ def _register(method, s, r, seeds, options):
     return (*_finite("annealing", *_annealing(s, r, a0, t0, seeds, iterations, cooling_c)), False)
 
 
+@thread_limited
 def rrbc_batch(
     registration: str,
     interpolation: str,

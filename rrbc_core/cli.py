@@ -423,6 +423,9 @@ def _cmd_view(args) -> str:
 
 
 def main(argv=None) -> int:
+    from .threads import apply_process_policy
+
+    apply_process_policy()  # one BLAS thread for the whole command (docs/threads.md)
     try:
         args = build_parser().parse_args(argv)
         out = args.run(args)

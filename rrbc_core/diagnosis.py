@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .registration import _kabsch, least_squares
+from .threads import thread_limited
 
 __all__ = ["Effect", "Diagnosis", "diagnose"]
 
@@ -399,6 +400,7 @@ def _whitener(cov: np.ndarray) -> np.ndarray:
     return vec @ np.diag(np.sqrt(ev.mean() / ev)) @ vec.T
 
 
+@thread_limited
 def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
     """Diagnose a MeasurementSet: which effects beyond rigid + isotropic noise are present, and will RRBC help."""
     if not (0 < float(alpha) < 1):

@@ -39,6 +39,7 @@ import numpy as np
 from . import interpolation, metrics, registration
 from .errors import InputError
 from .rrbc import correct_points, fiducial_corrections
+from .threads import thread_limited
 
 #: Seed of the planner's region samples (coverage, predicted RMST, suggestions): fixed, so the tab's numbers,
 #: a suggestion's "after" and the numbers after accepting it are the same computation.
@@ -173,6 +174,7 @@ class ExplorerSession:
 
     # ------------------------------------------------------------------------------------------------ sources
     @classmethod
+    @thread_limited
     def from_scene(cls, scene, settings: Settings | None = None) -> "ExplorerSession":
         layout = {
             "registration": Group(tuple(scene.registration.ids), np.array(scene.registration.positions, float)),
@@ -184,6 +186,7 @@ class ExplorerSession:
                    sensor_to_robot=scene.sensor_to_robot)
 
     @classmethod
+    @thread_limited
     def from_measurements(cls, mset, mesh_path=None, settings: Settings | None = None) -> "ExplorerSession":
         reg = mset.points("registration")
         fid = mset.points("fiducial")
@@ -273,6 +276,7 @@ class ExplorerSession:
         return Readings(np.array(out_s).reshape(n, 3), np.array(out_r).reshape(n, 3), np.array(out_t).reshape(n, 3))
 
     # -------------------------------------------------------------------------------------------- editing
+    @thread_limited
     def move(self, kind: str, pid: str, position) -> Evaluation:
         """Move a point (robot frame, mm) and re-evaluate. kind: registration, fiducials or targets."""
         if kind not in self.layout:
@@ -300,12 +304,14 @@ class ExplorerSession:
             self.layout, self._readings = old_layout, old_readings
             raise
 
+    @thread_limited
     def set_excluded(self, pid: str, excluded: bool) -> Evaluation:
         self.layout["fiducials"].index(pid)
         ex = set(self.settings.excluded)
         (ex.add if excluded else ex.discard)(pid)
         return self.update(excluded=frozenset(ex))
 
+    @thread_limited
     def update(self, **changes) -> Evaluation:
         """Change settings (names as in Settings) and re-evaluate; invalid values raise InputError and leave
         the session unchanged."""
@@ -321,6 +327,7 @@ class ExplorerSession:
             raise
 
     # ----------------------------------------------------------------------------------------- evaluating
+    @thread_limited
     def evaluate(self) -> Evaluation:
         s = self.settings
         reg_r = self._readings_for("registration")
@@ -442,6 +449,7 @@ class ExplorerSession:
 
         return self._cached("planning_scene", key, build)
 
+    @thread_limited
     def planning_state(self) -> "PlanningState":
         """Coverage per target and the fast predicted RMST (rigid and RRBC, with their std) for the fiducials as
         they are now (dragged, excluded or accepted ones included as the session has them). Cached: a call with
@@ -462,6 +470,7 @@ class ExplorerSession:
 
         return self._cached("planning_state", key, compute)
 
+    @thread_limited
     def suggest_fiducials(self, k: int, seed: int | None = None, progress=None):
         """Ask the planner for `k` more fiducials from the scene's candidates, given the included fiducials as
         they are now; keeps the result as `suggestion` and returns it (a planning.PlanResult). seed: the
@@ -491,6 +500,7 @@ class ExplorerSession:
     def clear_suggestion(self) -> None:
         self.suggestion, self._suggestion_key = None, None
 
+    @thread_limited
     def accept_suggestions(self, which=None) -> Evaluation:
         """Add fiducials and re-evaluate. `which`: None = every fiducial of the pending suggestion; a list of
         candidate ids (of the scene's candidates); or (K,3) robot-frame positions (mm). New fiducials get the
@@ -552,6 +562,7 @@ class ExplorerSession:
         return ids, pos
 
     # ---------------------------------------------------------------------------------------------- heat map
+    @thread_limited
     def heat_map(self, samples_per_target: int = 200) -> "HeatMap":
         """Predicted error over the targets' regions of variability (scene mode): samples (seeded, fixed per
         target id) inside each region, each measured noise-free (expected sensor reading incl. sensor bias) and
@@ -605,6 +616,7 @@ class ExplorerSession:
                                                 np.zeros_like(ev.registration_readings.sensor))
 
     # ----------------------------------------------------------------------------------------- Monte Carlo
+    @thread_limited
     def monte_carlo(self, trials: int = 200, checks_per_target: int = 10, seed: int | None = None) -> "MonteCarloPlots":
         """Scene mode: Monte Carlo of the current layout and settings (noise redrawn, bias fixed, both scaled);
         errors at check points sampled in the targets' regions, rigid vs RRBC, and their distance from the
@@ -676,6 +688,7 @@ class ExplorerSession:
                               robot=np.array(robot).reshape(n, 3), time=np.full(n, np.nan),
                               lines=tuple(0 for _ in ids), source=f"<{self.name}>")
 
+    @thread_limited
     def export_json(self) -> dict:
         """Results as `rrbc correct --json` would give them for `export_measurements()`, plus the settings."""
         from .pipeline import CorrectionOptions, correct_measurements

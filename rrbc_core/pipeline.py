@@ -14,6 +14,7 @@ from . import interpolation, metrics, registration
 from .errors import InputError
 from .measurements import MeasurementSet, PointGroup
 from .rrbc import CorrectedPoints, correct_points, fiducial_corrections
+from .threads import thread_limited
 
 
 @dataclass(frozen=True)
@@ -129,6 +130,7 @@ def run_registration(options: CorrectionOptions, sensor, robot) -> registration.
     return registration.register(options.registration, sensor, robot, **extra)
 
 
+@thread_limited
 def correct_measurements(mset: MeasurementSet, options: CorrectionOptions = CorrectionOptions()) -> CorrectionResult:
     """Run RRBC on a measurement set (all nine steps) and score any check points against their truth."""
     method = make_interpolator(options)  # validate options before any work

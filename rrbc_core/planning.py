@@ -81,6 +81,7 @@ import numpy as np
 from . import batch
 from .errors import InputError
 from .interpolation import hull_flags
+from .threads import thread_limited
 
 #: A sample within this distance (mm) of a coplanar fiducial set's plane (and inside its polygon) is covered.
 COPLANAR_TOL_MM = 1.0
@@ -212,6 +213,7 @@ def _covered(fiducials: np.ndarray, samples: np.ndarray) -> np.ndarray:
     return ~extrapolated & (off <= COPLANAR_TOL_MM)
 
 
+@thread_limited
 def coverage(fiducials_mm, regions, *, samples_per_region: int = 512, seed: int = 0) -> np.ndarray:
     """Per region, the fraction (R,) of its volume inside the convex hull of the fiducials.
 
@@ -482,6 +484,7 @@ def _predict_mc(scene, fid, registration, samples_per_target, trials, seed, chun
     return RmstPrediction(a, sa, b, sb, "monte-carlo")
 
 
+@thread_limited
 def predict_rmst(scene, fiducials_mm, *, registration_mm=None, trials: int = 0, seed: int = 0,
                  samples_per_target: int = SAMPLES_PER_TARGET) -> RmstPrediction:
     """Predicted RMS target error (mm) over the targets' regions of variability, rigid and with RRBC (IDW).
@@ -569,6 +572,7 @@ def _unreachable(scene, positions: np.ndarray) -> dict:
     return bad
 
 
+@thread_limited
 def usable_candidates(scene) -> tuple[np.ndarray, dict]:
     """(mask (C,) over scene.candidates, {candidate id: reason}) — which candidate locations can hold a fiducial.
 
@@ -730,6 +734,7 @@ def _corner_choice(scene, cand_pos: np.ndarray, add: int) -> np.ndarray:
     return np.array(chosen, dtype=int)
 
 
+@thread_limited
 def plan(scene, add: int = 0, *, fiducials_mm=None, seed: int = 0, progress=None,
          samples_per_target: int = SAMPLES_PER_TARGET) -> PlanResult:
     """Coverage, predicted RMST and `add` suggested fiducial locations for a scene.

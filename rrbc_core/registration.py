@@ -27,6 +27,7 @@ import numpy as np
 
 from . import geometry
 from .errors import InputError
+from .threads import thread_limited
 from .transforms import RigidTransform, chordal_mean, project_to_so3, rotation_from_euler_zyx
 
 
@@ -467,6 +468,7 @@ STRATEGIES = {
 }
 
 
+@thread_limited
 def register(method: str, sensor, robot, **options) -> Registration:
     """Run the named strategy (one of STRATEGIES)."""
     try:

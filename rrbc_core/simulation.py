@@ -24,6 +24,7 @@ from . import batch, metrics
 from .errormodels import ErrorModel, PointSet
 from .errors import InputError
 from .measurements import MeasurementSet
+from .threads import thread_limited
 from .transforms import RigidTransform
 
 STRATEGY_NAMES = ("least-squares", "three-point", "combinatorial", "annealing", "clustering")
@@ -155,6 +156,7 @@ class Measured:
     truth: np.ndarray
 
 
+@thread_limited
 def measure(cell: WorkCell, rng: np.random.Generator, trials: int = 1) -> Measured:
     """Simulate `trials` independent measurement sessions of the cell (bias fixed, noise redrawn)."""
     if trials < 1:
@@ -199,6 +201,7 @@ class TrialErrors:
     rrbc: np.ndarray
 
 
+@thread_limited
 def trial_errors(cell: WorkCell, measured: Measured, registration: str = "least-squares",
                  interpolation: str = "idw", seeds=None, **interp_options) -> TrialErrors:
     """Run registration + RRBC on every trial (vectorised where `batch` can) and score the check points."""
@@ -311,6 +314,7 @@ def _pearson(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(a, b)[0, 1])
 
 
+@thread_limited
 def monte_carlo(cell: WorkCell, trials: int, seed: int = 0, strategies=STRATEGY_NAMES,
                 interpolations=INTERPOLATION_NAMES, chunk: int = 2000, progress=None) -> MonteCarloResult:
     """Monte Carlo over `trials` sessions: per strategy, rigid TRE mean/RMS/max, correlation of the error with
@@ -369,6 +373,7 @@ def monte_carlo(cell: WorkCell, trials: int, seed: int = 0, strategies=STRATEGY_
     )
 
 
+@thread_limited
 def icp_statistics(scene, cell: WorkCell, trials: int, seed: int = 0, start_error_deg: float = 2.0,
                    start_error_mm: float = 10.0, progress=None) -> StrategyStats:
     """Point-cloud registration as the alternative step 2: per trial, the sensor's view of the cell's mesh is

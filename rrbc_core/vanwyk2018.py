@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from . import model_fit, reference_data, reproduction
 from .reproduction import METHODS, MODELS, STATISTICS
+from .threads import thread_limited
 
 DEFAULT_REPLICATES = 200
 CONFUSION_TABLES = 10
@@ -299,6 +300,7 @@ def cause_sentence(rep: Reproduction) -> str:
     return text
 
 
+@thread_limited
 def run(replicates: int = DEFAULT_REPLICATES, seed: int = 0, progress_factory=None, layout_names=None,
         confusion: bool = True) -> Reproduction:
     """The whole analysis. progress_factory(total) -> an object with update(n) and close(), or None."""

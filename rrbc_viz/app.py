@@ -49,6 +49,7 @@ import viser
 from rrbc_core.diagnosis import Diagnosis, diagnose
 from rrbc_core.errors import InputError
 from rrbc_core.explorer import LAYERS, Evaluation, ExplorerSession
+from rrbc_core.threads import apply_process_policy
 
 from . import diagnosis_panel, files, tables, teaching
 from .colors import legend_markdown
@@ -90,6 +91,7 @@ class RunningApp:
         self.url = f"http://{host if host not in ('0.0.0.0', '::', '') else 'localhost'}:{self.port}"
         self._lock = threading.RLock()
         self._stopped = False
+        self.quiet = True  # stop() hides viser's "Server stopped" line
         self.heat_samples_per_target = HEAT_SAMPLES_PER_TARGET
         self.loaded = loaded
         self.session: ExplorerSession = loaded.session
@@ -123,7 +125,8 @@ class RunningApp:
         self._stopped = True
         self.mc.stop()
         self.planning.stop()
-        self.server.stop()
+        with contextlib.redirect_stdout(io.StringIO()) if self.quiet else contextlib.nullcontext():
+            self.server.stop()  # viser prints "(viser) Server stopped" on stdout
 
     def _install(self, loaded: files.Loaded, first: bool = False) -> None:
         """Make `loaded` the current source: rebuild the scene and resync the panel."""
@@ -654,7 +657,10 @@ def _check_host(host: str) -> None:
 def serve(source=None, host: str = "127.0.0.1", port: int = 0, mesh=None, quiet: bool = True) -> RunningApp:
     """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
     .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
-    raises InputError before any server starts. `quiet` hides viser's start-up banner."""
+    raises InputError before any server starts. `quiet` hides viser's start-up banner and its "Server stopped"
+    line. Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.threads`, docs/threads.md): the
+    server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
+    apply_process_policy()
     if isinstance(source, ExplorerSession):
         loaded = files.Loaded(source, files.load_mesh(mesh) if mesh else None, f"session {source.name}")
         source.evaluate()
@@ -666,7 +672,9 @@ def serve(source=None, host: str = "127.0.0.1", port: int = 0, mesh=None, quiet:
         server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)
     try:
         server.scene.set_up_direction("+z")
-        return RunningApp(server, loaded, host)
+        app = RunningApp(server, loaded, host)
+        app.quiet = quiet
+        return app
     except BaseException:
         server.stop()
         raise

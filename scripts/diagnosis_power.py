@@ -31,23 +31,20 @@ Every data set has its own seed (see `trial_seed`), so the output does not depen
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import numpy as np  # noqa: E402
-from scipy.spatial.transform import Rotation  # noqa: E402
+import numpy as np
+from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from rrbc_core.diagnosis import diagnose  # noqa: E402
-from rrbc_core.errormodels import Affine, AnisotropicNoise, Drift, PointSet, Scale, SmoothField  # noqa: E402
-from rrbc_core.measurements import MeasurementSet  # noqa: E402
-from rrbc_core.registration import least_squares  # noqa: E402
+from rrbc_core.diagnosis import diagnose
+from rrbc_core.errormodels import Affine, AnisotropicNoise, Drift, PointSet, Scale, SmoothField
+from rrbc_core.measurements import MeasurementSet
+from rrbc_core.registration import least_squares
+from rrbc_core.threads import apply_process_policy
 
 SIGMA = 0.02  # mm per axis
 ALPHA = 0.01
@@ -166,6 +163,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="docs", help="output directory (default docs)")
     ap.add_argument("--workers", type=int, default=2, help="processes (default 2; results do not depend on it)")
     args = ap.parse_args(argv)
+    apply_process_policy()  # one BLAS thread, as the rrbc command runs (docs/threads.md)
     trials, clean_trials = (8, 40) if args.quick else (100, 500)
     scan_trials = 8 if args.quick else 50
     jobs, keys = [], []
@@ -219,7 +217,7 @@ def main(argv=None) -> int:
 
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)
-    cmd = "OPENBLAS_NUM_THREADS=1 python scripts/diagnosis_power.py" + (" --quick" if args.quick else "") + \
+    cmd = "python scripts/diagnosis_power.py" + (" --quick" if args.quick else "") + \
           f" --out {args.out}" + (f" --workers {args.workers}" if args.workers != 2 else "")
     lines = [
         "# Detection power of `rrbc diagnose`",

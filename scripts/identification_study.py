@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from rrbc_core import model_fit, reproduction
+from rrbc_core.threads import apply_process_policy
 
 #: (model, first weight, extension weight): sizes in each model's own parameter units (see reproduction.MODELS).
 CASES = (
@@ -46,6 +47,7 @@ def main(argv=None) -> None:
     ap.add_argument("--tables", type=int, default=20)
     ap.add_argument("--out", default="docs")
     args = ap.parse_args(argv)
+    apply_process_policy()  # one BLAS thread, as the rrbc command runs (docs/threads.md)
     t0 = time.perf_counter()
     geo = reproduction.geometry_for(reproduction.layout_by_name("A"))
     moments = {m.name: model_fit.Moments.of(reproduction.simulate_model(geo, m, 200, 0)) for m in reproduction.MODELS}

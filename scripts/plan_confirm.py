@@ -16,22 +16,19 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import sys
 import time
 from pathlib import Path
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import numpy as np  # noqa: E402
+import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from rrbc_core import planning  # noqa: E402
-from rrbc_core.errormodels import ErrorModel, Kinematic  # noqa: E402
-from rrbc_core.scene import NamedPoints, load_scene  # noqa: E402
+from rrbc_core import planning
+from rrbc_core.errormodels import ErrorModel, Kinematic
+from rrbc_core.scene import NamedPoints, load_scene
+from rrbc_core.threads import apply_process_policy
 
 SCENES = ("demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell")
 ADD = 4
@@ -182,6 +179,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="400 trials and 4 seeded scenes")
     ap.add_argument("--trials", type=int, default=None)
     args = ap.parse_args(argv)
+    apply_process_policy()  # one BLAS thread, as the rrbc command runs (docs/threads.md)
     trials = args.trials or (400 if args.quick else TRIALS)
     seeds = STUDY_SEEDS[:4] if args.quick else STUDY_SEEDS
     conf = confirm(trials)

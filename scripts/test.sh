@@ -4,6 +4,5 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$root/scripts/setup.sh" --browser
 cd "$root"
-# Small matrices everywhere: BLAS threads only contend on 2 cores (measured in tests/test_batch.py).
-export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}" OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
+# No thread variables: tests run as users run (rrbc sets its own BLAS pools, docs/threads.md).
 exec "$root/.venv/bin/python" -m pytest -q -p no:cacheprovider "$@"
