@@ -32,6 +32,7 @@ __all__ = ["Effect", "Diagnosis", "diagnose"]
 _PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points are treated as coplanar
 _BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
 _KNN = 6  # neighbours in Moran's I weights
+_BOOTSTRAP_CHUNK_ELEMENTS = 1 << 20  # bootstrap draws held at once (8 MiB): memory stays linear in N
 _SMALL_N = 40  # below this many paired points the smooth-field test's reach is stated as a limit (power study)
 
 
@@ -284,17 +285,42 @@ def _outliers(d: _Data, use_time: bool, alpha: float, white: np.ndarray):
 
 # ---------------------------------------------------------------------------------------------- Moran's I
 def _moran_weights(p: np.ndarray):
+    """Indices (N, k) of each point's k nearest other points (k = min(_KNN, N - 1))."""
     k = min(_KNN, len(p) - 1)
     _, nb = cKDTree(p).query(p, k=k + 1)
     return nb[:, 1:]
 
 
 def _moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
-    """Vector Moran's I with k-NN weights. res (..., N, 3) -> (...)."""
+    """Vector Moran's I with k-NN weights: res (..., N, 3) -> (...).
+
+    I = (1/k) Σ_i Σ_{j ∈ nb(i)} r_i·r_j / Σ_i |r_i|², the neighbour sums taken with a sparse (N, N) weight
+    matrix (k non-zeros per row), so memory is O(N·k) per residual field, not a gathered (..., N, k, 3) array."""
+    from scipy.sparse import csr_matrix
+
     n, k = nb.shape
-    num = np.einsum("...ic,...ikc->...", res, res[..., nb, :])
-    den = np.einsum("...ic,...ic->...", res, res)
-    return (n / (n * k)) * num / den
+    w = csr_matrix((np.ones(n * k), nb.reshape(-1), np.arange(0, n * k + 1, k)), shape=(n, n))
+    lead = res.shape[:-2]
+    r = res.reshape(-1, n, 3)
+    x = np.moveaxis(r, 1, 0).reshape(n, -1)  # (N, B*3)
+    num = np.einsum("nb,nb->b", x, w @ x).reshape(-1, 3).sum(axis=1)
+    den = np.einsum("bic,bic->b", r, r)
+    return (num / (k * den)).reshape(lead)
+
+
+def _moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = _BOOTSTRAP) -> np.ndarray:
+    """Moran's I of `replicates` white-noise residual fields with the accepted model's columns (orthonormal qa,
+    (3N, q)) projected out. Drawn and evaluated in chunks of _BOOTSTRAP_CHUNK_ELEMENTS: memory is linear in N and
+    the draws are those of one rng.standard_normal((replicates, 3N)) call (a Generator fills rows in order)."""
+    n3 = qa.shape[0]
+    out = np.empty(replicates)
+    step = max(1, _BOOTSTRAP_CHUNK_ELEMENTS // n3)
+    for start in range(0, replicates, step):
+        b = min(step, replicates - start)
+        eps = rng.standard_normal((b, n3))
+        eps -= (eps @ qa) @ qa.T
+        out[start : start + b] = _moran(eps.reshape(b, n3 // 3, 3), nb)
+    return out
 
 
 def _length_scale(p: np.ndarray, r: np.ndarray) -> tuple[float, float]:
@@ -331,28 +357,51 @@ def _sphericity(s: np.ndarray, nu: float):
 
 
 # ------------------------------------------------------------------------------------------------- LOO
+def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
+    """Weighted least-squares fits (R (N,3,3), t (N,3)) of all points but i, for every i at once: the weighted
+    sums of the full set minus point i's share (a rank-one downdate of the cross-covariance), then one batched
+    SVD with the reflection fix — the same fit as `registration._kabsch` on the N−1 points (to rounding), in O(N)
+    memory and time. Points are centred on the full set's weighted centroid first, so the downdates do not
+    cancel large numbers."""
+    w = np.asarray(weights, float)
+    c_s = (w @ sensor) / w.sum()
+    c_r = (w @ robot) / w.sum()
+    s, r = sensor - c_s, robot - c_r
+    wt = w.sum() - w  # (N,) weight of the others
+    ms = ((w @ s)[None] - w[:, None] * s) / wt[:, None]  # centroid of the others (centred frame)
+    mr = ((w @ r)[None] - w[:, None] * r) / wt[:, None]
+    full = np.einsum("n,ni,nj->ij", w, s, r)
+    h = full[None] - w[:, None, None] * s[:, :, None] * r[:, None, :] - wt[:, None, None] * ms[:, :, None] * mr[:, None, :]
+    u, _, vt = np.linalg.svd(h)
+    v = np.swapaxes(vt, 1, 2).copy()
+    d = np.sign(np.linalg.det(np.matmul(v, np.swapaxes(u, 1, 2))))
+    v[:, :, 2] *= np.where(d >= 0, 1.0, -1.0)[:, None]
+    rot = np.matmul(v, np.swapaxes(u, 1, 2))
+    t = (mr + c_r) - np.einsum("nij,nj->ni", rot, ms + c_s)
+    return rot, t
+
+
 def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0):
-    """Leave-one-out prediction error at each point: rigid only, and rigid + IDW correction from the others."""
+    """Leave-one-out prediction error at each point: rigid only, and rigid + IDW correction from its k nearest
+    others (sensor frame), with the registration of the others. Returns the two RMS values (mm)."""
     n = len(sensor)
-    dist = np.sqrt(np.sum((sensor[:, None] - sensor[None]) ** 2, axis=-1))
-    np.fill_diagonal(dist, np.inf)
     kk = min(k, n - 1)
-    nb = np.argsort(dist, axis=1)[:, :kk]
-    e_rigid = np.empty((n, 3))
-    e_rrbc = np.empty((n, 3))
-    for i in range(n):
-        keep = np.arange(n) != i
-        rot, t, _ = _kabsch(sensor[keep], robot[keep], weights[keep])
-        e_rigid[i] = robot[i] - (rot @ sensor[i] + t)
-        j = nb[i]
-        corr = robot[j] - (sensor[j] @ rot.T + t)
-        dj = dist[i, j]
-        if np.any(dj <= 1e-12):
-            c = corr[dj <= 1e-12].mean(axis=0)
-        else:
-            w = 1.0 / dj**power
-            c = (w @ corr) / w.sum()
-        e_rrbc[i] = e_rigid[i] - c
+    dist, nb = cKDTree(sensor).query(sensor, k=kk + 1)
+    dist, nb = dist.reshape(n, -1), nb.reshape(n, -1)
+    # drop each point itself (it is its own nearest unless another point coincides with it)
+    self_col = nb == np.arange(n)[:, None]
+    drop = np.where(self_col.any(axis=1), np.argmax(self_col, axis=1), kk)
+    keep = np.ones_like(nb, bool)
+    keep[np.arange(n), drop] = False
+    nb, dj = nb[keep].reshape(n, kk), dist[keep].reshape(n, kk)
+    rot, t = _loo_rotations(sensor, robot, weights)
+    e_rigid = robot - (np.einsum("nij,nj->ni", rot, sensor) + t)
+    corr = robot[nb] - (np.einsum("nij,nkj->nki", rot, sensor[nb]) + t[:, None, :])  # (N, k, 3)
+    on = dj <= 1e-12
+    with np.errstate(divide="ignore"):
+        w = np.where(on.any(axis=1, keepdims=True), on.astype(float), 1.0 / dj**power)
+    c = np.einsum("nk,nkc->nc", w, corr) / w.sum(axis=1, keepdims=True)
+    e_rrbc = e_rigid - c
     rms = lambda e: float(np.sqrt(np.mean(np.sum(e**2, axis=1))))  # noqa: E731
     return rms(e_rigid), rms(e_rrbc)
 
@@ -528,9 +577,7 @@ def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
     res_acc = y - qa @ (qa.T @ y)
     nb = _moran_weights(p)
     i_obs = float(_moran(res_acc.reshape(n, 3), nb))
-    eps = rng.standard_normal((_BOOTSTRAP, 3 * n))
-    eps -= (eps @ qa) @ qa.T
-    i_boot = _moran(eps.reshape(_BOOTSTRAP, n, 3), nb)
+    i_boot = _moran_bootstrap(rng, qa, nb)
     exceed = int(np.sum(i_boot >= i_obs))
     if exceed:
         p_sm = (1 + exceed) / (_BOOTSTRAP + 1)

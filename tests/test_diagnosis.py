@@ -297,3 +297,58 @@ def test_drift_under_anisotropic_noise_gives_both_and_the_rate_from_whitened_res
     assert {"drift", "anisotropic_noise"} <= set(dg.names), dg.tests
     est = dg.effects[dg.names.index("drift")].parameters["rate_mm_per_s"]
     assert np.max(np.abs(np.asarray(est) - rate)) < 6 * se
+
+
+# ------------------------------------------------------------------- the O(N) kernels equal the plain formulas
+@pytest.mark.parametrize("seed", range(4))
+def test_loo_equals_the_per_point_loop(seed):
+    """The vectorised leave-one-out (rank-one downdates, kd-tree neighbours) gives the numbers of refitting the
+    others point by point and weighting the k nearest others by 1/d^2; a coincident pair takes the exact branch."""
+    from rrbc_core.diagnosis import _loo
+    from rrbc_core.registration import _kabsch
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(6, 60))
+    s = rng.uniform(-300, 300, (n, 3)) + [0, 0, 2000]
+    rot = Rotation.random(random_state=rng).as_matrix()
+    r = s @ rot.T + [500, 0, 300] + rng.normal(0, 0.05, (n, 3)) + 0.2 * np.sin(s / 150.0)
+    w = rng.uniform(1, 3, n).round()
+    if seed % 2:
+        s[1], r[1] = s[0], r[0] + 0.01  # a repeated site
+    e_rigid, e_rrbc = np.empty((n, 3)), np.empty((n, 3))
+    for i in range(n):
+        keep = np.arange(n) != i
+        ri, ti, _ = _kabsch(s[keep], r[keep], w[keep])
+        e_rigid[i] = r[i] - (ri @ s[i] + ti)
+        others = np.flatnonzero(keep)
+        d = np.linalg.norm(s[others] - s[i], axis=1)
+        j = others[np.argsort(d, kind="stable")[:4]]
+        dj = np.linalg.norm(s[j] - s[i], axis=1)
+        corr = r[j] - (s[j] @ ri.T + ti)
+        c = corr[dj <= 1e-12].mean(0) if np.any(dj <= 1e-12) else (dj**-2.0) @ corr / np.sum(dj**-2.0)
+        e_rrbc[i] = e_rigid[i] - c
+    rms = lambda e: np.sqrt(np.mean(np.sum(e**2, axis=1)))  # noqa: E731
+    got = _loo(s, r, w)
+    assert got[0] == pytest.approx(rms(e_rigid), rel=1e-9)
+    assert got[1] == pytest.approx(rms(e_rrbc), rel=1e-9)
+
+
+def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
+    from rrbc_core import diagnosis
+    from rrbc_core.diagnosis import _moran, _moran_bootstrap, _moran_weights, _orth
+
+    monkeypatch.setattr(diagnosis, "_BOOTSTRAP_CHUNK_ELEMENTS", 900 * 40)  # chunks of 40 replicates
+
+    rng = np.random.default_rng(11)
+    n = 300
+    p = rng.uniform(0, 500, (n, 3))
+    nb = _moran_weights(p)
+    res = rng.normal(size=(5, n, 3)) + np.sin(p / 80.0)
+    dense = np.einsum("bic,bikc->b", res, res[:, nb, :]) / nb.shape[1] / np.einsum("bic,bic->b", res, res)
+    assert np.allclose(_moran(res, nb), dense, rtol=1e-12)
+    qa = _orth(rng.normal(size=(3 * n, 7)))
+    eps = np.random.default_rng(3).standard_normal((250, 3 * n))
+    eps -= (eps @ qa) @ qa.T
+    want = np.einsum("bic,bikc->b", eps.reshape(250, n, 3), eps.reshape(250, n, 3)[:, nb, :]) / nb.shape[1] / \
+        np.einsum("bi,bi->b", eps, eps)
+    assert np.allclose(_moran_bootstrap(np.random.default_rng(3), qa, nb, replicates=250), want, rtol=1e-10)
