@@ -351,9 +351,10 @@ def _subset_ok(triples: np.ndarray, ratio: float) -> np.ndarray:
     return ok
 
 
-def _combinatorial(s, r, average, degeneracy_ratio):
+def _combinatorial(s, r, average, degeneracy_ratio, method="combinatorial"):
     """Batched `registration.combinatorial`: (A (T, 3, 3), t (T, 3)); A is a rotation for 'chordal'."""
     trials, n = s.shape[:2]
+    registration.check_subset_count(n, method)
     combos = np.array(list(combinations(range(n), 3)))
     k = len(combos)
     a_out = np.empty((trials, 3, 3))
@@ -517,7 +518,8 @@ def annealing_batch(
     seeds = _check_seeds(seeds, s.shape[0])
     iterations, cooling_c = _annealing_options(iterations, cooling_c)
     if initial is None:
-        a0, t0 = _finite("combinatorial", *_combinatorial(s, r, "elementwise", geometry.SUBSET_DEGENERACY_RATIO))
+        a0, t0 = _finite("combinatorial", *_combinatorial(s, r, "elementwise", geometry.SUBSET_DEGENERACY_RATIO,
+                                                      "annealing (from the combinatorial average)"))
     else:
         try:
             a0, t0 = initial
@@ -664,7 +666,8 @@ def _register(method, s, r, seeds, options):
         return (*_finite("combinatorial", *_combinatorial(s, r, average, ratio)), average == "chordal")
     # annealing from the core's default start (element-wise combinatorial): a LinearMap
     iterations, cooling_c = _annealing_options(options.get("iterations", 5000), options.get("cooling_c", 2.0))
-    a0, t0 = _finite("combinatorial", *_combinatorial(s, r, "elementwise", geometry.SUBSET_DEGENERACY_RATIO))
+    a0, t0 = _finite("combinatorial", *_combinatorial(s, r, "elementwise", geometry.SUBSET_DEGENERACY_RATIO,
+                                                      "annealing (from the combinatorial average)"))
     return (*_finite("annealing", *_annealing(s, r, a0, t0, seeds, iterations, cooling_c)), False)
 
 

@@ -20,6 +20,7 @@ Degenerate input (fewer than 3 points, coincident points, (nearly) collinear poi
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from itertools import combinations
 
@@ -254,7 +255,24 @@ def three_point(sensor, robot) -> Registration:
 # ------------------------------------------------------------------------------------------------------
 # Combinatorial averaging (eqs. 6-7)
 # ------------------------------------------------------------------------------------------------------
-def _subset_registrations(s, r, degeneracy_ratio):
+#: Most registration points the subset-averaging strategies (combinatorial, annealing's start, clustering's
+#: pieces) accept: they register every 3-point subset, C(N, 3) of them (41 664 at 64 points, ~0.1 s), which grows
+#: as N³ (26 million subsets and out of memory near N = 540). Least squares uses any number of points.
+MAX_SUBSET_POINTS = 64
+
+
+def check_subset_count(n: int, method: str = "combinatorial") -> None:
+    """Refuse (InputError) more than MAX_SUBSET_POINTS registration points for a subset-averaging strategy."""
+    if n > MAX_SUBSET_POINTS:
+        raise InputError(
+            f"{method} registration averages the registrations of every 3-point subset: {n} registration points "
+            f"give {math.comb(n, 3):,} subsets; it accepts at most {MAX_SUBSET_POINTS} points "
+            f"({math.comb(MAX_SUBSET_POINTS, 3):,} subsets). Use least-squares, which uses every point, or fewer "
+            "registration points")
+
+
+def _subset_registrations(s, r, degeneracy_ratio, method: str = "combinatorial"):
+    check_subset_count(len(s), method)
     combos = np.array(list(combinations(range(len(s)), 3)))
     st, rt = s[combos], r[combos]
     ok = (geometry.collinear_ratio_batch(st) >= degeneracy_ratio) & (
@@ -339,6 +357,8 @@ def annealing(
     s, r = _check_pair(sensor, robot)
     if iterations < 1 or cooling_c <= 0:
         raise InputError("annealing needs iterations >= 1 and cooling constant C > 0")
+    if initial is None:
+        check_subset_count(len(s), "annealing (from the combinatorial average)")
     init = initial if initial is not None else combinatorial(s, r)
     mapped = init.mapping.apply(s)
     rng = np.random.default_rng(seed)
@@ -442,7 +462,7 @@ def clustering(
             if i not in chosen:
                 chosen.append(int(i))
         chosen = sorted(chosen)
-        _, mats, _ = _subset_registrations(s[chosen], r[chosen], geometry.SUBSET_DEGENERACY_RATIO)
+        _, mats, _ = _subset_registrations(s[chosen], r[chosen], geometry.SUBSET_DEGENERACY_RATIO, "clustering")
         pieces.append(_average_rooted(mats, average, kernels[j]))
         members.append([int(i) for i in chosen])
     mapping = PiecewiseMap(kernels, tuple(pieces))

@@ -242,3 +242,17 @@ def test_usage_errors_exit_2_with_one_line(args):
     assert res.stdout == ""
     assert "Traceback" not in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1, res.stderr
+
+
+def test_combinatorial_on_too_many_registration_points_is_refused_in_one_line(tmp_path):
+    from rrbc_core.registration import MAX_SUBSET_POINTS
+
+    rng = np.random.default_rng(2)
+    n = MAX_SUBSET_POINTS + 1
+    s = rng.uniform(0, 500, (n, 3))
+    rows = [HEADER] + [f"R{k},both,{s[k, 0]},{s[k, 1]},{s[k, 2]},{s[k, 0] + 5},{s[k, 1]},{s[k, 2]}," for k in range(n)]
+    path = tmp_path / "many.csv"
+    path.write_text("\n".join(rows) + "\n")
+    out = run("correct", path, "--registration", "combinatorial")
+    assert out.returncode == 2 and out.stdout == ""
+    assert len(out.stderr.strip().splitlines()) == 1 and f"at most {MAX_SUBSET_POINTS} points" in out.stderr

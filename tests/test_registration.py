@@ -169,3 +169,25 @@ def test_clustering_on_four_corners_with_two_clusters():
     assert len(r.mapping.pieces) == 2
     assert all(len(m) >= 3 for m in r.details["members"])
     assert np.all(np.isfinite(r.residuals))
+
+
+@pytest.mark.parametrize("name", ["combinatorial", "annealing", "clustering"])
+def test_subset_strategies_refuse_more_points_than_the_cap_and_accept_the_cap(name):
+    """C(N, 3) subsets grow as N³: above reg.MAX_SUBSET_POINTS the strategies refuse with a message that says
+    why and what to use instead; at the cap they run."""
+    rng = np.random.default_rng(4)
+    n = reg.MAX_SUBSET_POINTS
+    s = rng.uniform(0, 500, (n + 1, 3))
+    b = s @ Rotation.from_rotvec([0.1, 0.2, 0.3]).as_matrix().T + [10.0, 20.0, 30.0]
+    opts = {"clusters": 1} if name == "clustering" else ({"iterations": 50} if name == "annealing" else {})
+    with pytest.raises(InputError, match=rf"at most {n} points.*least-squares"):
+        reg.register(name, s, b, **opts)
+    assert reg.register(name, s[:n], b[:n], **opts).fre_rms_mm < 1e-6
+
+
+def test_batch_combinatorial_refuses_above_the_cap():
+    from rrbc_core import batch
+
+    s = np.random.default_rng(1).uniform(0, 500, (2, reg.MAX_SUBSET_POINTS + 1, 3))
+    with pytest.raises(InputError, match="at most"):
+        batch.combinatorial_batch(s, s + 1.0)
