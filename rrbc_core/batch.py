@@ -60,6 +60,7 @@ from __future__ import annotations
 from itertools import combinations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from . import geometry, registration
 from . import interpolation as interp_mod
@@ -94,8 +95,9 @@ def _as_float(x, what: str) -> np.ndarray:
         raise InputError(f"{what} must be numbers (mm)") from None
 
 
-def _stack(points, what: str, trials: int | None = None, shared: bool = False) -> np.ndarray:
-    """(T, N, 3) finite float array; with shared=True a (N, 3) array is broadcast to all `trials`."""
+def _stack(points, what: str, trials: int | None = None, shared: bool = False, finite: bool = True) -> np.ndarray:
+    """(T, N, 3) finite float array; with shared=True a (N, 3) array is broadcast to all `trials`. finite=False:
+    the caller checks the values (the compiled kernel reports them, `_raise_non_finite`)."""
     p = _as_float(points, what)
     if shared and p.ndim == 2 and trials is not None:
         p = np.broadcast_to(p, (trials,) + p.shape)
@@ -106,23 +108,51 @@ def _stack(points, what: str, trials: int | None = None, shared: bool = False) -
         raise InputError(f"{what}: no trials given (the first axis is empty)")
     if trials is not None and p.shape[0] != trials:
         raise InputError(f"{what} have {p.shape[0]} trials, expected {trials} like the registration points")
-    finite = np.isfinite(p).all(axis=(1, 2))
-    if not finite.all():
-        raise InputError(f"trial {int(np.argmin(finite))}: {what} contain a non-finite coordinate (NaN or infinity)")
+    if not finite:
+        return p
+    with np.errstate(over="ignore", invalid="ignore"):
+        maybe_bad = not np.isfinite(p.sum())  # one pass; finite values can only overflow the sum (then look)
+    if maybe_bad:
+        _raise_non_finite(np.isfinite(p).all(axis=(1, 2)), what)
     return p
 
 
-def _check_registration_batch(points: np.ndarray, what: str, minimum: int = 3) -> None:
+def _raise_non_finite(finite: np.ndarray, what: str) -> None:
+    """InputError naming the first trial whose `what` hold a non-finite coordinate (finite: (T,) bool)."""
+    if not finite.all():
+        raise InputError(f"trial {int(np.argmin(finite))}: {what} contain a non-finite coordinate (NaN or infinity)")
+
+
+def _check_registration_batch(points: np.ndarray, what: str, minimum: int = 3, deviation=None) -> None:
     """`geometry.check_registration_points` for every trial of a validated (T, N, 3) stack.
 
-    Cheap vectorised screens find the trials that might fail (closest pair below 2x the coincidence distance,
-    plus a rounding margin; a lower bound on sigma2/sigma1 below 1.5x the collinearity ratio); the core check
-    then decides those trials, so the decision and the message are the core's.
+    Screens find the trials that might fail; the core check then decides those trials, so the decision and the
+    message are the core's. First screen (Monte Carlo trials scatter around one layout): against the trial-mean
+    layout, with f_t = ‖p_t − p̄‖_F the trial's deviation from it, every pair of points is at least d̄_min − 2 f_t
+    apart and each singular value of the centred points moves by at most f_t (Weyl), so a trial whose bounds
+    clear 2x the coincidence distance and the collinearity ratio (with a rounding margin) passes. The trials it
+    cannot clear go through closed-form per-trial screens (closest pair from the Gram matrix; a lower bound on
+    sigma2/sigma1), then the core check. deviation (T,): f_t measured from trial 0's layout instead (the bounds
+    hold for any reference layout; the compiled kernel reports it), which saves the pass over the data.
     """
     trials, n = points.shape[:2]
     if n < minimum:
         raise InputError(f"{what}: {n} given, at least {minimum} distinct points are needed")
-    c = points - points.mean(axis=1, keepdims=True)
+    if deviation is None:
+        mean = points.mean(axis=0)
+        dev = points - mean
+        f = np.sqrt(np.einsum("tnc,tnc->t", dev, dev))
+    else:
+        mean, f = points[0], np.asarray(deviation, float)
+    f = f * (1 + 1e-9) + 1e-9
+    sv = np.linalg.svd(mean - mean.mean(axis=0), compute_uv=False)
+    dmin = float(cKDTree(mean).query(mean, k=2)[0][:, 1].min())
+    clear = (dmin - 2 * f >= 2 * geometry.COINCIDENT_MM) & (sv[1] - f >= 1.5 * geometry.COLLINEAR_RATIO * (sv[0] + f))
+    rest = np.flatnonzero(~clear)
+    if len(rest) == 0:
+        return
+    sub = points[rest]
+    c = sub - sub.mean(axis=1, keepdims=True)
     # closest pair: |ci - cj|² = |ci|² + |cj|² - 2 ci·cj (a screen: rounding ~1e-16 |c|² is covered by the margin)
     sq = np.einsum("tnc,tnc->tn", c, c)
     d2 = np.matmul(c, np.swapaxes(c, 1, 2))
@@ -131,14 +161,14 @@ def _check_registration_batch(points: np.ndarray, what: str, minimum: int = 3) -
     d2 += sq[:, None, :]
     d2 += np.diag(np.full(n, np.inf))
     margin = (2 * geometry.COINCIDENT_MM) ** 2 + 1e-13 * sq.max(axis=1)
-    suspicious = ~(d2.reshape(trials, n * n).min(axis=1) >= margin)
+    suspicious = ~(d2.reshape(len(rest), n * n).min(axis=1) >= margin)
     # collinearity: with S = CᵀC (eigenvalues l1 >= l2 >= l3), c2 = sum of principal 2x2 minors <= 3 l1 l2 and
     # trace >= l1, so l2 / l1 >= c2 / (3 trace²).
     tr, c2 = _trace_and_minors(c)
     with np.errstate(invalid="ignore", divide="ignore"):
         bound = c2 / (3.0 * tr * tr)
     suspicious |= ~(bound >= (1.5 * geometry.COLLINEAR_RATIO) ** 2)
-    for k in np.flatnonzero(suspicious):
+    for k in rest[suspicious]:
         try:
             geometry.check_registration_points(points[k], what, minimum)
         except InputError as exc:
@@ -207,6 +237,9 @@ def _ratio_option(value) -> float:
 
 def _finite(method: str, a: np.ndarray, t: np.ndarray):
     """The core's last check (`registration._finish`): no NaN / infinite mapping in any trial."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(a.sum() + t.sum()):
+            return a, t
     ok = np.isfinite(a).all(axis=(1, 2)) & np.isfinite(t).all(axis=1)
     if not ok.all():
         k = int(np.argmin(ok))
@@ -716,6 +749,8 @@ def rrbc_batch(
     if hull not in _HULL_MODES:
         raise InputError(f"unknown hull mode {hull!r}: choose one of {', '.join(_HULL_MODES)}")
 
+    if reg_name == "least-squares" and interp_name == "idw" and options.get("weights") is None:
+        return _ls_idw_compiled(reg_s, reg_b, fid_s, fid_b, query_s, method, hull)
     s, r = _check_pair_batch(reg_s, reg_b)
     trials = s.shape[0]
     fs = _stack(fid_s, "fiducial sensor points", trials=trials)
@@ -747,10 +782,8 @@ def rrbc_batch(
             flags[k] = pred.extrapolated
         if hull == "trial":
             extrapolated = flags
-    if hull == "trial" and extrapolated is None:
-        extrapolated = np.array([interp_mod.hull_flags(hull_points[k], q[k])[0] for k in range(trials)], dtype=bool)
-    elif hull == "mean":
-        extrapolated = interp_mod.hull_flags(hull_points.mean(axis=0), q.mean(axis=0))[0]
+    if extrapolated is None:
+        extrapolated = _hull_flags(hull, hull_points, q)
     robot_rigid = _apply(a, t, q)
     robot_rrbc = np.matmul(ehat, np.swapaxes(a, 1, 2))  # mapping(x + ê) = mapping(x) + A ê
     robot_rrbc += robot_rigid
@@ -764,6 +797,59 @@ def rrbc_batch(
         "translation": t,
         "rigid": rigid,
     }
+
+
+def _ls_idw_compiled(reg_s, reg_b, fid_s, fid_b, query_s, method, hull) -> dict:
+    """rrbc_batch for least squares (unweighted) + IDW: the compiled kernel (`compiled.ls_idw`), with the same
+    checks and messages as the general path, made on the kernel's by-products in the general path's order."""
+    from .compiled import ls_idw
+
+    names = ("sensor registration points", "robot registration points", "fiducial sensor points",
+             "fiducial robot points", "target sensor points")
+    s = _stack(reg_s, names[0], finite=False)
+    trials = s.shape[0]
+    r = _stack(reg_b, names[1], trials=trials, finite=False)
+    if s.shape != r.shape:
+        raise InputError(
+            f"sensor and robot registration points must pair up: {s.shape[1]} sensor vs {r.shape[1]} robot points")
+    if s.shape[1] < 3:
+        _raise_non_finite(np.isfinite(s).all(axis=(1, 2)), names[0])
+        _raise_non_finite(np.isfinite(r).all(axis=(1, 2)), names[1])
+        _check_registration_batch(s, names[0])
+    fs = _stack(fid_s, names[2], trials=trials, finite=False)
+    fb = _stack(fid_b, names[3], trials=trials, finite=False)
+    if fs.shape != fb.shape:
+        raise InputError(f"fiducials must pair up: {fs.shape[1]} sensor vs {fb.shape[1]} robot points")
+    q = _stack(query_s, names[4], trials=trials, shared=True, finite=False)
+    out = ls_idw(s, r, fs, fb, q, method.k, method.power, EXACT_MM) if fs.shape[1] else None
+    finite = out["finite"] if out is not None else np.stack(
+        [np.isfinite(x).all(axis=(1, 2)) for x in (s, r, fs, fb, q)], axis=1)
+    _raise_non_finite(finite[:, 0], names[0])
+    _raise_non_finite(finite[:, 1], names[1])
+    _check_registration_batch(s, names[0], deviation=None if out is None else out["deviation"][:, 0])
+    _check_registration_batch(r, names[1], deviation=None if out is None else out["deviation"][:, 1])
+    for i in (2, 3, 4):
+        _raise_non_finite(finite[:, i], names[i])
+    if out is None:
+        raise InputError("no fiducials given: RRBC needs at least 1 fiducial (or use interpolation 'none')")
+    _finite("least-squares", out["matrix"], out["translation"])
+    if hull == "mean":
+        out["extrapolated"] = interp_mod.hull_flags(out["fiducial_mean"], out["query_mean"])[0]
+    else:
+        out["extrapolated"] = _hull_flags(hull, fs, q)
+    for key in ("finite", "deviation", "fiducial_mean", "query_mean"):
+        del out[key]
+    out["rigid"] = True
+    return out
+
+
+def _hull_flags(hull: str, hull_points: np.ndarray, q: np.ndarray):
+    """Extrapolation flags: 'trial' (T, M), 'mean' (M,) against the trial-mean hull, 'none' None."""
+    if hull == "trial":
+        return np.array([interp_mod.hull_flags(hull_points[k], q[k])[0] for k in range(len(q))], dtype=bool)
+    if hull == "mean":
+        return interp_mod.hull_flags(hull_points.mean(axis=0), q.mean(axis=0))[0]
+    return None
 
 
 def _rrbc_per_trial(s, r, fs, fb, q, seeds, options, method, hull, hull_points) -> dict:

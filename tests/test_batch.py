@@ -404,3 +404,82 @@ def test_registration_points_near_the_collinearity_limit():
         else:
             with pytest.raises(InputError, match="trial 0: .*collinear"):
                 batch.least_squares_batch(s, b)
+
+
+# ------------------------------------------------------------------------------------------------------
+# The compiled least-squares + IDW kernel (rrbc_core/compiled.py): what rrbc_batch runs for the default chain
+# ------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("k, power", [(4, 2.0), (3, 2.5), (1, 1.0), (50, 0.5)])
+def test_compiled_least_squares_idw_equals_the_core_over_many_trials(layout, k, power):
+    """Many trials (the kernel warm-starts each trial's 3x3 SVD from the previous one), coplanar registration
+    points (rank-2 H), near half-turn rotations, 3 registration points, k beyond the fiducial count."""
+    c = _cell(trials=60, **layout)
+    out = batch.rrbc_batch("least-squares", "idw", c["reg_s"], c["reg_b"], c["fid_s"], c["fid_b"], c["query"],
+                           hull="trial", k=k, power=power)
+    for t in range(0, 60, 7):
+        ref, e = _reference("least-squares", "idw", c, t, 0, {}, {"k": k, "power": power})
+        np.testing.assert_allclose(out["robot_rigid"][t], ref.robot_rigid, rtol=0, atol=TOL)
+        np.testing.assert_allclose(out["robot_rrbc"][t], ref.robot_rrbc, rtol=0, atol=TOL)
+        np.testing.assert_allclose(out["corrections"][t], ref.correction, rtol=0, atol=TOL)
+        np.testing.assert_allclose(out["fiducial_corrections"][t], e, rtol=0, atol=TOL)
+        np.testing.assert_array_equal(out["extrapolated"][t], ref.extrapolated)
+        reg = registration.least_squares(c["reg_s"][t], c["reg_b"][t])
+        _assert_same(reg.mapping, out["matrix"][t], out["translation"][t])
+    mean = batch.rrbc_batch("least-squares", "idw", c["reg_s"], c["reg_b"], c["fid_s"], c["fid_b"], c["query"],
+                            k=k, power=power)
+    np.testing.assert_array_equal(mean["extrapolated"], interpolation.hull_flags(c["fid_s"].mean(0),
+                                                                                 c["query"].mean(0))[0])
+
+
+def test_compiled_kernel_takes_the_exact_branch_on_fiducials():
+    """A query on a fiducial takes its correction; on two coincident fiducials, their mean (as the core)."""
+    c = _cell(seed=77, trials=3, n_fid=8)
+    fid_s, fid_b = c["fid_s"].copy(), c["fid_b"].copy()
+    fid_s[:, 1], fid_b[:, 1] = fid_s[:, 0], fid_b[:, 0] + 0.05  # two fiducials at one place, different readings
+    q = c["query"].copy()
+    q[:, 0], q[:, 1] = fid_s[:, 0], fid_s[:, 3]
+    out = batch.rrbc_batch("least-squares", "idw", c["reg_s"], c["reg_b"], fid_s, fid_b, q, hull="none")
+    for t in range(3):
+        cc = dict(c, fid_s=fid_s, fid_b=fid_b, query=q)
+        ref, e = _reference("least-squares", "idw", cc, t, 0, {}, {})
+        np.testing.assert_allclose(out["corrections"][t], ref.correction, rtol=0, atol=TOL)
+        np.testing.assert_allclose(out["corrections"][t, 0], e[:2].mean(0), rtol=0, atol=TOL)
+        np.testing.assert_allclose(out["corrections"][t, 1], e[3], rtol=0, atol=TOL)
+
+
+@pytest.mark.parametrize("which", ["reg_s", "reg_b", "fid_s", "fid_b", "query"])
+def test_compiled_kernel_inputs_are_checked_like_the_general_path(which):
+    c = _cell(seed=78, trials=6, n_reg=5)
+    bad = {key: c[key].copy() for key in ("reg_s", "reg_b", "fid_s", "fid_b", "query")}
+    bad[which][4, 1, 2] = np.inf
+    with pytest.raises(InputError, match="trial 4: .*non-finite"):
+        batch.rrbc_batch("least-squares", "idw", *bad.values())
+    bad = {key: c[key].copy() for key in ("reg_s", "reg_b", "fid_s", "fid_b", "query")}
+    if which in ("reg_s", "reg_b"):
+        bad[which][3] = np.array([[0.0, 0, 0], [100, 0, 0], [200, 0.1, 0], [300, 0, 0], [400, 0, 0.1]])
+        with pytest.raises(InputError, match="trial 3: .*collinear"):
+            batch.rrbc_batch("least-squares", "idw", *bad.values())
+        bad[which][3] = c[which][3]
+        bad[which][5, 2] = bad[which][5, 0] + 1e-4
+        with pytest.raises(InputError, match="trial 5: .*coincide"):
+            batch.rrbc_batch("least-squares", "idw", *bad.values())
+
+
+def test_compiled_kabsch_equals_the_core_on_aligned_and_random_frames():
+    """Frames aligned with the axes (H diagonal: the SVD's columns come out of order and are sorted, so V turns
+    improper) and random ones, spreads of every order: the kernel's rotation is the core's."""
+    rng = np.random.default_rng(5)
+    sets = []
+    for spreads in ([1.0, 2.0, 3.0], [3.0, 2.0, 1.0], [2.0, 3.0, 1.0], [1.0, 3.0, 0.0], [5.0, 5.0, 1.0]):
+        sets.append((rng.normal(size=(9, 3)) * np.array(spreads) * 100.0, np.eye(3)))
+    for _ in range(40):
+        sets.append((rng.normal(size=(9, 3)) * rng.uniform(0.05, 3.0, 3) * 100.0,
+                     Rotation.random(random_state=rng.integers(2**31)).as_matrix()))
+    for p, rot in sets:
+        s = p[None] + rng.normal(0, 0.01, (4,) + p.shape)
+        b = s @ rot.T + [10.0, -20.0, 30.0] + rng.normal(0, 0.01, s.shape)
+        fid = s[:, :4] + 1.0
+        out = batch.rrbc_batch("least-squares", "idw", s, b, fid, fid @ rot.T, s[:, 4:], hull="none")
+        for t in range(4):
+            _assert_same(registration.least_squares(s[t], b[t]).mapping, out["matrix"][t], out["translation"][t])
