@@ -43,9 +43,8 @@ def scale_colors(values, lo: float, hi: float) -> np.ndarray:
     t = np.clip((v - lo) / span, 0.0, 1.0)
     t = np.where(np.isfinite(t), t, 0.0)
     x = t * (len(SCALE_STOPS) - 1)
-    i = np.minimum(np.floor(x).astype(int), len(SCALE_STOPS) - 2)
-    f = (x - i)[:, None]
-    out = SCALE_STOPS[i] * (1.0 - f) + SCALE_STOPS[i + 1] * f
+    knots = np.arange(len(SCALE_STOPS), dtype=float)
+    out = np.stack([np.interp(x, knots, SCALE_STOPS[:, c]) for c in range(3)], axis=1)  # piecewise linear
     out[~np.isfinite(v)] = NO_VALUE
     return np.round(out).astype(np.uint8)
 

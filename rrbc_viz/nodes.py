@@ -512,22 +512,29 @@ class SceneNodes:
         cut them."""
         t = ev.targets
         r = self.display.marker_mm
-        owners = np.asarray(hm.target)
         vals = np.asarray(values, float)
         width = RING_WIDTH_MARKERS * r
         size = width / RING_ROWS
+        # per target at once (group the samples by owner): the mean value and the region's reach
+        index = {pid: i for i, pid in enumerate(t.ids)}
+        owner = np.fromiter((index.get(o, -1) for o in hm.target), int, len(hm.target))
+        known = owner >= 0
+        ok = known & np.isfinite(vals)
+        n_t = len(t.ids)
+        counts = np.bincount(owner[ok], minlength=n_t)
+        sums = np.bincount(owner[ok], weights=vals[ok], minlength=n_t)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            means = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+        reach = np.zeros(n_t)
+        np.maximum.at(reach, owner[known], np.linalg.norm(offsets[known, :2], axis=1) * self.display.region_zoom)
+        has = np.bincount(owner[known], minlength=n_t) > 0
+        inner = np.where(has, np.maximum(RING_INNER_MARKERS * r, 1.1 * reach), RING_INNER_MARKERS * r)
+        ring_colors = colors.scale_colors(means, lo, hi)
         pts, cols = [], []
-        for i, pid in enumerate(t.ids):
-            mine = owners == pid
-            v = vals[mine][np.isfinite(vals[mine])]
-            mean = float(v.mean()) if len(v) else np.nan
-            inner = RING_INNER_MARKERS * r
-            if np.any(mine):
-                reach = float(np.max(np.linalg.norm(offsets[mine, :2], axis=1))) * self.display.region_zoom
-                inner = max(inner, 1.1 * reach)
-            dots = _ring_dots(inner, width) + t.positions[i] + (0.0, 0.0, 0.5 * size)
+        for i in range(n_t):
+            dots = _ring_dots(float(inner[i]), width) + t.positions[i] + (0.0, 0.0, 0.5 * size)
             pts.append(dots)
-            cols.append(np.repeat(colors.scale_colors([mean], lo, hi), len(dots), axis=0))
+            cols.append(np.repeat(ring_colors[i : i + 1], len(dots), axis=0))
         if not pts:
             rings.visible = False
             return
