@@ -6,7 +6,6 @@ Not interactive (a sweep, not a click), so measured on an idle machine only.
 
 from __future__ import annotations
 
-import os
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -126,33 +125,3 @@ def mc_throughput_annealing(quick: bool) -> list[dict]:
             f"trials (registration.annealing per trial); best of 3; max difference {diff:.1e} mm")
     return [row("mc_throughput_annealing", n_batch / t_batch, "trials/s", baseline=n_base / t_base,
                 higher_is_better=True, note=note)]
-
-
-def mc_blas_threads(quick: bool) -> list[dict]:
-    """Does a larger BLAS pool help the large batched Monte Carlo? The same `batched` run (20 000 trials) with
-    rrbc's policy (threads.THREADS BLAS threads) and with one BLAS thread per core (threadpoolctl). ratio > 1
-    means the policy is faster. The figure behind docs/threads.md's choice."""
-    from threadpoolctl import threadpool_limits
-
-    from rrbc_core import threads
-
-    cores = os.cpu_count() or 1
-    if cores <= threads.THREADS:
-        return []
-    n, chunk = (4000, 2000) if quick else (20_000, 2000)
-    c = work_cell(np.random.default_rng(5), n)
-    policy = threads.THREADS
-
-    def timed(pool: int) -> float:
-        threads.THREADS = pool  # what the library's own limit sets while a call runs
-        try:
-            with threadpool_limits(pool):
-                batched(c, chunk, chunk)
-                return best_time(lambda: batched(c, n, chunk))[0]
-        finally:
-            threads.THREADS = policy
-
-    t_pool, t_one = timed(cores), timed(policy)
-    note = (f"batch.rrbc_batch least-squares + IDW, {n} trials in chunks of {chunk}; value: {threads.THREADS} BLAS "
-            f"thread(s) (rrbc's policy), baseline: {cores} (one per core); best of 3")
-    return [row("mc_blas_threads", n / t_one, "trials/s", baseline=n / t_pool, higher_is_better=True, note=note)]

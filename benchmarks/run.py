@@ -24,11 +24,13 @@ sys.path.insert(0, str(HERE.parent))  # run from a checkout without installing
 
 import interactive  # noqa: E402
 import montecarlo  # noqa: E402
+import threads_policy  # noqa: E402
 
 BENCHMARKS = [
     montecarlo.mc_throughput_ls_rrbc,
     montecarlo.mc_throughput_annealing,
-    montecarlo.mc_blas_threads,
+    threads_policy.mc_blas_threads,
+    threads_policy.blas_pool_when_busy,
     interactive.drag_latency,
     interactive.suggest_app,
     interactive.plan_command,
@@ -57,10 +59,39 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines + ([""] + notes if notes else []))
 
 
+def write_report(path: Path, rows: list[dict], argv: list[str]) -> None:
+    """The results as Markdown: the command, the machine, the table and each row's note (written whole)."""
+    import datetime
+    import os
+    import platform
+
+    import numpy
+
+    command = "python benchmarks/run.py " + " ".join(argv)
+    head = [
+        "# Benchmarks",
+        "",
+        f"Made by `{command.strip()}` on {datetime.date.today().isoformat()}: {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}, numpy {numpy.__version__}; no thread variables set. Numbers below "
+        "are that run's (do not edit by hand); rows and their baselines: benchmarks/README.md. \"busy core\": the "
+        "same measurement with one other process spinning on a core.",
+        "",
+        "```",
+        format_table(rows),
+        "```",
+        "",
+    ]
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text("\n".join(head))
+    tmp.replace(path)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="one JSON object per line, nothing else on stdout")
     parser.add_argument("--quick", action="store_true", help="fewer repeats and trials (a smoke run)")
+    parser.add_argument("--out", default=None, metavar="FILE",
+                        help="also write the results as a Markdown report (e.g. docs/benchmarks.md)")
     parser.add_argument("names", nargs="*", help="run only these benchmarks (function or row names)")
     args = parser.parse_args(argv)
     functions = {fn.__name__ for fn in BENCHMARKS}
@@ -79,6 +110,8 @@ def main(argv=None) -> int:
                 print(json.dumps(r), file=stdout, flush=True)
     if not args.json:
         print(format_table(rows), file=stdout)
+    if args.out:
+        write_report(Path(args.out), rows, argv if argv is not None else sys.argv[1:])
     return 0 if all(r["met"] is not False for r in rows) else 1
 
 
