@@ -532,3 +532,12 @@ def test_diagnosis_says_why_it_cannot_run(measured):
     # loading a file clears the tab
     measured.load(EXAMPLE_CSV)
     assert panel.content.startswith("Tests the current") and measured.diagnosis is None
+
+
+def test_a_quiet_server_prints_nothing_on_stdout_from_start_to_stop(capfd):
+    """`serve(quiet=True)` (what the benchmarks and tests use) hides viser's banner and its "Server stopped" line,
+    so a caller's stdout (a --json stream) carries only what the caller prints."""
+    a = serve(port=0)
+    a.handle_drag("targets", "H1", a.session.layout["targets"].positions[0] + [0.5, 0.0, 0.0], "end")
+    a.stop()
+    assert capfd.readouterr().out == ""
