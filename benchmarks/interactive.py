@@ -71,7 +71,7 @@ def drag_latency(quick: bool) -> list[dict]:
     """Median server-side time per drag update (every update, heat-map refreshes included), default scene and
     the stress scene (200 fiducials, 50 targets, the demo's full error model, 20 000 heat-map samples), heat map
     shown. Goal: loaded median <= 10 ms. Absolute goal, no baseline."""
-    from rrbc_core.scene import default_scene_path
+    from rrbc_core.io.scene import default_scene_path
     from rrbc_viz.app import serve
 
     from stress_scene import HEAT_SAMPLES_PER_TARGET, write_stress_scene
@@ -144,8 +144,8 @@ def plan_optimiser(quick: bool) -> list[dict]:
     candidate grid, scripts/plan_confirm.py: candidate_grid), vectorised over candidate sets, against the same
     greedy + exchange with one set scored per call (`_OneSetPerCall`) on the same precomputed model. Both must
     choose the same candidates. Idle machine (a comparison of two implementations)."""
-    from rrbc_core import planning
-    from rrbc_core.scene import load_scene
+    from rrbc_core.analysis import planning
+    from rrbc_core.io.scene import load_scene
 
     sys.path.insert(0, str(ROOT / "scripts"))
     from plan_confirm import candidate_grid
@@ -175,7 +175,7 @@ def _diagnose_file(path: Path, n: int, seed: int) -> Path:
     sensor->robot rotation, a smooth robot bias (~0.3 mm), sensor noise 0.02 mm, random measurement order."""
     from scipy.spatial.transform import Rotation
 
-    from rrbc_core.measurements import MeasurementSet, write_measurements
+    from rrbc_core.io.measurements import MeasurementSet, write_measurements
 
     rng = np.random.default_rng(seed)
     robot = rng.uniform([100, -300, 50], [900, 300, 550], (n, 3))

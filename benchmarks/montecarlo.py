@@ -12,7 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from harness import best_time, row
 
-from rrbc_core import batch, registration
+from rrbc_core.simulation import batch
+from rrbc_core import registration
 
 
 def work_cell(rng, trials: int) -> dict:

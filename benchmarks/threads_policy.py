@@ -20,7 +20,7 @@ def mc_blas_threads(quick: bool) -> list[dict]:
     means the policy is faster. The figure behind docs/threads.md's choice."""
     from threadpoolctl import threadpool_limits
 
-    from rrbc_core import threads
+    from rrbc_core.runtime import threads
 
     cores = os.cpu_count() or 1
     if cores <= threads.THREADS:
@@ -51,8 +51,9 @@ def blas_pool_when_busy(quick: bool) -> list[dict]:
     the default pool with the busy core; ratio: baseline / loaded (how much the policy saves a loaded user)."""
     from threadpoolctl import threadpool_limits
 
-    from rrbc_core import planning, threads
-    from rrbc_core.scene import default_scene_path, load_scene
+    from rrbc_core.analysis import planning
+    from rrbc_core.runtime import threads
+    from rrbc_core.io.scene import default_scene_path, load_scene
 
     cores = os.cpu_count() or 1
     if cores <= threads.THREADS:

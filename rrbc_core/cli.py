@@ -14,7 +14,7 @@ import os
 import sys
 import time
 
-from .errors import InputError
+from rrbc_core.errors import InputError
 
 
 class _UsageError(Exception):
@@ -58,7 +58,8 @@ def _positive_float(text):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import interpolation, registration
+    from rrbc_core import interpolation
+    from rrbc_core import registration
 
     p = _Parser(prog="rrbc", description="Restoration of Rigid-Body Condition (RRBC): registration and corrections")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -194,8 +195,8 @@ def _table(result) -> str:
 
 
 def _cmd_correct(args) -> str:
-    from .measurements import read_measurements
-    from .pipeline import CorrectionOptions, correct_measurements
+    from rrbc_core.io.measurements import read_measurements
+    from rrbc_core.correction.pipeline import CorrectionOptions, correct_measurements
 
     mset = read_measurements(args.measurements)
     opts = CorrectionOptions(
@@ -226,8 +227,8 @@ def _diagnosis_table(dg) -> str:
 
 
 def _cmd_diagnose(args) -> str:
-    from .diagnosis import diagnose
-    from .measurements import read_measurements
+    from rrbc_core.analysis.diagnosis import diagnose
+    from rrbc_core.io.measurements import read_measurements
 
     if not args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
@@ -263,10 +264,10 @@ def _simulate_table(res) -> str:
 def _cmd_simulate(args) -> str:
     import numpy as np
 
-    from .measurements import write_measurements
-    from .progress import ProgressBar
-    from .scene import load_scene
-    from .simulation import (INTERPOLATION_NAMES, STRATEGY_NAMES, icp_statistics, measure, measurement_set,
+    from rrbc_core.io.measurements import write_measurements
+    from rrbc_core.runtime.progress import ProgressBar
+    from rrbc_core.io.scene import load_scene
+    from rrbc_core.simulation.montecarlo import (INTERPOLATION_NAMES, STRATEGY_NAMES, icp_statistics, measure, measurement_set,
                              monte_carlo, work_cell_from_scene)
 
     scene = load_scene(args.scene)
@@ -332,9 +333,9 @@ def _plan_table(res) -> str:
 
 
 def _cmd_plan(args) -> str:
-    from .planning import plan
-    from .progress import ProgressBar
-    from .scene import load_scene
+    from rrbc_core.analysis.planning import plan
+    from rrbc_core.runtime.progress import ProgressBar
+    from rrbc_core.io.scene import load_scene
 
     scene = load_scene(args.scene)
     bar = ProgressBar(2 * args.add + 2, "planning")
@@ -348,9 +349,10 @@ def _cmd_plan(args) -> str:
 
 
 def _cmd_reproduce(args) -> str:
-    from . import reproduction, vanwyk2018
-    from .progress import ProgressBar
-    from .vanwyk2018_report import json_safe, write_report
+    from rrbc_core.studies import reproduction
+    from rrbc_core.studies import vanwyk2018
+    from rrbc_core.runtime.progress import ProgressBar
+    from rrbc_core.studies.vanwyk2018_report import json_safe, write_report
 
     names = [x.strip() for x in args.layouts.split(",") if x.strip()]
     if not names:
@@ -423,7 +425,7 @@ def _cmd_view(args) -> str:
 
 
 def main(argv=None) -> int:
-    from .threads import apply_process_policy
+    from rrbc_core.runtime.threads import apply_process_policy
 
     apply_process_policy()  # one BLAS thread for the whole command (docs/threads.md)
     try:

@@ -46,12 +46,15 @@ from dataclasses import replace
 import numpy as np
 import viser
 
-from rrbc_core.diagnosis import Diagnosis, diagnose
+from rrbc_core.analysis.diagnosis import Diagnosis, diagnose
 from rrbc_core.errors import InputError
-from rrbc_core.explorer import LAYERS, Evaluation, ExplorerSession
-from rrbc_core.threads import apply_process_policy
+from rrbc_core.session.explorer import LAYERS, Evaluation, ExplorerSession
+from rrbc_core.runtime.threads import apply_process_policy
 
-from . import diagnosis_panel, files, tables, teaching
+from . import diagnosis_panel
+from . import files
+from . import tables
+from . import teaching
 from .colors import legend_markdown
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner

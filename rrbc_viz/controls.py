@@ -14,8 +14,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 import viser
 
-from rrbc_core import interpolation, registration
-from rrbc_core.explorer import LAYERS, Settings
+from rrbc_core import interpolation
+from rrbc_core import registration
+from rrbc_core.session.explorer import LAYERS, Settings
 
 from .diagnosis_panel import PROMPT
 from .nodes import HANDLE_CHOICES, Display

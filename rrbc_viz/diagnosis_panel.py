@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rrbc_core.diagnosis import Diagnosis, Effect
-from rrbc_core.measurements import MeasurementSet
+from rrbc_core.analysis.diagnosis import Diagnosis, Effect
+from rrbc_core.io.measurements import MeasurementSet
 
 ROLES = ("registration", "fiducial", "both")
 PROMPT = ("Tests the current registration points and fiducials (never the targets) for what a rigid fit with "

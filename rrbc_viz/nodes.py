@@ -35,7 +35,7 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
-from rrbc_core.explorer import LAYERS, Evaluation, ExplorerSession
+from rrbc_core.session.explorer import LAYERS, Evaluation, ExplorerSession
 
 from . import colors
 

@@ -40,7 +40,7 @@ from .nodes import gizmo_name
 from .worker import CoalescingWorker
 
 if TYPE_CHECKING:
-    from rrbc_core.explorer import ExplorerSession, PlanningState
+    from rrbc_core.session.explorer import ExplorerSession, PlanningState
 
     from .app import RunningApp
 

@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from rrbc_core.explorer import Evaluation
+from rrbc_core.session.explorer import Evaluation
 
 
 @dataclass(frozen=True)

@@ -40,11 +40,11 @@ from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from rrbc_core.diagnosis import diagnose
-from rrbc_core.errormodels import Affine, AnisotropicNoise, Drift, PointSet, Scale, SmoothField
-from rrbc_core.measurements import MeasurementSet
-from rrbc_core.registration import least_squares
-from rrbc_core.threads import apply_process_policy
+from rrbc_core.analysis.diagnosis import diagnose
+from rrbc_core.simulation.errormodels import Affine, AnisotropicNoise, Drift, PointSet, Scale, SmoothField
+from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.registration.strategies import least_squares
+from rrbc_core.runtime.threads import apply_process_policy
 
 SIGMA = 0.02  # mm per axis
 ALPHA = 0.01

@@ -17,8 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rrbc_core import model_fit, reproduction
-from rrbc_core.threads import apply_process_policy
+from rrbc_core.studies import model_fit
+from rrbc_core.studies import reproduction
+from rrbc_core.runtime.threads import apply_process_policy
 
 #: (model, first weight, extension weight): sizes in each model's own parameter units (see reproduction.MODELS).
 CASES = (

@@ -25,10 +25,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from rrbc_core import planning
-from rrbc_core.errormodels import ErrorModel, Kinematic
-from rrbc_core.scene import NamedPoints, load_scene
-from rrbc_core.threads import apply_process_policy
+from rrbc_core.analysis import planning
+from rrbc_core.simulation.errormodels import ErrorModel, Kinematic
+from rrbc_core.io.scene import NamedPoints, load_scene
+from rrbc_core.runtime.threads import apply_process_policy
 
 SCENES = ("demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell")
 ADD = 4

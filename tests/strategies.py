@@ -4,7 +4,7 @@ import numpy as np
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from rrbc_core.transforms import RigidTransform
+from rrbc_core.geometry.transforms import RigidTransform
 
 finite = dict(allow_nan=False, allow_infinity=False)
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rrbc_core.transforms import RigidTransform
+from rrbc_core.geometry.transforms import RigidTransform
 
 
 @dataclass(frozen=True)

@@ -4,10 +4,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rrbc_core import batch, interpolation, registration
+from rrbc_core.simulation import batch
+from rrbc_core import interpolation
+from rrbc_core import registration
 from rrbc_core.errors import InputError
-from rrbc_core.rrbc import correct_points, fiducial_corrections
-from rrbc_core.transforms import RigidTransform
+from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
+from rrbc_core.geometry import points as points_mod
+from rrbc_core.geometry.transforms import RigidTransform
 
 TOL = 1e-9  # mm (and for matrices, which multiply coordinates of ~1e3 mm: 1e-12)
 REGS = list(registration.STRATEGIES)
@@ -132,7 +135,7 @@ def test_combinatorial_batch_rejects_subsets_per_trial(average):
     pts = np.array([[0.0, 0, 0], [400, 0, 0], [200, 0, 0], [100, 300, 50], [300, 250, -80]])
     for h in np.linspace(5, 40, 2000):
         pts[2, 1] = h
-        if registration.geometry.collinear_ratio_batch(pts[None, :3])[0] >= 0.05:
+        if points_mod.collinear_ratio_batch(pts[None, :3])[0] >= 0.05:
             break
     s = pts[None] + rng.normal(0, 0.2, (trials, 5, 3))
     true = RigidTransform(_rotation(rng, "random"), [10, 20, 30])
@@ -381,7 +384,7 @@ def test_subset_screen_decides_like_the_core_svd():
     target = 0.05 * (1 + rng.choice([0.0, 1e-14, -1e-14, 1e-4, -1e-4, 5e-3, -5e-3, 0.5, -0.5], k))
     sv[:, 1] = sv[:, 0] * target  # set sigma2/sigma1 at (or within rounding of) the threshold
     triples = np.einsum("kij,kj,kjl->kil", u, sv, vt) + base.mean(axis=1, keepdims=True)
-    expected = registration.geometry.collinear_ratio_batch(triples) >= 0.05
+    expected = points_mod.collinear_ratio_batch(triples) >= 0.05
     assert 0 < expected.sum() < k
     np.testing.assert_array_equal(batch._subset_ok(triples, 0.05), expected)
 
@@ -394,7 +397,7 @@ def test_registration_points_near_the_collinearity_limit():
     for ratio, ok in ((0.0105, True), (0.0095, False)):
         pts = line.copy()
         pts[[1, 3], 1] = [1.0, -1.0]
-        pts[:, 1] *= ratio / registration.geometry.spread_ratios(pts)[0]
+        pts[:, 1] *= ratio / points_mod.spread_ratios(pts)[0]
         s = np.broadcast_to(pts, (3, 5, 3)).copy()
         b = true.apply(pts)[None] + rng.normal(0, 1e-3, (3, 5, 3))
         if ok:

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from .synth import BiasField, measure, random_transform
@@ -245,7 +244,7 @@ def test_usage_errors_exit_2_with_one_line(args):
 
 
 def test_combinatorial_on_too_many_registration_points_is_refused_in_one_line(tmp_path):
-    from rrbc_core.registration import MAX_SUBSET_POINTS
+    from rrbc_core.registration.strategies import MAX_SUBSET_POINTS
 
     rng = np.random.default_rng(2)
     n = MAX_SUBSET_POINTS + 1

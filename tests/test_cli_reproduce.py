@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rrbc_core import reference_data, vanwyk2018
-from rrbc_core.reproduction import METHODS
+from rrbc_core.studies import reference_data
+from rrbc_core.studies import vanwyk2018
+from rrbc_core.studies.reproduction import METHODS
 
 RRBC = str(Path(sys.executable).with_name("rrbc"))
 QUICK = ["--replicates", "8", "--layouts", "A", "--no-confusion"]
@@ -110,7 +111,8 @@ def test_out_in_a_missing_parent_is_refused(tmp_path):
 def test_peg_prediction_recovers_a_known_capture_radius():
     """Success counts drawn from a known capture radius on known horizontal errors are fitted back within the
     resolution the counts allow."""
-    from rrbc_core import model_fit, reproduction
+    from rrbc_core.studies import model_fit
+    from rrbc_core.studies import reproduction
 
     rng = np.random.default_rng(5)
     horiz = np.abs(rng.normal(0, 1, size=(1, 30, 7, 80))) * np.linspace(0.2, 0.6, 7)[None, None, :, None]

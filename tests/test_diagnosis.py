@@ -13,10 +13,10 @@ from scipy import stats
 from scipy.spatial.transform import Rotation
 
 from rrbc_core.cli import main
-from rrbc_core.diagnosis import diagnose
-from rrbc_core.errormodels import Affine, AnisotropicNoise, Drift, PointSet, Scale, SmoothField
-from rrbc_core.measurements import MeasurementSet, write_measurements
-from rrbc_core.registration import least_squares
+from rrbc_core.analysis.diagnosis import diagnose
+from rrbc_core.simulation.errormodels import Affine, AnisotropicNoise, Drift, PointSet, Scale, SmoothField
+from rrbc_core.io.measurements import MeasurementSet, write_measurements
+from rrbc_core.registration.strategies import least_squares
 
 
 def synth(seed, n=None, planar=None, sigma=None, terms=(), repeats=1, noise=None, order="random"):
@@ -304,8 +304,8 @@ def test_drift_under_anisotropic_noise_gives_both_and_the_rate_from_whitened_res
 def test_loo_equals_the_per_point_loop(seed):
     """The vectorised leave-one-out (rank-one downdates, kd-tree neighbours) gives the numbers of refitting the
     others point by point and weighting the k nearest others by 1/d^2; a coincident pair takes the exact branch."""
-    from rrbc_core.diagnosis import _loo
-    from rrbc_core.registration import _kabsch
+    from rrbc_core.analysis.diagnosis import _loo
+    from rrbc_core.registration.strategies import kabsch
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(6, 60))
@@ -318,7 +318,7 @@ def test_loo_equals_the_per_point_loop(seed):
     e_rigid, e_rrbc = np.empty((n, 3)), np.empty((n, 3))
     for i in range(n):
         keep = np.arange(n) != i
-        ri, ti, _ = _kabsch(s[keep], r[keep], w[keep])
+        ri, ti, _ = kabsch(s[keep], r[keep], w[keep])
         e_rigid[i] = r[i] - (ri @ s[i] + ti)
         others = np.flatnonzero(keep)
         d = np.linalg.norm(s[others] - s[i], axis=1)
@@ -334,8 +334,8 @@ def test_loo_equals_the_per_point_loop(seed):
 
 
 def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
-    from rrbc_core import diagnosis
-    from rrbc_core.diagnosis import _moran, _moran_bootstrap, _moran_weights, _orth
+    from rrbc_core.analysis import diagnosis
+    from rrbc_core.analysis.diagnosis import _moran, _moran_bootstrap, _moran_weights, _orth
 
     monkeypatch.setattr(diagnosis, "_BOOTSTRAP_CHUNK_ELEMENTS", 900 * 40)  # chunks of 40 replicates
 

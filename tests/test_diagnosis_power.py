@@ -25,7 +25,6 @@ effect and geometry.
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 from scipy import stats
 
@@ -92,7 +91,7 @@ def _small_n_limit(dg):
 def test_few_points_state_the_smooth_field_limit_and_that_affine_may_be_its_linear_part():
     """Below 40 points (power study: a field of length half the extent was rarely found with 12 points at any
     size) the diagnosis says which field lengths it cannot see; with 100 points it does not."""
-    from rrbc_core.diagnosis import diagnose
+    from rrbc_core.analysis.diagnosis import diagnose
 
     from diagnosis_power import make_set
 

@@ -22,10 +22,10 @@ RMST by 1.4 % (0.0730 -> 0.0720 mm), within the scatter of 20 check points, whil
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rrbc_core.diagnosis import diagnose
-from rrbc_core.errormodels import PointSet, Scale, SmoothField
-from rrbc_core.measurements import MeasurementSet
-from rrbc_core.pipeline import CorrectionOptions, correct_measurements
+from rrbc_core.analysis.diagnosis import diagnose
+from rrbc_core.simulation.errormodels import PointSet, Scale, SmoothField
+from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.correction.pipeline import CorrectionOptions, correct_measurements
 
 SETS_PER_CLASS = 20
 MIN_AGREE = 18  # 9 in 10

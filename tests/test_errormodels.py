@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 from scipy.spatial.transform import Rotation
 
-from rrbc_core.errormodels import (
+from rrbc_core.simulation.errormodels import (
     TERM_TYPES,
     Affine,
     AnisotropicNoise,
@@ -28,8 +28,8 @@ from rrbc_core.errormodels import (
     error_model_to_dict,
 )
 from rrbc_core.errors import InputError
-from rrbc_core.kinematics import UR5, UR5_TOOL_DOWN_SEED, tool_down
-from rrbc_core.transforms import RigidTransform
+from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, tool_down
+from rrbc_core.geometry.transforms import RigidTransform
 
 # The sensor hangs 1.5 m above the plate looking straight down: its +z is the robot's -z.
 SENSOR_POSE = RigidTransform(np.diag([1.0, -1.0, -1.0]), [-450.0, 0.0, 1550.0])

@@ -3,13 +3,14 @@
 import numpy as np
 import pytest
 
-from rrbc_core import interpolation, registration
+from rrbc_core import interpolation
+from rrbc_core import registration
 from rrbc_core.errors import InputError
-from rrbc_core.explorer import ExplorerSession, Settings, hull_edges
-from rrbc_core.measurements import read_measurements
-from rrbc_core.pipeline import CorrectionOptions, correct_measurements
-from rrbc_core.rrbc import correct_points, fiducial_corrections
-from rrbc_core.scene import default_scene_path, load_scene
+from rrbc_core.session.explorer import ExplorerSession, Settings, hull_edges
+from rrbc_core.io.measurements import read_measurements
+from rrbc_core.correction.pipeline import CorrectionOptions, correct_measurements
+from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
+from rrbc_core.io.scene import default_scene_path, load_scene
 
 EXAMPLE = default_scene_path().parents[1] / "rrbc_core" / "data" / "example_measurements.csv"
 
@@ -35,7 +36,7 @@ def test_evaluation_is_the_nine_steps_on_the_sessions_readings(scene):
 
 
 def test_export_reproduces_the_sessions_numbers_through_rrbc_correct(scene, tmp_path):
-    from rrbc_core.measurements import write_measurements
+    from rrbc_core.io.measurements import write_measurements
 
     ses = ExplorerSession.from_scene(scene, Settings(interpolation="tps"))
     ev = ses.move("targets", "H1", ses.layout["targets"].positions[0] + [3.0, -2.0, 0.0])

@@ -14,6 +14,9 @@ from scipy.spatial import Delaunay, QhullError
 from scipy.spatial.transform import Rotation
 
 from rrbc_core import interpolation as interp
+from rrbc_core.interpolation import gp as gp_module
+from rrbc_core.interpolation import hull as hull_module
+from rrbc_core.interpolation import linear as linear_module
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation import (
     GP,
@@ -456,7 +459,8 @@ def test_linear_extrapolation_finite_and_chunking(monkeypatch):
     ref = {name: make_interpolator(name).fit(p, e).predict(q) for name in ("linear", "gp")}
     assert ref["linear"].extrapolated.sum() > 300
     assert np.all(np.isfinite(ref["linear"].values))
-    monkeypatch.setattr(interp, "_CHUNK_ELEMENTS", 50)  # many small chunks
+    for module in (linear_module, gp_module, hull_module):
+        monkeypatch.setattr(module, "CHUNK_ELEMENTS", 50)  # many small chunks
     for name, want in ref.items():
         got = make_interpolator(name).fit(p, e).predict(q)
         # linear: identical arithmetic per query; gp: matrix products blocked differently -> round-off only
@@ -583,11 +587,11 @@ def test_gp_reml_gradient_matches_finite_differences(kernel, profiled):
 
     def objective(theta):
         ell, h = np.exp(theta)
-        r, dr = interp._corr(dist, ell, kernel)
+        r, dr = gp_module._corr(dist, ell, kernel)
         if profiled:
-            return interp._neg_reml(r + h * eye, [dr, h * eye], f, y, None, 1e-30)
+            return gp_module._neg_reml(r + h * eye, [dr, h * eye], f, y, None, 1e-30)
         c = h * r + (0.01**2 + 1e-8 * h) * eye
-        return interp._neg_reml(c, [h * dr, h * (r + 1e-8 * eye)], f, y, 0.0, 1e-30)
+        return gp_module._neg_reml(c, [h * dr, h * (r + 1e-8 * eye)], f, y, 0.0, 1e-30)
 
     theta = np.log([0.7, 0.05])
     _, grad = objective(theta)

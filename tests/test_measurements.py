@@ -12,9 +12,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import rrbc_core.measurements as meas
+import rrbc_core.io.measurements as meas
 from rrbc_core.errors import InputError
-from rrbc_core.measurements import (
+from rrbc_core.io.measurements import (
     ROLES,
     MeasurementSet,
     parse_measurements,
@@ -23,7 +23,7 @@ from rrbc_core.measurements import (
     write_measurements,
 )
 
-DATA = Path(meas.__file__).parent / "data"
+DATA = Path(meas.__file__).parents[1] / "data"
 EXAMPLE = DATA / "example_measurements.csv"
 
 HEADER = "id,role,sensor_x,sensor_y,sensor_z,robot_x,robot_y,robot_z,time,label"

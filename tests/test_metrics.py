@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from rrbc_core.errors import InputError
-from rrbc_core.metrics import (
+from rrbc_core.correction.metrics import (
     bias_tre,
     expected_fre_squared,
     expected_tre_fitzpatrick,
@@ -36,7 +36,7 @@ from rrbc_core.metrics import (
     tre,
     tre_covariance_first_order,
 )
-from rrbc_core.transforms import RigidTransform, rotation_from_euler_zyx
+from rrbc_core.geometry.transforms import RigidTransform, rotation_from_euler_zyx
 
 Z = 4.0
 
@@ -90,7 +90,7 @@ def simulate(sensor_true, targets_sensor, sensor_chol, robot_chol, trials, seed,
     (robot frame); target_chol (M,3,3) optional: sensor noise on the measured targets.
     Returns (TRE vectors (K,M,3) in the robot frame = predicted − true, FRE² (K,)).
     """
-    from rrbc_core.registration import least_squares
+    from rrbc_core.registration.strategies import least_squares
 
     rng = np.random.default_rng(seed)
     n, m = len(sensor_true), len(targets_sensor)
@@ -413,7 +413,7 @@ def test_affine_bias_analytical(layout):
 def test_bias_tre_matches_project_registration(weights):
     """A general affine sensor bias (non-commuting with the scatter) pushed through least_squares: the exact
     fit agrees with bias_tre to second order in the bias gradient, |G|² · max|r − c| (a few 1e-5 mm here)."""
-    from rrbc_core.registration import least_squares
+    from rrbc_core.registration.strategies import least_squares
 
     rng = np.random.default_rng(11)
     g = rng.normal(scale=1e-4, size=(3, 3))

@@ -24,12 +24,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from rrbc_core import metrics, planning
+from rrbc_core.correction import metrics
+from rrbc_core.analysis import planning
 from rrbc_core.cli import main
-from rrbc_core.errormodels import ErrorModel, IsotropicNoise
+from rrbc_core.simulation.errormodels import ErrorModel, IsotropicNoise
 from rrbc_core.errors import InputError
-from rrbc_core.scene import NamedPoints, Region, load_scene
-from rrbc_core.visibility import visible_points
+from rrbc_core.io.scene import Region, load_scene
+from rrbc_core.simulation.visibility import visible_points
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))

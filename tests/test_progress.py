@@ -1,6 +1,6 @@
 import io
 
-from rrbc_core.progress import ProgressBar
+from rrbc_core.runtime.progress import ProgressBar
 
 
 class _Tty(io.StringIO):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rrbc_core import reference_data
+from rrbc_core.studies import reference_data
 
 ROOT = Path(__file__).resolve().parents[1]
 PROJECT_CSV = ROOT / "rrbc_core" / "data" / "vanwyk2018_tables.csv"

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from rrbc_core import registration as reg
 from rrbc_core.errors import InputError
-from rrbc_core.transforms import RigidTransform
+from rrbc_core.geometry.transforms import RigidTransform
 
 from .strategies import point_layouts, transforms
 
@@ -186,7 +186,7 @@ def test_subset_strategies_refuse_more_points_than_the_cap_and_accept_the_cap(na
 
 
 def test_batch_combinatorial_refuses_above_the_cap():
-    from rrbc_core import batch
+    from rrbc_core.simulation import batch
 
     s = np.random.default_rng(1).uniform(0, 500, (2, reg.MAX_SUBSET_POINTS + 1, 3))
     with pytest.raises(InputError, match="at most"):

@@ -26,8 +26,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rrbc_core import batch, geometry, model_fit, reproduction
-from rrbc_core.reproduction import METHODS, STATISTICS
+from rrbc_core.simulation import batch
+from rrbc_core.geometry import points as geometry
+from rrbc_core.studies import model_fit
+from rrbc_core.studies import reproduction
+from rrbc_core.studies.reproduction import METHODS, STATISTICS
 
 LAYOUTS = reproduction.layouts()
 GEO = {lay.name: reproduction.geometry_for(lay) for lay in LAYOUTS}

@@ -5,8 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rrbc_core import interpolation, registration
-from rrbc_core.rrbc import correct_points, fiducial_corrections
+from rrbc_core import interpolation
+from rrbc_core import registration
+from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 
 from .strategies import point_layouts, transforms
 from .synth import BiasField, cell_points, measure, random_transform

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rrbc_core.errors import InputError
-from rrbc_core.scene import Region, Scene, default_scene_path, load_scene, sensor_pose
+from rrbc_core.io.scene import Region, Scene, default_scene_path, load_scene, sensor_pose
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 SHIPPED = ("demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell")
@@ -229,7 +229,7 @@ def test_points_are_on_surfaces_or_in_free_space(scenes):
     nothing is buried inside a solid part."""
     import trimesh
 
-    from rrbc_core.visibility import inside_solids
+    from rrbc_core.simulation.visibility import inside_solids
 
     for name, s in scenes.items():
         mesh = s.load_mesh()
@@ -434,7 +434,7 @@ def test_missing_and_undecodable_files(tmp_path):
 
 
 def test_default_scene_path_missing(monkeypatch, tmp_path):
-    import rrbc_core.scene as scene_mod
+    import rrbc_core.io.scene as scene_mod
 
     monkeypatch.setattr(scene_mod, "__file__", str(tmp_path / "pkg" / "scene.py"))
     with pytest.raises(InputError, match="default scene is missing"):

@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rrbc_core import batch, metrics
-from rrbc_core.errormodels import AnisotropicNoise, ErrorModel, IsotropicNoise
-from rrbc_core.simulation import WorkCell, measure, measurement_set, monte_carlo, trial_errors
-from rrbc_core.transforms import RigidTransform
+from rrbc_core.simulation import batch
+from rrbc_core.correction import metrics
+from rrbc_core.simulation.errormodels import AnisotropicNoise, ErrorModel, IsotropicNoise
+from rrbc_core.simulation.montecarlo import WorkCell, measure, measurement_set, monte_carlo, trial_errors
+from rrbc_core.geometry.transforms import RigidTransform
 
 Z = 4.0  # z-score of the statistical tolerances
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from rrbc_core import threads
+from rrbc_core.runtime import threads
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "scenes" / "demo_workcell.toml"
@@ -60,7 +60,9 @@ def _run(body: str) -> dict:
 
 def test_cli_command_runs_with_the_documented_pool_size():
     res = _run(f"""
-        from rrbc_core import planning, cli, scene
+        from rrbc_core.analysis import planning
+        from rrbc_core import cli
+        from rrbc_core.io import scene
         recording(scene, "load_scene")  # outside any library entry point: the process policy
         recording(planning, "predict_rmst")
         code = cli.main(["plan", {str(DEMO)!r}, "--add", "1", "--json"])
@@ -73,7 +75,7 @@ def test_cli_command_runs_with_the_documented_pool_size():
 def test_app_server_callbacks_run_with_the_documented_pool_size():
     res = _run("""
         import threading
-        from rrbc_core import explorer
+        from rrbc_core.session import explorer
         from rrbc_viz import tables
         from rrbc_viz.app import serve
         recording(explorer, "correct_points")
@@ -94,8 +96,8 @@ def test_app_server_callbacks_run_with_the_documented_pool_size():
 def test_library_call_limits_pools_only_while_it_runs():
     """From a notebook: the call runs single-threaded and the user's pool sizes come back afterwards."""
     res = _run(f"""
-        from rrbc_core import planning
-        from rrbc_core.scene import load_scene
+        from rrbc_core.analysis import planning
+        from rrbc_core.io.scene import load_scene
         recording(planning, "_predict_fast")
         scene = load_scene({str(DEMO)!r})
         planning.predict_rmst(scene, scene.fiducials.positions)

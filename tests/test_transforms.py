@@ -5,7 +5,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from rrbc_core.errors import InputError
-from rrbc_core.transforms import RigidTransform, chordal_mean, mean_transform, project_to_so3
+from rrbc_core.geometry.transforms import RigidTransform, chordal_mean, mean_transform, project_to_so3
 
 from .strategies import finite, rotations, transforms
 

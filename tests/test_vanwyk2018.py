@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rrbc_core import reproduction as rp
+from rrbc_core.studies import reproduction as rp
 
 
 def test_each_repetition_uses_its_own_registration_in_layout_d():
@@ -41,7 +41,7 @@ def test_rrbc_gain_helps_against_bias_more_than_against_noise():
 
 
 def test_run_reports_progress_up_to_its_total_and_closes_the_bar():
-    from rrbc_core import vanwyk2018
+    from rrbc_core.studies import vanwyk2018
 
     class Recorder:
         def __init__(self, total):

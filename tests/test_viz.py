@@ -20,7 +20,7 @@ import pytest
 
 viser = pytest.importorskip("viser")
 
-from rrbc_core.measurements import parse_measurements  # noqa: E402
+from rrbc_core.io.measurements import parse_measurements  # noqa: E402
 from rrbc_viz import colors  # noqa: E402
 from rrbc_viz.app import RunningApp, serve  # noqa: E402
 
@@ -433,7 +433,7 @@ def _press(button) -> None:
 
 
 def _rows_without_targets(app: RunningApp):
-    from rrbc_core.measurements import MeasurementSet
+    from rrbc_core.io.measurements import MeasurementSet
 
     m = app.session.export_measurements()
     keep = [i for i, role in enumerate(m.roles) if role in ("registration", "fiducial", "both")]
@@ -443,7 +443,7 @@ def _rows_without_targets(app: RunningApp):
 
 
 def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
-    from rrbc_core.diagnosis import diagnose
+    from rrbc_core.analysis.diagnosis import diagnose
 
     panel = app.controls.diagnosis
     assert "Diagnose current data" in app.controls.diagnose.label and "Press" in panel.content

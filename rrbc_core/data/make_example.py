@@ -51,7 +51,7 @@ def _rotation(z_deg: float, y_deg: float, x_deg: float) -> np.ndarray:
 
 def make_example(**overrides):
     """Return (MeasurementSet, comment lines) of the example; keyword arguments override PARAMETERS."""
-    from rrbc_core.measurements import MeasurementSet
+    from rrbc_core.io.measurements import MeasurementSet
 
     p = {**PARAMETERS, **overrides}
     rng = np.random.default_rng(p["seed"])
@@ -149,7 +149,7 @@ def make_example(**overrides):
 
 
 def main(argv=None) -> int:
-    from rrbc_core.measurements import write_measurements
+    from rrbc_core.io.measurements import write_measurements
 
     argv = sys.argv[1:] if argv is None else argv
     out = Path(argv[0]) if argv else Path(__file__).with_name("example_measurements.csv")

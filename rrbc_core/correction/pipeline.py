@@ -1,0 +1,161 @@
+"""The whole RRBC run on a measurement set: register, correct fiducials, correct targets, score checks.
+
+This is what `rrbc correct` does; the command line only parses options and prints. Units mm; frames as in
+the measurement file (sensor_* sensor frame, robot_* robot frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rrbc_core import interpolation
+from rrbc_core.correction import metrics
+from rrbc_core import registration
+from rrbc_core.errors import InputError
+from rrbc_core.io.measurements import MeasurementSet, PointGroup
+from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
+from rrbc_core.runtime.threads import thread_limited
+
+
+@dataclass(frozen=True)
+class CorrectionOptions:
+    """registration: a name in registration.STRATEGIES; interpolation: a name in interpolation.METHODS;
+    neighbors/power: IDW options (None = defaults k=4, p=2); seed: for annealing and clustering."""
+
+    registration: str = "least-squares"
+    interpolation: str = "idw"
+    neighbors: int | None = None
+    power: float | None = None
+    seed: int = 0
+    interpolation_options: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class CorrectionResult:
+    options: CorrectionOptions
+    registration: registration.Registration
+    fiducials: PointGroup
+    fiducial_corrections: np.ndarray
+    targets: PointGroup
+    targets_corrected: CorrectedPoints | None
+    checks: PointGroup
+    checks_corrected: CorrectedPoints | None
+    error_rigid: np.ndarray  # (C,) check-point errors, mm
+    error_rrbc: np.ndarray
+
+    def summary(self) -> dict:
+        if len(self.error_rigid) == 0:
+            return {"rmst_rigid_mm": None, "rmst_rrbc_mm": None, "max_rigid_mm": None, "max_rrbc_mm": None}
+        return {
+            "rmst_rigid_mm": metrics.rmst(self.error_rigid),
+            "rmst_rrbc_mm": metrics.rmst(self.error_rrbc),
+            "max_rigid_mm": metrics.max_error(self.error_rigid),
+            "max_rrbc_mm": metrics.max_error(self.error_rrbc),
+        }
+
+    def to_json(self) -> dict:
+        """The JSON object of `rrbc correct --json` (shared/spec/cli.md)."""
+        reg = self.registration
+        reg_json = {"method": reg.method, **reg.mapping.as_dict(), "fre_rms_mm": reg.fre_rms_mm}
+        if self.options.registration in ("annealing", "clustering"):
+            reg_json["seed"] = self.options.seed
+        return {
+            "registration": reg_json,
+            "interpolation": _interp_json(self.options),
+            "fiducials": [
+                {"id": i, "sensor": s.tolist(), "correction_mm": e.tolist()}
+                for i, s, e in zip(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections)
+            ],
+            "targets": _points_json(self.targets, self.targets_corrected),
+            "checks": _points_json(self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc),
+            "summary": self.summary(),
+        }
+
+
+def _interp_json(opt: CorrectionOptions) -> dict:
+    out = {"method": opt.interpolation}
+    if opt.interpolation == "idw":
+        out["neighbors"] = opt.neighbors if opt.neighbors is not None else interpolation.IDW().k
+        out["power"] = opt.power if opt.power is not None else interpolation.IDW().power
+    out.update(opt.interpolation_options)
+    return out
+
+
+def _points_json(group: PointGroup, corrected: CorrectedPoints | None, err_rigid=None, err_rrbc=None) -> list:
+    rows = []
+    if corrected is None:
+        return rows
+    for k, pid in enumerate(group.ids):
+        row = {
+            "id": pid,
+            "sensor": corrected.sensor[k].tolist(),
+            "correction_mm": corrected.correction[k].tolist(),
+            "robot_rigid": corrected.robot_rigid[k].tolist(),
+            "robot_rrbc": corrected.robot_rrbc[k].tolist(),
+            "extrapolated": bool(corrected.extrapolated[k]),
+        }
+        if corrected.correction_std is not None:
+            row["correction_std_mm"] = corrected.correction_std[k].tolist()
+        if corrected.off_plane_mm[k] > 0:
+            row["off_plane_mm"] = float(corrected.off_plane_mm[k])
+        if err_rigid is not None:
+            row["robot_truth"] = group.robot[k].tolist()
+            row["error_rigid_mm"] = float(err_rigid[k])
+            row["error_rrbc_mm"] = float(err_rrbc[k])
+        rows.append(row)
+    return rows
+
+
+def make_interpolator(options: CorrectionOptions):
+    name = options.interpolation
+    if name not in interpolation.METHODS:
+        raise InputError(f"unknown interpolation '{name}': choose one of {', '.join(interpolation.METHODS)}")
+    if name != "idw" and (options.neighbors is not None or options.power is not None):
+        raise InputError("--neighbors and --power apply to --interpolation idw only")
+    opts = dict(options.interpolation_options)
+    if name == "idw":
+        if options.neighbors is not None:
+            opts["k"] = options.neighbors
+        if options.power is not None:
+            opts["power"] = options.power
+    return interpolation.make_interpolator(name, **opts)
+
+
+def run_registration(options: CorrectionOptions, sensor, robot) -> registration.Registration:
+    if options.registration not in registration.STRATEGIES:
+        raise InputError(
+            f"unknown registration '{options.registration}': choose one of {', '.join(registration.STRATEGIES)}"
+        )
+    extra = {"seed": options.seed} if options.registration in ("annealing", "clustering") else {}
+    return registration.register(options.registration, sensor, robot, **extra)
+
+
+@thread_limited
+def correct_measurements(mset: MeasurementSet, options: CorrectionOptions = CorrectionOptions()) -> CorrectionResult:
+    """Run RRBC on a measurement set (all nine steps) and score any check points against their truth."""
+    method = make_interpolator(options)  # validate options before any work
+    reg_pts = mset.points("registration")
+    reg = run_registration(options, reg_pts.sensor, reg_pts.robot)
+    fid = mset.points("fiducial")
+    targets = mset.points("target")
+    checks = mset.points("check")
+    if len(fid.ids) == 0:
+        if options.interpolation != "none":
+            raise InputError(
+                f"{mset.source}: no fiducial rows (role fiducial or both); add fiducials or use --interpolation none"
+            )
+        corr = np.zeros((0, 3))
+        fitted = interpolation.NoCorrection().fit(reg_pts.sensor, np.zeros_like(reg_pts.sensor))
+    else:
+        corr = fiducial_corrections(reg.mapping, fid.sensor, fid.robot)
+        fitted = method.fit(fid.sensor, corr)
+    t_corr = correct_points(reg.mapping, fitted, targets.sensor) if len(targets.ids) else None
+    c_corr = correct_points(reg.mapping, fitted, checks.sensor) if len(checks.ids) else None
+    if c_corr is not None:
+        err_rigid = metrics.tre(c_corr.robot_rigid, checks.robot)
+        err_rrbc = metrics.tre(c_corr.robot_rrbc, checks.robot)
+    else:
+        err_rigid = err_rrbc = np.zeros(0)
+    return CorrectionResult(options, reg, fid, corr, targets, t_corr, checks, c_corr, err_rigid, err_rrbc)

@@ -1,0 +1,126 @@
+"""Shape of point sets: principal axes, degeneracy checks, and the local coordinates used to interpolate.
+
+All points are rows (N x 3) in one frame, in mm.
+
+Documented thresholds (theory notes §1.2, §3.3, §4.6):
+- COINCIDENT_MM: two distinct points closer than this are treated as the same point (1e-3 mm = 1 µm).
+- COLLINEAR_RATIO: a point set whose second principal spread is below this fraction of its first
+  (sigma_2 / sigma_1 of the centred coordinates) is "nearly collinear": the rotation about its line is not
+  determined, so registration refuses it.
+- SUBSET_DEGENERACY_RATIO: combinatorial averaging drops 3-point subsets whose sigma_2 / sigma_1 is below this
+  (theory notes §1.2 recommend ~0.05; near-collinear triples can wreck an element-wise mean).
+- PLANAR_RATIO: a set whose third spread is below this fraction of its first is treated as planar
+  (a breadboard) and interpolated in its best-fit plane; 0.02 keeps a 750 mm plate measured with 0.1 mm noise
+  (ratio ~1e-4) planar while a fixture with 20 mm of height in 750 mm is 3-D.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rrbc_core.errors import InputError
+
+COINCIDENT_MM = 1e-3
+COLLINEAR_RATIO = 0.01
+SUBSET_DEGENERACY_RATIO = 0.05
+PLANAR_RATIO = 0.02
+
+
+def as_points(points, what: str = "points") -> np.ndarray:
+    """Validate and return an (N, 3) float array with finite values."""
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise InputError(f"{what} must be an N x 3 array of coordinates (mm), got shape {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise InputError(f"{what} contain a non-finite coordinate (NaN or infinity)")
+    return p
+
+
+def principal_spreads(points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centroid, singular values (descending) and principal axes (rows) of the centred points."""
+    p = np.asarray(points, dtype=float)
+    c = p.mean(axis=0)
+    _, s, vt = np.linalg.svd(p - c, full_matrices=len(p) < 3)  # never an N x N U for large N
+    s = np.concatenate([s, np.zeros(3 - len(s))])
+    return c, s, vt
+
+
+def spread_ratios(points) -> tuple[float, float]:
+    """(sigma_2 / sigma_1, sigma_3 / sigma_1) of the centred points; (0, 0) for coincident points."""
+    _, s, _ = principal_spreads(points)
+    if s[0] <= 0:
+        return 0.0, 0.0
+    return float(s[1] / s[0]), float(s[2] / s[0])
+
+
+def collinear_ratio_batch(triples: np.ndarray) -> np.ndarray:
+    """sigma_2 / sigma_1 for a stack of point sets (K, n, 3), vectorised."""
+    c = triples - triples.mean(axis=1, keepdims=True)
+    s = np.linalg.svd(c, compute_uv=False)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.where(s[:, 0] > 0, s[:, 1] / np.where(s[:, 0] > 0, s[:, 0], 1.0), 0.0)
+    return r
+
+
+def check_registration_points(points, what: str = "registration points", minimum: int = 3) -> np.ndarray:
+    """Refuse sets that cannot define a rigid transform: too few, coincident, or (nearly) collinear points."""
+    p = as_points(points, what)
+    if len(p) < minimum:
+        raise InputError(f"{what}: {len(p)} given, at least {minimum} distinct points are needed")
+    pairs = cKDTree(p).query_pairs(COINCIDENT_MM, output_type="ndarray")  # O(N log N), not an N x N matrix
+    if len(pairs):
+        a, b = sorted(min(map(tuple, pairs)))
+        raise InputError(
+            f"{what}: points {a + 1} and {b + 1} coincide (closer than {COINCIDENT_MM} mm); "
+            "use distinct, well-spread points"
+        )
+    r2, _ = spread_ratios(p)
+    if r2 < COLLINEAR_RATIO:
+        raise InputError(
+            f"{what} are collinear or nearly so (spread ratio sigma2/sigma1 = {r2:.2g} < {COLLINEAR_RATIO}): "
+            "the rotation about their line is undetermined; add a point off that line"
+        )
+    return p
+
+
+@dataclass(frozen=True, eq=False)
+class LocalFrame:
+    """Coordinates for interpolating over a set of points (e.g. fiducials, sensor frame, mm).
+
+    `dim` is 3 for a volume, 2 for a (nearly) planar set, 1 for a (nearly) collinear set. `to_local` maps
+    points to the first `dim` principal coordinates, centred on the set's centroid and divided by `scale`
+    (the RMS distance from the centroid), so local coordinates are O(1). `off_axis` gives the distance (mm)
+    of points from the set's affine hull (zero for dim 3).
+    """
+
+    centroid: np.ndarray
+    axes: np.ndarray  # (3, 3) principal axes as rows
+    scale: float
+    dim: int
+
+    @classmethod
+    def of(cls, points) -> "LocalFrame":
+        p = as_points(points, "interpolation points")
+        c, s, vt = principal_spreads(p)
+        if s[0] <= COINCIDENT_MM:
+            dim = 0
+        elif s[1] / s[0] < COLLINEAR_RATIO:
+            dim = 1
+        elif s[2] / s[0] < PLANAR_RATIO:
+            dim = 2
+        else:
+            dim = 3
+        scale = float(np.sqrt(np.mean(np.sum((p - c) ** 2, axis=1)))) or 1.0
+        return cls(c, vt, scale, dim)
+
+    def to_local(self, points) -> np.ndarray:
+        q = np.asarray(points, dtype=float) - self.centroid
+        return (q @ self.axes[: self.dim].T) / self.scale
+
+    def off_axis(self, points) -> np.ndarray:
+        q = np.asarray(points, dtype=float) - self.centroid
+        rest = q @ self.axes[self.dim :].T
+        return np.linalg.norm(rest, axis=-1)

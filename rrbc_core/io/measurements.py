@@ -1,0 +1,608 @@
+"""Measurement files: the CSV interchange format for measured points (spec: shared/spec/measurement-file.md).
+
+A measurement file holds, per row, a point `id`, its `role` (registration, fiducial, both, target, check), the
+point as measured in the sensor frame (`sensor_x`, `sensor_y`, `sensor_z`, mm), as measured by the robot or, for
+check rows, its robot-frame ground truth (`robot_x`, `robot_y`, `robot_z`, mm; empty for targets) and optionally
+the time of measurement (`time`, s). Other columns are kept verbatim and written back.
+
+Reading:
+- `read_measurements(path)` / `parse_measurements(text, source)` return a `MeasurementSet` (rows in file order)
+  and raise `InputError` with a one-line message `<file>: line <n>: field <name>: <what is wrong>` on any bad
+  input (the `line` and `field` parts are left out where they do not apply).
+- `#` lines (possibly indented), blank lines and rows of empty cells only are skipped; line numbers count
+  physical lines of the file. A quoted cell may span lines.
+- Cells are stripped of surrounding whitespace; column names are case-sensitive.
+- Robot values on `target` rows are ignored (stored as NaN); an empty `time` cell is NaN.
+
+Writing: `write_measurements(path, mset, comments)` validates the set, then writes it atomically (temporary file
+in the same directory, then `os.replace`): a failure never leaves a partial or modified destination. Floats are
+written with `repr`, so writing then reading gives back the very same floats.
+
+`validate(mset)` runs the set-level checks (also run by the readers): per-row consistency, one role per id, at
+least 3 distinct registration points (roles registration and both), not coincident and not (nearly) collinear in
+either frame (`geometry.check_registration_points`, thresholds `COINCIDENT_MM`, `COLLINEAR_RATIO`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import re
+import secrets
+from dataclasses import dataclass, field
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from rrbc_core.errors import InputError
+from rrbc_core.geometry.points import COINCIDENT_MM, COLLINEAR_RATIO, check_registration_points, spread_ratios
+
+__all__ = [
+    "ROLES",
+    "REGISTRATION_ROLES",
+    "FIDUCIAL_ROLES",
+    "ROBOT_REQUIRED_ROLES",
+    "SENSOR_COLUMNS",
+    "ROBOT_COLUMNS",
+    "STANDARD_COLUMNS",
+    "MeasurementSet",
+    "PointGroup",
+    "read_measurements",
+    "parse_measurements",
+    "write_measurements",
+    "validate",
+]
+
+ROLES = ("registration", "fiducial", "both", "target", "check")
+REGISTRATION_ROLES = ("registration", "both")
+FIDUCIAL_ROLES = ("fiducial", "both")
+ROBOT_REQUIRED_ROLES = ("registration", "fiducial", "both", "check")
+
+SENSOR_COLUMNS = ("sensor_x", "sensor_y", "sensor_z")
+ROBOT_COLUMNS = ("robot_x", "robot_y", "robot_z")
+REQUIRED_COLUMNS = ("id", "role") + SENSOR_COLUMNS + ROBOT_COLUMNS
+STANDARD_COLUMNS = REQUIRED_COLUMNS + ("time",)
+
+# A plain decimal number (what `repr(float)` and spreadsheets write); stricter than float(), which would also
+# take '1_000', 'nan', 'infinity' and non-ASCII digits.
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_MAX_LISTED = 8
+
+
+# --------------------------------------------------------------------------------------------------- messages
+
+
+def _message(source: str, line: int | None, fieldname: str | None, text: str) -> str:
+    parts = [str(source)]
+    if line:
+        parts.append(f"line {line}")
+    if fieldname:
+        parts.append(f"field {fieldname}")
+    parts.append(text)
+    msg = ": ".join(parts)
+    # One line, always: anything user-supplied is shown with repr(), but be safe about the rest.
+    return msg.replace("\r", "\\r").replace("\n", "\\n")
+
+
+def _error(source: str, line: int | None, fieldname: str | None, text: str) -> InputError:
+    return InputError(_message(source, line, fieldname, text))
+
+
+def _listed(names: Sequence[str]) -> str:
+    shown = ", ".join(repr(n) for n in names[:_MAX_LISTED])
+    if len(names) > _MAX_LISTED:
+        shown += f", ... ({len(names)} in all)"
+    return shown
+
+
+# ------------------------------------------------------------------------------------------------ data types
+
+
+@dataclass(frozen=True, eq=False)
+class PointGroup:
+    """Points of one role aggregated per distinct id, in order of first appearance (units mm).
+
+    `sensor` (K, 3) sensor frame and `robot` (K, 3) robot frame are the means of the id's rows (`robot` is NaN for
+    targets); `count` is the number of rows averaged and `first_line` the line of the id's first row.
+    """
+
+    ids: tuple[str, ...]
+    sensor: np.ndarray
+    robot: np.ndarray
+    count: np.ndarray
+    first_line: tuple[int, ...]
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+@dataclass(frozen=True, eq=False)
+class MeasurementSet:
+    """Rows of a measurement file, in file order. Units mm and s. Frames: sensor_* sensor frame, robot_* robot frame.
+
+    Arrays are stored as read-only float copies. Robot values of `target` rows are ignored and stored as NaN.
+    Construction does not validate; call `validate` (the readers and the writer do).
+    """
+
+    ids: tuple[str, ...]  # per row
+    roles: tuple[str, ...]  # per row
+    sensor: np.ndarray  # (R, 3)
+    robot: np.ndarray  # (R, 3), NaN where the file has no robot values (targets)
+    time: np.ndarray  # (R,), NaN where absent
+    lines: tuple[int, ...]  # 1-based physical line of each row in the source file; 0 for rows built in memory
+    source: str = "<memory>"  # file name used in messages
+    extra: dict[str, tuple[str, ...]] = field(default_factory=dict)  # other columns kept verbatim, per row
+
+    def __post_init__(self) -> None:
+        src = str(self.source)
+        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+        set_("source", src)
+        set_("ids", tuple(self.ids))
+        set_("roles", tuple(self.roles))
+        set_("lines", tuple(int(n) for n in self.lines))
+        set_("extra", {str(k): tuple(v) for k, v in dict(self.extra).items()})
+        for name in ("sensor", "robot", "time"):
+            try:
+                arr = np.array(getattr(self, name), dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise _error(src, None, None, f"{name} is not a numeric array ({exc})") from None
+            set_(name, arr)
+        robot = self.robot
+        if robot.ndim == 2 and robot.shape[1:] == (3,) and len(robot) == len(self.roles):
+            is_target = np.array([r == "target" for r in self.roles], dtype=bool)
+            if is_target.any():
+                robot[is_target] = np.nan
+        for name in ("sensor", "robot", "time"):
+            getattr(self, name).flags.writeable = False
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def rows(self, role: str) -> np.ndarray:
+        """Indices of the rows selected by `role` (registration: registration or both; fiducial: fiducial or both)."""
+        wanted = _selected_roles(role)
+        return np.array([i for i, r in enumerate(self.roles) if r in wanted], dtype=int)
+
+    def points(self, role: str) -> PointGroup:
+        """Points of a role aggregated per distinct id, in order of first appearance; repeated rows are averaged.
+
+        "registration" selects rows whose role is registration or both, "fiducial" rows whose role is fiducial or
+        both; "both", "target" and "check" select their own rows.
+        """
+        order: list[str] = []
+        members: dict[str, list[int]] = {}
+        for i in self.rows(role):
+            key = self.ids[i]
+            if key not in members:
+                members[key] = []
+                order.append(key)
+            members[key].append(int(i))
+        k = len(order)
+        sensor = np.empty((k, 3))
+        robot = np.empty((k, 3))
+        count = np.empty(k, dtype=int)
+        first_line = []
+        for j, key in enumerate(order):
+            idx = members[key]
+            sensor[j] = self.sensor[idx].mean(axis=0)
+            robot[j] = self.robot[idx].mean(axis=0)
+            count[j] = len(idx)
+            first_line.append(self.lines[idx[0]] if idx[0] < len(self.lines) else 0)
+        return PointGroup(tuple(order), sensor, robot, count, tuple(first_line))
+
+
+def _selected_roles(role: str) -> tuple[str, ...]:
+    if role == "registration":
+        return REGISTRATION_ROLES
+    if role == "fiducial":
+        return FIDUCIAL_ROLES
+    if role in ROLES:
+        return (role,)
+    raise InputError(f"unknown role {role!r}; valid roles: {', '.join(ROLES)}")
+
+
+# --------------------------------------------------------------------------------------------------- reading
+
+
+def read_measurements(path) -> MeasurementSet:
+    """Read and validate a measurement file (UTF-8 CSV). Raises InputError with a one-line message on bad input."""
+    source = os.fspath(path)
+    if isinstance(source, bytes):
+        source = os.fsdecode(source)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        reason = exc.strerror or exc.__class__.__name__
+        raise _error(source, None, None, f"cannot read the file: {reason}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise _error(
+            source,
+            line,
+            None,
+            f"not UTF-8 text (byte 0x{data[exc.start]:02x} at column {column}); save the file as UTF-8",
+        ) from None
+    return parse_measurements(text, source)
+
+
+class _LineFeed:
+    """Feeds physical lines to csv.reader, skipping comment and blank lines between records (not inside a quoted
+    multi-line cell) and remembering the physical line number where each record starts."""
+
+    def __init__(self, text: str) -> None:
+        self._lines = io.StringIO(text, newline="")
+        self.number = 0  # physical lines consumed so far
+        self.record_start = 0
+        self.at_record_start = True
+
+    def __iter__(self) -> Iterator[str]:
+        return self
+
+    def __next__(self) -> str:
+        while True:
+            raw = self._lines.readline()
+            if raw == "":
+                raise StopIteration
+            self.number += 1
+            if self.at_record_start:
+                stripped = raw.strip()
+                if not stripped or stripped.startswith("#"):
+                    continue
+                self.record_start = self.number
+                self.at_record_start = False
+            return raw
+
+
+def _records(text: str, source: str) -> Iterator[tuple[int, list[str]]]:
+    """(line number, stripped cells) for every non-comment record of the text."""
+    feed = _LineFeed(text)
+    reader = csv.reader(feed, strict=True, skipinitialspace=True)
+    while True:
+        feed.at_record_start = True
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            hint = "; is a quote left open?" if "end of data" in str(exc) else ""
+            raise _error(source, feed.record_start or None, None, f"malformed CSV ({exc}){hint}") from None
+        cells = [cell.strip() for cell in row]
+        if any(cells):  # rows of empty cells only (",,,,", left by spreadsheets) are skipped like blank lines
+            yield feed.record_start, cells
+
+
+def _number(cell: str, source: str, line: int, column: str) -> float:
+    if _NUMBER.fullmatch(cell):
+        value = float(cell)
+        if math.isfinite(value):
+            return value
+        raise _error(source, line, column, f"{cell!r} is out of range (not a finite number)")
+    try:
+        value = float(cell)
+    except ValueError:
+        value = None
+    if value is not None and not math.isfinite(value):
+        raise _error(source, line, column, f"{cell!r} is not a finite number (NaN and infinity are not allowed)")
+    raise _error(source, line, column, f"{cell!r} is not a number")
+
+
+def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
+    """Parse and validate the text of a measurement file. Raises InputError with a one-line message on bad input."""
+    source = str(source)
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    records = _records(text, source)
+    try:
+        header_line, header = next(records)
+    except StopIteration:
+        raise _error(source, None, None, "no header row: the file is empty or holds only comments") from None
+    columns = _check_header(header, header_line, source)
+    position = {name: k for k, name in enumerate(header)}
+    extra_names = [name for name in header if name not in STANDARD_COLUMNS]
+    has_time = "time" in position
+
+    ids: list[str] = []
+    roles: list[str] = []
+    sensor: list[list[float]] = []
+    robot: list[list[float]] = []
+    times: list[float] = []
+    lines: list[int] = []
+    extra: dict[str, list[str]] = {name: [] for name in extra_names}
+    seen: dict[str, tuple[str, int]] = {}  # id -> (role, first line)
+
+    for line, cells in records:
+        if len(cells) != columns:
+            if len(cells) < columns:
+                missing = header[len(cells)]
+                raise _error(
+                    source, line, missing, f"cell missing: the row has {len(cells)} cells, the header has {columns}"
+                )
+            raise _error(
+                source,
+                line,
+                None,
+                f"the row has {len(cells)} cells, the header has {columns} (extra cells after {header[-1]!r}; "
+                "quote cells that contain commas)",
+            )
+        ident = cells[position["id"]]
+        role = cells[position["role"]]
+        s = []
+        for name in SENSOR_COLUMNS:
+            cell = cells[position[name]]
+            if cell == "":
+                raise _error(source, line, name, "empty: every row needs its sensor-frame coordinates")
+            s.append(_number(cell, source, line, name))
+        b = [math.nan] * 3
+        if role != "target":
+            for k, name in enumerate(ROBOT_COLUMNS):
+                cell = cells[position[name]]
+                if cell != "":
+                    b[k] = _number(cell, source, line, name)
+        t = math.nan
+        if has_time:
+            cell = cells[position["time"]]
+            if cell != "":
+                t = _number(cell, source, line, "time")
+        _check_row(source, line, ident, role, s, b, t)
+        _check_same_role(source, line, ident, role, seen)
+        ids.append(ident)
+        roles.append(role)
+        sensor.append(s)
+        robot.append(b)
+        times.append(t)
+        lines.append(line)
+        for name in extra_names:
+            extra[name].append(cells[position[name]])
+
+    mset = MeasurementSet(
+        ids=tuple(ids),
+        roles=tuple(roles),
+        sensor=np.array(sensor, dtype=float).reshape(-1, 3),
+        robot=np.array(robot, dtype=float).reshape(-1, 3),
+        time=np.array(times, dtype=float),
+        lines=tuple(lines),
+        source=source,
+        extra={name: tuple(values) for name, values in extra.items()},
+    )
+    _validate(mset, header_line=header_line)
+    return mset
+
+
+def _check_header(header: list[str], line: int, source: str) -> int:
+    for k, name in enumerate(header):
+        if name == "":
+            raise _error(source, line, None, f"column {k + 1} of the header has no name")
+    seen: dict[str, int] = {}
+    for k, name in enumerate(header):
+        if name in seen:
+            raise _error(source, line, name, f"column named twice in the header (columns {seen[name] + 1} and {k + 1})")
+        seen[name] = k
+    for name in REQUIRED_COLUMNS:
+        if name not in seen:
+            hint = ""
+            near = [h for h in header if h.lower() == name.lower()]
+            if near:
+                hint = f" (found {near[0]!r}: column names are case-sensitive)"
+            elif name in ROBOT_COLUMNS:
+                hint = " (needed for roles registration, fiducial, both, check)"
+            shown = ", ".join(header[:_MAX_LISTED]) + (", ..." if len(header) > _MAX_LISTED else "")
+            raise _error(source, line, name, f"required column missing{hint}; the header is: {shown}")
+    return len(header)
+
+
+# ------------------------------------------------------------------------------------------------ validation
+
+
+def _check_row(source: str, line: int, ident, role, s, b, t) -> None:
+    """Row-level checks shared by the parser (file order) and `validate` (in-memory sets)."""
+    if not isinstance(ident, str):
+        raise _error(source, line, "id", f"{ident!r} is not a string")
+    if ident == "":
+        raise _error(source, line, "id", "empty: every row needs the id of its point")
+    if ident != ident.strip():
+        raise _error(source, line, "id", f"{ident!r} has leading or trailing whitespace")
+    if role not in ROLES:
+        raise _error(source, line, "role", f"{role!r} is not a valid role; valid roles: {', '.join(ROLES)}")
+    for name, v in zip(SENSOR_COLUMNS, s):
+        if not math.isfinite(v):
+            raise _error(source, line, name, f"{v!r} is not a finite number")
+    if role in ROBOT_REQUIRED_ROLES:
+        given = [name for name, v in zip(ROBOT_COLUMNS, b) if not math.isnan(v)]
+        for name, v in zip(ROBOT_COLUMNS, b):
+            if math.isnan(v):
+                what = "robot-frame ground truth" if role == "check" else "robot measurement"
+                part = f" (only {', '.join(given)} given)" if given else ""
+                raise _error(
+                    source,
+                    line,
+                    name,
+                    f"missing{part}: role {role!r} needs the {what} in robot_x, robot_y, robot_z",
+                )
+            if not math.isfinite(v):
+                raise _error(source, line, name, f"{v!r} is not a finite number")
+    if not (math.isnan(t) or math.isfinite(t)):
+        raise _error(source, line, "time", f"{t!r} is not a finite number")
+
+
+def _check_same_role(source: str, line: int, ident: str, role: str, seen: dict[str, tuple[str, int]]) -> None:
+    if ident in seen:
+        first_role, first_line = seen[ident]
+        if first_role != role:
+            where = f"line {first_line}" if first_line else "an earlier row"
+            raise _error(
+                source,
+                line,
+                "role",
+                f"id {ident!r} has role {role!r} here but {first_role!r} on {where}; "
+                "all rows of one point must carry the same role",
+            )
+    else:
+        seen[ident] = (role, line)
+
+
+def validate(mset: MeasurementSet) -> None:
+    """Check a measurement set (also run by the readers and the writer); raise InputError with a one-line message.
+
+    Checks: consistent shapes; per row a non-empty id, a valid role, finite sensor values, complete finite robot
+    values for roles registration, fiducial, both, check, finite or absent time; one role per id; at least 3
+    distinct registration points (registration + both), neither coincident nor (nearly) collinear in the sensor
+    frame nor in the robot frame.
+    """
+    _validate(mset, header_line=0)
+
+
+def _validate(mset: MeasurementSet, header_line: int) -> None:
+    source = mset.source
+    n = len(mset.ids)
+    shapes = {
+        "roles": (len(mset.roles), (n,)),
+        "sensor": (mset.sensor.shape, (n, 3)),
+        "robot": (mset.robot.shape, (n, 3)),
+        "time": (mset.time.shape, (n,)),
+        "lines": (len(mset.lines), (n,)),
+    }
+    for name, (got, want) in shapes.items():
+        got_shape = got if isinstance(got, tuple) else (got,)
+        if got_shape != want:
+            raise _error(source, None, name, f"has shape {got_shape}, expected {want} ({n} rows)")
+    for name, values in mset.extra.items():
+        if name == "" or name != name.strip():
+            raise _error(source, None, None, f"extra column name {name!r} is empty or has surrounding whitespace")
+        if name in STANDARD_COLUMNS:
+            raise _error(source, None, name, "an extra column cannot use the name of a standard column")
+        if len(values) != n:
+            raise _error(source, None, name, f"extra column has {len(values)} values, expected {n} (one per row)")
+
+    seen: dict[str, tuple[str, int]] = {}
+    for i in range(n):
+        line = mset.lines[i]
+        _check_row(
+            source,
+            line,
+            mset.ids[i],
+            mset.roles[i],
+            mset.sensor[i].tolist(),
+            mset.robot[i].tolist(),
+            float(mset.time[i]),
+        )
+        _check_same_role(source, line, mset.ids[i], mset.roles[i], seen)
+
+    reg_rows = mset.rows("registration")
+    reg = mset.points("registration")
+    last_line = max((mset.lines[i] for i in reg_rows), default=0) or header_line
+    if len(reg) < 3:
+        listed = f" ({_listed(reg.ids)})" if len(reg) else ""
+        raise _error(
+            source,
+            last_line,
+            "role",
+            f"{len(reg)} distinct registration point{'s' if len(reg) != 1 else ''}{listed}; at least 3 are needed "
+            "(rows with role registration or both), well spread and not on one line",
+        )
+    for frame, pts in (("sensor", reg.sensor), ("robot", reg.robot)):
+        try:
+            check_registration_points(pts, what=f"registration points ({frame} frame)")
+        except InputError as exc:
+            raise _registration_error(source, frame, reg, pts, last_line, exc) from None
+
+
+def _registration_error(source, frame, reg: PointGroup, pts, last_line, exc) -> InputError:
+    fieldname = f"{frame}_x/y/z"
+    d = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)
+    i, j = np.triu_indices(len(pts), k=1)
+    close = d[i, j] < COINCIDENT_MM
+    if np.any(close):
+        a, b = int(i[close][0]), int(j[close][0])
+        la, lb = reg.first_line[a], reg.first_line[b]
+        where_a = f" (line {la})" if la else ""
+        where_b = f" (line {lb})" if lb else ""
+        return _error(
+            source,
+            lb or last_line,
+            fieldname,
+            f"registration points {reg.ids[b]!r}{where_b} and {reg.ids[a]!r}{where_a} coincide in the {frame} frame "
+            f"(closer than {COINCIDENT_MM} mm); use distinct, well-spread registration points",
+        )
+    r2, _ = spread_ratios(pts)
+    if r2 < COLLINEAR_RATIO:
+        return _error(
+            source,
+            last_line,
+            fieldname,
+            f"registration points {_listed(reg.ids)} are collinear or nearly so in the {frame} frame "
+            f"(spread ratio sigma2/sigma1 = {r2:.2g} < {COLLINEAR_RATIO}): the rotation about their line is "
+            "undetermined; add a registration point off that line",
+        )
+    text = str(exc).replace("\n", " ")
+    return _error(source, last_line, fieldname, text)
+
+
+# --------------------------------------------------------------------------------------------------- writing
+
+
+def _cell(value: float) -> str:
+    v = float(value)
+    return "" if math.isnan(v) else repr(v)
+
+
+def write_measurements(path, mset: MeasurementSet, comments: Sequence[str] = ()) -> None:
+    """Validate `mset` and write it as a measurement file, atomically (temporary file + os.replace).
+
+    Columns: id, role, sensor_x..z, robot_x..z, time (only if some time is finite), then the extra columns in
+    their order. NaN is written as an empty cell, floats with repr() so a round trip is exact. Each comment
+    line is written as `# ...` at the top. OS errors (missing directory, no permission) raise InputError; on any
+    failure the destination is left untouched and the temporary file removed.
+    """
+    validate(mset)
+    dest = os.fspath(path)
+    if isinstance(dest, bytes):
+        dest = os.fsdecode(dest)
+    directory = os.path.dirname(os.path.abspath(dest))
+    base = os.path.basename(dest)
+    tmp = os.path.join(directory, f".{base}.{secrets.token_hex(6)}.tmp")
+    write_time = bool(np.any(np.isfinite(mset.time)))
+    header = ["id", "role", *SENSOR_COLUMNS, *ROBOT_COLUMNS] + (["time"] if write_time else []) + list(mset.extra)
+    try:
+        mode = os.stat(dest).st_mode & 0o7777 if os.path.exists(dest) else None
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except OSError as exc:
+        raise _error(dest, None, None, f"cannot write the file: {exc.strerror or exc}") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            for comment in comments:
+                for text in str(comment).splitlines() or [""]:
+                    fh.write(f"# {text}\n" if text else "#\n")
+            plain = csv.writer(fh, lineterminator="\n")
+            quoted = csv.writer(fh, lineterminator="\n", quoting=csv.QUOTE_ALL)
+            plain.writerow(header)
+            extra_values = list(mset.extra.values())
+            for i in range(len(mset.ids)):
+                row = [mset.ids[i], mset.roles[i]]
+                row += [_cell(v) for v in mset.sensor[i]]
+                row += [_cell(v) for v in mset.robot[i]]
+                if write_time:
+                    row.append(_cell(mset.time[i]))
+                row += [str(values[i]) for values in extra_values]
+                # A row whose id starts with '#' would read as a comment unless its first cell is quoted; csv
+                # quotes '\n' (the line terminator) but not a lone '\r', which readers take as a line break.
+                needs_quotes = row[0].lstrip().startswith("#") or any("\r" in cell for cell in row)
+                (quoted if needs_quotes else plain).writerow(row)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if mode is not None:
+            os.chmod(tmp, mode)
+        os.replace(tmp, dest)
+    except BaseException as exc:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        if isinstance(exc, OSError):
+            raise _error(dest, None, None, f"cannot write the file: {exc.strerror or exc}") from None
+        raise
