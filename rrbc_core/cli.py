@@ -196,10 +196,11 @@ def _table(result) -> str:
 
 def _cmd_correct(args) -> str:
     from rrbc_core.io.measurements import read_measurements
-    from rrbc_core.correction.pipeline import CorrectionOptions, correct_measurements
+    from rrbc_core.correction.pipeline import correct_measurements
+    from rrbc_core.methods import MethodOptions
 
     mset = read_measurements(args.measurements)
-    opts = CorrectionOptions(
+    opts = MethodOptions(
         registration=args.registration,
         interpolation=args.interpolation,
         neighbors=args.neighbors,

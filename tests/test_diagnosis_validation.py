@@ -25,7 +25,8 @@ from scipy.spatial.transform import Rotation
 from rrbc_core.analysis.diagnosis import diagnose
 from rrbc_core.simulation.errormodels import PointSet, Scale, SmoothField
 from rrbc_core.io.measurements import MeasurementSet
-from rrbc_core.correction.pipeline import CorrectionOptions, correct_measurements
+from rrbc_core.correction.pipeline import correct_measurements
+from rrbc_core.methods import MethodOptions
 
 SETS_PER_CLASS = 20
 MIN_AGREE = 18  # 9 in 10
@@ -71,7 +72,7 @@ def _agreements(biased: bool, base: int):
     for k in range(SETS_PER_CLASS):
         full, paired = _data_set(base + k, biased)
         rec = diagnose(paired).rrbc_recommended
-        summ = correct_measurements(full, CorrectionOptions()).summary()
+        summ = correct_measurements(full, MethodOptions()).summary()
         helped = summ["rmst_rrbc_mm"] < summ["rmst_rigid_mm"]
         agree.append(rec == helped)
     return agree

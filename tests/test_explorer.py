@@ -8,7 +8,8 @@ from rrbc_core import registration
 from rrbc_core.errors import InputError
 from rrbc_core.session.explorer import ExplorerSession, Settings, hull_edges
 from rrbc_core.io.measurements import read_measurements
-from rrbc_core.correction.pipeline import CorrectionOptions, correct_measurements
+from rrbc_core.correction.pipeline import correct_measurements
+from rrbc_core.methods import MethodOptions
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.io.scene import default_scene_path, load_scene
 
@@ -42,7 +43,7 @@ def test_export_reproduces_the_sessions_numbers_through_rrbc_correct(scene, tmp_
     ev = ses.move("targets", "H1", ses.layout["targets"].positions[0] + [3.0, -2.0, 0.0])
     f = tmp_path / "export.csv"
     write_measurements(f, ses.export_measurements())
-    out = correct_measurements(read_measurements(f), CorrectionOptions(interpolation="tps")).to_json()
+    out = correct_measurements(read_measurements(f), MethodOptions(interpolation="tps")).to_json()
     by_id = {c["id"]: c for c in out["checks"]}
     for i, pid in enumerate(ev.targets.ids):
         np.testing.assert_allclose(by_id[pid]["robot_rrbc"], ev.targets.robot_rrbc[i], atol=1e-9)

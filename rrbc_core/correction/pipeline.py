@@ -6,7 +6,7 @@ the measurement file (sensor_* sensor frame, robot_* robot frame).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -15,26 +15,14 @@ from rrbc_core.correction import metrics
 from rrbc_core import registration
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
+from rrbc_core.methods import SEEDED, MethodOptions
 from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.runtime.threads import thread_limited
 
 
-@dataclass(frozen=True)
-class CorrectionOptions:
-    """registration: a name in registration.STRATEGIES; interpolation: a name in interpolation.METHODS;
-    neighbors/power: IDW options (None = defaults k=4, p=2); seed: for annealing and clustering."""
-
-    registration: str = "least-squares"
-    interpolation: str = "idw"
-    neighbors: int | None = None
-    power: float | None = None
-    seed: int = 0
-    interpolation_options: dict = field(default_factory=dict)
-
-
 @dataclass(frozen=True, eq=False)
 class CorrectionResult:
-    options: CorrectionOptions
+    options: MethodOptions
     registration: registration.Registration
     fiducials: PointGroup
     fiducial_corrections: np.ndarray
@@ -59,11 +47,11 @@ class CorrectionResult:
         """The JSON object of `rrbc correct --json` (shared/spec/cli.md)."""
         reg = self.registration
         reg_json = {"method": reg.method, **reg.mapping.as_dict(), "fre_rms_mm": reg.fre_rms_mm}
-        if self.options.registration in ("annealing", "clustering"):
+        if self.options.registration in SEEDED:
             reg_json["seed"] = self.options.seed
         return {
             "registration": reg_json,
-            "interpolation": _interp_json(self.options),
+            "interpolation": self.options.interpolation_json(),
             "fiducials": [
                 {"id": i, "sensor": s.tolist(), "correction_mm": e.tolist()}
                 for i, s, e in zip(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections)
@@ -72,15 +60,6 @@ class CorrectionResult:
             "checks": _points_json(self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc),
             "summary": self.summary(),
         }
-
-
-def _interp_json(opt: CorrectionOptions) -> dict:
-    out = {"method": opt.interpolation}
-    if opt.interpolation == "idw":
-        out["neighbors"] = opt.neighbors if opt.neighbors is not None else interpolation.IDW().k
-        out["power"] = opt.power if opt.power is not None else interpolation.IDW().power
-    out.update(opt.interpolation_options)
-    return out
 
 
 def _points_json(group: PointGroup, corrected: CorrectedPoints | None, err_rigid=None, err_rrbc=None) -> list:
@@ -108,36 +87,13 @@ def _points_json(group: PointGroup, corrected: CorrectedPoints | None, err_rigid
     return rows
 
 
-def make_interpolator(options: CorrectionOptions):
-    name = options.interpolation
-    if name not in interpolation.METHODS:
-        raise InputError(f"unknown interpolation '{name}': choose one of {', '.join(interpolation.METHODS)}")
-    if name != "idw" and (options.neighbors is not None or options.power is not None):
-        raise InputError("--neighbors and --power apply to --interpolation idw only")
-    opts = dict(options.interpolation_options)
-    if name == "idw":
-        if options.neighbors is not None:
-            opts["k"] = options.neighbors
-        if options.power is not None:
-            opts["power"] = options.power
-    return interpolation.make_interpolator(name, **opts)
-
-
-def run_registration(options: CorrectionOptions, sensor, robot) -> registration.Registration:
-    if options.registration not in registration.STRATEGIES:
-        raise InputError(
-            f"unknown registration '{options.registration}': choose one of {', '.join(registration.STRATEGIES)}"
-        )
-    extra = {"seed": options.seed} if options.registration in ("annealing", "clustering") else {}
-    return registration.register(options.registration, sensor, robot, **extra)
-
-
 @thread_limited
-def correct_measurements(mset: MeasurementSet, options: CorrectionOptions = CorrectionOptions()) -> CorrectionResult:
+def correct_measurements(mset: MeasurementSet, options: MethodOptions | None = None) -> CorrectionResult:
     """Run RRBC on a measurement set (all nine steps) and score any check points against their truth."""
-    method = make_interpolator(options)  # validate options before any work
+    options = MethodOptions() if options is None else options
+    method = options.interpolator()
     reg_pts = mset.points("registration")
-    reg = run_registration(options, reg_pts.sensor, reg_pts.robot)
+    reg = options.register(reg_pts.sensor, reg_pts.robot)
     fid = mset.points("fiducial")
     targets = mset.points("target")
     checks = mset.points("check")

@@ -488,6 +488,17 @@ STRATEGIES = {
 }
 
 
+#: The options each strategy takes by name besides its seed (`methods.SEEDED`), in `register` and in the batch
+#: kernels (`simulation.batch.rrbc_batch`). From Python, `annealing` also takes `initial` (a Registration).
+STRATEGY_OPTIONS = {
+    "least-squares": ("weights",),
+    "three-point": (),
+    "combinatorial": ("average", "degeneracy_ratio"),
+    "annealing": ("iterations", "cooling_c"),
+    "clustering": ("clusters", "average"),
+}
+
+
 @thread_limited
 def register(method: str, sensor, robot, **options) -> Registration:
     """Run the named strategy (one of STRATEGIES)."""

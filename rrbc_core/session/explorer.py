@@ -40,6 +40,7 @@ from rrbc_core import interpolation
 from rrbc_core.correction import metrics
 from rrbc_core import registration
 from rrbc_core.errors import InputError
+from rrbc_core.methods import MethodOptions
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.runtime.threads import thread_limited
 
@@ -66,10 +67,6 @@ class Settings:
     excluded: frozenset = frozenset()
 
     def __post_init__(self):
-        if self.registration not in registration.STRATEGIES:
-            raise InputError(f"unknown registration '{self.registration}': choose one of {', '.join(registration.STRATEGIES)}")
-        if self.interpolation not in interpolation.METHODS:
-            raise InputError(f"unknown interpolation '{self.interpolation}': choose one of {', '.join(interpolation.METHODS)}")
         for name in ("noise_scale", "bias_scale", "smoothing"):
             v = getattr(self, name)
             if not np.isfinite(v) or v < 0:
@@ -77,13 +74,18 @@ class Settings:
         if int(self.neighbors) < 1 or not self.power > 0:
             raise InputError("neighbors must be >= 1 and power > 0")
         object.__setattr__(self, "excluded", frozenset(self.excluded))
+        self.method  # noqa: B018 - validates the names and the chosen method's options
+
+    @property
+    def method(self) -> MethodOptions:
+        """The registration and interpolation chosen, with the options of the chosen interpolation only."""
+        idw, tps = self.interpolation == "idw", self.interpolation == "tps"
+        return MethodOptions(registration=self.registration, interpolation=self.interpolation,
+                             neighbors=int(self.neighbors) if idw else None, power=float(self.power) if idw else None,
+                             smoothing=float(self.smoothing) if tps else None, seed=int(self.seed))
 
     def interpolator(self):
-        if self.interpolation == "idw":
-            return interpolation.IDW(k=int(self.neighbors), power=float(self.power))
-        if self.interpolation == "tps":
-            return interpolation.TPS(smoothing=float(self.smoothing))
-        return interpolation.make_interpolator(self.interpolation)
+        return self.method.interpolator()
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,8 +206,7 @@ class ExplorerSession:
         truth = np.vstack([np.full((len(tgt.ids), 3), np.nan), chk.robot.reshape(-1, 3)])
         for i, pid in enumerate(ids):
             readings[("targets", pid)] = (sensor[i], np.full(3, np.nan), truth[i])
-        reg_map = registration.register(settings.registration, reg.sensor, reg.robot,
-                                        **_reg_options(settings))
+        reg_map = settings.method.register(reg.sensor, reg.robot)
         layout = {
             "registration": Group(tuple(reg.ids), np.array(reg.robot, float)),
             "fiducials": Group(tuple(fid.ids), np.array(fid.robot, float)),
@@ -336,7 +337,7 @@ class ExplorerSession:
         fid_r = self._readings_for("fiducials")
         tgt_r = self._readings_for("targets")
         reg = self._cached("registration", (s.registration, s.seed, reg_r.sensor.tobytes(), reg_r.robot.tobytes()),
-                           lambda: registration.register(s.registration, reg_r.sensor, reg_r.robot, **_reg_options(s)))
+                           lambda: s.method.register(reg_r.sensor, reg_r.robot))
         fids = self.layout["fiducials"]
         included = np.array([pid not in s.excluded for pid in fids.ids], dtype=bool)
         corr = np.full((len(fids.ids), 3), np.nan)
@@ -663,8 +664,7 @@ class ExplorerSession:
                         error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale), joint_seed=sc.joint_seed,
                         distance_origin=np.asarray(sc.distance_origin, float))
         m = measure(cell, rng, trials)
-        opts = {"k": int(s.neighbors), "power": float(s.power)} if s.interpolation == "idw" else (
-            {"smoothing": float(s.smoothing)} if s.interpolation == "tps" else {})
+        opts = s.method.interpolation_kwargs()
         e = trial_errors(cell, m, s.registration, s.interpolation,
                          seeds=rng.integers(0, 2**31 - 1, trials), **opts)
         chk = cell.index("check")
@@ -703,13 +703,10 @@ class ExplorerSession:
     @thread_limited
     def export_json(self) -> dict:
         """Results as `rrbc correct --json` would give them for `export_measurements()`, plus the settings."""
-        from rrbc_core.correction.pipeline import CorrectionOptions, correct_measurements
+        from rrbc_core.correction.pipeline import correct_measurements
 
         s = self.settings
-        opts = CorrectionOptions(registration=s.registration, interpolation=s.interpolation,
-                                 neighbors=int(s.neighbors) if s.interpolation == "idw" else None,
-                                 power=float(s.power) if s.interpolation == "idw" else None, seed=s.seed,
-                                 interpolation_options={"smoothing": s.smoothing} if s.interpolation == "tps" else {})
+        opts = s.method
         out = correct_measurements(self.export_measurements(), opts).to_json()
         out["settings"] = {**dataclasses.asdict(s), "excluded": sorted(s.excluded)}
         out["source"] = {"kind": self.kind, "name": self.name}
@@ -821,10 +818,6 @@ def _feature_edges(hull, edges):
 
 def _display_rotation(mapping) -> np.ndarray:
     return np.asarray(mapping.rotation, float)
-
-
-def _reg_options(s: Settings) -> dict:
-    return {"seed": int(s.seed)} if s.registration in ("annealing", "clustering") else {}
 
 
 @dataclass(frozen=True)

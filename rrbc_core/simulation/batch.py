@@ -64,6 +64,7 @@ from scipy.spatial import cKDTree
 
 from rrbc_core.geometry import points as geometry
 from rrbc_core import registration
+from rrbc_core.registration import STRATEGY_OPTIONS
 from rrbc_core import interpolation as interp_mod
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation import EXACT_MM
@@ -73,14 +74,6 @@ from rrbc_core.geometry.transforms import project_to_so3
 
 #: Elements per temporary array: trials are processed in chunks so memory stays bounded (and in cache).
 _CHUNK_ELEMENTS = 250_000
-#: Registration options accepted by rrbc_batch, per strategy (as in the core functions).
-_REG_OPTIONS = {
-    "least-squares": ("weights",),
-    "three-point": (),
-    "combinatorial": ("average", "degeneracy_ratio"),
-    "annealing": ("iterations", "cooling_c"),
-    "clustering": ("clusters", "average"),
-}
 #: Annealing chains advanced in lockstep per group (bounds memory; larger groups amortise Python overhead).
 _ANNEALING_GROUP = 1024
 _HULL_MODES = ("mean", "trial", "none")
@@ -738,14 +731,14 @@ def rrbc_batch(
     (None for the piecewise 'clustering'); rigid: whether `matrix` is a rotation in every trial.
     """
     reg_name = str(registration).strip().lower()
-    if reg_name not in _REG_OPTIONS:
-        raise InputError(f"unknown registration '{registration}': choose one of {', '.join(_REG_OPTIONS)}")
+    if reg_name not in STRATEGY_OPTIONS:
+        raise InputError(f"unknown registration '{registration}': choose one of {', '.join(STRATEGY_OPTIONS)}")
     interp_name = str(interpolation).strip().lower()
     method = interp_mod.make_interpolator(interp_name, **interp_options)  # validates name and options
     options = dict(registration_options or {})
-    unknown = sorted(set(options) - set(_REG_OPTIONS[reg_name]))
+    unknown = sorted(set(options) - set(STRATEGY_OPTIONS[reg_name]))
     if unknown:
-        takes = ", ".join(_REG_OPTIONS[reg_name]) or "no options"
+        takes = ", ".join(STRATEGY_OPTIONS[reg_name]) or "no options"
         raise InputError(f"registration '{reg_name}' does not take option(s) {', '.join(unknown)}; it takes: {takes}")
     if hull not in _HULL_MODES:
         raise InputError(f"unknown hull mode {hull!r}: choose one of {', '.join(_HULL_MODES)}")

@@ -23,13 +23,14 @@ import numpy as np
 from rrbc_core.simulation import batch
 from rrbc_core.correction import metrics
 from rrbc_core.simulation.errormodels import ErrorModel, PointSet
+from rrbc_core import interpolation, registration
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.geometry.transforms import RigidTransform
 
-STRATEGY_NAMES = ("least-squares", "three-point", "combinatorial", "annealing", "clustering")
-INTERPOLATION_NAMES = ("idw", "linear", "tps", "gp", "none")
+STRATEGY_NAMES = tuple(registration.STRATEGIES)  # the registries' names, in their order
+INTERPOLATION_NAMES = tuple(interpolation.METHODS)
 
 
 @dataclass(frozen=True, eq=False)
