@@ -292,16 +292,14 @@ class _Readings:
 
 
 def _readings(cell) -> _Readings:
+    """Bias-only readings of the cell's points and their noise covariances, through the measurement model."""
+    model = cell.measurement_model()
     pts = cell.point_set()
-    model = cell.error_model
-    det, rnd = model.deterministic(), model.random_terms()
-    rng = np.random.default_rng(0)  # deterministic terms draw nothing
-    bias_r = det.sample(pts, "robot", rng, 1)[0]
-    bias_s = det.sample(pts, "sensor", rng, 1)[0]
+    r = model.read(pts)
     rot = cell.sensor_to_robot.rotation
-    cov_s = np.einsum("ab,pbc,dc->pad", rot, rnd.covariance(pts, "sensor"), rot)
-    cov_r = rnd.covariance(pts, "robot")
-    return _Readings(pts.sensor + bias_s, pts.robot + bias_r, pts.robot + bias_r, cov_s + cov_r, cov_s)
+    sensor_cov, robot_cov = model.noise_covariance(pts)
+    cov_s = np.einsum("ab,pbc,dc->pad", rot, sensor_cov, rot)
+    return _Readings(r.sensor[0], r.robot[0], r.truth, cov_s + robot_cov, cov_s)
 
 
 @dataclass(frozen=True, eq=False)

@@ -41,6 +41,7 @@ from rrbc_core.correction import metrics
 from rrbc_core import registration
 from rrbc_core.errors import InputError
 from rrbc_core.methods import MethodOptions
+from rrbc_core.simulation.measurement import MeasurementModel
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.runtime.threads import thread_limited
 
@@ -216,41 +217,33 @@ class ExplorerSession:
                    readings=readings, mesh_path=mesh_path)
 
     # ------------------------------------------------------------------------------------------- measuring
+    def measurement_model(self) -> MeasurementModel:
+        """Scene mode: the scene's measurement model with the bias and noise sizes of the settings."""
+        sc, s = self.scene, self.settings
+        return MeasurementModel(self.sensor_to_robot, sc.error_model, sc.joint_seed, s.bias_scale, s.noise_scale)
+
     def _measure_scene(self, kind: str, ids, positions, noise: bool = True) -> Readings:
-        """Scene mode: readings of points at `positions` (robot frame), noise seeded per id, scaled by settings
-        (noise=False: the expected readings, bias only)."""
+        """Scene mode: readings of points at `positions` (robot frame) through the measurement model, the noise of
+        each point drawn from a generator seeded by (seed, kind, id) (noise=False: the expected readings, bias
+        only)."""
         from rrbc_core.simulation.errormodels import PointSet
         from rrbc_core.simulation.kinematics import tool_down
 
-        s = self.settings
-        sc = self.scene
+        model = self.measurement_model()
         positions = np.asarray(positions, float).reshape(-1, 3)
         n = len(positions)
-        t_true = self.sensor_to_robot
-        yaw = np.full(n, sc.tool_yaw_deg)
-        pts = PointSet(robot=positions, sensor=t_true.apply_inverse(positions),
-                       time=np.zeros(n), tool_rotation=np.array([tool_down(y) for y in yaw]).reshape(n, 3, 3),
-                       joint_seed=sc.joint_seed)
-        model = sc.error_model
-        det = model.deterministic()
-        rnd = model.random_terms()
-        bias_r = det.sample(pts, "robot", None, 1)[0] if det.robot else np.zeros((n, 3))
-        bias_s = det.sample(pts, "sensor", None, 1)[0] if det.sensor else np.zeros((n, 3))
-        noise_r = np.zeros((n, 3))
-        noise_s = np.zeros((n, 3))
+        pts = model.points(positions, np.array([tool_down(self.scene.tool_yaw_deg)] * n).reshape(n, 3, 3))
+        noise_s, noise_r = np.zeros((1, n, 3)), np.zeros((1, n, 3))
+        rnd = model.error_model.random_terms()
         if noise and (rnd.robot or rnd.sensor):
             for i, pid in enumerate(ids):
                 one = PointSet(robot=positions[i:i + 1], sensor=pts.sensor[i:i + 1], time=np.zeros(1),
-                               tool_rotation=pts.tool_rotation[i:i + 1], joint_seed=sc.joint_seed)
-                rng = np.random.default_rng(_seed_for(s.seed, f"{kind}:{pid}"))
-                if rnd.sensor:
-                    noise_s[i] = rnd.sample(one, "sensor", rng, 1)[0, 0]
-                if rnd.robot:
-                    noise_r[i] = rnd.sample(one, "robot", rng, 1)[0, 0]
-        sensor = pts.sensor + s.bias_scale * bias_s + s.noise_scale * noise_s
-        robot = positions + s.bias_scale * bias_r + s.noise_scale * noise_r
-        truth = positions + s.bias_scale * bias_r
-        return Readings(sensor, robot, truth)
+                               tool_rotation=pts.tool_rotation[i:i + 1], joint_seed=pts.joint_seed)
+                rng = np.random.default_rng(_seed_for(self.settings.seed, f"{kind}:{pid}"))
+                e_s, e_r = model.noise(one, rng, 1)
+                noise_s[0, i], noise_r[0, i] = e_s[0, 0], e_r[0, 0]
+        r = model.read(pts, noise=(noise_s, noise_r))
+        return Readings(r.sensor[0], r.robot[0], r.truth)
 
     def _readings_for(self, kind: str) -> Readings:
         g = self.layout[kind]

@@ -23,6 +23,7 @@ import numpy as np
 from rrbc_core.simulation import batch
 from rrbc_core.correction import metrics
 from rrbc_core.simulation.errormodels import ErrorModel, PointSet
+from rrbc_core.simulation.measurement import MeasurementModel
 from rrbc_core import interpolation, registration
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
@@ -64,14 +65,11 @@ class WorkCell:
         """(P, 3) the true points in the sensor frame, mm."""
         return self.sensor_to_robot.apply_inverse(self.robot)
 
+    def measurement_model(self) -> MeasurementModel:
+        return MeasurementModel(self.sensor_to_robot, self.error_model, self.joint_seed)
+
     def point_set(self) -> PointSet:
-        return PointSet(
-            robot=self.robot,
-            sensor=self.sensor_truth,
-            time=self.time,
-            tool_rotation=self.tool_rotation,
-            joint_seed=self.joint_seed,
-        )
+        return self.measurement_model().points(self.robot, self.tool_rotation, self.time)
 
 
 def work_cell_from_scene(scene, seed: int | None = None, checks_per_target: int | None = None,
@@ -160,18 +158,15 @@ class Measured:
 
 @thread_limited
 def measure(cell: WorkCell, rng: np.random.Generator, trials: int = 1) -> Measured:
-    """Simulate `trials` independent measurement sessions of the cell (bias fixed, noise redrawn)."""
+    """Simulate `trials` independent measurement sessions of the cell (bias fixed, noise redrawn), through the
+    measurement model (`measurement.MeasurementModel`)."""
     if trials < 1:
         raise InputError(f"trials must be >= 1, got {trials}")
+    model = cell.measurement_model()
     pts = cell.point_set()
-    det, rnd = cell.error_model.deterministic(), cell.error_model.random_terms()
-    bias_r = det.sample(pts, "robot", rng, 1)
-    bias_s = det.sample(pts, "sensor", rng, 1)
-    sensor = pts.sensor[None] + bias_s + rnd.sample(pts, "sensor", rng, trials)
-    robot = pts.robot[None] + bias_r + rnd.sample(pts, "robot", rng, trials)
-    truth = pts.robot + np.broadcast_to(bias_r, (1,) + pts.robot.shape)[0]
-    return Measured(np.ascontiguousarray(np.broadcast_to(sensor, (trials,) + pts.sensor.shape)),
-                    np.ascontiguousarray(np.broadcast_to(robot, (trials,) + pts.robot.shape)), truth)
+    r = model.read(pts, noise=model.noise(pts, rng, trials))
+    return Measured(np.ascontiguousarray(np.broadcast_to(r.sensor, (trials,) + pts.sensor.shape)),
+                    np.ascontiguousarray(np.broadcast_to(r.robot, (trials,) + pts.robot.shape)), r.truth)
 
 
 def measurement_set(cell: WorkCell, measured: Measured, trial: int = 0) -> MeasurementSet:
