@@ -80,6 +80,7 @@ import numpy as np
 
 from rrbc_core.simulation import batch
 from rrbc_core.errors import InputError
+from rrbc_core.geometry.points import as_points
 from rrbc_core.interpolation import hull_flags
 from rrbc_core.runtime.threads import thread_limited
 
@@ -190,19 +191,7 @@ class PlanResult:
 # Coverage
 # ------------------------------------------------------------------------------------------------------
 def _points(x, what: str) -> np.ndarray:
-    try:
-        p = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"{what} must be numbers (scene frame, mm)") from None
-    if p.size == 0:
-        return np.zeros((0, 3))
-    if p.ndim == 1 and p.shape == (3,):
-        p = p[None]
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise InputError(f"{what} must be an (N, 3) array of positions (scene frame, mm), got shape {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise InputError(f"{what} contain a non-finite coordinate (NaN or infinity)")
-    return p
+    return as_points(x, what, single=True, frame="scene frame, mm")
 
 
 def _covered(fiducials: np.ndarray, samples: np.ndarray) -> np.ndarray:

@@ -38,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.geometry.points import as_points
 
 # H (6x6, after centring and scaling) is treated as singular when its smallest eigenvalue is below this
 # fraction of its largest. For uniform weights the rotational eigenvalues are N f_k² / s², so this is the
@@ -60,12 +61,7 @@ def _finite_array(x, what: str) -> np.ndarray:
 
 
 def _points(x, what: str, allow_empty: bool = False) -> np.ndarray:
-    a = _finite_array(x, what)
-    if a.ndim != 2 or a.shape[1] != 3:
-        raise InputError(f"{what} must be an N x 3 array of coordinates (mm), got shape {a.shape}")
-    if not allow_empty and len(a) == 0:
-        raise InputError(f"{what} are empty: at least one point is needed")
-    return a
+    return as_points(x, what, empty=allow_empty)
 
 
 def _fiducials(x) -> np.ndarray:

@@ -29,13 +29,39 @@ SUBSET_DEGENERACY_RATIO = 0.05
 PLANAR_RATIO = 0.02
 
 
-def as_points(points, what: str = "points") -> np.ndarray:
-    """Validate and return an (N, 3) float array with finite values."""
-    p = np.asarray(points, dtype=float)
+def as_points(points, what: str = "points", *, single: bool = False, empty: bool = True, minimum: int = 0,
+              frame: str = "mm") -> np.ndarray:
+    """The one point validator: `points` as an (N, 3) float array of finite coordinates, or InputError.
+
+    Parameters
+    ----------
+    points : array_like
+        (N, 3) coordinates; with ``single=True`` one (3,) point is accepted and returned as (1, 3).
+    what : str
+        What the points are, for the message ("fiducial positions").
+    empty : bool
+        Whether no points at all (an empty array of any shape) is allowed; it is returned as (0, 3).
+    minimum : int
+        The least number of points.
+    frame : str
+        The frame and unit named in the message ("mm", "robot frame, mm").
+    """
+    try:
+        p = np.asarray(points, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be numbers ({frame})") from None
+    if p.size == 0 and p.ndim <= 2 and (p.ndim < 2 or p.shape[-1] in (0, 3)):
+        if not empty or minimum > 0:
+            raise InputError(f"{what} are empty: at least {max(minimum, 1)} point(s) needed")
+        return np.zeros((0, 3))
+    if single and p.shape == (3,):
+        p = p[None, :]
     if p.ndim != 2 or p.shape[1] != 3:
-        raise InputError(f"{what} must be an N x 3 array of coordinates (mm), got shape {p.shape}")
+        raise InputError(f"{what} must be an N x 3 array of coordinates ({frame}), got shape {p.shape}")
     if not np.all(np.isfinite(p)):
         raise InputError(f"{what} contain a non-finite coordinate (NaN or infinity)")
+    if len(p) < minimum:
+        raise InputError(f"{what}: {len(p)} given, at least {minimum} needed")
     return p
 
 

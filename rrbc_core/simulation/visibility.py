@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.geometry.points import as_points
 
 
 def _mesh_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -27,12 +28,7 @@ def _mesh_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _points(points, what: str = "points") -> np.ndarray:
-    p = np.asarray(points, dtype=float)
-    if p.ndim == 1 and p.shape == (3,):
-        p = p[None, :]
-    if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
-        raise InputError(f"visibility: {what} must be finite (P, 3) coordinates, got shape {np.shape(points)}")
-    return p
+    return as_points(points, f"visibility: {what}", single=True, frame="robot frame, mm")
 
 
 def _origin(sensor_origin) -> np.ndarray:
