@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rrbc_core.simulation import batch
+from rrbc_core.simulation import batch, batch_checks, batch_registration
 from rrbc_core import interpolation
 from rrbc_core import registration
 from rrbc_core.errors import InputError
@@ -163,8 +163,8 @@ def test_annealing_batch_equals_loop(layout):
 def test_annealing_batch_from_a_rigid_start_and_in_small_blocks(monkeypatch):
     """initial=(R, t) from least squares equals annealing(initial=least_squares(...)); proposals drawn in
     blocks and chains run in groups (both forced small here) give the same streams as the core's one draw."""
-    monkeypatch.setattr(batch, "_CHUNK_ELEMENTS", 100)
-    monkeypatch.setattr(batch, "_ANNEALING_GROUP", 2)  # groups of 2 and 1 chains
+    monkeypatch.setattr(batch_checks, "_CHUNK_ELEMENTS", 100)
+    monkeypatch.setattr(batch_registration, "_ANNEALING_GROUP", 2)  # groups of 2 and 1 chains
     c = _cell(seed=9, trials=3)
     s, b = c["reg_s"], c["reg_b"]
     r0, t0 = batch.least_squares_batch(s, b)
@@ -231,7 +231,7 @@ def test_idw_batch_query_on_fiducials_closer_than_exact_mm():
 
 
 def test_idw_batch_in_small_chunks(monkeypatch):
-    monkeypatch.setattr(batch, "_CHUNK_ELEMENTS", 50)
+    monkeypatch.setattr(batch_checks, "_CHUNK_ELEMENTS", 50)
     c = _cell(seed=22, trials=7)
     corr = np.random.default_rng(0).normal(size=c["fid_s"].shape)
     out = batch.idw_batch(c["fid_s"], corr, c["query"][0])  # (M, 3) queries shared by the trials
@@ -386,7 +386,7 @@ def test_subset_screen_decides_like_the_core_svd():
     triples = np.einsum("kij,kj,kjl->kil", u, sv, vt) + base.mean(axis=1, keepdims=True)
     expected = points_mod.collinear_ratio_batch(triples) >= 0.05
     assert 0 < expected.sum() < k
-    np.testing.assert_array_equal(batch._subset_ok(triples, 0.05), expected)
+    np.testing.assert_array_equal(batch_registration._subset_ok(triples, 0.05), expected)
 
 
 def test_registration_points_near_the_collinearity_limit():
