@@ -145,7 +145,7 @@ def plan_optimiser(quick: bool) -> list[dict]:
     greedy + exchange with one set scored per call (`_OneSetPerCall`) on the same precomputed model. Both must
     choose the same candidates. Idle machine (a comparison of two implementations)."""
     from rrbc_core.analysis import planning
-    from rrbc_core.io.scene import load_scene
+    from rrbc_core.io.scene_toml import load_scene
 
     sys.path.insert(0, str(ROOT / "scripts"))
     from plan_confirm import candidate_grid

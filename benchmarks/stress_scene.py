@@ -50,7 +50,7 @@ def write_stress_scene(directory) -> Path:
 def check_stress_scene(path) -> None:
     """Raise AssertionError unless the stress scene has the demo's error model, robot and sensor, 200 fiducials
     and 50 targets (what the benchmark's notes claim)."""
-    from rrbc_core.io.scene import load_scene
+    from rrbc_core.io.scene_toml import load_scene
 
     demo, stress = load_scene(DEMO), load_scene(path)
     assert repr(stress.error_model) == repr(demo.error_model), "the stress scene lost the demo's error model"

@@ -53,7 +53,8 @@ def blas_pool_when_busy(quick: bool) -> list[dict]:
 
     from rrbc_core.analysis import planning
     from rrbc_core.runtime import threads
-    from rrbc_core.io.scene import default_scene_path, load_scene
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_core.io.scene_toml import load_scene
 
     cores = os.cpu_count() or 1
     if cores <= threads.THREADS:

@@ -267,7 +267,7 @@ def _cmd_simulate(args) -> str:
 
     from rrbc_core.io.measurements import write_measurements
     from rrbc_core.runtime.progress import ProgressBar
-    from rrbc_core.io.scene import load_scene
+    from rrbc_core.io.scene_toml import load_scene
     from rrbc_core.simulation.montecarlo import (INTERPOLATION_NAMES, STRATEGY_NAMES, icp_statistics, measure, measurement_set,
                              monte_carlo, work_cell_from_scene)
 
@@ -336,7 +336,7 @@ def _plan_table(res) -> str:
 def _cmd_plan(args) -> str:
     from rrbc_core.analysis.planning import plan
     from rrbc_core.runtime.progress import ProgressBar
-    from rrbc_core.io.scene import load_scene
+    from rrbc_core.io.scene_toml import load_scene
 
     scene = load_scene(args.scene)
     bar = ProgressBar(2 * args.add + 2, "planning")

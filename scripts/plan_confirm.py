@@ -27,7 +27,8 @@ sys.path.insert(0, str(ROOT))
 
 from rrbc_core.analysis import planning
 from rrbc_core.simulation.errormodels import ErrorModel, Kinematic
-from rrbc_core.io.scene import NamedPoints, load_scene
+from rrbc_core.io.scene import NamedPoints
+from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.runtime.threads import apply_process_policy
 
 SCENES = ("demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell")

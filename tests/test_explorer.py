@@ -11,7 +11,8 @@ from rrbc_core.io.measurements import read_measurements
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.methods import MethodOptions
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
-from rrbc_core.io.scene import default_scene_path, load_scene
+from rrbc_core.io.scene import default_scene_path
+from rrbc_core.io.scene_toml import load_scene
 
 EXAMPLE = default_scene_path().parents[1] / "rrbc_core" / "data" / "example_measurements.csv"
 

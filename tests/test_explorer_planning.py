@@ -11,7 +11,8 @@ from rrbc_core.analysis import planning
 from rrbc_core.errors import InputError
 from rrbc_core.session.explorer import ExplorerSession, Settings
 from rrbc_core.io.measurements import read_measurements
-from rrbc_core.io.scene import default_scene_path, load_scene
+from rrbc_core.io.scene import default_scene_path
+from rrbc_core.io.scene_toml import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "rrbc_core" / "data" / "example_measurements.csv"

@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 from scipy.spatial import Delaunay, QhullError
 from scipy.spatial.transform import Rotation
 
-from rrbc_core import interpolation as interp
 from rrbc_core.interpolation import gp as gp_module
 from rrbc_core.interpolation import hull as hull_module
 from rrbc_core.interpolation import linear as linear_module

@@ -29,7 +29,8 @@ from rrbc_core.analysis import planning
 from rrbc_core.cli import main
 from rrbc_core.simulation.errormodels import ErrorModel, IsotropicNoise
 from rrbc_core.errors import InputError
-from rrbc_core.io.scene import Region, load_scene
+from rrbc_core.io.scene import Region
+from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.simulation.visibility import visible_points
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from rrbc_core.errors import InputError
-from rrbc_core.io.scene import Region, Scene, default_scene_path, load_scene, sensor_pose
+from rrbc_core.io.scene import Region, Scene, default_scene_path, sensor_pose
+from rrbc_core.io.scene_toml import load_scene
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 SHIPPED = ("demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell")

@@ -97,7 +97,7 @@ def test_library_call_limits_pools_only_while_it_runs():
     """From a notebook: the call runs single-threaded and the user's pool sizes come back afterwards."""
     res = _run(f"""
         from rrbc_core.analysis import planning
-        from rrbc_core.io.scene import load_scene
+        from rrbc_core.io.scene_toml import load_scene
         recording(planning, "_predict_fast")
         scene = load_scene({str(DEMO)!r})
         planning.predict_rmst(scene, scene.fiducials.positions)

@@ -12,7 +12,7 @@ import trimesh
 from rrbc_core.simulation.cloud_registration import icp_registration, pinhole_directions, simulate_cloud
 from rrbc_core.errors import InputError
 from rrbc_core.registration.strategies import Registration
-from rrbc_core.io.scene import load_scene
+from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.geometry.transforms import RigidTransform, rotation_from_rotvec
 from rrbc_core.simulation.visibility import inside_solids, occluded_by, visible_points
 
