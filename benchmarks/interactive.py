@@ -144,7 +144,7 @@ def plan_optimiser(quick: bool) -> list[dict]:
     candidate grid, scripts/plan_confirm.py: candidate_grid), vectorised over candidate sets, against the same
     greedy + exchange with one set scored per call (`_OneSetPerCall`) on the same precomputed model. Both must
     choose the same candidates. Idle machine (a comparison of two implementations)."""
-    from rrbc_core.analysis import planning
+    from rrbc_core.analysis import planning, planning_search
     from rrbc_core.io.scene_toml import load_scene
 
     sys.path.insert(0, str(ROOT / "scripts"))
@@ -158,13 +158,13 @@ def plan_optimiser(quick: bool) -> list[dict]:
     base = scene.fiducials.positions
     cand = scene.candidates.positions[mask]
     cand = cand[np.min(np.linalg.norm(cand[:, None] - base[None], axis=2), axis=1) > 1e-6]
-    pool = planning._pool(scene, base, cand, planning.SAMPLES_PER_TARGET, 0)
-    t_vec, (chosen_v, evals) = best_time(lambda: planning._optimise(pool, len(cand), 4), 1 if quick else 3)
-    t_set, (chosen_s, _) = best_time(lambda: planning._optimise(_OneSetPerCall(pool), len(cand), 4), 1)
+    pool = planning_search._pool(scene, base, cand, planning.SAMPLES_PER_TARGET, 0)
+    t_vec, (chosen_v, evals) = best_time(lambda: planning_search._optimise(pool, len(cand), 4), 1 if quick else 3)
+    t_set, (chosen_s, _) = best_time(lambda: planning_search._optimise(_OneSetPerCall(pool), len(cand), 4), 1)
     assert list(chosen_v) == list(chosen_s), "vectorised and per-set search chose different candidates"
     note = (f"{len(cand)} usable candidates, {evals} sets scored; chose {', '.join(res.suggested_ids)}; "
             f"predicted RRBC RMST {res.predicted.rrbc_mm:.4f} -> {res.predicted_after.rrbc_mm:.4f} mm; "
-            "value: planning._optimise (sets scored in vectorised chunks); baseline: the same search scoring one "
+            "value: planning_search._optimise (sets scored in vectorised chunks); baseline: the same search scoring one "
             "set per call; both on the same precomputed model")
     return [row("plan_optimiser_4_of_125", t_vec, "s", baseline=t_set, note=note)]
 

@@ -1,0 +1,324 @@
+"""The planner's prediction model (`planning.predict_rmst`): a planned cell's bias-only readings through the measurement
+model, the least-squares fit and its sensitivities, IDW weights, and the predicted RMST — bias exact, noise to first
+order — evaluated for many fiducial sets at once; and the Monte Carlo check of it. The method: `planning`."""
+
+from __future__ import annotations
+import dataclasses
+from dataclasses import dataclass
+import numpy as np
+from rrbc_core.simulation import batch
+from rrbc_core.errors import InputError
+from rrbc_core.geometry.points import as_points
+from rrbc_core.interpolation import hull_flags
+
+
+#: A sample within this distance (mm) of a coplanar fiducial set's plane (and inside its polygon) is covered.
+COPLANAR_TOL_MM = 1.0
+
+
+#: Check points sampled per target region for the prediction (the app calls it on every drag: keep it small).
+SAMPLES_PER_TARGET = 32
+
+
+#: IDW options of the RRBC prediction (the defaults of `rrbc simulate`, `rrbc correct` and the explorer).
+IDW_K = 4
+
+
+IDW_POWER = 2.0
+
+
+#: Central-difference step (mm) for the registration sensitivities.
+_FD_STEP_MM = 1e-3
+
+
+#: Positions closer than this (mm) are the same physical point (as `scene.SAME_POINT_TOL_MM`).
+_SAME_MM = 1e-6
+
+
+#: Fiducial sets evaluated per vectorised call (keeps the temporaries in cache).
+_SETS_PER_CHUNK = 16
+
+
+# ------------------------------------------------------------------------------------------------------
+# Results
+# ------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RmstPrediction:
+    """Predicted RMS target error (mm) over the targets' regions of variability, rigid and with RRBC.
+
+    rigid_mm: RMST with rigid (least-squares) registration only; rigid_std_mm its 1-sigma uncertainty.
+    rrbc_mm: RMST after RRBC with IDW (k=4, p=2); rrbc_std_mm its 1-sigma uncertainty.
+    method: "first-order" (noise by first-order formulas + the exact deterministic bias) or "monte-carlo".
+    Meaning of the std: module docstring.
+    """
+
+    rigid_mm: float
+    rigid_std_mm: float
+    rrbc_mm: float
+    rrbc_std_mm: float
+    method: str
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+# ------------------------------------------------------------------------------------------------------
+# Coverage
+# ------------------------------------------------------------------------------------------------------
+def _points(x, what: str) -> np.ndarray:
+    return as_points(x, what, single=True, frame="scene frame, mm")
+
+
+def _covered(fiducials: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """Bool per sample: inside the fiducials' hull (coplanar: inside the polygon and within COPLANAR_TOL_MM)."""
+    if len(fiducials) < 3 or len(samples) == 0:
+        return np.zeros(len(samples), dtype=bool)
+    extrapolated, off = hull_flags(fiducials, samples)
+    return ~extrapolated & (off <= COPLANAR_TOL_MM)
+
+
+# ------------------------------------------------------------------------------------------------------
+# The prediction model
+# ------------------------------------------------------------------------------------------------------
+def _named(scene, positions: np.ndarray, kind: str):
+    """NamedPoints for planned positions: the id of a registration point / fiducial / candidate at the same
+    place (so a fiducial on a registration point is ONE physical point, role `both`), else PLAN-<k>."""
+    from rrbc_core.io.scene import NamedPoints
+
+    pools = [scene.registration] + ([scene.fiducials, scene.candidates] if kind == "fiducial" else [])
+    ids = []
+    for k, p in enumerate(positions):
+        pid = f"{'PLAN' if kind == 'fiducial' else 'REG'}-{k + 1}"
+        for pool in pools:
+            if len(pool):
+                d = np.linalg.norm(pool.positions - p, axis=1)
+                j = int(np.argmin(d))
+                if d[j] <= _SAME_MM:
+                    pid = pool.ids[j]
+                    break
+        if pid in ids:
+            raise InputError(f"two {kind} positions coincide at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) mm; "
+                             "give each physical point once")
+        ids.append(pid)
+    return NamedPoints(tuple(ids), positions, np.full(len(positions), float(scene.tool_yaw_deg)))
+
+
+def _planned_scene(scene, fiducials: np.ndarray, registration=None):
+    reg = scene.registration if registration is None else _named(scene, registration, "registration")
+    sc = dataclasses.replace(scene, registration=reg)
+    return dataclasses.replace(sc, fiducials=_named(sc, fiducials, "fiducial"))
+
+
+def _cell(scene, fiducials: np.ndarray, registration, samples_per_target: int, seed: int):
+    """(work cell without visibility, indices (N,) of the planned fiducials in the cell, in the given order)."""
+    from rrbc_core.simulation.montecarlo import work_cell_from_scene
+
+    if int(samples_per_target) < 1:
+        raise InputError(f"samples_per_target must be >= 1, got {samples_per_target}")
+    sc = _planned_scene(scene, fiducials, registration)
+    cell = work_cell_from_scene(sc, seed=seed, checks_per_target=int(samples_per_target), visibility=False)
+    where = {pid: i for i, pid in enumerate(cell.ids)}
+    return cell, np.array([where[pid] for pid in sc.fiducials.ids], dtype=int)
+
+
+@dataclass(frozen=True, eq=False)
+class _Readings:
+    """Bias-only readings of points: sensor (P,3) sensor frame, robot (P,3) and truth (P,3) robot frame, mm;
+    net FLE covariance (P,3,3) robot frame (R Σ_s Rᵀ + Σ_b), and the sensor part alone R Σ_s Rᵀ (P,3,3)."""
+
+    sensor: np.ndarray
+    robot: np.ndarray
+    truth: np.ndarray
+    net_cov: np.ndarray
+    sensor_cov: np.ndarray
+
+
+def _readings(cell) -> _Readings:
+    """Bias-only readings of the cell's points and their noise covariances, through the measurement model."""
+    model = cell.measurement_model()
+    pts = cell.point_set()
+    r = model.read(pts)
+    rot = cell.sensor_to_robot.rotation
+    sensor_cov, robot_cov = model.noise_covariance(pts)
+    cov_s = np.einsum("ab,pbc,dc->pad", rot, sensor_cov, rot)
+    return _Readings(r.sensor[0], r.robot[0], r.truth, cov_s + robot_cov, cov_s)
+
+
+@dataclass(frozen=True, eq=False)
+class _Registration:
+    """The bias-only least-squares fit T̂ (rot (3,3), trans (3,)) and its sensitivities to the robot readings of
+    the registration points: dA (Nr, 3, 3, 3) = ∂R̂/∂b_jc and dt (Nr, 3, 3) = ∂t̂/∂b_jc ([j, c, ...])."""
+
+    rot: np.ndarray
+    trans: np.ndarray
+    d_rot: np.ndarray
+    d_trans: np.ndarray
+    net_cov: np.ndarray  # (Nr,3,3)
+
+    @property
+    def net_cov_chol(self) -> np.ndarray:
+        """L (Nr,3,3) with L Lᵀ = net_cov (symmetric square root: also fine for a singular covariance)."""
+        evals, evecs = np.linalg.eigh(self.net_cov)
+        return evecs * np.sqrt(np.clip(evals, 0.0, None))[:, None, :]
+
+    @classmethod
+    def fit(cls, sensor: np.ndarray, robot: np.ndarray, net_cov: np.ndarray) -> "_Registration":
+        n = len(sensor)
+        a0, t0 = batch.least_squares_batch(sensor[None], robot[None])
+        h = _FD_STEP_MM
+        pert = np.zeros((2, n, 3, n, 3))
+        for j in range(n):
+            for c in range(3):
+                pert[0, j, c, j, c] = h
+                pert[1, j, c, j, c] = -h
+        r = robot[None] + pert.reshape(2 * n * 3, n, 3)
+        s = np.broadcast_to(sensor, r.shape)
+        a, t = batch.least_squares_batch(s, r)
+        a = a.reshape(2, n, 3, 3, 3)
+        t = t.reshape(2, n, 3, 3)
+        return cls(a0[0], t0[0], (a[0] - a[1]) / (2 * h), (t[0] - t[1]) / (2 * h), net_cov)
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        return x @ self.rot.T + self.trans
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """J (..., Nr, 3, 3): J[..., j, :, c] = ∂T̂(x)/∂b_jc for sensor-frame points x (..., 3)."""
+        da = np.einsum("jcab,...b->...jac", self.d_rot, x)
+        return da + np.swapaxes(self.d_trans, 1, 2)
+
+
+def _idw_weights(fid_sensor: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """IDW weights W (T, M, N) with Σ_n W = 1 such that batch.idw_batch(fid, e, query) = W @ e, for stacks of
+    fiducial sets fid_sensor (T, N, 3) and shared queries (M, 3) (sensor frame, mm). Obtained by probing the
+    library's IDW with unit corrections (3 columns per call), so the rule (k nearest, 1/d^p, exact hits) is the
+    library's own."""
+    t, n = fid_sensor.shape[:2]
+    w = np.empty((t, len(query), n))
+    eye = np.eye(n)
+    for start in range(0, n, 3):
+        cols = list(range(start, min(start + 3, n)))
+        probe = np.zeros((n, 3))
+        probe[:, : len(cols)] = eye[:, cols]
+        out = batch.idw_batch(fid_sensor, np.broadcast_to(probe, (t, n, 3)), query, k=IDW_K, power=IDW_POWER)
+        w[:, :, cols] = out[:, :, : len(cols)]
+    return w
+
+
+@dataclass(frozen=True, eq=False)
+class _Model:
+    """Everything the fast prediction needs that does not depend on the choice of fiducials."""
+
+    reg: _Registration
+    reg_pos: np.ndarray  # (Nr,3) robot frame (nominal)
+    q_sensor: np.ndarray  # (M,3) check points, bias-only sensor readings
+    q_rigid_err: np.ndarray  # (M,3) rigid bias error T̂(s_q) − truth_q
+    q_jac: np.ndarray  # (M,Nr,3,3)
+    q_target_var: np.ndarray  # (M,) tr R Σ_s(q) Rᵀ
+    q_rigid_noise_var: np.ndarray  # (M,)
+    n_targets: int
+
+    @classmethod
+    def from_cell(cls, cell) -> tuple["_Model", "_Readings"]:
+        rd = _readings(cell)
+        ri = cell.index("registration", "both")
+        qi = cell.index("check")
+        reg = _Registration.fit(rd.sensor[ri], rd.robot[ri], rd.net_cov[ri])
+        qs = rd.sensor[qi]
+        jac = reg.jacobian(qs)
+        var_t = np.trace(rd.sensor_cov[qi], axis1=1, axis2=2)
+        gl = np.matmul(jac, reg.net_cov_chol)
+        var_reg = np.sum(gl * gl, axis=(1, 2, 3))
+        n_t = len({t for t in (cell.check_target[i] for i in qi)})
+        model = cls(reg, cell.robot[ri], qs, reg.apply(qs) - rd.truth[qi], jac, var_t, var_reg + var_t, n_t)
+        return model, rd
+
+    def _rmst(self, sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """RMST and its sampling std from squared errors (..., M) with M = n_targets x n per target."""
+        per = sq.reshape(sq.shape[:-1] + (self.n_targets, -1))
+        n = per.shape[-1]
+        mse = per.mean(axis=(-1, -2))
+        var_mse = (per.var(axis=-1, ddof=1) / n).sum(axis=-1) / self.n_targets**2 if n > 1 else 0 * mse
+        rmst = np.sqrt(mse)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            std = np.where(rmst > 0, np.sqrt(var_mse) / (2 * rmst), 0.0)
+        return rmst, std
+
+    def rigid(self) -> tuple[float, float]:
+        sq = np.sum(self.q_rigid_err**2, axis=1) + self.q_rigid_noise_var
+        r, s = self._rmst(sq)
+        return float(r), float(s)
+
+    def rrbc_sq(self, f_sensor, f_corr, f_jac, f_cov, shared) -> np.ndarray:
+        """Squared RRBC errors (T, M) for T fiducial sets (stacked): f_sensor (T,N,3) bias-only sensor readings,
+        f_corr (T,N,3) robot-frame corrections b − T̂(s), f_jac (T,N,Nr,3,3), f_cov (T,N,3,3) net FLE
+        covariance, shared (T,N) index of the registration point a fiducial is (−1: none)."""
+        if f_sensor.shape[1] == 0:
+            sq = np.sum(self.q_rigid_err**2, axis=1) + self.q_rigid_noise_var
+            return np.broadcast_to(sq, (f_sensor.shape[0], len(sq))).copy()
+        w = _idw_weights(f_sensor, self.q_sensor)  # (T,M,N)
+        bias = self.q_rigid_err[None] + np.matmul(w, f_corr)
+        t, n = f_jac.shape[:2]
+        nr = self.q_jac.shape[1]
+        g = np.matmul(w, f_jac.reshape(t, n, nr * 9)).reshape(t, -1, nr, 3, 3)
+        np.subtract(self.q_jac[None], g, out=g)  # G = J_q − Σ_i w_qi J_i
+        gl = np.matmul(g, self.reg.net_cov_chol)  # tr(G Σ Gᵀ) = ‖G L‖², Σ = L Lᵀ
+        var = np.sum(gl * gl, axis=(2, 3, 4))
+        var += np.einsum("tmn,tn->tm", w**2, np.trace(f_cov, axis1=2, axis2=3))
+        if np.any(shared >= 0):
+            ti, ni = np.nonzero(shared >= 0)
+            ji = shared[ti, ni]
+            gs = g[ti, :, ji]  # (S, M, 3, 3)
+            tr = np.einsum("smab,sba->sm", gs, self.reg.net_cov[ji])
+            np.add.at(var, ti, 2.0 * w[ti, :, ni] * tr)
+        var += self.q_target_var[None]
+        return np.sum(bias**2, axis=2) + var
+
+    def shared_index(self, positions: np.ndarray) -> np.ndarray:
+        d = np.linalg.norm(positions[:, None] - self.reg_pos[None], axis=2)
+        j = np.argmin(d, axis=1) if len(self.reg_pos) else np.zeros(len(positions), int)
+        return np.where(d[np.arange(len(positions)), j] <= _SAME_MM, j, -1)
+
+
+def _fid_arrays(model: _Model, rd: _Readings, idx: np.ndarray):
+    s = rd.sensor[idx]
+    return s, rd.robot[idx] - model.reg.apply(s), model.reg.jacobian(s), rd.net_cov[idx]
+
+
+def _predict_fast(scene, fid: np.ndarray, registration, samples_per_target: int, seed: int) -> RmstPrediction:
+    cell, fi = _cell(scene, fid, registration, samples_per_target, seed)
+    model, rd = _Model.from_cell(cell)
+    rigid, rigid_std = model.rigid()
+    s, corr, jac, cov = _fid_arrays(model, rd, fi)
+    shared = model.shared_index(cell.robot[fi])
+    sq = model.rrbc_sq(s[None], corr[None], jac[None], cov[None], shared[None])
+    r, st = model._rmst(sq)
+    return RmstPrediction(rigid, rigid_std, float(r[0]), float(st[0]), "first-order")
+
+
+def _mc_rmst(err: np.ndarray) -> tuple[float, float]:
+    """RMST and its Monte Carlo standard error from errors (T, M)."""
+    per_trial = np.mean(err**2, axis=1)
+    mse = float(per_trial.mean())
+    se = float(per_trial.std(ddof=1) / np.sqrt(len(per_trial))) if len(per_trial) > 1 else float("nan")
+    r = float(np.sqrt(mse))
+    return r, (se / (2 * r) if r > 0 else 0.0)
+
+
+def _predict_mc(scene, fid, registration, samples_per_target, trials, seed, chunk: int = 1000) -> RmstPrediction:
+    from rrbc_core.simulation.montecarlo import measure, trial_errors
+
+    cell, _ = _cell(scene, fid, registration, samples_per_target, seed)
+    interp = "idw" if len(cell.index("fiducial", "both")) else "none"
+    opts = {"k": IDW_K, "power": IDW_POWER} if interp == "idw" else {}
+    rng = np.random.default_rng([seed, 3])
+    rig, rr = [], []
+    done = 0
+    while done < trials:
+        n = min(chunk, trials - done)
+        e = trial_errors(cell, measure(cell, rng, n), "least-squares", interp, **opts)
+        rig.append(e.rigid)
+        rr.append(e.rrbc)
+        done += n
+    a, sa = _mc_rmst(np.concatenate(rig))
+    b, sb = _mc_rmst(np.concatenate(rr))
+    return RmstPrediction(a, sa, b, sb, "monte-carlo")
