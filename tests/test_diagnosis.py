@@ -304,7 +304,7 @@ def test_drift_under_anisotropic_noise_gives_both_and_the_rate_from_whitened_res
 def test_loo_equals_the_per_point_loop(seed):
     """The vectorised leave-one-out (rank-one downdates, kd-tree neighbours) gives the numbers of refitting the
     others point by point and weighting the k nearest others by 1/d^2; a coincident pair takes the exact branch."""
-    from rrbc_core.analysis.diagnosis import _loo
+    from rrbc_core.analysis.diagnosis_stats import _loo
     from rrbc_core.registration.strategies import kabsch
 
     rng = np.random.default_rng(seed)
@@ -334,8 +334,8 @@ def test_loo_equals_the_per_point_loop(seed):
 
 
 def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
-    from rrbc_core.analysis import diagnosis
-    from rrbc_core.analysis.diagnosis import _moran, _moran_bootstrap, _moran_weights, _orth
+    from rrbc_core.analysis import diagnosis_stats as diagnosis
+    from rrbc_core.analysis.diagnosis_stats import _moran, _moran_bootstrap, _moran_weights, _orth
 
     monkeypatch.setattr(diagnosis, "_BOOTSTRAP_CHUNK_ELEMENTS", 900 * 40)  # chunks of 40 replicates
 

@@ -20,19 +20,33 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
-from scipy.linalg import eigh as _geigh
 from scipy.spatial import cKDTree
 
 from rrbc_core.errors import InputError
 from rrbc_core.registration.strategies import least_squares
 from rrbc_core.runtime.threads import thread_limited
+from rrbc_core.analysis.diagnosis_stats import (
+    _BOOTSTRAP,
+    _DRIFT_KEPT,
+    _Geometry,
+    _fit,
+    _ftest,
+    _length_scale,
+    _loo,
+    _moran,
+    _moran_bootstrap,
+    _moran_weights,
+    _noise_cov,
+    _orth,
+    _outliers,
+    _paired,
+    _sphericity,
+    _usable_drift,
+    _whitener,
+)
 
 __all__ = ["Effect", "Diagnosis", "diagnose"]
 
-_PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points are treated as coplanar
-_BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
-_KNN = 6  # neighbours in Moran's I weights
-_BOOTSTRAP_CHUNK_ELEMENTS = 1 << 20  # bootstrap draws held at once (8 MiB): memory stays linear in N
 _SMALL_N = 40  # below this many paired points the smooth-field test's reach is stated as a limit (power study)
 
 
@@ -85,368 +99,9 @@ class Diagnosis:
         }
 
 
-# ------------------------------------------------------------------------------------------------ data
-@dataclass
-class _Data:
-    ids: list
-    sensor: np.ndarray  # (N, 3) per-id means
-    robot: np.ndarray
-    count: np.ndarray  # (N,)
-    time: np.ndarray | None  # (N,) per-id mean time, None when absent
-    row_point: np.ndarray  # (R,) index of each paired row's point
-    row_sensor: np.ndarray
-    row_robot: np.ndarray
-
-
-def _paired(mset) -> _Data:
-    robot = np.asarray(mset.robot, float)
-    sensor = np.asarray(mset.sensor, float)
-    rows = [i for i, role in enumerate(mset.roles) if role != "target" and np.all(np.isfinite(robot[i]))
-            and np.all(np.isfinite(sensor[i]))]
-    order: dict[str, int] = {}
-    row_point = []
-    for i in rows:
-        row_point.append(order.setdefault(mset.ids[i], len(order)))
-    row_point = np.asarray(row_point, int)
-    n = len(order)
-    if n < 5:
-        raise InputError(f"{mset.source}: diagnose needs at least 5 distinct points with sensor and robot values, "
-                         f"got {n}")
-    count = np.bincount(row_point, minlength=n).astype(float)
-    rs, rr = sensor[rows], robot[rows]
-    s = np.zeros((n, 3))
-    r = np.zeros((n, 3))
-    np.add.at(s, row_point, rs)
-    np.add.at(r, row_point, rr)
-    s /= count[:, None]
-    r /= count[:, None]
-    t = np.asarray(mset.time, float)[rows] if len(mset.time) == len(mset.roles) else np.full(len(rows), np.nan)
-    time = None
-    if len(rows) and np.all(np.isfinite(t)):
-        tm = np.zeros(n)
-        np.add.at(tm, row_point, t)
-        tm /= count
-        if np.ptp(tm) > 0:
-            time = tm
-    return _Data(list(order), s, r, count, time, row_point, rs, rr)
-
-
-# ------------------------------------------------------------------------------------------ linear model
-class _Geometry:
-    """Design columns of the linearised residual model at mapped points p (robot frame)."""
-
-    def __init__(self, p: np.ndarray, time: np.ndarray | None, weights: np.ndarray, white: np.ndarray | None = None):
-        self.white = np.eye(3) if white is None else white
-        self.center = p.mean(axis=0)
-        c = p - self.center
-        _, sv, vt = np.linalg.svd(c, full_matrices=False)
-        self.axes = vt  # rows: principal directions
-        self.planar = bool(sv[-1] <= _PLANAR_RATIO * sv[0])
-        self.normal = vt[2]
-        self.scale = float(np.sqrt(np.mean(np.sum(c**2, axis=1)))) or 1.0
-        u = c / self.scale
-        if self.planar:  # exact rank deficiency on coplanar points: drop the normal coordinate
-            u = u - np.outer(u @ self.normal, self.normal)
-        self.u = u
-        self.n = len(p)
-        self.sw = np.repeat(np.sqrt(weights), 3)
-        self.time = time
-        self.tscale = float(np.std(time)) if time is not None else 1.0
-
-    def vec(self, arr: np.ndarray) -> np.ndarray:
-        """(N, 3) robot-frame vectors -> whitened, weighted (3N,)."""
-        return (arr @ self.white.T).reshape(-1) * self.sw
-
-    def _cols(self, fields) -> np.ndarray:  # fields (k, N, 3) -> whitened, weighted (3N, k)
-        a = (np.asarray(fields) @ self.white.T).reshape(len(fields), -1).T
-        return a * self.sw[:, None]
-
-    def rigid(self):
-        e = np.eye(3)
-        trans = [np.tile(e[k], (self.n, 1)) for k in range(3)]
-        rot = [np.cross(e[k], self.u) for k in range(3)]
-        return self._cols(trans + rot)
-
-    def scale_col(self):
-        return self._cols([self.u])
-
-    def linear(self):  # full 3x3 linear map: E_ab u
-        out = []
-        for a in range(3):
-            for b in range(3):
-                f = np.zeros((self.n, 3))
-                f[:, a] = self.u[:, b]
-                out.append(f)
-        return self._cols(out)
-
-    def drift(self):
-        tt = (self.time - self.time.mean()) / self.tscale
-        e = np.eye(3)
-        return self._cols([np.outer(tt, e[k]) for k in range(3)])
-
-
-def _rank(x: np.ndarray) -> int:
-    if x.shape[1] == 0:
-        return 0
-    norms = np.linalg.norm(x, axis=0)
-    xs = x[:, norms > 0] / norms[norms > 0]
-    if xs.shape[1] == 0:
-        return 0
-    sv = np.linalg.svd(xs, compute_uv=False)
-    return int(np.sum(sv > 1e-8 * sv[0]))
-
-
-def _fit(y: np.ndarray, x: np.ndarray):
-    coef, *_ = np.linalg.lstsq(x, y, rcond=1e-10)
-    res = y - x @ coef
-    return coef, res, float(res @ res), _rank(x)
-
-
-def _ftest(y, x0, x1):
-    """Nested F-test of x1 ⊃ x0 on y. Returns (p, q, nu, F, rss0, rss1, coef1)."""
-    _, _, rss0, k0 = _fit(y, x0)
-    coef1, _, rss1, k1 = _fit(y, x1)
-    q, nu = k1 - k0, len(y) - k1
-    if q <= 0 or nu <= 0 or rss1 <= 0:
-        return 1.0, q, nu, 0.0, rss0, rss1, coef1
-    f = ((rss0 - rss1) / q) / (rss1 / nu)
-    return float(stats.f.sf(f, q, nu)), q, nu, float(f), rss0, rss1, coef1
-
-
-def _orth(x: np.ndarray) -> np.ndarray:
-    u, sv, _ = np.linalg.svd(x, full_matrices=False)
-    return u[:, sv > 1e-8 * (sv[0] if len(sv) else 1.0)]
-
-
-_DRIFT_KEPT = 0.1  # drift directions keeping less than this fraction of their energy beside the model: not testable
-
-
-def _usable_drift(base: np.ndarray, dcol: np.ndarray):
-    """Drift columns restricted to the directions not (almost) absorbed by the columns `base`.
-
-    In raster order time is (nearly) linear in the coordinates, so some drift directions equal a rotation or linear
-    term up to the noise in the mapped points; fitting them would fit noise patterns (false drift and anisotropy).
-    Returns (columns, fraction of drift energy kept per direction)."""
-    qx = _orth(base)
-    kept = dcol - qx @ (qx.T @ dcol)
-    frac, vec = _geigh(kept.T @ kept, dcol.T @ dcol)
-    return dcol @ vec[:, frac >= _DRIFT_KEPT], frac
-
-
-# ----------------------------------------------------------------------------------------------- outliers
-def _outliers(d: _Data, use_time: bool, alpha: float, white: np.ndarray):
-    """Generalised ESD on deleted (mean-shift) studentised residuals of a rigid + linear (+ drift) model.
-
-    Returns (outlier indices in order found, Bonferroni-adjusted p of the last accepted, statistics)."""
-    n = len(d.ids)
-    active = np.ones(n, bool)
-    kmax = max(0, min(n // 5, n - 8, 10))
-    steps = []
-    for _ in range(kmax):
-        idx = np.flatnonzero(active)
-        reg = least_squares(d.sensor[idx], d.robot[idx], weights=d.count[idx])
-        p = reg.mapping.apply(d.sensor[idx])
-        g = _Geometry(p, d.time[idx] if use_time else None, d.count[idx], white)
-        x = np.hstack([g.rigid(), g.linear()])
-        if use_time:
-            x = np.hstack([x, _usable_drift(x, g.drift())[0]])
-        q = _orth(x)
-        y = g.vec(d.robot[idx] - p)
-        res = y - q @ (q.T @ y)
-        rss = float(res @ res)
-        k = q.shape[1]
-        nu = len(y) - k - 3
-        if nu < 3:
-            break
-        qb = q.reshape(len(idx), 3, k)
-        m = np.eye(3)[None] - np.einsum("nak,nbk->nab", qb, qb)
-        rb = res.reshape(len(idx), 3)
-        try:
-            dss = np.einsum("na,na->n", rb, np.linalg.solve(m, rb[..., None])[..., 0])
-        except np.linalg.LinAlgError:
-            break
-        s2 = (rss - dss) / nu
-        fj = np.where(s2 > 0, (dss / 3) / np.where(s2 > 0, s2, 1.0), np.inf)
-        best_i = int(np.argmax(fj))
-        best = float(fj[best_i])
-        if best_i < 0:
-            break
-        padj = min(1.0, float(stats.f.sf(best, 3, nu)) * len(idx))
-        steps.append((int(idx[best_i]), padj))
-        active[idx[best_i]] = False
-    found = 0
-    for i, (_, padj) in enumerate(steps):
-        if padj < alpha:
-            found = i + 1
-    out = [s[0] for s in steps[:found]]
-    p = max([s[1] for s in steps[:found]]) if found else (steps[0][1] if steps else 1.0)
-    return out, p
-
-
-# ---------------------------------------------------------------------------------------------- Moran's I
-def _moran_weights(p: np.ndarray):
-    """Indices (N, k) of each point's k nearest other points (k = min(_KNN, N - 1))."""
-    k = min(_KNN, len(p) - 1)
-    _, nb = cKDTree(p).query(p, k=k + 1)
-    return nb[:, 1:]
-
-
-def _moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
-    """Vector Moran's I with k-NN weights: res (..., N, 3) -> (...).
-
-    I = (1/k) Σ_i Σ_{j ∈ nb(i)} r_i·r_j / Σ_i |r_i|², the neighbour sums taken with a sparse (N, N) weight
-    matrix (k non-zeros per row), so memory is O(N·k) per residual field, not a gathered (..., N, k, 3) array."""
-    from scipy.sparse import csr_matrix
-
-    n, k = nb.shape
-    w = csr_matrix((np.ones(n * k), nb.reshape(-1), np.arange(0, n * k + 1, k)), shape=(n, n))
-    lead = res.shape[:-2]
-    r = res.reshape(-1, n, 3)
-    x = np.moveaxis(r, 1, 0).reshape(n, -1)  # (N, B*3)
-    num = np.einsum("nb,nb->b", x, w @ x).reshape(-1, 3).sum(axis=1)
-    den = np.einsum("bic,bic->b", r, r)
-    return (num / (k * den)).reshape(lead)
-
-
-def _moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = _BOOTSTRAP) -> np.ndarray:
-    """Moran's I of `replicates` white-noise residual fields with the accepted model's columns (orthonormal qa,
-    (3N, q)) projected out. Drawn and evaluated in chunks of _BOOTSTRAP_CHUNK_ELEMENTS: memory is linear in N and
-    the draws are those of one rng.standard_normal((replicates, 3N)) call (a Generator fills rows in order)."""
-    n3 = qa.shape[0]
-    out = np.empty(replicates)
-    step = max(1, _BOOTSTRAP_CHUNK_ELEMENTS // n3)
-    for start in range(0, replicates, step):
-        b = min(step, replicates - start)
-        eps = rng.standard_normal((b, n3))
-        eps -= (eps @ qa) @ qa.T
-        out[start : start + b] = _moran(eps.reshape(b, n3 // 3, 3), nb)
-    return out
-
-
-def _length_scale(p: np.ndarray, r: np.ndarray) -> tuple[float, float]:
-    """Fit r_i·r_j ≈ v exp(−d²/2ℓ²) (i ≠ j) over a grid of ℓ; returns (ℓ, v)."""
-    n = len(p)
-    if n > 400:
-        sel = np.random.default_rng(0).choice(n, 400, replace=False)
-        p, r = p[sel], r[sel]
-    d2 = np.sum((p[:, None] - p[None]) ** 2, axis=-1)
-    prod = r @ r.T
-    iu = np.triu_indices(len(p), 1)
-    d2, prod = d2[iu], prod[iu]
-    dmin = np.sqrt(max(np.min(d2[d2 > 0]) if np.any(d2 > 0) else 1.0, 1e-12))
-    dmax = np.sqrt(np.max(d2)) if len(d2) else 1.0
-    best = (np.inf, dmax, 0.0)
-    for ell in np.geomspace(dmin * 0.5, dmax * 2, 60):
-        k = np.exp(-d2 / (2 * ell**2))
-        v = max(0.0, float(k @ prod) / float(k @ k)) if k @ k > 0 else 0.0
-        sse = float(np.sum((prod - v * k) ** 2))
-        if sse < best[0]:
-            best = (sse, ell, v)
-    return float(best[1]), float(best[2])
-
-
-# ---------------------------------------------------------------------------------------------- anisotropy
-def _sphericity(s: np.ndarray, nu: float):
-    """LR test of Σ = σ²I for a 3x3 covariance estimate s with nu dof (Mauchly, Bartlett-corrected)."""
-    p = 3
-    ev = np.clip(np.linalg.eigvalsh(s), 1e-300, None)
-    lam = p * np.log(np.mean(ev)) - np.sum(np.log(ev))
-    corr = 1 - (2 * p * p + p + 2) / (6 * p * nu)
-    stat = max(0.0, nu * corr * lam)
-    return float(stats.chi2.sf(stat, p * (p + 1) // 2 - 1))
-
-
-# ------------------------------------------------------------------------------------------------- LOO
-def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
-    """Weighted least-squares fits (R (N,3,3), t (N,3)) of all points but i, for every i at once: the weighted
-    sums of the full set minus point i's share (a rank-one downdate of the cross-covariance), then one batched
-    SVD with the reflection fix — the same fit as `registration.kabsch` on the N−1 points (to rounding), in O(N)
-    memory and time. Points are centred on the full set's weighted centroid first, so the downdates do not
-    cancel large numbers."""
-    w = np.asarray(weights, float)
-    c_s = (w @ sensor) / w.sum()
-    c_r = (w @ robot) / w.sum()
-    s, r = sensor - c_s, robot - c_r
-    wt = w.sum() - w  # (N,) weight of the others
-    ms = ((w @ s)[None] - w[:, None] * s) / wt[:, None]  # centroid of the others (centred frame)
-    mr = ((w @ r)[None] - w[:, None] * r) / wt[:, None]
-    full = np.einsum("n,ni,nj->ij", w, s, r)
-    h = full[None] - w[:, None, None] * s[:, :, None] * r[:, None, :] - wt[:, None, None] * ms[:, :, None] * mr[:, None, :]
-    u, _, vt = np.linalg.svd(h)
-    v = np.swapaxes(vt, 1, 2).copy()
-    d = np.sign(np.linalg.det(np.matmul(v, np.swapaxes(u, 1, 2))))
-    v[:, :, 2] *= np.where(d >= 0, 1.0, -1.0)[:, None]
-    rot = np.matmul(v, np.swapaxes(u, 1, 2))
-    t = (mr + c_r) - np.einsum("nij,nj->ni", rot, ms + c_s)
-    return rot, t
-
-
-def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0):
-    """Leave-one-out prediction error at each point: rigid only, and rigid + IDW correction from its k nearest
-    others (sensor frame), with the registration of the others. Returns the two RMS values (mm)."""
-    n = len(sensor)
-    kk = min(k, n - 1)
-    dist, nb = cKDTree(sensor).query(sensor, k=kk + 1)
-    dist, nb = dist.reshape(n, -1), nb.reshape(n, -1)
-    # drop each point itself (it is its own nearest unless another point coincides with it)
-    self_col = nb == np.arange(n)[:, None]
-    drop = np.where(self_col.any(axis=1), np.argmax(self_col, axis=1), kk)
-    keep = np.ones_like(nb, bool)
-    keep[np.arange(n), drop] = False
-    nb, dj = nb[keep].reshape(n, kk), dist[keep].reshape(n, kk)
-    rot, t = _loo_rotations(sensor, robot, weights)
-    e_rigid = robot - (np.einsum("nij,nj->ni", rot, sensor) + t)
-    corr = robot[nb] - (np.einsum("nij,nkj->nki", rot, sensor[nb]) + t[:, None, :])  # (N, k, 3)
-    on = dj <= 1e-12
-    with np.errstate(divide="ignore"):
-        w = np.where(on.any(axis=1, keepdims=True), on.astype(float), 1.0 / dj**power)
-    c = np.einsum("nk,nkc->nc", w, corr) / w.sum(axis=1, keepdims=True)
-    e_rrbc = e_rigid - c
-    rms = lambda e: float(np.sqrt(np.mean(np.sum(e**2, axis=1))))  # noqa: E731
-    return rms(e_rigid), rms(e_rrbc)
-
-
 # --------------------------------------------------------------------------------------------- diagnose
 def _fmt_p(p: float) -> str:
     return f"{p:.2g}"
-
-
-def _noise_cov(d: _Data, inl: np.ndarray, use_time: bool):
-    """Noise covariance (3x3, robot frame, per single measurement) and its degrees of freedom.
-
-    From repeated measurements (pure error) when present, else from the residuals of a rigid + linear (+ drift)
-    fit, corrected per axis for what the fit absorbs: E[Σ r rᵀ] = B^½ Σ B^½ approximately, B = Σ (I − H)_ii."""
-    s, r, w = d.sensor[inl], d.robot[inl], d.count[inl]
-    reg = least_squares(s, r, weights=w)
-    rot = reg.mapping.rotation
-    if np.any(d.count > 1):
-        dev = d.row_robot - d.row_sensor @ rot.T  # the translation cancels within an id
-        mean_dev = np.zeros((len(d.ids), 3))
-        np.add.at(mean_dev, d.row_point, dev)
-        mean_dev /= d.count[:, None]
-        e = dev - mean_dev[d.row_point]
-        nu = float(np.sum(d.count - 1))
-        return e.T @ e / nu, nu, "repeats"
-    p = reg.mapping.apply(s)
-    g = _Geometry(p, d.time[inl] if use_time else None, w)
-    x = np.hstack([g.rigid(), g.linear()])
-    if use_time:
-        x = np.hstack([x, _usable_drift(x, g.drift())[0]])
-    q = _orth(x)
-    y = g.vec(r - p)
-    rr = (y - q @ (q.T @ y)).reshape(len(inl), 3)
-    qb = q.reshape(len(inl), 3, -1)
-    blocks = len(inl) * np.eye(3) - np.einsum("nak,nbk->ab", qb, qb)
-    ev, vec = np.linalg.eigh(blocks)
-    bi = vec @ np.diag(1 / np.sqrt(np.clip(ev, 1e-12, None))) @ vec.T
-    nu = (3 * len(inl) - q.shape[1]) / 3.0
-    return bi @ (rr.T @ rr) @ bi, nu, "fit"
-
-
-def _whitener(cov: np.ndarray) -> np.ndarray:
-    ev, vec = np.linalg.eigh(cov)
-    ev = np.clip(ev, 1e-12 * max(ev.max(), 1e-300), None)
-    return vec @ np.diag(np.sqrt(ev.mean() / ev)) @ vec.T
 
 
 @thread_limited

@@ -80,9 +80,6 @@ import numpy as np
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.analysis.planning_model import (
-    COPLANAR_TOL_MM,
-    IDW_K,
-    IDW_POWER,
     RmstPrediction,
     SAMPLES_PER_TARGET,
     _SAME_MM,
@@ -91,7 +88,7 @@ from rrbc_core.analysis.planning_model import (
     _predict_fast,
     _predict_mc,
 )
-from rrbc_core.analysis.planning_search import SURFACE_TOL_MM, _corner_choice, _optimise, _pool, usable_candidates
+from rrbc_core.analysis.planning_search import _corner_choice, _optimise, _pool, usable_candidates
 
 #: Random K-subsets averaged for the "random" baseline.
 RANDOM_DRAWS = 32
