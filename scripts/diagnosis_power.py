@@ -41,7 +41,8 @@ from scipy.spatial.transform import Rotation
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from rrbc_core.analysis.diagnosis import diagnose
-from rrbc_core.simulation.errormodels import Affine, AnisotropicNoise, Drift, PointSet, Scale, SmoothField
+from rrbc_core.simulation.errormodels import PointSet
+from rrbc_core.simulation.errorterms import Affine, AnisotropicNoise, Drift, Scale, SmoothField
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.registration.strategies import least_squares
 from rrbc_core.runtime.threads import apply_process_policy

@@ -26,7 +26,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from rrbc_core.analysis import planning
-from rrbc_core.simulation.errormodels import ErrorModel, Kinematic
+from rrbc_core.simulation.errormodels import ErrorModel
+from rrbc_core.simulation.errorterms import Kinematic
 from rrbc_core.io.scene import NamedPoints
 from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.runtime.threads import apply_process_policy

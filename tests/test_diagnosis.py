@@ -14,7 +14,8 @@ from scipy.spatial.transform import Rotation
 
 from rrbc_core.cli import main
 from rrbc_core.analysis.diagnosis import diagnose
-from rrbc_core.simulation.errormodels import Affine, AnisotropicNoise, Drift, PointSet, Scale, SmoothField
+from rrbc_core.simulation.errormodels import PointSet
+from rrbc_core.simulation.errorterms import Affine, AnisotropicNoise, Drift, Scale, SmoothField
 from rrbc_core.io.measurements import MeasurementSet, write_measurements
 from rrbc_core.registration.strategies import least_squares
 

@@ -23,7 +23,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rrbc_core.analysis.diagnosis import diagnose
-from rrbc_core.simulation.errormodels import PointSet, Scale, SmoothField
+from rrbc_core.simulation.errormodels import PointSet
+from rrbc_core.simulation.errorterms import Scale, SmoothField
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.methods import MethodOptions

@@ -9,17 +9,14 @@ import pytest
 from scipy import stats
 from scipy.spatial.transform import Rotation
 
-from rrbc_core.simulation.errormodels import (
-    TERM_TYPES,
+from rrbc_core.simulation.errormodels import TERM_TYPES, ErrorModel, ErrorTerm, PointSet
+from rrbc_core.simulation.errorterms import (
     Affine,
     AnisotropicNoise,
     Drift,
-    ErrorModel,
-    ErrorTerm,
     IsotropicNoise,
     Kinematic,
     Outliers,
-    PointSet,
     RangeNoise,
     Scale,
     SmoothField,

@@ -27,7 +27,8 @@ import trimesh
 from rrbc_core.correction import metrics
 from rrbc_core.analysis import planning
 from rrbc_core.cli import main
-from rrbc_core.simulation.errormodels import ErrorModel, IsotropicNoise
+from rrbc_core.simulation.errormodels import ErrorModel
+from rrbc_core.simulation.errorterms import IsotropicNoise
 from rrbc_core.errors import InputError
 from rrbc_core.io.scene import Region
 from rrbc_core.io.scene_toml import load_scene

@@ -6,7 +6,8 @@ from scipy.spatial.transform import Rotation
 
 from rrbc_core.simulation import batch
 from rrbc_core.correction import metrics
-from rrbc_core.simulation.errormodels import AnisotropicNoise, ErrorModel, IsotropicNoise
+from rrbc_core.simulation.errormodels import ErrorModel
+from rrbc_core.simulation.errorterms import AnisotropicNoise, IsotropicNoise
 from rrbc_core.simulation.montecarlo import WorkCell, measure, measurement_set, monte_carlo, trial_errors
 from rrbc_core.geometry.transforms import RigidTransform
 

@@ -62,8 +62,8 @@ def test_cli_command_runs_with_the_documented_pool_size():
     res = _run(f"""
         from rrbc_core.analysis import planning
         from rrbc_core import cli
-        from rrbc_core.io import scene
-        recording(scene, "load_scene")  # outside any library entry point: the process policy
+        from rrbc_core.io import scene_toml
+        recording(scene_toml, "load_scene")  # outside any library entry point: the process policy
         recording(planning, "predict_rmst")
         code = cli.main(["plan", {str(DEMO)!r}, "--add", "1", "--json"])
         assert code == 0

@@ -80,15 +80,21 @@ import numpy as np
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.analysis.planning_model import (
-    RmstPrediction,
+    COPLANAR_TOL_MM,
+    IDW_K,
+    IDW_POWER,
     SAMPLES_PER_TARGET,
+    RmstPrediction,
     _SAME_MM,
     _covered,
     _points,
     _predict_fast,
     _predict_mc,
 )
-from rrbc_core.analysis.planning_search import _corner_choice, _optimise, _pool, usable_candidates
+from rrbc_core.analysis.planning_search import SURFACE_TOL_MM, _corner_choice, _optimise, _pool, usable_candidates
+
+__all__ = ["COPLANAR_TOL_MM", "IDW_K", "IDW_POWER", "RANDOM_DRAWS", "SAMPLES_PER_TARGET", "SURFACE_TOL_MM",
+           "PlanResult", "RmstPrediction", "coverage", "plan", "predict_rmst", "usable_candidates"]
 
 #: Random K-subsets averaged for the "random" baseline.
 RANDOM_DRAWS = 32

@@ -488,7 +488,9 @@ def _with_tool(model, table: dict, tool_mm: float):
     the simulated arm then reaches the scene's points with its tool tip, as the scene describes."""
     import dataclasses
 
-    from rrbc_core.simulation.errormodels import ErrorModel, Kinematic
+    from rrbc_core.simulation.errormodels import ErrorModel
+
+    from rrbc_core.simulation.errorterms import Kinematic
 
     rows = table.get("robot", []) if isinstance(table, dict) else []
     terms = []
@@ -503,7 +505,7 @@ def _with_tool(model, table: dict, tool_mm: float):
 def _error_model(c: _Checker, table: dict):
     """Build the error model with the error-model module (imported lazily: it is optional for loading)."""
     try:
-        from rrbc_core.simulation.errormodels import error_model_from_dict
+        from rrbc_core.simulation.errorterms import error_model_from_dict
     except ImportError as exc:  # pragma: no cover - only while the module is being written
         raise c.error("error_model", f"the error-model module is not available ({exc})") from None
     try:
