@@ -48,7 +48,8 @@ import viser
 
 from rrbc_core.analysis.diagnosis import Diagnosis, diagnose
 from rrbc_core.errors import InputError
-from rrbc_core.session.explorer import LAYERS, Evaluation, ExplorerSession
+from rrbc_core.session.evaluation import Evaluation
+from rrbc_core.session.explorer import ExplorerSession
 from rrbc_core.runtime.threads import apply_process_policy
 
 from . import diagnosis_panel
@@ -58,7 +59,7 @@ from . import teaching
 from .colors import legend_markdown
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
-from .nodes import HANDLE_CHOICES, Display, SceneNodes, gizmo_name
+from .nodes import Display, gizmo_name, HANDLE_CHOICES, LAYERS, SceneNodes
 
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
 HEAT_INTERVAL_S = 0.3  # least time between heat-map recomputations while dragging
@@ -378,7 +379,7 @@ class RunningApp:
                 self._show(self.session.last, heat=heat)
 
     def set_layer(self, layer: str, visible: bool) -> None:
-        """Show or hide a layer (explorer.LAYERS) in the scene and on its checkbox."""
+        """Show or hide a layer (nodes.LAYERS) in the scene and on its checkbox."""
         if layer not in LAYERS:
             raise InputError(f"unknown layer '{layer}': {', '.join(LAYERS)}")
         with self._lock:

@@ -16,10 +16,10 @@ import viser
 
 from rrbc_core import interpolation
 from rrbc_core import registration
-from rrbc_core.session.explorer import LAYERS, Settings
+from rrbc_core.session.evaluation import Settings
 
 from .diagnosis_panel import PROMPT
-from .nodes import HANDLE_CHOICES, Display
+from .nodes import Display, HANDLE_CHOICES, LAYERS
 from .planning_panel import PlanningPanel
 
 if TYPE_CHECKING:

@@ -5,7 +5,7 @@ viser's +z is up, as in the scenes). Correction arrows and landing offsets are d
 longer than they are (said on screen); regions of variability and heat-map samples can be drawn `region_zoom`
 times larger about their target. Both are display-only transforms.
 
-Node tree (one group per layer of `rrbc_core.explorer.LAYERS`; a layer's visibility is its group's):
+Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's):
 
     /mesh/cell                         the work-cell mesh
     /frames/robot, /frames/sensor_true, /frames/sensor_registered   (+ …/label)
@@ -35,7 +35,13 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
-from rrbc_core.session.explorer import LAYERS, Evaluation, ExplorerSession
+from rrbc_core.session.evaluation import Evaluation
+
+from rrbc_core.session.explorer import ExplorerSession
+
+#: The scene's layers, each a group node whose visibility the View tab and the lesson steps switch.
+LAYERS = ("mesh", "frames", "registration", "fiducials", "corrections", "hull", "targets", "regions", "landing",
+          "labels", "heatmap")
 
 from . import colors
 

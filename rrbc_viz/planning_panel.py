@@ -40,7 +40,8 @@ from .nodes import gizmo_name
 from .worker import CoalescingWorker
 
 if TYPE_CHECKING:
-    from rrbc_core.session.explorer import ExplorerSession, PlanningState
+    from rrbc_core.session.results import PlanningState
+    from rrbc_core.session.explorer import ExplorerSession
 
     from .app import RunningApp
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rrbc_core.session.explorer import Evaluation
+from rrbc_core.session.evaluation import Evaluation
 
 
 def _mm(x) -> str:

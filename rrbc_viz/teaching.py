@@ -1,6 +1,6 @@
 """The lesson: NIST's nine RRBC steps, one screen each, with live numbers.
 
-Each `Step` names the scene layers that show its result (explorer.LAYERS) and renders one or two sentences as
+Each `Step` names the scene layers that show its result (nodes.LAYERS) and renders one or two sentences as
 markdown. Every number quoted comes from the current `Evaluation` (or, for regions, the session's scene);
 nothing is computed here beyond picking, formatting and taking the length of vectors the Evaluation holds.
 Frames: robot frame for positions, sensor frame where a sentence says so; millimetres throughout.
@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from rrbc_core.session.explorer import Evaluation
+from rrbc_core.session.evaluation import Evaluation
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,8 @@ import pytest
 from rrbc_core import interpolation
 from rrbc_core import registration
 from rrbc_core.errors import InputError
-from rrbc_core.session.explorer import ExplorerSession, Settings, hull_edges
+from rrbc_core.session.evaluation import Settings, hull_edges
+from rrbc_core.session.explorer import ExplorerSession
 from rrbc_core.io.measurements import read_measurements
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.methods import MethodOptions

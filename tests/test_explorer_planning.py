@@ -9,7 +9,8 @@ import pytest
 
 from rrbc_core.analysis import planning
 from rrbc_core.errors import InputError
-from rrbc_core.session.explorer import ExplorerSession, Settings
+from rrbc_core.session.evaluation import Settings
+from rrbc_core.session.explorer import ExplorerSession
 from rrbc_core.io.measurements import read_measurements
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene

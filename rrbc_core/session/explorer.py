@@ -32,123 +32,21 @@ from __future__ import annotations
 
 import dataclasses
 import zlib
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from rrbc_core import interpolation
-from rrbc_core.correction import metrics
-from rrbc_core import registration
 from rrbc_core.errors import InputError
-from rrbc_core.methods import MethodOptions
 from rrbc_core.simulation.measurement import MeasurementModel
-from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
+from rrbc_core.correction.rrbc import correct_points
 from rrbc_core.runtime.threads import thread_limited
+from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate
+from rrbc_core.session.results import HeatMap, MonteCarloPlots, PlanningState, _scaled
 
 #: Seed of the planner's region samples (coverage, predicted RMST, suggestions): fixed, so the tab's numbers,
 #: a suggestion's "after" and the numbers after accepting it are the same computation.
 PLANNING_SEED = 0
 
-LAYERS = ("mesh", "frames", "registration", "fiducials", "corrections", "hull", "targets", "regions", "landing",
-          "labels", "heatmap")
-
-
-@dataclass(frozen=True)
-class Settings:
-    """What the user controls. noise_scale/bias_scale multiply the scene's random/deterministic error terms."""
-
-    registration: str = "least-squares"
-    interpolation: str = "idw"
-    neighbors: int = 4
-    power: float = 2.0
-    smoothing: float = 0.0
-    noise_scale: float = 1.0
-    bias_scale: float = 1.0
-    seed: int = 0
-    excluded: frozenset = frozenset()
-
-    def __post_init__(self):
-        for name in ("noise_scale", "bias_scale", "smoothing"):
-            v = getattr(self, name)
-            if not np.isfinite(v) or v < 0:
-                raise InputError(f"{name} must be a finite number >= 0, got {v}")
-        if int(self.neighbors) < 1 or not self.power > 0:
-            raise InputError("neighbors must be >= 1 and power > 0")
-        object.__setattr__(self, "excluded", frozenset(self.excluded))
-        self.method  # noqa: B018 - validates the names and the chosen method's options
-
-    @property
-    def method(self) -> MethodOptions:
-        """The registration and interpolation chosen, with the options of the chosen interpolation only."""
-        idw, tps = self.interpolation == "idw", self.interpolation == "tps"
-        return MethodOptions(registration=self.registration, interpolation=self.interpolation,
-                             neighbors=int(self.neighbors) if idw else None, power=float(self.power) if idw else None,
-                             smoothing=float(self.smoothing) if tps else None, seed=int(self.seed))
-
-    def interpolator(self):
-        return self.method.interpolator()
-
-
-@dataclass(frozen=True, eq=False)
-class Group:
-    """Points of one kind: ids and robot-frame display positions (M, 3) mm."""
-
-    ids: tuple
-    positions: np.ndarray
-
-    def index(self, pid: str) -> int:
-        try:
-            return self.ids.index(pid)
-        except ValueError:
-            raise InputError(f"no point '{pid}' here; known: {', '.join(self.ids[:12])}") from None
-
-
-@dataclass(frozen=True, eq=False)
-class Readings:
-    """Measurements of M points: sensor (M,3) sensor frame, robot (M,3) robot frame (NaN if none), truth (M,3)
-    robot-frame command that reaches the point (NaN if unknown)."""
-
-    sensor: np.ndarray
-    robot: np.ndarray
-    truth: np.ndarray
-
-
-@dataclass(frozen=True, eq=False)
-class TargetResult:
-    """Per target (M,): robot-frame arrays (M,3) mm unless noted."""
-
-    ids: tuple
-    positions: np.ndarray  # display position
-    sensor: np.ndarray  # sensor reading (sensor frame)
-    correction: np.ndarray  # interpolated correction (sensor frame)
-    correction_robot: np.ndarray  # the same vector in the robot frame (R @ correction), for drawing
-    correction_std: np.ndarray | None  # (M,3) sensor frame, gp only
-    robot_rigid: np.ndarray
-    robot_rrbc: np.ndarray
-    truth: np.ndarray  # NaN where unknown
-    error_rigid: np.ndarray  # (M,) NaN where unknown
-    error_rrbc: np.ndarray
-    extrapolated: np.ndarray  # (M,) bool
-
-
-@dataclass(frozen=True, eq=False)
-class Evaluation:
-    """The result of the nine RRBC steps for the current layout and settings (see the module docstring)."""
-
-    settings: Settings
-    registration: registration.Registration
-    registration_ids: tuple
-    registration_positions: np.ndarray
-    registration_readings: Readings
-    fiducial_ids: tuple
-    fiducial_positions: np.ndarray
-    fiducial_readings: Readings
-    included: np.ndarray  # (N,) bool
-    corrections: np.ndarray  # (N,3) sensor frame; NaN rows for excluded fiducials
-    corrections_robot: np.ndarray  # (N,3) robot frame, for drawing
-    targets: TargetResult
-    hull_edges: np.ndarray  # (E,2,3) robot frame: edges of the included fiducials' convex hull
-    summary: dict
 
 
 def _seed_for(seed: int, pid: str) -> list[int]:
@@ -325,53 +223,10 @@ class ExplorerSession:
     # ----------------------------------------------------------------------------------------- evaluating
     @thread_limited
     def evaluate(self) -> Evaluation:
-        s = self.settings
-        reg_r = self._readings_for("registration")
-        fid_r = self._readings_for("fiducials")
-        tgt_r = self._readings_for("targets")
-        reg = self._cached("registration", (s.registration, s.seed, reg_r.sensor.tobytes(), reg_r.robot.tobytes()),
-                           lambda: s.method.register(reg_r.sensor, reg_r.robot))
-        fids = self.layout["fiducials"]
-        included = np.array([pid not in s.excluded for pid in fids.ids], dtype=bool)
-        corr = np.full((len(fids.ids), 3), np.nan)
-        if np.any(included):
-            corr[included] = fiducial_corrections(reg.mapping, fid_r.sensor[included], fid_r.robot[included])
-            key = (s.interpolator(), fid_r.sensor[included].tobytes(), corr[included].tobytes())
-            fitted = self._cached("fitted", key, lambda: s.interpolator().fit(fid_r.sensor[included], corr[included]))
-        elif s.interpolation != "none":
-            raise InputError("every fiducial is excluded: include at least one, or choose interpolation 'none'")
-        else:
-            fitted = interpolation.NoCorrection().fit(reg_r.sensor, np.zeros_like(reg_r.sensor))
-        rot = _display_rotation(reg.mapping)
-        corr_robot = corr @ rot.T
-        tg = self.layout["targets"]
-        if len(tg.ids):
-            cp = correct_points(reg.mapping, fitted, tgt_r.sensor)
-            err_rigid = np.linalg.norm(cp.robot_rigid - tgt_r.truth, axis=1)
-            err_rrbc = np.linalg.norm(cp.robot_rrbc - tgt_r.truth, axis=1)
-            targets = TargetResult(tg.ids, tg.positions, tgt_r.sensor, cp.correction, cp.correction @ rot.T,
-                                   cp.correction_std, cp.robot_rigid, cp.robot_rrbc, tgt_r.truth, err_rigid,
-                                   err_rrbc, cp.extrapolated)
-        else:
-            z = np.zeros((0, 3))
-            targets = TargetResult((), z, z, z, z, None, z, z, z, np.zeros(0), np.zeros(0), np.zeros(0, bool))
-        hull = hull_edges(fids.positions[included]) if np.count_nonzero(included) >= 3 else np.zeros((0, 2, 3))
-        known = np.isfinite(targets.error_rigid)
-        summary = {
-            "fre_rms_mm": reg.fre_rms_mm,
-            "targets": len(tg.ids),
-            "scored": int(np.count_nonzero(known)),
-            "rmst_rigid_mm": metrics.rmst(targets.error_rigid[known]) if np.any(known) else None,
-            "rmst_rrbc_mm": metrics.rmst(targets.error_rrbc[known]) if np.any(known) else None,
-            "max_rigid_mm": float(targets.error_rigid[known].max()) if np.any(known) else None,
-            "max_rrbc_mm": float(targets.error_rrbc[known].max()) if np.any(known) else None,
-            "extrapolated": [pid for pid, e in zip(tg.ids, targets.extrapolated) if e],
-            "fiducials_used": int(np.count_nonzero(included)),
-        }
-        ev = Evaluation(s, reg, self.layout["registration"].ids, self.layout["registration"].positions, reg_r,
-                        fids.ids, fids.positions, fid_r, included, corr, corr_robot, targets, hull, summary)
-        self._last = ev
-        return ev
+        """Measure what changed (scene mode) and run `evaluation.evaluate` on the layout as it is now."""
+        readings = {kind: self._readings_for(kind) for kind in ("registration", "fiducials", "targets")}
+        self._last = evaluate(self.settings, self.layout, readings, self._cached)
+        return self._last
 
     def _cached(self, name: str, key, compute):
         """One-entry cache per name: a drag that leaves the registration points (or the fiducials) unchanged
@@ -706,143 +561,3 @@ class ExplorerSession:
         return out
 
 
-@dataclass(frozen=True, eq=False)
-class HeatMap:
-    """Samples (S,3) robot frame with their target, predicted errors rigid/RRBC (S,) mm (NaN without truth),
-    the correction size (S,) mm, its gp std (S,) or None, and extrapolation flags."""
-
-    positions: np.ndarray
-    target: tuple
-    error_rigid: np.ndarray
-    error_rrbc: np.ndarray
-    correction_mm: np.ndarray
-    std_mm: np.ndarray | None
-    extrapolated: np.ndarray
-
-
-@dataclass(frozen=True, eq=False)
-class PlanningState:
-    """Planning for the fiducials as the session has them: per target (M,) the fraction of its region of
-    variability inside the included fiducials' hull; the fast predicted RMST (planning.RmstPrediction: rigid_mm,
-    rigid_std_mm, rrbc_mm, rrbc_std_mm, method) over the regions; the number of fiducials it counts."""
-
-    target_ids: tuple
-    coverage: np.ndarray
-    predicted: object
-    fiducials_used: int
-
-    def coverage_of(self, pid: str) -> float:
-        return float(self.coverage[self.target_ids.index(pid)])
-
-
-@dataclass(frozen=True, eq=False)
-class MonteCarloPlots:
-    """Errors (T, C) mm at C check points over T trials, rigid and RRBC, and the checks' distances (C,)."""
-
-    rigid: np.ndarray
-    rrbc: np.ndarray
-    distance: np.ndarray
-    trials: int
-
-    def histogram(self, bins: int = 30) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(bin centres, rigid counts, RRBC counts) on a shared range, as fractions of all samples."""
-        hi = float(max(self.rigid.max(), self.rrbc.max(), 1e-9))
-        edges = np.linspace(0.0, hi, bins + 1)
-        a, _ = np.histogram(self.rigid.ravel(), edges)
-        b, _ = np.histogram(self.rrbc.ravel(), edges)
-        n = self.rigid.size
-        return 0.5 * (edges[1:] + edges[:-1]), a / n, b / n
-
-    def by_distance(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(distance sorted, mean rigid error, mean RRBC error) per check point."""
-        order = np.argsort(self.distance)
-        return self.distance[order], self.rigid.mean(0)[order], self.rrbc.mean(0)[order]
-
-
-def hull_edges(points) -> np.ndarray:
-    """Edges (E, 2, 3) of the convex hull of points (robot frame, mm): 3-D hull facets' edges, or the polygon
-    in the best-fit plane for (nearly) coplanar points, or the segment for collinear ones."""
-    from scipy.spatial import ConvexHull, QhullError
-
-    from rrbc_core.geometry.points import LocalFrame
-
-    p = np.asarray(points, float)
-    if len(p) < 2:
-        return np.zeros((0, 2, 3))
-    frame = LocalFrame.of(p)
-    if frame.dim == 3:
-        try:
-            hull = ConvexHull(p)
-            edges = set()
-            for simplex in hull.simplices:
-                for a, b in ((0, 1), (1, 2), (0, 2)):
-                    i, j = sorted((simplex[a], simplex[b]))
-                    edges.add((i, j))
-            # drop edges inside coplanar facets (shared by two facets with the same normal)
-            keep = _feature_edges(hull, edges)
-            return np.array([[p[i], p[j]] for i, j in keep]).reshape(-1, 2, 3)
-        except QhullError:
-            pass
-    if frame.dim >= 2:
-        try:
-            hull = ConvexHull(frame.to_local(p)[:, :2])
-            v = hull.vertices
-            return np.array([[p[v[k]], p[v[(k + 1) % len(v)]]] for k in range(len(v))])
-        except QhullError:
-            pass
-    local = frame.to_local(p)[:, 0] if frame.dim >= 1 else np.zeros(len(p))
-    return np.array([[p[np.argmin(local)], p[np.argmax(local)]]])
-
-
-def _feature_edges(hull, edges):
-    normals = hull.equations[:, :3]
-    owners: dict = {}
-    for f, simplex in enumerate(hull.simplices):
-        for a, b in ((0, 1), (1, 2), (0, 2)):
-            owners.setdefault(tuple(sorted((simplex[a], simplex[b]))), []).append(f)
-    keep = []
-    for e in edges:
-        fs = owners.get(e, [])
-        if len(fs) == 2 and float(np.dot(normals[fs[0]], normals[fs[1]])) > 1 - 1e-9:
-            continue
-        keep.append(e)
-    return sorted(keep)
-
-
-def _display_rotation(mapping) -> np.ndarray:
-    return np.asarray(mapping.rotation, float)
-
-
-@dataclass(frozen=True)
-class _Scaled:
-    """An error term whose displacements are multiplied by `factor` (noise or bias size in the app)."""
-
-    term: object
-    factor: float
-    kind: str = field(default="")
-    random: bool = field(default=False)
-
-    def __post_init__(self):
-        object.__setattr__(self, "kind", self.term.kind)
-        object.__setattr__(self, "random", self.term.random)
-
-    def sample(self, points, side, rng, trials):
-        return self.factor * self.term.sample(points, side, rng, trials)
-
-    def __getattr__(self, name):
-        # a noise term's `covariance`, scaled with the term (absent, like here, if the term has none). Nothing else
-        # is forwarded: an unscaled parameter read through the wrapper would be silently wrong.
-        if name == "covariance" and hasattr(self.term, "covariance"):
-            return lambda x: self.factor ** 2 * self.term.covariance(x)
-        raise AttributeError(name)
-
-
-def _scaled(model, noise: float, bias: float):
-    """The model with random terms scaled by `noise` and deterministic ones by `bias`."""
-    from rrbc_core.simulation.errormodels import ErrorModel
-
-    def sc(t):
-        f = noise if t.random else bias
-        return t if f == 1.0 else _Scaled(t, f)
-
-    return ErrorModel(robot=tuple(sc(t) for t in model.robot), sensor=tuple(sc(t) for t in model.sensor))

@@ -1,0 +1,95 @@
+"""What the session hands the app besides an `Evaluation`: the heat map over the targets' regions (`HeatMap`), the
+planning state (`PlanningState`), the Monte Carlo plots (`MonteCarloPlots`), and the error model with the app's
+noise and bias sizes applied (`scaled`)."""
+
+from __future__ import annotations
+from dataclasses import dataclass, field
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class HeatMap:
+    """Samples (S,3) robot frame with their target, predicted errors rigid/RRBC (S,) mm (NaN without truth),
+    the correction size (S,) mm, its gp std (S,) or None, and extrapolation flags."""
+
+    positions: np.ndarray
+    target: tuple
+    error_rigid: np.ndarray
+    error_rrbc: np.ndarray
+    correction_mm: np.ndarray
+    std_mm: np.ndarray | None
+    extrapolated: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class PlanningState:
+    """Planning for the fiducials as the session has them: per target (M,) the fraction of its region of
+    variability inside the included fiducials' hull; the fast predicted RMST (planning.RmstPrediction: rigid_mm,
+    rigid_std_mm, rrbc_mm, rrbc_std_mm, method) over the regions; the number of fiducials it counts."""
+
+    target_ids: tuple
+    coverage: np.ndarray
+    predicted: object
+    fiducials_used: int
+
+    def coverage_of(self, pid: str) -> float:
+        return float(self.coverage[self.target_ids.index(pid)])
+
+
+@dataclass(frozen=True, eq=False)
+class MonteCarloPlots:
+    """Errors (T, C) mm at C check points over T trials, rigid and RRBC, and the checks' distances (C,)."""
+
+    rigid: np.ndarray
+    rrbc: np.ndarray
+    distance: np.ndarray
+    trials: int
+
+    def histogram(self, bins: int = 30) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(bin centres, rigid counts, RRBC counts) on a shared range, as fractions of all samples."""
+        hi = float(max(self.rigid.max(), self.rrbc.max(), 1e-9))
+        edges = np.linspace(0.0, hi, bins + 1)
+        a, _ = np.histogram(self.rigid.ravel(), edges)
+        b, _ = np.histogram(self.rrbc.ravel(), edges)
+        n = self.rigid.size
+        return 0.5 * (edges[1:] + edges[:-1]), a / n, b / n
+
+    def by_distance(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(distance sorted, mean rigid error, mean RRBC error) per check point."""
+        order = np.argsort(self.distance)
+        return self.distance[order], self.rigid.mean(0)[order], self.rrbc.mean(0)[order]
+
+
+@dataclass(frozen=True)
+class _Scaled:
+    """An error term whose displacements are multiplied by `factor` (noise or bias size in the app)."""
+
+    term: object
+    factor: float
+    kind: str = field(default="")
+    random: bool = field(default=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "kind", self.term.kind)
+        object.__setattr__(self, "random", self.term.random)
+
+    def sample(self, points, side, rng, trials):
+        return self.factor * self.term.sample(points, side, rng, trials)
+
+    def __getattr__(self, name):
+        # a noise term's `covariance`, scaled with the term (absent, like here, if the term has none). Nothing else
+        # is forwarded: an unscaled parameter read through the wrapper would be silently wrong.
+        if name == "covariance" and hasattr(self.term, "covariance"):
+            return lambda x: self.factor ** 2 * self.term.covariance(x)
+        raise AttributeError(name)
+
+
+def _scaled(model, noise: float, bias: float):
+    """The model with random terms scaled by `noise` and deterministic ones by `bias`."""
+    from rrbc_core.simulation.errormodels import ErrorModel
+
+    def sc(t):
+        f = noise if t.random else bias
+        return t if f == 1.0 else _Scaled(t, f)
+
+    return ErrorModel(robot=tuple(sc(t) for t in model.robot), sensor=tuple(sc(t) for t in model.sensor))
