@@ -175,7 +175,9 @@ def _diagnose_file(path: Path, n: int, seed: int) -> Path:
     sensor->robot rotation, a smooth robot bias (~0.3 mm), sensor noise 0.02 mm, random measurement order."""
     from scipy.spatial.transform import Rotation
 
-    from rrbc_core.io.measurements import MeasurementSet, write_measurements
+    from rrbc_core.io.measurements import MeasurementSet
+
+    from rrbc_core.io.measurements_write import write_measurements
 
     rng = np.random.default_rng(seed)
     robot = rng.uniform([100, -300, 50], [900, 300, 550], (n, 3))

@@ -265,7 +265,7 @@ def _simulate_table(res) -> str:
 def _cmd_simulate(args) -> str:
     import numpy as np
 
-    from rrbc_core.io.measurements import write_measurements
+    from rrbc_core.io.measurements_write import write_measurements
     from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.io.scene_toml import load_scene
     from rrbc_core.simulation.montecarlo import (INTERPOLATION_NAMES, STRATEGY_NAMES, icp_statistics, measure, measurement_set,

@@ -12,7 +12,8 @@ from pathlib import Path
 
 from rrbc_core.errors import InputError
 from rrbc_core.session.explorer import ExplorerSession
-from rrbc_core.io.measurements import MeasurementSet, parse_measurements, read_measurements, write_measurements
+from rrbc_core.io.measurements import MeasurementSet, parse_measurements, read_measurements
+from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
 

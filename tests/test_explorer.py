@@ -39,7 +39,7 @@ def test_evaluation_is_the_nine_steps_on_the_sessions_readings(scene):
 
 
 def test_export_reproduces_the_sessions_numbers_through_rrbc_correct(scene, tmp_path):
-    from rrbc_core.io.measurements import write_measurements
+    from rrbc_core.io.measurements_write import write_measurements
 
     ses = ExplorerSession.from_scene(scene, Settings(interpolation="tps"))
     ev = ses.move("targets", "H1", ses.layout["targets"].positions[0] + [3.0, -2.0, 0.0])

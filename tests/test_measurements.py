@@ -13,6 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import rrbc_core.io.measurements as meas
+import rrbc_core.io.measurements_write as meas_write
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import (
     ROLES,
@@ -20,8 +21,8 @@ from rrbc_core.io.measurements import (
     parse_measurements,
     read_measurements,
     validate,
-    write_measurements,
 )
+from rrbc_core.io.measurements_write import write_measurements
 
 DATA = Path(meas.__file__).parents[1] / "data"
 EXAMPLE = DATA / "example_measurements.csv"
@@ -483,7 +484,7 @@ def test_writer_is_atomic_when_a_row_fails(tmp_path, monkeypatch, existing):
     before = _write_existing(dest) if existing else None
     m = read_measurements(EXAMPLE)
     calls = {"n": 0}
-    real = meas._cell
+    real = meas_write._cell
 
     def failing(value):
         calls["n"] += 1
@@ -491,7 +492,7 @@ def test_writer_is_atomic_when_a_row_fails(tmp_path, monkeypatch, existing):
             raise RuntimeError("disk on fire")
         return real(value)
 
-    monkeypatch.setattr(meas, "_cell", failing)
+    monkeypatch.setattr(meas_write, "_cell", failing)
     with pytest.raises(RuntimeError, match="disk on fire"):
         write_measurements(dest, m)
     assert calls["n"] > 40
@@ -509,7 +510,7 @@ def test_writer_is_atomic_when_replace_fails(tmp_path, monkeypatch):
     def no_replace(src, dst):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(meas.os, "replace", no_replace)
+    monkeypatch.setattr(meas_write.os, "replace", no_replace)
     with pytest.raises(InputError) as info:
         write_measurements(dest, read_measurements(EXAMPLE))
     _assert_one_line_error(info.value, str(dest), "cannot write", "No space left")

@@ -149,7 +149,7 @@ def make_example(**overrides):
 
 
 def main(argv=None) -> int:
-    from rrbc_core.io.measurements import write_measurements
+    from rrbc_core.io.measurements_write import write_measurements
 
     argv = sys.argv[1:] if argv is None else argv
     out = Path(argv[0]) if argv else Path(__file__).with_name("example_measurements.csv")

@@ -1,0 +1,74 @@
+"""Writing a measurement file (`write_measurements`): the format of docs/formats/measurement-file.md, numbers written so
+they read back exactly, the file replaced atomically (a failed write leaves the old file as it was)."""
+
+from __future__ import annotations
+import csv
+import math
+import os
+import secrets
+from typing import Sequence
+import numpy as np
+
+from rrbc_core.io.measurements import ROBOT_COLUMNS, SENSOR_COLUMNS, MeasurementSet, _error, validate
+
+
+def _cell(value: float) -> str:
+    v = float(value)
+    return "" if math.isnan(v) else repr(v)
+
+
+def write_measurements(path, mset: MeasurementSet, comments: Sequence[str] = ()) -> None:
+    """Validate `mset` and write it as a measurement file, atomically (temporary file + os.replace).
+
+    Columns: id, role, sensor_x..z, robot_x..z, time (only if some time is finite), then the extra columns in
+    their order. NaN is written as an empty cell, floats with repr() so a round trip is exact. Each comment
+    line is written as `# ...` at the top. OS errors (missing directory, no permission) raise InputError; on any
+    failure the destination is left untouched and the temporary file removed.
+    """
+    validate(mset)
+    dest = os.fspath(path)
+    if isinstance(dest, bytes):
+        dest = os.fsdecode(dest)
+    directory = os.path.dirname(os.path.abspath(dest))
+    base = os.path.basename(dest)
+    tmp = os.path.join(directory, f".{base}.{secrets.token_hex(6)}.tmp")
+    write_time = bool(np.any(np.isfinite(mset.time)))
+    header = ["id", "role", *SENSOR_COLUMNS, *ROBOT_COLUMNS] + (["time"] if write_time else []) + list(mset.extra)
+    try:
+        mode = os.stat(dest).st_mode & 0o7777 if os.path.exists(dest) else None
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except OSError as exc:
+        raise _error(dest, None, None, f"cannot write the file: {exc.strerror or exc}") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            for comment in comments:
+                for text in str(comment).splitlines() or [""]:
+                    fh.write(f"# {text}\n" if text else "#\n")
+            plain = csv.writer(fh, lineterminator="\n")
+            quoted = csv.writer(fh, lineterminator="\n", quoting=csv.QUOTE_ALL)
+            plain.writerow(header)
+            extra_values = list(mset.extra.values())
+            for i in range(len(mset.ids)):
+                row = [mset.ids[i], mset.roles[i]]
+                row += [_cell(v) for v in mset.sensor[i]]
+                row += [_cell(v) for v in mset.robot[i]]
+                if write_time:
+                    row.append(_cell(mset.time[i]))
+                row += [str(values[i]) for values in extra_values]
+                # A row whose id starts with '#' would read as a comment unless its first cell is quoted; csv
+                # quotes '\n' (the line terminator) but not a lone '\r', which readers take as a line break.
+                needs_quotes = row[0].lstrip().startswith("#") or any("\r" in cell for cell in row)
+                (quoted if needs_quotes else plain).writerow(row)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if mode is not None:
+            os.chmod(tmp, mode)
+        os.replace(tmp, dest)
+    except BaseException as exc:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        if isinstance(exc, OSError):
+            raise _error(dest, None, None, f"cannot write the file: {exc.strerror or exc}") from None
+        raise
