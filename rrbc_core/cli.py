@@ -8,7 +8,6 @@ printed, so a failure never leaves partial output.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import sys
@@ -263,31 +262,22 @@ def _simulate_table(res) -> str:
 
 
 def _cmd_simulate(args) -> str:
-    import numpy as np
-
     from rrbc_core.io.measurements_write import write_measurements
-    from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.io.scene_toml import load_scene
-    from rrbc_core.simulation.montecarlo import (INTERPOLATION_NAMES, STRATEGY_NAMES, icp_statistics, measure, measurement_set,
-                             monte_carlo, work_cell_from_scene)
+    from rrbc_core.runtime.progress import ProgressBar
+    from rrbc_core.simulation.montecarlo import INTERPOLATION_NAMES, STRATEGY_NAMES, simulate, simulated_data
 
     scene = load_scene(args.scene)
     if args.layout:
-        scene = scene.with_layout(args.layout)
-    cell = work_cell_from_scene(scene, seed=args.seed)
-    start = time.perf_counter()
+        scene.with_layout(args.layout)  # an unknown layout is refused before any work
     bar = ProgressBar(args.trials * (len(STRATEGY_NAMES) + len(INTERPOLATION_NAMES)) + args.icp, "simulating")
     try:
-        res = monte_carlo(cell, args.trials, seed=args.seed, progress=lambda n, label: bar.update(n, label))
-        if args.icp:
-            icp = icp_statistics(scene, cell, args.icp, seed=args.seed, progress=lambda n, label: bar.update(n, label))
-            res = dataclasses.replace(res, strategies=res.strategies + (icp,), icp_trials=args.icp,
-                                      seconds=time.perf_counter() - start)
+        res = simulate(scene, args.trials, seed=args.seed, layout=args.layout, icp=args.icp,
+                       progress=lambda n, label: bar.update(n, label))
     finally:
         bar.close()
     if args.out:
-        data = measure(cell, np.random.default_rng([args.seed, 1]), 1)
-        mset = measurement_set(cell, data)
+        mset = simulated_data(scene, seed=args.seed, layout=args.layout)
         write_measurements(args.out, mset, comments=[
             f"simulated by: rrbc simulate {args.scene} --seed {args.seed}" + (f" --layout {args.layout}" if args.layout else ""),
             f"scene: {scene.name}; check rows carry the robot-frame truth (the command that reaches the point)",

@@ -65,6 +65,12 @@ class Effect:
 
 @dataclass(frozen=True)
 class Diagnosis:
+    """The verdict of `diagnose`: ``effects`` (`Effect`: name, parameters, p-value, evidence), largest first;
+    ``noise_sigma_mm`` per robot axis and where it came from (``noise_source``: repeats or fit); ``bias_rms_mm``;
+    RRBC's leave-one-out verdict (``rrbc_recommended``, ``expected_rmst_change``, the two RMS values); the
+    p-value of every test run (``tests``) and what these data cannot show (``limits``). `to_json()` is the JSON of
+    `rrbc diagnose --json`.
+    """
     effects: tuple[Effect, ...]
     noise_sigma_mm: tuple[float, float, float]
     noise_source: str  # "repeats" or "fit"
@@ -106,7 +112,29 @@ def _fmt_p(p: float) -> str:
 
 @thread_limited
 def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
-    """Diagnose a MeasurementSet: which effects beyond rigid + isotropic noise are present, and will RRBC help."""
+    """What, beyond a rigid transform plus isotropic noise, is in measured point pairs; and whether RRBC will help.
+
+    Parameters
+    ----------
+    mset : MeasurementSet
+        Rows with both readings (roles registration, fiducial, both, check); repeated ids are repeats.
+    alpha : float
+        Family-wise false-alarm rate over all tests (0 < alpha < 1).
+    seed : int
+        Seed of the bootstrap of the smooth-field test.
+
+    Returns
+    -------
+    Diagnosis
+        The effects found (outliers, scale, affine, drift, smooth_field, anisotropic_noise) with their parameters
+        and p-values, the noise per axis (mm), the bias RMS (mm), the leave-one-out verdict on RRBC and the limits
+        of what these data can show; `to_json()` is the JSON of `rrbc diagnose --json`.
+
+    Raises
+    ------
+    InputError
+        Fewer than 5 distinct points with both readings, or alpha out of range.
+    """
     if not (0 < float(alpha) < 1):
         raise InputError(f"alpha must be between 0 and 1, got {alpha!r}")
     d = _paired(mset)

@@ -159,13 +159,24 @@ class PlanResult:
 
 @thread_limited
 def coverage(fiducials_mm, regions, *, samples_per_region: int = 512, seed: int = 0) -> np.ndarray:
-    """Per region, the fraction (R,) of its volume inside the convex hull of the fiducials.
+    """Per region of variability, the fraction of its volume inside the convex hull of the fiducials.
 
-    fiducials_mm: (N, 3) scene frame (robot base frame), mm. regions: `scene.Region` objects (or targets with a
-    `.region`). Estimated from `samples_per_region` uniform samples per region (seed `seed`; standard error
-    ≤ 0.5/√samples). Coplanar fiducials: a sample counts as covered when its projection is inside the planar
-    hull AND it lies within COPLANAR_TOL_MM (1 mm) of the plane; fewer than 3 fiducials or collinear ones cover
-    nothing of a volume (a line has no area).
+    Parameters
+    ----------
+    fiducials_mm : (N, 3) array_like
+        Fiducial positions, robot frame, mm.
+    regions : sequence of Region (or targets with a ``region``)
+        The targets' regions of variability.
+    samples_per_region : int
+        Uniform samples per region (standard error <= 0.5 / sqrt(samples)).
+    seed : int
+        Seed of the samples.
+
+    Returns
+    -------
+    (R,) ndarray
+        Fractions in [0, 1]. Coplanar fiducials cover a sample whose projection is inside their polygon and that
+        lies within `COPLANAR_TOL_MM` of their plane; fewer than 3 or collinear fiducials cover nothing.
     """
     f = _points(fiducials_mm, "fiducial positions")
     n = int(samples_per_region)
@@ -184,13 +195,30 @@ def predict_rmst(scene, fiducials_mm, *, registration_mm=None, trials: int = 0, 
                  samples_per_target: int = SAMPLES_PER_TARGET) -> RmstPrediction:
     """Predicted RMS target error (mm) over the targets' regions of variability, rigid and with RRBC (IDW).
 
-    scene: a loaded `Scene`. fiducials_mm: (N, 3) fiducial positions, scene frame (= robot base frame), mm; N may
-    be 0 (then RRBC = rigid). registration_mm: (Nr, 3) registration points, scene frame, mm (default: the scene's).
-    A fiducial at a registration point's position is the same physical point (one reading, role `both`).
-    trials=0: the fast first-order prediction (bias exact, noise first order; see the module docstring; ~10 ms
-    on the shipped scenes); trials>0: Monte Carlo over the scene's error model with that many trials.
-    samples_per_target check points are sampled uniformly in each region (seeded by `seed`). Visibility is not
-    checked here (use `usable_candidates`). Unreachable points raise InputError.
+    Parameters
+    ----------
+    scene : Scene
+        A loaded scene.
+    fiducials_mm : (N, 3) array_like
+        The fiducials, robot frame, mm (a position equal to a registration point is one physical point).
+    registration_mm : (Nr, 3) array_like, optional
+        The registration points (default the scene's).
+    trials : int
+        0: the fast prediction (bias exact, noise to first order); > 1: Monte Carlo with that many trials.
+    seed : int
+        Seed of the region samples (and of the Monte Carlo).
+    samples_per_target : int
+        Check points sampled uniformly in each target's region.
+
+    Returns
+    -------
+    RmstPrediction
+        ``rigid_mm``, ``rrbc_mm`` and their 1-sigma uncertainties; ``method``.
+
+    Raises
+    ------
+    InputError
+        Bad positions, or a point out of the arm's reach.
     """
     fid = _points(fiducials_mm, "fiducial positions")
     reg = None if registration_mm is None else _points(registration_mm, "registration positions")
@@ -207,13 +235,34 @@ def predict_rmst(scene, fiducials_mm, *, registration_mm=None, trials: int = 0, 
 @thread_limited
 def plan(scene, add: int = 0, *, fiducials_mm=None, seed: int = 0, progress=None,
          samples_per_target: int = SAMPLES_PER_TARGET) -> PlanResult:
-    """Coverage, predicted RMST and `add` suggested fiducial locations for a scene.
+    """Coverage, predicted RMST and `add` suggested fiducial locations for a scene (`rrbc plan`).
 
-    fiducials_mm: (N, 3) the fiducials to plan around (scene frame = robot base frame, mm; default the scene's
-    fiducials); they stay. The `add` suggestions come from the usable candidates (`usable_candidates`), chosen by
-    greedy forward selection + exchange on the fast predicted RMST with RRBC (module docstring). Baselines of the
-    same K: "hull-corners" and "random" (mean over RANDOM_DRAWS draws seeded by `seed`). progress(n, label), if
-    given, is called as the work proceeds. Raises InputError when add exceeds the usable candidates.
+    Parameters
+    ----------
+    scene : Scene
+        A loaded scene (its candidates, error model, targets and regions).
+    add : int
+        How many fiducials to suggest from the usable candidates (0: only coverage and prediction).
+    fiducials_mm : (N, 3) array_like, optional
+        The fiducials to plan around (robot frame, mm; default the scene's); they stay.
+    seed : int
+        Seed of the region samples and of the "random" baseline.
+    progress : callable, optional
+        ``progress(n, label)``, called as the search proceeds.
+    samples_per_target : int
+        Check points sampled in each target's region for the prediction.
+
+    Returns
+    -------
+    PlanResult
+        Coverage per target before and after, the predicted RMST (rigid and RRBC, with their std) before and
+        after, the suggestions (ids and robot-frame positions, mm), the baselines for the same K and the rejected
+        candidates with their reasons; `to_json()` is the JSON of `rrbc plan --json`.
+
+    Raises
+    ------
+    InputError
+        `add` exceeds the usable candidates, or a point cannot be evaluated.
     """
     import time
 

@@ -22,6 +22,14 @@ from rrbc_core.runtime.threads import thread_limited
 
 @dataclass(frozen=True, eq=False)
 class CorrectionResult:
+    """The outcome of `correct_measurements` (frames as in the measurement file; mm).
+
+    Attributes: ``options`` (the `MethodOptions` used), ``registration`` (`Registration`), ``fiducials`` and
+    ``fiducial_corrections`` (N, 3) sensor frame, ``targets``/``checks`` (`PointGroup`) with ``targets_corrected`` /
+    ``checks_corrected`` (`CorrectedPoints`: correction, robot_rigid, robot_rrbc, extrapolated; None when there are
+    none), ``error_rigid`` / ``error_rrbc`` (C,) at the checks. `summary()` gives RMST and max error rigid and with
+    RRBC; `to_json()` the JSON of `rrbc correct --json`.
+    """
     options: MethodOptions
     registration: registration.Registration
     fiducials: PointGroup
@@ -89,7 +97,27 @@ def _points_json(group: PointGroup, corrected: CorrectedPoints | None, err_rigid
 
 @thread_limited
 def correct_measurements(mset: MeasurementSet, options: MethodOptions | None = None) -> CorrectionResult:
-    """Run RRBC on a measurement set (all nine steps) and score any check points against their truth."""
+    """RRBC on a measurement set: register, correct the fiducials, interpolate to the targets and checks, score.
+
+    Parameters
+    ----------
+    mset : MeasurementSet
+        Registration, fiducial (or both), target and check rows (`read_measurements`).
+    options : MethodOptions, optional
+        The registration strategy and interpolation (default: least squares + IDW, k = 4, p = 2).
+
+    Returns
+    -------
+    CorrectionResult
+        The registration, fiducial corrections e = Rᵀ(b − t) − s (sensor frame), each target's and check's
+        correction and corrected robot-frame position (``targets_corrected.robot_rrbc``, mm), the check errors and
+        `summary()`; `to_json()` is the JSON of `rrbc correct --json`.
+
+    Raises
+    ------
+    InputError
+        Unknown method or options, too few or degenerate registration points, no fiducials for an interpolation.
+    """
     options = MethodOptions() if options is None else options
     method = options.interpolator()
     reg_pts = mset.points("registration")

@@ -72,9 +72,26 @@ METHODS = {"idw": IDW, "linear": Linear, "tps": TPS, "gp": GP, "none": NoCorrect
 
 
 def make_interpolator(name: str, **options):
-    """The method object for a command-line name ('idw', 'linear', 'tps', 'gp', 'none') and its options.
+    """The interpolation method object for a command-line name, ready to ``fit(points, values)``.
 
-    Options set to None are ignored (they mean "default"); an option the method does not take raises InputError.
+    Parameters
+    ----------
+    name : str
+        A name in `METHODS`: "idw", "linear", "tps", "gp", "none".
+    **options
+        The method's options (idw: ``k``, ``power``; tps: ``smoothing``; gp: ``kernel``, ``noise_mm``); None means
+        the default.
+
+    Returns
+    -------
+    IDW, Linear, TPS, GP or NoCorrection
+        ``method.fit(points (N, 3) sensor frame mm, values (N, 3) mm)`` gives a fitted interpolator whose
+        ``predict(query (M, 3))`` returns a `Prediction`.
+
+    Raises
+    ------
+    InputError
+        An unknown name, or an option the method does not take or that is out of range.
     """
     key = str(name).strip().lower()
     if key not in METHODS:

@@ -97,12 +97,22 @@ class Hull:
 
 
 def hull_flags(points, query) -> tuple[np.ndarray, np.ndarray]:
-    """(extrapolated, off_plane_mm) for query points (M x 3 or a 3-vector, sensor frame, mm).
+    """Whether query points lie outside the fiducials' convex hull, and how far they are from its plane.
 
-    extrapolated[m] is True when the query's projection into the fiducials' local coordinates lies outside the
-    fiducials' convex hull (for coplanar fiducials: outside the 2-D polygon, judged by the projection);
-    off_plane_mm[m] is the query's distance (mm) from the fiducials' affine hull (0 for a 3-D fiducial set).
-    See the module docstring for the tolerances and the degenerate cases.
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        Fiducial positions, sensor frame, mm.
+    query : (M, 3) or (3,) array_like
+        Query points, sensor frame, mm.
+
+    Returns
+    -------
+    extrapolated : (M,) bool
+        The query's projection into the fiducials' local coordinates lies outside their hull (for coplanar
+        fiducials: outside the polygon in their plane, judged by the projection).
+    off_plane_mm : (M,) float
+        Distance (mm) from the fiducials' affine hull (0 for a 3-D fiducial set).
     """
     p = as_points(points, "fiducial positions")
     if len(p) == 0:

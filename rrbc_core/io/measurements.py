@@ -205,7 +205,23 @@ def _selected_roles(role: str) -> tuple[str, ...]:
 
 
 def read_measurements(path) -> MeasurementSet:
-    """Read and validate a measurement file (UTF-8 CSV). Raises InputError with a one-line message on bad input."""
+    """Read and validate a measurement file (UTF-8 CSV; format: docs/formats/measurement-file.md).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+
+    Returns
+    -------
+    MeasurementSet
+        Its rows in file order: ids, roles, sensor (N, 3) sensor frame, robot (N, 3) robot frame, mm, time (s).
+
+    Raises
+    ------
+    InputError
+        One line naming the file, the line and the field of the first problem.
+    """
     source = os.fspath(path)
     if isinstance(source, bytes):
         source = os.fsdecode(source)
@@ -291,7 +307,24 @@ def _number(cell: str, source: str, line: int, column: str) -> float:
 
 
 def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
-    """Parse and validate the text of a measurement file. Raises InputError with a one-line message on bad input."""
+    """Parse and validate the text of a measurement file (as `read_measurements` does for a file).
+
+    Parameters
+    ----------
+    text : str
+        The file's content.
+    source : str
+        The name used in messages.
+
+    Returns
+    -------
+    MeasurementSet
+
+    Raises
+    ------
+    InputError
+        One line naming the source, the line and the field of the first problem.
+    """
     source = str(source)
     if text.startswith("\ufeff"):
         text = text[1:]

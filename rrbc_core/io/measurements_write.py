@@ -18,12 +18,25 @@ def _cell(value: float) -> str:
 
 
 def write_measurements(path, mset: MeasurementSet, comments: Sequence[str] = ()) -> None:
-    """Validate `mset` and write it as a measurement file, atomically (temporary file + os.replace).
+    """Validate a measurement set and write it as a measurement file, atomically.
 
-    Columns: id, role, sensor_x..z, robot_x..z, time (only if some time is finite), then the extra columns in
-    their order. NaN is written as an empty cell, floats with repr() so a round trip is exact. Each comment
-    line is written as `# ...` at the top. OS errors (missing directory, no permission) raise InputError; on any
-    failure the destination is left untouched and the temporary file removed.
+    Columns: the standard ones, plus ``time`` when any row has a time. Numbers are written with ``repr`` so they read
+    back exactly; a missing value is an empty cell. The file is written beside `path` and moved into place with
+    ``os.replace``, so a failure leaves an existing file as it was.
+
+    Parameters
+    ----------
+    path : str or Path
+        Where to write.
+    mset : MeasurementSet
+        The rows (validated first, as `read_measurements` would).
+    comments : sequence of str
+        Lines written first, each as a ``#`` comment.
+
+    Raises
+    ------
+    InputError
+        The set is invalid or the file cannot be written (one line).
     """
     validate(mset)
     dest = os.fspath(path)

@@ -355,7 +355,17 @@ def _load_mesh_file(path: Path):
 
 
 def default_scene_path() -> Path:
-    """scenes/demo_workcell.toml in the repository (next to this package)."""
+    """The bundled default scene, scenes/demo_workcell.toml in the repository.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    InputError
+        The file is missing (the package was installed without its repository).
+    """
     p = Path(__file__).resolve().parents[2] / "scenes" / "demo_workcell.toml"
     if not p.is_file():
         raise InputError(f"{p}: the default scene is missing (expected scenes/demo_workcell.toml in the repository)")

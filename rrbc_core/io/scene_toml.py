@@ -179,8 +179,24 @@ def _read_toml(path, source: str, c: _Checker) -> dict:
 
 
 def load_scene(path) -> Scene:
-    """Read and validate a scene TOML file. Every problem raises InputError with one line
-    `<file>: <key path>: <what is wrong>`."""
+    """Read and validate a scene TOML file (format: scenes/README.md).
+
+    Parameters
+    ----------
+    path : str or Path
+        The scene file; a mesh it names is read relative to it.
+
+    Returns
+    -------
+    Scene
+        Robot, sensor pose, registration points, fiducials, targets with their regions, candidates, error model;
+        robot base frame, mm.
+
+    Raises
+    ------
+    InputError
+        One line ``<file>: <key path>: <problem>`` (with the line for TOML syntax errors).
+    """
     source = os.fspath(path)
     if isinstance(source, bytes):
         source = os.fsdecode(source)

@@ -501,7 +501,27 @@ STRATEGY_OPTIONS = {
 
 @thread_limited
 def register(method: str, sensor, robot, **options) -> Registration:
-    """Run the named strategy (one of STRATEGIES)."""
+    """Register paired points with a named strategy: the sensor→robot mapping and its residuals.
+
+    Parameters
+    ----------
+    method : str
+        A name in `STRATEGIES`: "least-squares", "three-point", "combinatorial", "annealing", "clustering".
+    sensor, robot : (N, 3) array_like
+        The same N physical points measured in the sensor frame and in the robot frame, mm.
+    **options
+        The strategy's options (`STRATEGY_OPTIONS`, and ``seed`` for annealing and clustering).
+
+    Returns
+    -------
+    Registration
+        ``mapping`` (robot = mapping.apply(sensor)), ``residuals`` (N, 3) robot frame, mm, and ``fre_rms_mm``.
+
+    Raises
+    ------
+    InputError
+        An unknown name or option, fewer than 3 points, coincident or (nearly) collinear points.
+    """
     try:
         fn = STRATEGIES[method]
     except KeyError:

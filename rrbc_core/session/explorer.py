@@ -54,7 +54,14 @@ def _seed_for(seed: int, pid: str) -> list[int]:
 
 
 class ExplorerSession:
-    """Mutable session state (owned by one app); every method that changes it returns the new Evaluation."""
+    """The interactive session behind the browser app: a layout of points, the settings, and everything shown.
+
+    Make one with `from_scene(scene)` (points measured through the scene's measurement model wherever they are
+    moved) or `from_measurements(mset)` (readings as measured). Every method that changes it (`move`, `update`,
+    `set_excluded`, `accept_suggestions`) returns the new `Evaluation` and leaves the session unchanged when it
+    raises `InputError`. Views: `evaluate()` / `last`, `heat_map()`, `planning_state()`, `suggest_fiducials()`,
+    `monte_carlo()`, `export_measurements()`, `export_json()`. Positions are robot frame, mm.
+    """
 
     def __init__(self, *, kind, name, layout, settings, scene=None, mset=None, readings=None, regions=None,
                  mesh_path=None, sensor_to_robot=None):

@@ -15,6 +15,7 @@ Points the sensor cannot see (ray cast against the cell's mesh, `visibility.py`)
 
 from __future__ import annotations
 
+import dataclasses
 import time as _time
 from dataclasses import dataclass, field
 
@@ -255,6 +256,11 @@ class InterpolationStats:
 
 @dataclass(frozen=True)
 class MonteCarloResult:
+    """The outcome of `monte_carlo` / `simulate`: per registration strategy (`strategies`, `StrategyStats`) the
+    rigid TRE mean, RMS and max (mm) at the check points, its correlation with distance, and the RMST after RRBC
+    (IDW); per interpolation (`interpolations`, `InterpolationStats`) the RMST after least squares + RRBC; the scene,
+    trials, seed and seconds. `to_json()` is the JSON of `rrbc simulate --json`.
+    """
     scene: str
     trials: int
     seconds: float
@@ -414,3 +420,66 @@ def icp_statistics(scene, cell: WorkCell, trials: int, seed: int = 0, start_erro
         if progress:
             progress(1, "icp")
     return _strategy_stats("icp", np.array(rigid), np.array(rrbc), dist)
+
+
+@thread_limited
+def simulate(scene, trials: int = 200, *, seed: int = 0, layout: str | None = None, icp: int = 0,
+             progress=None) -> MonteCarloResult:
+    """Monte Carlo of a scene's robot and sensor with its error model: what `rrbc simulate` reports.
+
+    Parameters
+    ----------
+    scene : Scene
+        A loaded scene (`load_scene`).
+    trials : int
+        Monte Carlo trials (noise redrawn in each, bias fixed by the scene's seeds).
+    seed : int
+        Seed of the noise, of the check points sampled in the targets' regions and of annealing.
+    layout : str, optional
+        A named layout of the scene (its registration points and fiducials) to simulate instead.
+    icp : int
+        Also register by ICP of a simulated depth-sensor point cloud against the cell mesh, over this many trials.
+    progress : callable, optional
+        ``progress(n, label)``, called as work completes.
+
+    Returns
+    -------
+    MonteCarloResult
+        Per registration strategy the rigid TRE (mean, RMS, max, mm) at the check points and its correlation
+        with distance, and the RMST after RRBC (IDW); per interpolation method the RMST after least squares +
+        RRBC; `to_json()` gives the command's JSON.
+    """
+    if layout:
+        scene = scene.with_layout(layout)
+    cell = work_cell_from_scene(scene, seed=seed)
+    start = _time.perf_counter()
+    res = monte_carlo(cell, trials, seed=seed, progress=progress)
+    if icp:
+        icp_row = icp_statistics(scene, cell, icp, seed=seed, progress=progress)
+        res = dataclasses.replace(res, strategies=res.strategies + (icp_row,), icp_trials=icp,
+                                  seconds=_time.perf_counter() - start)
+    return res
+
+
+def simulated_data(scene, *, seed: int = 0, layout: str | None = None) -> MeasurementSet:
+    """One simulated measurement of a scene, as a measurement file holds it: what `rrbc simulate --out` writes.
+
+    Parameters
+    ----------
+    scene : Scene
+        A loaded scene.
+    seed : int
+        The same seed as `simulate` uses for the same cell (check points, noise).
+    layout : str, optional
+        A named layout of the scene.
+
+    Returns
+    -------
+    MeasurementSet
+        Registration, fiducial, target and check rows; check rows carry the robot-frame truth (the command that
+        reaches the point).
+    """
+    if layout:
+        scene = scene.with_layout(layout)
+    cell = work_cell_from_scene(scene, seed=seed)
+    return measurement_set(cell, measure(cell, np.random.default_rng([seed, 1]), 1))
