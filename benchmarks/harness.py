@@ -59,8 +59,12 @@ def median_time(fn, repeats: int = 3) -> tuple[float, object]:
 def busy_core():
     """One other process spinning on a core for the duration of the block (a user's machine running something
     else: a browser, a compiler, another job). Started before and killed after the block."""
-    spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"], stdin=subprocess.DEVNULL,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    spinner = subprocess.Popen(
+        [sys.executable, "-c", "while True: pass"],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         time.sleep(0.3)  # let it reach the scheduler's steady state
         yield
@@ -103,8 +107,9 @@ def run_command(args, repeats: int = 3) -> tuple[float, float, str]:
         with tempfile.TemporaryFile() as fout, tempfile.TemporaryFile() as ferr:
             peak = 0.0
             t0 = time.perf_counter()
-            proc = subprocess.Popen(list(map(str, args)), stdout=fout, stderr=ferr, stdin=subprocess.DEVNULL,
-                                    env=env, cwd=ROOT)
+            proc = subprocess.Popen(
+                list(map(str, args)), stdout=fout, stderr=ferr, stdin=subprocess.DEVNULL, env=env, cwd=ROOT
+            )
             while proc.poll() is None:
                 mark = _peak_rss_mb(proc.pid)
                 if mark is not None and proc.poll() is None:
@@ -125,5 +130,14 @@ def row(name, value, unit, *, loaded=None, baseline=None, higher_is_better=False
     ratio = None
     if baseline is not None and value:
         ratio = value / baseline if higher_is_better else baseline / value
-    return {"name": name, "value": value, "loaded": loaded, "unit": unit, "baseline": baseline, "ratio": ratio,
-            "goal": goal, "met": met, "note": note}
+    return {
+        "name": name,
+        "value": value,
+        "loaded": loaded,
+        "unit": unit,
+        "baseline": baseline,
+        "ratio": ratio,
+        "goal": goal,
+        "met": met,
+        "note": note,
+    }

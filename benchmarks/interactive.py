@@ -9,13 +9,11 @@ row's docstring); the drag, Suggest and command rows have absolute goals and no 
 from __future__ import annotations
 
 import dataclasses
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-
 from harness import ROOT, RRBC, best_time, both, median_time, row, run_command
 
 DEMO = ROOT / "scenes" / "demo_workcell.toml"
@@ -51,30 +49,39 @@ def _drag(app, kind: str, pid: str, steps: int) -> dict:
     app.handle_drag(kind, pid, start, phase="end")
     app.mc.wait_idle(), app.planning.wait_idle()
     times, heat = np.array(times), np.array(heat)
-    return {"median": float(np.median(times)), "p95": float(np.percentile(times, 95)), "max": float(times.max()),
-            "heat_refreshes": int(heat.sum()),
-            "heat_median": float(np.median(times[heat])) if heat.any() else float("nan"), "end": end}
+    return {
+        "median": float(np.median(times)),
+        "p95": float(np.percentile(times, 95)),
+        "max": float(times.max()),
+        "heat_refreshes": int(heat.sum()),
+        "heat_median": float(np.median(times[heat])) if heat.any() else float("nan"),
+        "end": end,
+    }
 
 
 def _drag_note(steps, kind, pid, app, idle, loaded, samples) -> str:
     def fig(d):
-        return (f"median {d['median'] * 1e3:.1f} ms, p95 {d['p95'] * 1e3:.1f}, max {d['max'] * 1e3:.1f}; "
-                f"{d['heat_refreshes']} updates refreshed the heat map (median {d['heat_median'] * 1e3:.1f} ms); "
-                f"drag end {d['end'] * 1e3:.1f} ms")
+        return (
+            f"median {d['median'] * 1e3:.1f} ms, p95 {d['p95'] * 1e3:.1f}, max {d['max'] * 1e3:.1f}; "
+            f"{d['heat_refreshes']} updates refreshed the heat map (median {d['heat_median'] * 1e3:.1f} ms); "
+            f"drag end {d['end'] * 1e3:.1f} ms"
+        )
 
-    return (f"{steps} drag updates of {kind[:-1]} {pid} at {DRAG_RATE_HZ:.0f} Hz, every update counted; heat map "
-            f"shown ({samples} samples); {len(app.session.layout['fiducials'].ids)} fiducials, "
-            f"{len(app.session.layout['targets'].ids)} targets. idle: {fig(idle)}. busy core: {fig(loaded)}")
+    return (
+        f"{steps} drag updates of {kind[:-1]} {pid} at {DRAG_RATE_HZ:.0f} Hz, every update counted; heat map "
+        f"shown ({samples} samples); {len(app.session.layout['fiducials'].ids)} fiducials, "
+        f"{len(app.session.layout['targets'].ids)} targets. idle: {fig(idle)}. busy core: {fig(loaded)}"
+    )
 
 
 def drag_latency(quick: bool) -> list[dict]:
     """Median server-side time per drag update (every update, heat-map refreshes included), default scene and
     the stress scene (200 fiducials, 50 targets, the demo's full error model, 20 000 heat-map samples), heat map
     shown. Goal: loaded median <= 10 ms. Absolute goal, no baseline."""
+    from stress_scene import HEAT_SAMPLES_PER_TARGET, write_stress_scene
+
     from rrbc_core.io.scene import default_scene_path
     from rrbc_viz.app import serve
-
-    from stress_scene import HEAT_SAMPLES_PER_TARGET, write_stress_scene
 
     rows = []
     steps = 20 if quick else 60
@@ -90,10 +97,18 @@ def drag_latency(quick: bool) -> list[dict]:
                 samples = len(app.heat_map.positions)
                 for kind, pid in moves:
                     _drag(app, kind, pid, 5)  # warm-up
-                    idle, loaded = both(lambda: _drag(app, kind, pid, steps))
-                    rows.append(row(f"drag_{label}_{kind[:-1]}", idle["median"], "s", loaded=loaded["median"],
-                                    goal="loaded median <= 0.010 s", met=bool(loaded["median"] <= 0.010),
-                                    note=_drag_note(steps, kind, pid, app, idle, loaded, samples)))
+                    idle, loaded = both(lambda app=app, kind=kind, pid=pid: _drag(app, kind, pid, steps))
+                    rows.append(
+                        row(
+                            f"drag_{label}_{kind[:-1]}",
+                            idle["median"],
+                            "s",
+                            loaded=loaded["median"],
+                            goal="loaded median <= 0.010 s",
+                            met=bool(loaded["median"] <= 0.010),
+                            note=_drag_note(steps, kind, pid, app, idle, loaded, samples),
+                        )
+                    )
             finally:
                 app.stop()
     return rows
@@ -111,9 +126,18 @@ def suggest_app(quick: bool) -> list[dict]:
         idle, loaded = both(lambda: median_time(lambda: app.suggest_fiducials(4), 1 if quick else 3)[0])
     finally:
         app.stop()
-    return [row("suggest_app_demo_k4", idle, "s", loaded=loaded, goal="loaded < 5 s", met=bool(loaded < 5.0),
-                note="RunningApp.suggest_fiducials(4) on the default scene (264 candidates), median of "
-                     f"{1 if quick else 3}")]
+    return [
+        row(
+            "suggest_app_demo_k4",
+            idle,
+            "s",
+            loaded=loaded,
+            goal="loaded < 5 s",
+            met=bool(loaded < 5.0),
+            note="RunningApp.suggest_fiducials(4) on the default scene (264 candidates), median of "
+            f"{1 if quick else 3}",
+        )
+    ]
 
 
 def plan_command(quick: bool) -> list[dict]:
@@ -122,8 +146,17 @@ def plan_command(quick: bool) -> list[dict]:
     args = [RRBC, "plan", DEMO, "--add", "4", "--json"]
     n = 1 if quick else 3
     idle, loaded = both(lambda: run_command(args, n)[0])
-    return [row("plan_command_demo_add4", idle, "s", loaded=loaded, goal="loaded < 5 s", met=bool(loaded < 5.0),
-                note=f"wall time of `rrbc plan scenes/demo_workcell.toml --add 4 --json`, median of {n} runs")]
+    return [
+        row(
+            "plan_command_demo_add4",
+            idle,
+            "s",
+            loaded=loaded,
+            goal="loaded < 5 s",
+            met=bool(loaded < 5.0),
+            note=f"wall time of `rrbc plan scenes/demo_workcell.toml --add 4 --json`, median of {n} runs",
+        )
+    ]
 
 
 class _OneSetPerCall:
@@ -141,18 +174,17 @@ class _OneSetPerCall:
 
 def plan_optimiser(quick: bool) -> list[dict]:
     """The planner's search choosing 4 of 125 candidates (the demo cell with 6 of its fiducials and a 5 x 5 x 5
-    candidate grid, scripts/plan_confirm.py: candidate_grid), vectorised over candidate sets, against the same
+    candidate grid, rrbc_core/studies/planning_study.py: candidate_grid), vectorised over candidate sets, against the same
     greedy + exchange with one set scored per call (`_OneSetPerCall`) on the same precomputed model. Both must
     choose the same candidates. Idle machine (a comparison of two implementations)."""
     from rrbc_core.analysis import planning, planning_search
     from rrbc_core.io.scene_toml import load_scene
-
-    sys.path.insert(0, str(ROOT / "scripts"))
-    from plan_confirm import candidate_grid
+    from rrbc_core.studies.planning_study import candidate_grid
 
     demo = load_scene(DEMO)
-    scene = dataclasses.replace(demo, fiducials=demo.fiducials.subset(["F1", "F3", "F5", "F6", "F9", "F10"]),
-                                candidates=candidate_grid())
+    scene = dataclasses.replace(
+        demo, fiducials=demo.fiducials.subset(["F1", "F3", "F5", "F6", "F9", "F10"]), candidates=candidate_grid()
+    )
     res = planning.plan(scene, 4)
     mask, _ = planning.usable_candidates(scene)
     base = scene.fiducials.positions
@@ -162,10 +194,12 @@ def plan_optimiser(quick: bool) -> list[dict]:
     t_vec, (chosen_v, evals) = best_time(lambda: planning_search._optimise(pool, len(cand), 4), 1 if quick else 3)
     t_set, (chosen_s, _) = best_time(lambda: planning_search._optimise(_OneSetPerCall(pool), len(cand), 4), 1)
     assert list(chosen_v) == list(chosen_s), "vectorised and per-set search chose different candidates"
-    note = (f"{len(cand)} usable candidates, {evals} sets scored; chose {', '.join(res.suggested_ids)}; "
-            f"predicted RRBC RMST {res.predicted.rrbc_mm:.4f} -> {res.predicted_after.rrbc_mm:.4f} mm; "
-            "value: planning_search._optimise (sets scored in vectorised chunks); baseline: the same search scoring one "
-            "set per call; both on the same precomputed model")
+    note = (
+        f"{len(cand)} usable candidates, {evals} sets scored; chose {', '.join(res.suggested_ids)}; "
+        f"predicted RRBC RMST {res.predicted.rrbc_mm:.4f} -> {res.predicted_after.rrbc_mm:.4f} mm; "
+        "value: planning_search._optimise (sets scored in vectorised chunks); baseline: the same search scoring one "
+        "set per call; both on the same precomputed model"
+    )
     return [row("plan_optimiser_4_of_125", t_vec, "s", baseline=t_set, note=note)]
 
 
@@ -176,7 +210,6 @@ def _diagnose_file(path: Path, n: int, seed: int) -> Path:
     from scipy.spatial.transform import Rotation
 
     from rrbc_core.io.measurements import MeasurementSet
-
     from rrbc_core.io.measurements_write import write_measurements
 
     rng = np.random.default_rng(seed)
@@ -184,8 +217,7 @@ def _diagnose_file(path: Path, n: int, seed: int) -> Path:
     rot = Rotation.from_rotvec([2.2, -0.9, 0.6]).as_matrix()
     sensor = (robot - [500.0, 0.0, 300.0]) @ rot + [0.0, 0.0, 2000.0] + rng.normal(0, 0.02, (n, 3))
     biased = robot + 0.3 * np.sin(robot / np.array([410.0, 530.0, 370.0]))
-    mset = MeasurementSet([f"P{i}" for i in range(n)], ["both"] * n, sensor, biased, rng.permutation(n) * 10.0,
-                          [0] * n)
+    mset = MeasurementSet([f"P{i}" for i in range(n)], ["both"] * n, sensor, biased, rng.permutation(n) * 10.0, [0] * n)
     write_measurements(path, mset)
     return path
 
@@ -200,17 +232,33 @@ def diagnose_command(quick: bool) -> list[dict]:
         f1k = _diagnose_file(Path(tmp) / "p1000.csv", 1000, 606)
         args = [RRBC, "diagnose", f1k, "--json"]
         idle, loaded = both(lambda: run_command(args, n_runs)[0])
-        rows.append(row("diagnose_command_1000_points", idle, "s", loaded=loaded, goal="loaded < 2 s",
-                        met=bool(loaded < 2.0),
-                        note=f"wall time of `rrbc diagnose FILE --json` on 1000 points, median of {n_runs} runs"))
+        rows.append(
+            row(
+                "diagnose_command_1000_points",
+                idle,
+                "s",
+                loaded=loaded,
+                goal="loaded < 2 s",
+                met=bool(loaded < 2.0),
+                note=f"wall time of `rrbc diagnose FILE --json` on 1000 points, median of {n_runs} runs",
+            )
+        )
         sizes = (2500, 10_000) if quick else (2500, 5000, 10_000)
         mem = {}
         for n in sizes:
             path = _diagnose_file(Path(tmp) / f"p{n}.csv", n, 606)
             mem[n] = run_command([RRBC, "diagnose", path, "--json"], 1)[1]
         slope = (mem[sizes[-1]] - mem[sizes[0]]) / (sizes[-1] - sizes[0]) * 1000
-        rows.append(row("diagnose_memory_10000_points", mem[10_000], "MB", goal="< 500 MB", met=bool(mem[10_000] < 500),
-                        note="peak resident memory (VmHWM) of `rrbc diagnose FILE --json`: "
-                             + ", ".join(f"{n} points {m:.0f} MB" for n, m in mem.items())
-                             + f"; {slope:.1f} MB per 1000 points"))
+        rows.append(
+            row(
+                "diagnose_memory_10000_points",
+                mem[10_000],
+                "MB",
+                goal="< 500 MB",
+                met=bool(mem[10_000] < 500),
+                note="peak resident memory (VmHWM) of `rrbc diagnose FILE --json`: "
+                + ", ".join(f"{n} points {m:.0f} MB" for n, m in mem.items())
+                + f"; {slope:.1f} MB per 1000 points",
+            )
+        )
     return rows

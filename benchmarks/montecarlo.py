@@ -6,14 +6,12 @@ Not interactive (a sweep, not a click), so measured on an idle machine only.
 
 from __future__ import annotations
 
-
 import numpy as np
+from harness import best_time, row
 from scipy.spatial.transform import Rotation
 
-from harness import best_time, row
-
-from rrbc_core.simulation import batch
 from rrbc_core import registration
+from rrbc_core.simulation import batch
 
 
 def work_cell(rng, trials: int) -> dict:
@@ -37,8 +35,10 @@ def work_cell(rng, trials: int) -> dict:
         return x[None] + rng.normal(0, sigma, (trials,) + x.shape)
 
     return {
-        "reg_s": noisy(reg, 0.05), "reg_b": noisy(robot(reg), 0.02),
-        "fid_s": noisy(fid, 0.05), "fid_b": noisy(robot(fid), 0.02),
+        "reg_s": noisy(reg, 0.05),
+        "reg_b": noisy(robot(reg), 0.02),
+        "fid_s": noisy(fid, 0.05),
+        "fid_b": noisy(robot(fid), 0.02),
         "tgt_s": noisy(tgt, 0.05),
     }
 
@@ -78,8 +78,18 @@ def batched(c: dict, trials: int, chunk: int, hull: str = "mean") -> tuple[np.nd
     rrbc = np.empty_like(rigid)
     for start in range(0, trials, chunk):
         sl = slice(start, min(start + chunk, trials))
-        out = batch.rrbc_batch("least-squares", "idw", c["reg_s"][sl], c["reg_b"][sl], c["fid_s"][sl],
-                               c["fid_b"][sl], c["tgt_s"][sl], hull=hull, k=4, power=2.0)
+        out = batch.rrbc_batch(
+            "least-squares",
+            "idw",
+            c["reg_s"][sl],
+            c["reg_b"][sl],
+            c["fid_s"][sl],
+            c["fid_b"][sl],
+            c["tgt_s"][sl],
+            hull=hull,
+            k=4,
+            power=2.0,
+        )
         rigid[sl], rrbc[sl] = out["robot_rigid"], out["robot_rrbc"]
     return rigid, rrbc
 
@@ -98,12 +108,24 @@ def mc_throughput_ls_rrbc(quick: bool) -> list[dict]:
     diff = max(np.abs(rigid[:n_base] - b_rigid).max(), np.abs(rrbc[:n_base] - b_rrbc).max())
     assert diff < 1e-6, f"batch and baseline disagree by {diff} mm"
     value, base = n_batch / t_batch, n_base / t_base
-    note = (f"8 registration points, 16 fiducials, 20 targets; batch {n_batch} trials in chunks of {chunk} "
-            f"(extrapolation flags on the trial-mean hull included); baseline: per-trial loop over {n_base} trials "
-            f"({', '.join(f'{k} {n_base / v[0]:.0f} trials/s' for k, v in loops.items())}; the faster, {fastest}, "
-            f"is the baseline); best of 3; max |batch - baseline| = {diff:.1e} mm")
-    return [row("mc_throughput_ls_rrbc", value, "trials/s", baseline=base, higher_is_better=True,
-                goal="ratio >= 30", met=bool(value / base >= 30), note=note)]
+    note = (
+        f"8 registration points, 16 fiducials, 20 targets; batch {n_batch} trials in chunks of {chunk} "
+        f"(extrapolation flags on the trial-mean hull included); baseline: per-trial loop over {n_base} trials "
+        f"({', '.join(f'{k} {n_base / v[0]:.0f} trials/s' for k, v in loops.items())}; the faster, {fastest}, "
+        f"is the baseline); best of 3; max |batch - baseline| = {diff:.1e} mm"
+    )
+    return [
+        row(
+            "mc_throughput_ls_rrbc",
+            value,
+            "trials/s",
+            baseline=base,
+            higher_is_better=True,
+            goal="ratio >= 30",
+            met=bool(value / base >= 30),
+            note=note,
+        )
+    ]
 
 
 def mc_throughput_annealing(quick: bool) -> list[dict]:
@@ -122,7 +144,17 @@ def mc_throughput_annealing(quick: bool) -> list[dict]:
     t_batch, (a, t) = best_time(lambda: batch.annealing_batch(s, b, seeds=seeds, iterations=iterations))
     diff = max(max(np.abs(m.matrix - a[k]).max() * 1e3, np.abs(m.translation - t[k]).max()) for k, m in enumerate(ref))
     assert diff < 1e-9, f"annealing batch and loop disagree by {diff} mm"
-    note = (f"8 registration points, {iterations} iterations per chain; batch {n_batch} trials, baseline {n_base} "
-            f"trials (registration.annealing per trial); best of 3; max difference {diff:.1e} mm")
-    return [row("mc_throughput_annealing", n_batch / t_batch, "trials/s", baseline=n_base / t_base,
-                higher_is_better=True, note=note)]
+    note = (
+        f"8 registration points, {iterations} iterations per chain; batch {n_batch} trials, baseline {n_base} "
+        f"trials (registration.annealing per trial); best of 3; max difference {diff:.1e} mm"
+    )
+    return [
+        row(
+            "mc_throughput_annealing",
+            n_batch / t_batch,
+            "trials/s",
+            baseline=n_base / t_base,
+            higher_is_better=True,
+            note=note,
+        )
+    ]

@@ -53,8 +53,10 @@ def format_table(rows: list[dict]) -> str:
     for r in rows:
         ratio = "-" if r["ratio"] is None else f"{r['ratio']:.1f}x"
         goal = "" if r["goal"] is None else f"{r['goal']} ({'met' if r['met'] else 'NOT met'})"
-        lines.append(f"{r['name']:<30} {_num(r['value'], r['unit']):>11} {_num(r['loaded'], r['unit']):>11} "
-                     f"{_num(r['baseline'], r['unit']):>11} {r['unit']:<9} {ratio:>7}  {goal}")
+        lines.append(
+            f"{r['name']:<30} {_num(r['value'], r['unit']):>11} {_num(r['loaded'], r['unit']):>11} "
+            f"{_num(r['baseline'], r['unit']):>11} {r['unit']:<9} {ratio:>7}  {goal}"
+        )
     notes = [f"  {r['name']}: {r['note']}" for r in rows if r.get("note")]
     return "\n".join(lines + ([""] + notes if notes else []))
 
@@ -73,7 +75,7 @@ def write_report(path: Path, rows: list[dict], argv: list[str]) -> None:
         "",
         f"Made by `{command.strip()}` on {datetime.date.today().isoformat()}: {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, numpy {numpy.__version__}; no thread variables set. Numbers below "
-        "are that run's (do not edit by hand); rows and their baselines: benchmarks/README.md. \"busy core\": the "
+        'are that run\'s (do not edit by hand); rows and their baselines: benchmarks/README.md. "busy core": the '
         "same measurement with one other process spinning on a core.",
         "",
         "```",
@@ -90,8 +92,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="one JSON object per line, nothing else on stdout")
     parser.add_argument("--quick", action="store_true", help="fewer repeats and trials (a smoke run)")
-    parser.add_argument("--out", default=None, metavar="FILE",
-                        help="also write the results as a Markdown report (e.g. docs/benchmarks.md)")
+    parser.add_argument(
+        "--out",
+        default=None,
+        metavar="FILE",
+        help="also write the results as a Markdown report (e.g. docs/benchmarks.md)",
+    )
     parser.add_argument("names", nargs="*", help="run only these benchmarks (function or row names)")
     args = parser.parse_args(argv)
     functions = {fn.__name__ for fn in BENCHMARKS}

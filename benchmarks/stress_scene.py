@@ -33,14 +33,19 @@ def write_stress_scene(directory) -> Path:
     shutil.copy(ROOT / "scenes" / "meshes" / "demo_workcell.glb", directory / "meshes" / "demo_workcell.glb")
     kept = [s for s in _sections(DEMO.read_text()) if not _DROPPED.match(s)]
     text = "".join(kept).replace('name = "Demo work cell"', 'name = "Stress cell"')
-    gx, gy, gz = np.meshgrid(np.linspace(300, 650, 10), np.linspace(-260, 260, 5), np.linspace(0, 150, 4),
-                             indexing="ij")
-    fid = [f'[[fiducial]]\nid = "S{k:03d}"\nposition = [{p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f}]\n\n'
-           for k, p in enumerate(np.c_[gx.ravel(), gy.ravel(), gz.ravel()])]
+    gx, gy, gz = np.meshgrid(
+        np.linspace(300, 650, 10), np.linspace(-260, 260, 5), np.linspace(0, 150, 4), indexing="ij"
+    )
+    fid = [
+        f'[[fiducial]]\nid = "S{k:03d}"\nposition = [{p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f}]\n\n'
+        for k, p in enumerate(np.c_[gx.ravel(), gy.ravel(), gz.ravel()])
+    ]
     tx, ty = np.meshgrid(np.linspace(360, 590, 10), np.linspace(-180, 180, 5), indexing="ij")
-    tgt = [f'[[target]]\nid = "T{k:02d}"\nposition = [{x:.1f}, {y:.1f}, 15.0]\n'
-           'region = { kind = "box", size = [4.0, 4.0, 1.0] }\n\n'
-           for k, (x, y) in enumerate(zip(tx.ravel(), ty.ravel()))]
+    tgt = [
+        f'[[target]]\nid = "T{k:02d}"\nposition = [{x:.1f}, {y:.1f}, 15.0]\n'
+        'region = { kind = "box", size = [4.0, 4.0, 1.0] }\n\n'
+        for k, (x, y) in enumerate(zip(tx.ravel(), ty.ravel()))
+    ]
     out = directory / "stress.toml"
     out.write_text(text.rstrip() + "\n\n" + "".join(fid) + "".join(tgt))
     check_stress_scene(out)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 
 import numpy as np
-
 from harness import best_time, both, busy_core, median_time, row
 from montecarlo import batched, work_cell
 
@@ -39,8 +38,10 @@ def mc_blas_threads(quick: bool) -> list[dict]:
             threads.THREADS = policy
 
     t_pool, t_one = timed(cores), timed(policy)
-    note = (f"batch.rrbc_batch least-squares + IDW, {n} trials in chunks of {chunk}; value: {threads.THREADS} BLAS "
-            f"thread(s) (rrbc's policy), baseline: {cores} (one per core); best of 3")
+    note = (
+        f"batch.rrbc_batch least-squares + IDW, {n} trials in chunks of {chunk}; value: {threads.THREADS} BLAS "
+        f"thread(s) (rrbc's policy), baseline: {cores} (one per core); best of 3"
+    )
     return [row("mc_blas_threads", n / t_one, "trials/s", baseline=n / t_pool, higher_is_better=True, note=note)]
 
 
@@ -52,9 +53,9 @@ def blas_pool_when_busy(quick: bool) -> list[dict]:
     from threadpoolctl import threadpool_limits
 
     from rrbc_core.analysis import planning
-    from rrbc_core.runtime import threads
     from rrbc_core.io.scene import default_scene_path
     from rrbc_core.io.scene_toml import load_scene
+    from rrbc_core.runtime import threads
 
     cores = os.cpu_count() or 1
     if cores <= threads.THREADS:
@@ -75,9 +76,15 @@ def blas_pool_when_busy(quick: bool) -> list[dict]:
     idle, loaded = both(lambda: timed(policy))
     with busy_core():
         pool_loaded = timed(cores)
-    r = row("blas_pool_plan_busy", idle, "s", loaded=loaded, baseline=pool_loaded,
-            note=f"planning.plan(demo, add=4), median of {repeats}; value/loaded: {policy} BLAS thread(s) (the "
-                 f"policy), baseline: {cores} (OpenBLAS's default) with a busy core beside it; ratio: baseline / "
-                 "loaded")
+    r = row(
+        "blas_pool_plan_busy",
+        idle,
+        "s",
+        loaded=loaded,
+        baseline=pool_loaded,
+        note=f"planning.plan(demo, add=4), median of {repeats}; value/loaded: {policy} BLAS thread(s) (the "
+        f"policy), baseline: {cores} (OpenBLAS's default) with a busy core beside it; ratio: baseline / "
+        "loaded",
+    )
     r["ratio"] = pool_loaded / loaded
     return [r]

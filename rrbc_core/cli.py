@@ -57,8 +57,7 @@ def _positive_float(text):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rrbc_core import interpolation
-    from rrbc_core import registration
+    from rrbc_core import interpolation, registration
 
     p = _Parser(prog="rrbc", description="Restoration of Rigid-Body Condition (RRBC): registration and corrections")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -73,58 +72,95 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(run=_cmd_correct)
 
-    g = sub.add_parser("diagnose", help="find what, beyond rigid + noise, is in measured point pairs",
-                       description="Say what, beyond a rigid transform plus isotropic noise, is in the measured data, "
-                                   "and whether RRBC will help.")
+    g = sub.add_parser(
+        "diagnose",
+        help="find what, beyond rigid + noise, is in measured point pairs",
+        description="Say what, beyond a rigid transform plus isotropic noise, is in the measured data, "
+        "and whether RRBC will help.",
+    )
     g.add_argument("measurements", help="measurement CSV (shared/spec/measurement-file.md)")
-    g.add_argument("--alpha", type=_positive_float, default=0.01,
-                   help="family-wise false-alarm rate over all tests (default 0.01)")
+    g.add_argument(
+        "--alpha", type=_positive_float, default=0.01, help="family-wise false-alarm rate over all tests (default 0.01)"
+    )
     g.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
     g.add_argument("--json", action="store_true", help="print one JSON object")
     g.set_defaults(run=_cmd_diagnose)
 
-    m = sub.add_parser("simulate", help="simulate a scene: Monte Carlo statistics and synthetic data",
-                       description="Simulate a scene's robot and sensor with its error model.")
+    m = sub.add_parser(
+        "simulate",
+        help="simulate a scene: Monte Carlo statistics and synthetic data",
+        description="Simulate a scene's robot and sensor with its error model.",
+    )
     m.add_argument("scene", help="scene TOML file (scenes/README.md)")
     m.add_argument("--trials", type=_positive_int, default=200, help="Monte Carlo trials (default 200)")
     m.add_argument("--seed", type=int, default=0, help="seed of the noise, the check points and annealing (default 0)")
     m.add_argument("--out", default=None, help="write one synthetic measured data set (measurement CSV) here")
     m.add_argument("--layout", default=None, help="use a named layout of the scene (e.g. large_5pt)")
-    m.add_argument("--icp", type=_non_negative_int, default=0, metavar="N",
-                   help="also register by ICP of a simulated point cloud against the mesh, over N trials (~1 s each)")
+    m.add_argument(
+        "--icp",
+        type=_non_negative_int,
+        default=0,
+        metavar="N",
+        help="also register by ICP of a simulated point cloud against the mesh, over N trials (~1 s each)",
+    )
     m.add_argument("--json", action="store_true", help="print one JSON object")
     m.set_defaults(run=_cmd_simulate)
 
-    pl = sub.add_parser("plan", help="fiducial placement: coverage, predicted RMST, suggested fiducials",
-                        description="Whether the fiducials' hull contains each target's region of variability, the "
-                                    "predicted RMS target error (rigid and with RRBC) and K suggested fiducials "
-                                    "from the scene's candidate locations (docs/planning.md).")
+    pl = sub.add_parser(
+        "plan",
+        help="fiducial placement: coverage, predicted RMST, suggested fiducials",
+        description="Whether the fiducials' hull contains each target's region of variability, the "
+        "predicted RMS target error (rigid and with RRBC) and K suggested fiducials "
+        "from the scene's candidate locations (docs/planning.md).",
+    )
     pl.add_argument("scene", help="scene TOML file (scenes/README.md)")
-    pl.add_argument("--add", type=_non_negative_int, default=0, metavar="K",
-                    help="suggest K fiducials from the scene's usable candidates (default 0)")
-    pl.add_argument("--seed", type=int, default=0, help="seed of the region samples and the random baseline (default 0)")
+    pl.add_argument(
+        "--add",
+        type=_non_negative_int,
+        default=0,
+        metavar="K",
+        help="suggest K fiducials from the scene's usable candidates (default 0)",
+    )
+    pl.add_argument(
+        "--seed", type=int, default=0, help="seed of the region samples and the random baseline (default 0)"
+    )
     pl.add_argument("--json", action="store_true", help="print one JSON object")
     pl.set_defaults(run=_cmd_plan)
 
-    rp = sub.add_parser("reproduce", help="hold the simulation against published measurements",
-                        description="Hold the simulation against the measured tables of Van Wyk & Marvel (2018): "
-                                    "baseline and extended error models, cross-validated misfit, peg success, "
-                                    "layout sensitivity. Writes a Markdown report with PNG figures to --out.")
+    rp = sub.add_parser(
+        "reproduce",
+        help="hold the simulation against published measurements",
+        description="Hold the simulation against the measured tables of Van Wyk & Marvel (2018): "
+        "baseline and extended error models, cross-validated misfit, peg success, "
+        "layout sensitivity. Writes a Markdown report with PNG figures to --out.",
+    )
     rp.add_argument("paper", choices=["vanwyk2018"], help="the published experiment (vanwyk2018)")
     rp.add_argument("--out", default=None, metavar="DIR", help="write report.md, figures and summary.json here")
-    rp.add_argument("--replicates", type=_int_at_least(5), default=200,
-                    help="simulated experiments per model and direction (default 200; ~15 min on 2 cores)")
+    rp.add_argument(
+        "--replicates",
+        type=_int_at_least(5),
+        default=200,
+        help="simulated experiments per model and direction (default 200; ~15 min on 2 cores)",
+    )
     rp.add_argument("--layouts", default="A,B,C,D", help="comma-separated assumed layouts (default A,B,C,D)")
     rp.add_argument("--no-confusion", action="store_true", help="skip the planted-table confusion study")
     rp.add_argument("--seed", type=int, default=0, help="seed of every simulated draw (default 0)")
     rp.add_argument("--json", action="store_true", help="print one JSON object")
     rp.set_defaults(run=_cmd_reproduce)
 
-    v = sub.add_parser("view", help="start the browser app",
-                       description="Start the browser app on a scene (default: the bundled demo scene) or a "
-                                   "measurement file; prints the URL and runs until interrupted.")
-    v.add_argument("scene", nargs="?", default=None, metavar="SCENE",
-                   help="scene TOML file or measurement CSV (default: the bundled default scene)")
+    v = sub.add_parser(
+        "view",
+        help="start the browser app",
+        description="Start the browser app on a scene (default: the bundled demo scene) or a "
+        "measurement file; prints the URL and runs until interrupted.",
+    )
+    v.add_argument(
+        "scene",
+        nargs="?",
+        default=None,
+        metavar="SCENE",
+        help="scene TOML file or measurement CSV (default: the bundled default scene)",
+    )
     v.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
     v.add_argument("--port", type=_non_negative_int, default=8080, help="port (default 8080; 0 = any free port)")
     v.add_argument("--mesh", default=None, help="work-cell mesh for a measurement CSV (any format trimesh reads)")
@@ -146,7 +182,9 @@ def _table(result) -> str:
     if m.get("piecewise"):
         lines.append(f"  piecewise: {len(m['pieces'])} clusters, each point uses its nearest kernel")
         for k, pc in enumerate(m["pieces"]):
-            lines.append(f"  kernel {k}: [{_fmt_vec(pc['kernel'], 9, 2)}]  translation [{_fmt_vec(pc['translation'], 10, 4)}]")
+            lines.append(
+                f"  kernel {k}: [{_fmt_vec(pc['kernel'], 9, 2)}]  translation [{_fmt_vec(pc['translation'], 10, 4)}]"
+            )
     else:
         for k in range(3):
             label = "  rotation    " if k == 0 else "              "
@@ -194,8 +232,8 @@ def _table(result) -> str:
 
 
 def _cmd_correct(args) -> str:
-    from rrbc_core.io.measurements import read_measurements
     from rrbc_core.correction.pipeline import correct_measurements
+    from rrbc_core.io.measurements import read_measurements
     from rrbc_core.methods import MethodOptions
 
     mset = read_measurements(args.measurements)
@@ -214,8 +252,10 @@ def _cmd_correct(args) -> str:
 
 def _diagnosis_table(dg) -> str:
     sig = ", ".join(f"{v:.4g}" for v in dg.noise_sigma_mm)
-    lines = [f"{dg.n_points} paired points; noise sigma per axis ({dg.noise_source}): {sig} mm; "
-             f"bias RMS {dg.bias_rms_mm:.4g} mm"]
+    lines = [
+        f"{dg.n_points} paired points; noise sigma per axis ({dg.noise_source}): {sig} mm; "
+        f"bias RMS {dg.bias_rms_mm:.4g} mm"
+    ]
     if not dg.effects:
         lines.append("no effect found: the data are consistent with a rigid transform plus isotropic noise")
     for e in dg.effects:
@@ -254,8 +294,11 @@ def _simulate_table(res) -> str:
             f"   {st.rmst_rrbc_mm:9.4f} {st.max_rrbc_mm:9.4f}"
         )
     if res.interpolations:
-        lines += ["", "least-squares registration + RRBC by interpolation method (mm):",
-                  f"  {'method':<8} {'rmst':>8} {'mean':>8} {'max':>8}"]
+        lines += [
+            "",
+            "least-squares registration + RRBC by interpolation method (mm):",
+            f"  {'method':<8} {'rmst':>8} {'mean':>8} {'max':>8}",
+        ]
         for it in res.interpolations:
             lines.append(f"  {it.name:<8} {it.rmst_mm:8.4f} {it.mean_mm:8.4f} {it.max_mm:8.4f}")
     return "\n".join(lines) + "\n"
@@ -272,16 +315,27 @@ def _cmd_simulate(args) -> str:
         scene.with_layout(args.layout)  # an unknown layout is refused before any work
     bar = ProgressBar(args.trials * (len(STRATEGY_NAMES) + len(INTERPOLATION_NAMES)) + args.icp, "simulating")
     try:
-        res = simulate(scene, args.trials, seed=args.seed, layout=args.layout, icp=args.icp,
-                       progress=lambda n, label: bar.update(n, label))
+        res = simulate(
+            scene,
+            args.trials,
+            seed=args.seed,
+            layout=args.layout,
+            icp=args.icp,
+            progress=lambda n, label: bar.update(n, label),
+        )
     finally:
         bar.close()
     if args.out:
         mset = simulated_data(scene, seed=args.seed, layout=args.layout)
-        write_measurements(args.out, mset, comments=[
-            f"simulated by: rrbc simulate {args.scene} --seed {args.seed}" + (f" --layout {args.layout}" if args.layout else ""),
-            f"scene: {scene.name}; check rows carry the robot-frame truth (the command that reaches the point)",
-        ])
+        write_measurements(
+            args.out,
+            mset,
+            comments=[
+                f"simulated by: rrbc simulate {args.scene} --seed {args.seed}"
+                + (f" --layout {args.layout}" if args.layout else ""),
+                f"scene: {scene.name}; check rows carry the robot-frame truth (the command that reaches the point)",
+            ],
+        )
     if args.json:
         out = res.to_json()
         if args.out:
@@ -295,38 +349,50 @@ def _cmd_simulate(args) -> str:
 
 def _plan_table(res) -> str:
     p0, p1 = res.predicted, res.predicted_after
-    lines = [f"scene: {res.scene}   coverage of the target regions by the fiducials' hull: "
-             f"{100 * res.overall_coverage():.1f} % (volume-weighted)"]
+    lines = [
+        f"scene: {res.scene}   coverage of the target regions by the fiducials' hull: "
+        f"{100 * res.overall_coverage():.1f} % (volume-weighted)"
+    ]
     lines.append(f"  {'target':<12} {'coverage':>9}" + (f" {'after':>9}" if res.suggested_ids else ""))
     for k, tid in enumerate(res.target_ids):
         row = f"  {tid:<12} {100 * res.coverage[k]:8.1f}%"
         if res.suggested_ids:
             row += f" {100 * res.coverage_after[k]:8.1f}%"
         lines.append(row)
-    lines += ["", f"predicted RMST over the regions ({p0.method}), mm:",
-              f"  {'fiducials':<28} {'rigid':>8} {'RRBC':>8} {'+-':>7}",
-              f"  {'current':<28} {p0.rigid_mm:8.4f} {p0.rrbc_mm:8.4f} {p0.rrbc_std_mm:7.4f}"]
+    lines += [
+        "",
+        f"predicted RMST over the regions ({p0.method}), mm:",
+        f"  {'fiducials':<28} {'rigid':>8} {'RRBC':>8} {'+-':>7}",
+        f"  {'current':<28} {p0.rigid_mm:8.4f} {p0.rrbc_mm:8.4f} {p0.rrbc_std_mm:7.4f}",
+    ]
     if res.suggested_ids:
         k = len(res.suggested_ids)
         lines.append(f"  {f'+ {k} suggested':<28} {p1.rigid_mm:8.4f} {p1.rrbc_mm:8.4f} {p1.rrbc_std_mm:7.4f}")
         for name, b in res.baselines.items():
-            lines.append(f"  {f'+ {k} by rule {name}':<28} {b.rigid_mm:8.4f} {b.rrbc_mm:8.4f} {b.rrbc_std_mm:7.4f}"
-                         + ("  (mean, sd over draws)" if name == "random" else ""))
-        lines += ["", f"suggested fiducials ({res.n_usable} usable candidates, {len(res.rejected)} rejected), "
-                      "robot frame, mm:"]
+            lines.append(
+                f"  {f'+ {k} by rule {name}':<28} {b.rigid_mm:8.4f} {b.rrbc_mm:8.4f} {b.rrbc_std_mm:7.4f}"
+                + ("  (mean, sd over draws)" if name == "random" else "")
+            )
+        lines += [
+            "",
+            f"suggested fiducials ({res.n_usable} usable candidates, {len(res.rejected)} rejected), robot frame, mm:",
+        ]
         for pid, pos in zip(res.suggested_ids, res.suggested):
             lines.append(f"  {pid:<12} {_fmt_vec(pos, 9, 1)}")
     if res.rejected:
         shown = list(res.rejected.items())[:5]
-        lines.append("rejected candidates: " + "; ".join(f"{i}: {r}" for i, r in shown)
-                     + (f"; and {len(res.rejected) - 5} more" if len(res.rejected) > 5 else ""))
+        lines.append(
+            "rejected candidates: "
+            + "; ".join(f"{i}: {r}" for i, r in shown)
+            + (f"; and {len(res.rejected) - 5} more" if len(res.rejected) > 5 else "")
+        )
     return "\n".join(lines) + "\n"
 
 
 def _cmd_plan(args) -> str:
     from rrbc_core.analysis.planning import plan
-    from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.io.scene_toml import load_scene
+    from rrbc_core.runtime.progress import ProgressBar
 
     scene = load_scene(args.scene)
     bar = ProgressBar(2 * args.add + 2, "planning")
@@ -340,9 +406,8 @@ def _cmd_plan(args) -> str:
 
 
 def _cmd_reproduce(args) -> str:
-    from rrbc_core.studies import reproduction
-    from rrbc_core.studies import vanwyk2018
     from rrbc_core.runtime.progress import ProgressBar
+    from rrbc_core.studies import reproduction, vanwyk2018
     from rrbc_core.studies.vanwyk2018_report import json_safe, write_report
 
     names = [x.strip() for x in args.layouts.split(",") if x.strip()]
@@ -359,7 +424,10 @@ def _cmd_reproduce(args) -> str:
         if not out.resolve().parent.exists():
             raise InputError(f"--out {out}: parent directory {out.resolve().parent} does not exist")
     rep = vanwyk2018.run(
-        replicates=args.replicates, seed=args.seed, layout_names=names, confusion=not args.no_confusion,
+        replicates=args.replicates,
+        seed=args.seed,
+        layout_names=names,
+        confusion=not args.no_confusion,
         progress_factory=lambda total: ProgressBar(total, "reproducing vanwyk2018"),
     )
     command = "rrbc reproduce vanwyk2018" + (f" --out {args.out}" if args.out else "")
@@ -381,7 +449,7 @@ def _cmd_reproduce(args) -> str:
     m = j["misfit"]
     lines = [
         f"Van Wyk & Marvel (2018): {j['samples_per_method']} samples per method; layouts {', '.join(names)}",
-        f"misfit (deviance; lower is better)   in sample   cross-validated",
+        "misfit (deviance; lower is better)   in sample   cross-validated",
         f"  baseline                          {m['baseline']:9.1f}   {m['baseline_cv']:9.1f}",
         f"  {j['extended_model']:<32}  {m['extended']:9.1f}   {m['extended_cv']:9.1f}",
         "",
@@ -431,8 +499,10 @@ def main(argv=None) -> int:
     except Exception as exc:  # noqa: BLE001 - the contract: one line, exit 1
         if os.environ.get("RRBC_DEBUG"):
             raise
-        print(f"rrbc: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} "
-              "(set RRBC_DEBUG=1 for details)", file=sys.stderr)
+        print(
+            f"rrbc: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} (set RRBC_DEBUG=1 for details)",
+            file=sys.stderr,
+        )
         return 1
     try:
         sys.stdout.write(out)

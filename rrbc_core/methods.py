@@ -52,11 +52,13 @@ class MethodOptions:
 
     def __post_init__(self):
         if self.registration not in registration.STRATEGIES:
-            raise InputError(f"unknown registration '{self.registration}': choose one of "
-                             f"{', '.join(registration.STRATEGIES)}")
+            raise InputError(
+                f"unknown registration '{self.registration}': choose one of {', '.join(registration.STRATEGIES)}"
+            )
         if self.interpolation not in interpolation.METHODS:
-            raise InputError(f"unknown interpolation '{self.interpolation}': choose one of "
-                             f"{', '.join(interpolation.METHODS)}")
+            raise InputError(
+                f"unknown interpolation '{self.interpolation}': choose one of {', '.join(interpolation.METHODS)}"
+            )
         if self.interpolation != "idw" and (self.neighbors is not None or self.power is not None):
             raise InputError("--neighbors and --power apply to --interpolation idw only")
         if self.interpolation != "tps" and self.smoothing is not None:

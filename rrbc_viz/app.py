@@ -48,31 +48,38 @@ import viser
 
 from rrbc_core.analysis.diagnosis import Diagnosis, diagnose
 from rrbc_core.errors import InputError
+from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
-from rrbc_core.runtime.threads import apply_process_policy
 
-from . import diagnosis_panel
-from . import files
-from . import tables
-from . import teaching
+from . import diagnosis_panel, files, tables, teaching
 from .colors import legend_markdown
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
-from .nodes import Display, gizmo_name, HANDLE_CHOICES, LAYERS, SceneNodes
+from .nodes import HANDLE_CHOICES, LAYERS, Display, SceneNodes, gizmo_name
 
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
 HEAT_INTERVAL_S = 0.3  # least time between heat-map recomputations while dragging
 HEAT_LIVE_MAX_S = 0.05  # a heat map slower than this to compute is refreshed only when a drag ends
 DEFAULT_LAYERS = {name: name not in ("labels", "heatmap") for name in LAYERS}
-_KINDS = {"target": "targets", "targets": "targets", "fiducial": "fiducials", "fiducials": "fiducials",
-          "registration": "registration"}
+_KINDS = {
+    "target": "targets",
+    "targets": "targets",
+    "fiducial": "fiducials",
+    "fiducials": "fiducials",
+    "registration": "registration",
+}
 
 
 def _all_points(ev: Evaluation) -> np.ndarray:
     """Registration points, fiducials and targets (robot frame, mm), stacked."""
-    return np.vstack([ev.registration_positions.reshape(-1, 3), ev.fiducial_positions.reshape(-1, 3),
-                      ev.targets.positions.reshape(-1, 3)])
+    return np.vstack(
+        [
+            ev.registration_positions.reshape(-1, 3),
+            ev.fiducial_positions.reshape(-1, 3),
+            ev.targets.positions.reshape(-1, 3),
+        ]
+    )
 
 
 def _nice(x: float) -> float:
@@ -155,10 +162,11 @@ class RunningApp:
                 self.controls.sync_settings(self.session.settings, self.session.kind)
                 self.controls.sync_display(self.display, self.session.kind)
                 self.controls.sync_layers(self.layers)
-                self.controls.source.content = (
-                    f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}.")
-                self.controls.lesson.content = ("The nine steps of RRBC, one at a time, each shown in the scene with "
-                                                "live numbers. Press **Next** to start.")
+                self.controls.source.content = f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}."
+                self.controls.lesson.content = (
+                    "The nine steps of RRBC, one at a time, each shown in the scene with "
+                    "live numbers. Press **Next** to start."
+                )
                 self.controls.diagnosis.content = diagnosis_panel.PROMPT
                 self._frame_camera(loaded.mesh, ev)
                 self._show(ev, heat=True)
@@ -176,8 +184,13 @@ class RunningApp:
         mag = _nice(0.08 * extent / float(np.median(sizes))) if len(sizes) else 200.0
         heat = "rrbc" if self.session.kind == "scene" else "correction"
         # fiducial handles start hidden: at the overview they crowd the targets' (View -> Drag handles on)
-        return Display(magnification=float(np.clip(mag, 1, 2000)), marker_mm=marker, region_zoom=1.0,
-                       handles="targets", heat_value=heat)
+        return Display(
+            magnification=float(np.clip(mag, 1, 2000)),
+            marker_mm=marker,
+            region_zoom=1.0,
+            handles="targets",
+            heat_value=heat,
+        )
 
     def _frame_camera(self, mesh, ev: Evaluation) -> None:
         """Initial camera (and that of open tabs): looking at the points' centre, far enough to see the cell."""
@@ -228,7 +241,7 @@ class RunningApp:
         self._heat_time = time.monotonic()
         self._heat_stale = False
         legend = self.nodes.update_heatmap(self.heat_map, self.session.last)
-        self.controls.legend.content = ("Nothing to show." if legend is None else legend_markdown(*legend))
+        self.controls.legend.content = "Nothing to show." if legend is None else legend_markdown(*legend)
 
     def _lesson_context(self) -> teaching.LessonContext:
         return teaching.LessonContext(self.session.kind, self.display.magnification, dict(self.session.regions))
@@ -241,8 +254,12 @@ class RunningApp:
         targets = [client] if client is not None else list(self.server.get_clients().values())
         for c in targets:
             try:
-                c.add_notification(title or ("Not done" if error else "Done"), line, auto_close_seconds=10.0,
-                                   color="red" if error else "green")
+                c.add_notification(
+                    title or ("Not done" if error else "Done"),
+                    line,
+                    auto_close_seconds=10.0,
+                    color="red" if error else "green",
+                )
             except Exception:  # noqa: BLE001 - a closing tab must not break the app
                 pass
 
@@ -281,8 +298,11 @@ class RunningApp:
                 self._refuse(key, before, str(exc), client, phase)
                 return None
             end = phase == "end"
-            heat_due = end or (self.layers.get("heatmap") and self._heat_cost <= HEAT_LIVE_MAX_S
-                               and time.monotonic() - self._heat_time >= HEAT_INTERVAL_S)
+            heat_due = end or (
+                self.layers.get("heatmap")
+                and self._heat_cost <= HEAT_LIVE_MAX_S
+                and time.monotonic() - self._heat_time >= HEAT_INTERVAL_S
+            )
             slow_plan = self.planning.slow
             plan_due = not slow_plan and (end or self.planning.live_due())
             with self.server.atomic():
@@ -461,8 +481,12 @@ class RunningApp:
         if old is None or self.diagnosis_stale:
             return
         new = self._diagnosis_input()
-        same = (new.ids == old.ids and new.roles == old.roles and np.array_equal(new.sensor, old.sensor, equal_nan=True)
-                and np.array_equal(new.robot, old.robot, equal_nan=True))
+        same = (
+            new.ids == old.ids
+            and new.roles == old.roles
+            and np.array_equal(new.sensor, old.sensor, equal_nan=True)
+            and np.array_equal(new.robot, old.robot, equal_nan=True)
+        )
         if not same:
             self.diagnosis_stale = True
             self.controls.diagnosis.content = diagnosis_panel.STALE + "\n\n" + self._diagnosis_text
@@ -487,8 +511,11 @@ class RunningApp:
             session = self.session
             k = int(panel.k.value) if k is None else k
             if session.kind != "scene":
-                self._message("planning needs a scene (an error model and candidate locations); measured data have "
-                              "none", client, title="Cannot plan")
+                self._message(
+                    "planning needs a scene (an error model and candidate locations); measured data have none",
+                    client,
+                    title="Cannot plan",
+                )
                 return None
             if not panel.begin():
                 self._message("a suggestion is already being computed", client, title="Planning")
@@ -534,8 +561,10 @@ class RunningApp:
             after = self.planning.state
             text = f"Added {len(new)} fiducial{'s' if len(new) != 1 else ''}: {', '.join(new)}."
             if before is not None and after is not None:
-                text += (f" Predicted RMST with RRBC {before.predicted.rrbc_mm:.3f} → {after.predicted.rrbc_mm:.3f} mm, "
-                         f"rigid {before.predicted.rigid_mm:.3f} → {after.predicted.rigid_mm:.3f} mm.")
+                text += (
+                    f" Predicted RMST with RRBC {before.predicted.rrbc_mm:.3f} → {after.predicted.rrbc_mm:.3f} mm, "
+                    f"rigid {before.predicted.rigid_mm:.3f} → {after.predicted.rigid_mm:.3f} mm."
+                )
             self._message(text, client, error=False, title="Fiducials added")
         self.request_monte_carlo()
         return ev
@@ -552,8 +581,9 @@ class RunningApp:
         with self._lock:
             if self.session.kind != "scene":
                 self.mc.cancel()
-                self.controls.mc_info.content = ("Monte Carlo needs a scene (an error model to simulate); "
-                                                 "measured data have none.")
+                self.controls.mc_info.content = (
+                    "Monte Carlo needs a scene (an error model to simulate); measured data have none."
+                )
                 self.controls.mc_hist.visible = self.controls.mc_dist.visible = False
                 return False
             snapshot = copy.copy(self.session)  # settings and layout are immutable values
@@ -577,10 +607,12 @@ class RunningApp:
             c.mc_hist.data = (centres, rigid, rrbc)
             c.mc_dist.data = (dist, mean_rigid, mean_rrbc)
             s = self.session.settings
-            c.mc_info.content = (f"{plots.trials} trials × {plots.rigid.shape[1]} check points in the targets' "
-                                 f"regions; {s.registration} + {s.interpolation}; noise ×{s.noise_scale:g}, "
-                                 f"bias ×{s.bias_scale:g} ({seconds:.1f} s). Updates after a setting changes, a "
-                                 "drag ends or the seed changes.")
+            c.mc_info.content = (
+                f"{plots.trials} trials × {plots.rigid.shape[1]} check points in the targets' "
+                f"regions; {s.registration} + {s.interpolation}; noise ×{s.noise_scale:g}, "
+                f"bias ×{s.bias_scale:g} ({seconds:.1f} s). Updates after a setting changes, a "
+                "drag ends or the seed changes."
+            )
 
     # --------------------------------------------------------------------------------------------- files
     def load(self, source=None, mesh=None, client=None) -> bool:
@@ -616,14 +648,19 @@ class RunningApp:
             slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", self.session.name).strip("-.") or "rrbc"
             if what == "csv":
                 s = self.session.settings
-                text = files.measurements_csv(self.session.export_measurements(), comments=[
-                    f"exported by the rrbc browser app from {self.session.name}",
-                    f"settings: registration {s.registration}, interpolation {s.interpolation}, noise x{s.noise_scale:g}, "
-                    f"bias x{s.bias_scale:g}, seed {s.seed}",
-                ])
+                text = files.measurements_csv(
+                    self.session.export_measurements(),
+                    comments=[
+                        f"exported by the rrbc browser app from {self.session.name}",
+                        f"settings: registration {s.registration}, interpolation {s.interpolation}, noise x{s.noise_scale:g}, "
+                        f"bias x{s.bias_scale:g}, seed {s.seed}",
+                    ],
+                )
                 return f"rrbc-{slug}.csv", text.encode("utf-8")
             if what == "json":
-                return f"rrbc-{slug}-results.json", (json.dumps(self.session.export_json(), indent=2) + "\n").encode("utf-8")
+                return f"rrbc-{slug}-results.json", (json.dumps(self.session.export_json(), indent=2) + "\n").encode(
+                    "utf-8"
+                )
         raise InputError(f"unknown export '{what}': csv or json")
 
     def download(self, what: str, client=None) -> tuple[str, bytes] | None:

@@ -25,9 +25,7 @@ FRAME_ORIGIN: Rgb = (236, 236, 0)
 NO_VALUE: Rgb = (128, 128, 128)
 
 #: The heat-map scale, low → high (viridis-like stops, perceptually ordered, colour-blind safe).
-SCALE_STOPS = np.array(
-    [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=float
-)
+SCALE_STOPS = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=float)
 
 
 def hex_color(rgb) -> str:
@@ -49,8 +47,10 @@ def scale_colors(values, lo: float, hi: float) -> np.ndarray:
     return np.round(out).astype(np.uint8)
 
 
-HEAT_NOTE = ("Ring around each target: the mean over its region of variability, visible from afar. Dots: the "
-             "samples themselves, inside the region (zoom in, or raise View → Region zoom).")
+HEAT_NOTE = (
+    "Ring around each target: the mean over its region of variability, visible from afar. Dots: the "
+    "samples themselves, inside the region (zoom in, or raise View → Region zoom)."
+)
 
 
 def legend_markdown(title: str, lo: float, hi: float, unit: str = "mm", note: str = HEAT_NOTE) -> str:
@@ -59,8 +59,7 @@ def legend_markdown(title: str, lo: float, hi: float, unit: str = "mm", note: st
     return (
         f"**{title}**\n\n"
         f'<div style="height:12px;border-radius:3px;background:linear-gradient(to right, {stops})"></div>\n\n'
-        f"{lo:.4f} {unit} (low) → {hi:.4f} {unit} (high)"
-        + (f"\n\n{note}" if note else "")
+        f"{lo:.4f} {unit} (low) → {hi:.4f} {unit} (high)" + (f"\n\n{note}" if note else "")
     )
 
 

@@ -14,21 +14,27 @@ from typing import TYPE_CHECKING
 import numpy as np
 import viser
 
-from rrbc_core import interpolation
-from rrbc_core import registration
+from rrbc_core import interpolation, registration
 from rrbc_core.session.evaluation import Settings
 
 from .diagnosis_panel import PROMPT
-from .nodes import Display, HANDLE_CHOICES, LAYERS
+from .nodes import HANDLE_CHOICES, LAYERS, Display
 from .planning_panel import PlanningPanel
 
 if TYPE_CHECKING:
     from .app import RunningApp
 
 LAYER_LABELS = {
-    "mesh": "Work-cell mesh", "frames": "Robot and sensor frames", "registration": "Registration points",
-    "fiducials": "Fiducials", "corrections": "Correction arrows", "hull": "Fiducials' hull", "targets": "Targets",
-    "regions": "Regions of variability", "landing": "Landing points (rigid vs RRBC)", "labels": "Labels",
+    "mesh": "Work-cell mesh",
+    "frames": "Robot and sensor frames",
+    "registration": "Registration points",
+    "fiducials": "Fiducials",
+    "corrections": "Correction arrows",
+    "hull": "Fiducials' hull",
+    "targets": "Targets",
+    "regions": "Regions of variability",
+    "landing": "Landing points (rigid vs RRBC)",
+    "labels": "Labels",
     "heatmap": "Heat map of predicted error",
 }
 HEAT_CHOICES = {
@@ -47,7 +53,7 @@ def _series(label: str, color: str, points: bool = False) -> dict:
 
 
 class Controls:
-    def __init__(self, server: viser.ViserServer, app: "RunningApp"):
+    def __init__(self, server: viser.ViserServer, app: RunningApp):
         self.app = app
         self.syncing = False
         gui = server.gui
@@ -60,49 +66,74 @@ class Controls:
         with tabs.add_tab("Explore", icon=viser.Icon.ADJUSTMENTS):
             self.source = gui.add_markdown("")
             with gui.add_folder("Results"):
-                self.magnification = gui.add_slider("Arrow magnification", 1, MAG_MAX, 1, 200,
-                                                    hint="Correction arrows and landing offsets are drawn this many "
-                                                         "times longer than they are")
+                self.magnification = gui.add_slider(
+                    "Arrow magnification",
+                    1,
+                    MAG_MAX,
+                    1,
+                    200,
+                    hint="Correction arrows and landing offsets are drawn this many times longer than they are",
+                )
                 self.scale = gui.add_markdown("")
                 self.summary = gui.add_markdown("")
                 self.table = gui.add_markdown("")
             with gui.add_folder("Method"):
-                self.registration = gui.add_dropdown("Registration", tuple(registration.STRATEGIES),
-                                                     initial_value="least-squares")
-                self.interpolation = gui.add_dropdown("Interpolation", tuple(interpolation.METHODS),
-                                                      initial_value="idw")
+                self.registration = gui.add_dropdown(
+                    "Registration", tuple(registration.STRATEGIES), initial_value="least-squares"
+                )
+                self.interpolation = gui.add_dropdown(
+                    "Interpolation", tuple(interpolation.METHODS), initial_value="idw"
+                )
                 self.neighbors = gui.add_slider("IDW neighbours k", 1, 16, 1, 4)
                 self.power = gui.add_slider("IDW power p", 0.5, 6.0, 0.1, 2.0)
-                self.smoothing = gui.add_slider("TPS smoothing", 0.0, 1.0, 0.005, 0.0,
-                                                hint="scipy RBF smoothing in the fiducials' local units; 0 = exact")
+                self.smoothing = gui.add_slider(
+                    "TPS smoothing",
+                    0.0,
+                    1.0,
+                    0.005,
+                    0.0,
+                    hint="scipy RBF smoothing in the fiducials' local units; 0 = exact",
+                )
             with gui.add_folder("Errors (scene)"):
-                self.noise = gui.add_slider("Noise size ×", 0.0, 3.0, 0.05, 1.0,
-                                            hint="Multiplies the scene's random error terms")
-                self.bias = gui.add_slider("Bias size ×", 0.0, 3.0, 0.05, 1.0,
-                                           hint="Multiplies the scene's systematic error terms")
+                self.noise = gui.add_slider(
+                    "Noise size ×", 0.0, 3.0, 0.05, 1.0, hint="Multiplies the scene's random error terms"
+                )
+                self.bias = gui.add_slider(
+                    "Bias size ×", 0.0, 3.0, 0.05, 1.0, hint="Multiplies the scene's systematic error terms"
+                )
                 self.seed_md = gui.add_markdown("")
                 self.new_seed = gui.add_button("New random seed", icon=viser.Icon.DICE)
-            gui.add_markdown("Drag the arrows at a target or fiducial to move it (View → *Drag handles on* chooses "
-                             "which); click a fiducial to exclude or include it. Robot frame, mm.")
+            gui.add_markdown(
+                "Drag the arrows at a target or fiducial to move it (View → *Drag handles on* chooses "
+                "which); click a fiducial to exclude or include it. Robot frame, mm."
+            )
 
         # ------------------------------------------------------------------------------------------- View
         with tabs.add_tab("View", icon=viser.Icon.EYE):
             self.handles = gui.add_dropdown("Drag handles on", HANDLE_CHOICES, initial_value="targets")
             self.marker = gui.add_slider("Marker radius (mm)", 0.5, 50.0, 0.5, 8.0)
-            self.region_zoom = gui.add_slider("Region zoom ×", 1.0, 50.0, 0.5, 1.0,
-                                              hint="Regions of variability and heat-map samples drawn this many "
-                                                   "times larger about their target")
+            self.region_zoom = gui.add_slider(
+                "Region zoom ×",
+                1.0,
+                50.0,
+                0.5,
+                1.0,
+                hint="Regions of variability and heat-map samples drawn this many times larger about their target",
+            )
             with gui.add_folder("Layers"):
                 self.layers = {name: gui.add_checkbox(LAYER_LABELS.get(name, name), True) for name in LAYERS}
             with gui.add_folder("Heat map"):
                 self.heat_value = gui.add_dropdown("Colour by", tuple(k for k, _ in HEAT_CHOICES["scene"]))
-                self.legend = gui.add_markdown("Turn on the heat-map layer to see predicted error over the targets' "
-                                               "regions of variability.")
+                self.legend = gui.add_markdown(
+                    "Turn on the heat-map layer to see predicted error over the targets' regions of variability."
+                )
 
         # ------------------------------------------------------------------------------------------ Learn
         with tabs.add_tab("Learn", icon=viser.Icon.SCHOOL):
-            self.lesson = gui.add_markdown("The nine steps of RRBC, one at a time, each shown in the scene with "
-                                           "live numbers. Press **Next** to start.")
+            self.lesson = gui.add_markdown(
+                "The nine steps of RRBC, one at a time, each shown in the scene with "
+                "live numbers. Press **Next** to start."
+            )
             self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
             self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
             self.lesson_end = gui.add_button("End lesson (restore layers)")
@@ -114,20 +145,29 @@ class Controls:
             self.mc_run = gui.add_button("Run again")
             z2 = (np.array([0.0, 1.0]), np.zeros(2), np.zeros(2))
             self.mc_hist = gui.add_uplot(
-                z2, ({"label": "error (mm)"}, _series("rigid", "#dc2828"), _series("RRBC", "#1eb43c")),
-                title="Error at check points: histogram", scales={"x": {"time": False}},
-                axes=({"label": "error (mm)"}, {"label": "fraction"}), aspect=1.4)
+                z2,
+                ({"label": "error (mm)"}, _series("rigid", "#dc2828"), _series("RRBC", "#1eb43c")),
+                title="Error at check points: histogram",
+                scales={"x": {"time": False}},
+                axes=({"label": "error (mm)"}, {"label": "fraction"}),
+                aspect=1.4,
+            )
             self.mc_dist = gui.add_uplot(
-                z2, ({"label": "distance (mm)"}, _series("rigid", "#dc2828", True),
-                     _series("RRBC", "#1eb43c", True)),
-                title="Mean error vs distance from the origin", scales={"x": {"time": False}},
-                axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}), aspect=1.4)
+                z2,
+                ({"label": "distance (mm)"}, _series("rigid", "#dc2828", True), _series("RRBC", "#1eb43c", True)),
+                title="Mean error vs distance from the origin",
+                scales={"x": {"time": False}},
+                axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}),
+                aspect=1.4,
+            )
 
         # --------------------------------------------------------------------------------------- Diagnose
         with tabs.add_tab("Diagnose", icon=viser.Icon.STETHOSCOPE):
-            self.diagnose = gui.add_button("Diagnose current data", icon=viser.Icon.STETHOSCOPE,
-                                           hint="Test the registration points and fiducials (not the targets) "
-                                                "for effects a rigid fit misses")
+            self.diagnose = gui.add_button(
+                "Diagnose current data",
+                icon=viser.Icon.STETHOSCOPE,
+                hint="Test the registration points and fiducials (not the targets) for effects a rigid fit misses",
+            )
             self.diagnosis = gui.add_markdown(PROMPT)
 
         # ------------------------------------------------------------------------------------------- Plan
@@ -182,6 +222,7 @@ class Controls:
                 app.set_display(client=event.client, heat_value=choices.get(self.heat_value.value, "rrbc"))
 
         for name, box in self.layers.items():
+
             def on_layer(event: viser.GuiEvent, name=name, box=box) -> None:
                 if not self.syncing:
                     app.set_layer(name, bool(box.value))
@@ -239,9 +280,12 @@ class Controls:
             self.bias.disabled = not scene
             self.neighbors.visible = self.power.visible = settings.interpolation == "idw"
             self.smoothing.visible = settings.interpolation == "tps"
-            self.seed_md.content = (f"Noise seed **{settings.seed}**." if scene else
-                                    f"Measured data: noise and bias are what they are (seed {settings.seed} only "
-                                    "seeds annealing and clustering).")
+            self.seed_md.content = (
+                f"Noise seed **{settings.seed}**."
+                if scene
+                else f"Measured data: noise and bias are what they are (seed {settings.seed} only "
+                "seeds annealing and clustering)."
+            )
 
     def sync_display(self, display: Display, kind: str) -> None:
         with self.quiet():

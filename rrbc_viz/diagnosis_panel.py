@@ -13,22 +13,36 @@ from rrbc_core.analysis.diagnosis import Diagnosis, Effect
 from rrbc_core.io.measurements import MeasurementSet
 
 ROLES = ("registration", "fiducial", "both")
-PROMPT = ("Tests the current registration points and fiducials (never the targets) for what a rigid fit with "
-          "isotropic noise misses: outliers, scale, affine terms, drift, a smooth field, anisotropic noise. "
-          "Press **Diagnose current data**.")
+PROMPT = (
+    "Tests the current registration points and fiducials (never the targets) for what a rigid fit with "
+    "isotropic noise misses: outliers, scale, affine terms, drift, a smooth field, anisotropic noise. "
+    "Press **Diagnose current data**."
+)
 STALE = "**(data changed since — press again)**"
-LABELS = {"outliers": "Outliers", "scale": "Uniform scale", "affine": "Affine (beyond scale)", "drift": "Drift",
-          "smooth_field": "Smooth field", "anisotropic_noise": "Anisotropic noise"}
+LABELS = {
+    "outliers": "Outliers",
+    "scale": "Uniform scale",
+    "affine": "Affine (beyond scale)",
+    "drift": "Drift",
+    "smooth_field": "Smooth field",
+    "anisotropic_noise": "Anisotropic noise",
+}
 
 
 def diagnosis_rows(mset: MeasurementSet) -> MeasurementSet:
     """The rows of `mset` whose role is registration, fiducial or both (targets and check rows removed)."""
     keep = [i for i, role in enumerate(mset.roles) if role in ROLES]
     extra = {k: tuple(v[i] for i in keep) for k, v in mset.extra.items()}
-    return MeasurementSet(ids=tuple(mset.ids[i] for i in keep), roles=tuple(mset.roles[i] for i in keep),
-                          sensor=mset.sensor[keep].reshape(len(keep), 3), robot=mset.robot[keep].reshape(len(keep), 3),
-                          time=mset.time[keep] if len(mset.time) == len(mset.roles) else np.full(len(keep), np.nan),
-                          lines=tuple(mset.lines[i] for i in keep), source=mset.source, extra=extra)
+    return MeasurementSet(
+        ids=tuple(mset.ids[i] for i in keep),
+        roles=tuple(mset.roles[i] for i in keep),
+        sensor=mset.sensor[keep].reshape(len(keep), 3),
+        robot=mset.robot[keep].reshape(len(keep), 3),
+        time=mset.time[keep] if len(mset.time) == len(mset.roles) else np.full(len(keep), np.nan),
+        lines=tuple(mset.lines[i] for i in keep),
+        source=mset.source,
+        extra=extra,
+    )
 
 
 def _g(x) -> str:
@@ -68,22 +82,34 @@ def parameters(e: Effect) -> str:
 def render(d: Diagnosis, source: str, stale: bool = False) -> str:
     """The verdict, noise, bias, RRBC recommendation and limits of `d` (most important effect first)."""
     lines = [STALE] if stale else []
-    lines.append(f"Diagnosis of **{d.n_points} points** (registration points and fiducials of {source}; targets "
-                 f"withheld), α = {d.alpha:g} family-wise over {len(d.tests)} tests.")
+    lines.append(
+        f"Diagnosis of **{d.n_points} points** (registration points and fiducials of {source}; targets "
+        f"withheld), α = {d.alpha:g} family-wise over {len(d.tests)} tests."
+    )
     if d.effects:
-        lines.append(f"**Verdict: {len(d.effects)} effect{'s' if len(d.effects) != 1 else ''} beyond rigid + "
-                     "isotropic noise**, most important first:")
-        lines.append("\n".join(f"{i}. **{LABELS.get(e.name, e.name)}**: {parameters(e)}; p = {_p(e.p_value)}. "
-                               f"*{e.evidence}*" for i, e in enumerate(d.effects, 1)))
+        lines.append(
+            f"**Verdict: {len(d.effects)} effect{'s' if len(d.effects) != 1 else ''} beyond rigid + "
+            "isotropic noise**, most important first:"
+        )
+        lines.append(
+            "\n".join(
+                f"{i}. **{LABELS.get(e.name, e.name)}**: {parameters(e)}; p = {_p(e.p_value)}. *{e.evidence}*"
+                for i, e in enumerate(d.effects, 1)
+            )
+        )
     else:
         lines.append("**Verdict: consistent with rigid + isotropic noise** (no test significant).")
     src = "repeated measurements" if d.noise_source == "repeats" else "fit residuals"
-    lines.append(f"Noise σ (x, y, z): **{', '.join(f'{s:.3f}' for s in d.noise_sigma_mm)} mm** (from {src}). "
-                 f"Bias RMS: **{d.bias_rms_mm:.3f} mm**.")
+    lines.append(
+        f"Noise σ (x, y, z): **{', '.join(f'{s:.3f}' for s in d.noise_sigma_mm)} mm** (from {src}). "
+        f"Bias RMS: **{d.bias_rms_mm:.3f} mm**."
+    )
     change = 100.0 * d.expected_rmst_change
-    lines.append(f"RRBC **{'recommended' if d.rrbc_recommended else 'not recommended'}**: expected RMST change "
-                 f"**{change:+.1f} %** (leave-one-out RMS {d.loo_rms_rigid_mm:.3f} mm rigid → "
-                 f"{d.loo_rms_rrbc_mm:.3f} mm RRBC).")
+    lines.append(
+        f"RRBC **{'recommended' if d.rrbc_recommended else 'not recommended'}**: expected RMST change "
+        f"**{change:+.1f} %** (leave-one-out RMS {d.loo_rms_rigid_mm:.3f} mm rigid → "
+        f"{d.loo_rms_rrbc_mm:.3f} mm RRBC)."
+    )
     if d.limits:
         lines.append("Limits:\n" + "\n".join(f"- {s}" for s in d.limits))
     return "\n\n".join(lines)

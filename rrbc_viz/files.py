@@ -11,11 +11,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rrbc_core.errors import InputError
-from rrbc_core.session.explorer import ExplorerSession
 from rrbc_core.io.measurements import MeasurementSet, parse_measurements, read_measurements
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.session.explorer import ExplorerSession
 
 SCENE_SUFFIXES = (".toml",)
 
@@ -48,7 +48,9 @@ def load_mesh(path) -> object:
     try:
         mesh = trimesh.load(str(p), force="mesh")
     except Exception as exc:  # trimesh raises many types for unreadable files
-        raise InputError(f"{path}: cannot load as a mesh: {exc.__class__.__name__}: {' '.join(str(exc).split())}") from None
+        raise InputError(
+            f"{path}: cannot load as a mesh: {exc.__class__.__name__}: {' '.join(str(exc).split())}"
+        ) from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise InputError(f"{path}: the file holds no triangles")
     return mesh
@@ -63,7 +65,7 @@ def load_source(source=None, mesh=None) -> Loaded:
     head = ""
     if Path(path).suffix.lower() not in SCENE_SUFFIXES + (".csv",):
         try:
-            with open(path, "r", encoding="utf-8", errors="replace") as fh:
+            with open(path, encoding="utf-8", errors="replace") as fh:
                 head = fh.read(200)
         except OSError:
             head = ""
@@ -96,7 +98,9 @@ def load_upload(name: str, content: bytes) -> Loaded:
     try:
         text = content.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise InputError(f"{base}: not UTF-8 text (byte {exc.start}); upload a measurement CSV or a scene TOML") from None
+        raise InputError(
+            f"{base}: not UTF-8 text (byte {exc.start}); upload a measurement CSV or a scene TOML"
+        ) from None
     if _is_scene(base, text[:200]):
         with tempfile.TemporaryDirectory(prefix="rrbc-upload-") as tmp:
             path = Path(tmp) / (base if base.lower().endswith(".toml") else base + ".toml")

@@ -28,22 +28,32 @@ Ids are used in node names with "/" replaced by "_" (`node_key`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import viser
 import viser.transforms as vtf
 
 from rrbc_core.session.evaluation import Evaluation
-
 from rrbc_core.session.explorer import ExplorerSession
 
-#: The scene's layers, each a group node whose visibility the View tab and the lesson steps switch.
-LAYERS = ("mesh", "frames", "registration", "fiducials", "corrections", "hull", "targets", "regions", "landing",
-          "labels", "heatmap")
-
 from . import colors
+
+#: The scene's layers, each a group node whose visibility the View tab and the lesson steps switch.
+LAYERS = (
+    "mesh",
+    "frames",
+    "registration",
+    "fiducials",
+    "corrections",
+    "hull",
+    "targets",
+    "regions",
+    "landing",
+    "labels",
+    "heatmap",
+)
 
 #: (kind, id, robot-frame position mm, phase, client=...) -> anything
 DragCallback = Callable[..., object]
@@ -115,8 +125,10 @@ def _identity_wxyzs(n: int) -> np.ndarray:
 def fiducial_labels(ev: Evaluation) -> list[str]:
     """Label texts of every fiducial (correction size, or 'excluded')."""
     norms = np.linalg.norm(ev.corrections, axis=1)
-    return [f"{pid} · e {norms[i]:.3f} mm" if ev.included[i] else f"{pid} · excluded"
-            for i, pid in enumerate(ev.fiducial_ids)]
+    return [
+        f"{pid} · e {norms[i]:.3f} mm" if ev.included[i] else f"{pid} · excluded"
+        for i, pid in enumerate(ev.fiducial_ids)
+    ]
 
 
 def fiducial_label(pid: str, ev: Evaluation, i: int) -> str:
@@ -188,8 +200,13 @@ class SceneNodes:
         self.kind = session.kind
         self.display = display
         self.layers = {name: bool(layers.get(name, True)) for name in LAYERS}
-        pts = np.vstack([ev.registration_positions.reshape(-1, 3), ev.fiducial_positions.reshape(-1, 3),
-                         ev.targets.positions.reshape(-1, 3)])
+        pts = np.vstack(
+            [
+                ev.registration_positions.reshape(-1, 3),
+                ev.fiducial_positions.reshape(-1, 3),
+                ev.targets.positions.reshape(-1, 3),
+            ]
+        )
         self.extent_mm = float(np.linalg.norm(pts.max(0) - pts.min(0))) if len(pts) else 1000.0
         self.extent_mm = max(self.extent_mm, 1.0)
         sc = self.scene
@@ -208,23 +225,38 @@ class SceneNodes:
         if session.sensor_to_robot is not None:
             T = session.sensor_to_robot
             self.nodes["/frames/sensor_true"] = sc.add_frame(
-                "/frames/sensor_true", axes_length=axes, axes_radius=axes * 0.03, wxyz=_wxyz(T.rotation),
-                position=np.asarray(T.translation, float))
+                "/frames/sensor_true",
+                axes_length=axes,
+                axes_radius=axes * 0.03,
+                wxyz=_wxyz(T.rotation),
+                position=np.asarray(T.translation, float),
+            )
             self._label("/frames/sensor_true/label", "sensor (true pose)", (0.0, 0.0, axes * 0.2))
         m = ev.registration.mapping
         self.nodes["/frames/sensor_registered"] = sc.add_frame(
-            "/frames/sensor_registered", axes_length=axes * 1.3, axes_radius=axes * 0.012,
-            origin_color=(255, 255, 255), wxyz=_wxyz(m.rotation), position=np.asarray(m.translation, float))
+            "/frames/sensor_registered",
+            axes_length=axes * 1.3,
+            axes_radius=axes * 0.012,
+            origin_color=(255, 255, 255),
+            wxyz=_wxyz(m.rotation),
+            position=np.asarray(m.translation, float),
+        )
         self._label("/frames/sensor_registered/label", "sensor (registered)", (0.0, 0.0, -axes * 0.2))
 
         # registration points --------------------------------------------------------------------------
         n = len(ev.registration_ids)
         if n:
             self.nodes["/registration/points"] = sc.add_batched_meshes_simple(
-                "/registration/points", self._sphere_v, self._sphere_f, batched_wxyzs=_identity_wxyzs(n),
+                "/registration/points",
+                self._sphere_v,
+                self._sphere_f,
+                batched_wxyzs=_identity_wxyzs(n),
                 batched_positions=ev.registration_positions.astype(np.float32),
-                batched_scales=np.full(n, 0.8 * r, np.float32), batched_colors=colors.REGISTRATION,
-                cast_shadow=False, receive_shadow=False)
+                batched_scales=np.full(n, 0.8 * r, np.float32),
+                batched_colors=colors.REGISTRATION,
+                cast_shadow=False,
+                receive_shadow=False,
+            )
             for pid, p in zip(ev.registration_ids, ev.registration_positions):
                 self._label(f"/registration/labels/{node_key(pid)}", str(pid), np.asarray(p) + (0.0, 0.0, 1.6 * r))
 
@@ -237,11 +269,14 @@ class SceneNodes:
         # corrections, hull -----------------------------------------------------------------------------
         z = np.zeros((1, 2, 3), np.float32)
         self.nodes["/corrections/fiducials"] = sc.add_arrows(
-            "/corrections/fiducials", z, np.array(colors.CORRECTION_FIDUCIAL, np.uint8), **self._arrow_sizes())
+            "/corrections/fiducials", z, np.array(colors.CORRECTION_FIDUCIAL, np.uint8), **self._arrow_sizes()
+        )
         self.nodes["/corrections/targets"] = sc.add_arrows(
-            "/corrections/targets", z, np.array(colors.CORRECTION_TARGET, np.uint8), **self._arrow_sizes())
+            "/corrections/targets", z, np.array(colors.CORRECTION_TARGET, np.uint8), **self._arrow_sizes()
+        )
         self.nodes["/hull/edges"] = sc.add_line_segments(
-            "/hull/edges", z, np.array(colors.HULL, np.uint8), thickness=2.0, thickness_units="screen")
+            "/hull/edges", z, np.array(colors.HULL, np.uint8), thickness=2.0, thickness_units="screen"
+        )
 
         # regions of variability ------------------------------------------------------------------------
         for i, pid in enumerate(ev.targets.ids):
@@ -252,37 +287,79 @@ class SceneNodes:
             size = np.asarray(region.size, float)
             zoom = display.region_zoom
             if region.kind == "box":
-                h = sc.add_box(name, color=colors.REGION, dimensions=tuple(size), opacity=0.35, scale=zoom,
-                               position=ev.targets.positions[i], cast_shadow=False, receive_shadow=False)
+                h = sc.add_box(
+                    name,
+                    color=colors.REGION,
+                    dimensions=tuple(size),
+                    opacity=0.35,
+                    scale=zoom,
+                    position=ev.targets.positions[i],
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
             else:
-                h = sc.add_icosphere(name, radius=1.0, color=colors.REGION, subdivisions=3, opacity=0.35,
-                                     scale=tuple(size * zoom), position=ev.targets.positions[i],
-                                     cast_shadow=False, receive_shadow=False)
+                h = sc.add_icosphere(
+                    name,
+                    radius=1.0,
+                    color=colors.REGION,
+                    subdivisions=3,
+                    opacity=0.35,
+                    scale=tuple(size * zoom),
+                    position=ev.targets.positions[i],
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
             self.regions[pid] = h
             self.region_kind[pid] = (region.kind, size)
 
         # landing points --------------------------------------------------------------------------------
         m_t = len(ev.targets.ids)
         if m_t:
-            for key, color, s in (("anchor", colors.LAND_ANCHOR, 0.35), ("rigid", colors.LAND_RIGID, 0.45),
-                                  ("rrbc", colors.LAND_RRBC, 0.45)):
+            for key, color, s in (
+                ("anchor", colors.LAND_ANCHOR, 0.35),
+                ("rigid", colors.LAND_RIGID, 0.45),
+                ("rrbc", colors.LAND_RRBC, 0.45),
+            ):
                 self.nodes[f"/landing/{key}"] = sc.add_batched_meshes_simple(
-                    f"/landing/{key}", self._sphere_v, self._sphere_f, batched_wxyzs=_identity_wxyzs(m_t),
+                    f"/landing/{key}",
+                    self._sphere_v,
+                    self._sphere_f,
+                    batched_wxyzs=_identity_wxyzs(m_t),
                     batched_positions=ev.targets.positions.astype(np.float32),
-                    batched_scales=np.full(m_t, s * r, np.float32), batched_colors=color,
-                    cast_shadow=False, receive_shadow=False)
+                    batched_scales=np.full(m_t, s * r, np.float32),
+                    batched_colors=color,
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
             self.nodes["/landing/lines"] = sc.add_line_segments(
-                "/landing/lines", np.zeros((2 * m_t, 2, 3), np.float32), self._landing_line_colors(m_t),
-                thickness=2.0, thickness_units="screen")
+                "/landing/lines",
+                np.zeros((2 * m_t, 2, 3), np.float32),
+                self._landing_line_colors(m_t),
+                thickness=2.0,
+                thickness_units="screen",
+            )
 
         # heat map (filled by update_heatmap) ------------------------------------------------------------
         self.nodes["/heatmap/points"] = sc.add_point_cloud(
-            "/heatmap/points", np.zeros((1, 3), np.float32), np.zeros((1, 3), np.uint8), point_size=0.5,
-            point_shape="circle", precision="float32", visible=False)
+            "/heatmap/points",
+            np.zeros((1, 3), np.float32),
+            np.zeros((1, 3), np.uint8),
+            point_size=0.5,
+            point_shape="circle",
+            precision="float32",
+            visible=False,
+        )
         if m_t:  # unlit points (flat shading): the ring shows the legend's colours, whatever the lighting
             self.nodes["/heatmap/rings"] = sc.add_point_cloud(
-                "/heatmap/rings", np.zeros((1, 3), np.float32), np.zeros((1, 3), np.uint8), point_size=1.0,
-                point_shape="circle", point_shading="flat", precision="float32", visible=False)
+                "/heatmap/rings",
+                np.zeros((1, 3), np.float32),
+                np.zeros((1, 3), np.uint8),
+                point_size=1.0,
+                point_shape="circle",
+                point_shading="flat",
+                precision="float32",
+                visible=False,
+            )
 
         self.set_handles(display.handles)
         self.set_layer("labels", self.layers["labels"])
@@ -302,25 +379,44 @@ class SceneNodes:
         return new
 
     def _label(self, name: str, text: str, position) -> None:
-        self.labels[name] = self.scene.add_label(name, text, position=np.asarray(position, float),
-                                                 font_size_mode="screen", font_screen_scale=0.75,
-                                                 anchor="bottom-left", visible=self.layers.get("labels", True))
+        self.labels[name] = self.scene.add_label(
+            name,
+            text,
+            position=np.asarray(position, float),
+            font_size_mode="screen",
+            font_screen_scale=0.75,
+            anchor="bottom-left",
+            visible=self.layers.get("labels", True),
+        )
 
     def _point(self, kind: str, pid: str, position, color, label: str) -> None:
         r = self.display.marker_mm
         name = gizmo_name(kind, pid)
         tc = self.scene.add_transform_controls(
-            name, scale=self._gizmo_scale(), line_width=3.0, disable_rotations=True, depth_test=False,
-            translation_limits=GIZMO_LIMITS, position=np.asarray(position, float))
+            name,
+            scale=self._gizmo_scale(),
+            line_width=3.0,
+            disable_rotations=True,
+            depth_test=False,
+            translation_limits=GIZMO_LIMITS,
+            position=np.asarray(position, float),
+        )
 
         async def on_update(event: viser.TransformControlsEvent, kind=kind, pid=pid) -> None:
             # async: runs on viser's event loop, in order (start, updates, end); never awaits.
             self._on_drag(kind, pid, np.asarray(event.target.position, float), event.phase, client=event.client)
 
         tc.on_update(on_update)
-        sphere = self.scene.add_icosphere(f"{name}/sphere", radius=r if kind == "fiducials" else 0.8 * r,
-                                          color=color, subdivisions=2, cast_shadow=False, receive_shadow=False)
+        sphere = self.scene.add_icosphere(
+            f"{name}/sphere",
+            radius=r if kind == "fiducials" else 0.8 * r,
+            color=color,
+            subdivisions=2,
+            cast_shadow=False,
+            receive_shadow=False,
+        )
         if kind == "fiducials":
+
             def on_click(event: viser.SceneNodePointerEvent, pid=pid) -> None:
                 self._on_click(pid, client=event.client)
 
@@ -364,7 +460,9 @@ class SceneNodes:
         texts = fiducial_labels(ev)
         for i, pid in enumerate(ev.fiducial_ids):
             inc = bool(ev.included[i])
-            self._assign(self.spheres[("fiducials", pid)], "color", colors.FIDUCIAL if inc else colors.FIDUCIAL_EXCLUDED)
+            self._assign(
+                self.spheres[("fiducials", pid)], "color", colors.FIDUCIAL if inc else colors.FIDUCIAL_EXCLUDED
+            )
             self._assign(self.gizmos[("fiducials", pid)], "position", tuple(ev.fiducial_positions[i]))
             self._assign(self.labels[f"{gizmo_name('fiducials', pid)}/label"], "text", texts[i])
         inc = np.flatnonzero(ev.included)
@@ -384,8 +482,11 @@ class SceneNodes:
         t = ev.targets
         texts = target_labels(ev)
         for i, pid in enumerate(t.ids):
-            self._assign(self.spheres[("targets", pid)], "color",
-                         colors.TARGET_EXTRAPOLATED if t.extrapolated[i] else colors.TARGET)
+            self._assign(
+                self.spheres[("targets", pid)],
+                "color",
+                colors.TARGET_EXTRAPOLATED if t.extrapolated[i] else colors.TARGET,
+            )
             self._assign(self.gizmos[("targets", pid)], "position", tuple(t.positions[i]))
             self._assign(self.labels[f"{gizmo_name('targets', pid)}/label"], "text", texts[i])
             region = self.regions.get(pid)
@@ -407,7 +508,8 @@ class SceneNodes:
             self.nodes["/landing/rigid"].batched_positions = rigid.astype(np.float32)
             self.nodes["/landing/rrbc"].batched_positions = rrbc.astype(np.float32)
             self.nodes["/landing/lines"].points = np.concatenate(
-                [np.stack([anchor, rigid], 1), np.stack([anchor, rrbc], 1)]).astype(np.float32)
+                [np.stack([anchor, rigid], 1), np.stack([anchor, rrbc], 1)]
+            ).astype(np.float32)
 
     def _assign(self, handle, attr: str, value) -> None:
         """Set handle.attr = value unless it is the value this object last set there (tuples/str compare
@@ -441,7 +543,7 @@ class SceneNodes:
     def apply_sizes(self) -> None:
         """Marker size and region zoom changed: resize spheres, gizmos, arrows, regions."""
         r = self.display.marker_mm
-        for (kind, pid), s in self.spheres.items():
+        for (kind, _pid), s in self.spheres.items():
             s.radius = r if kind == "fiducials" else 0.8 * r
         for tc in self.gizmos.values():
             tc.scale = self._gizmo_scale()

@@ -40,8 +40,8 @@ from .nodes import gizmo_name
 from .worker import CoalescingWorker
 
 if TYPE_CHECKING:
-    from rrbc_core.session.results import PlanningState
     from rrbc_core.session.explorer import ExplorerSession
+    from rrbc_core.session.results import PlanningState
 
     from .app import RunningApp
 
@@ -53,8 +53,10 @@ K_MAX = 10
 HALO_MARKERS = 1.8  # halo radius, in marker radii (the target sphere is 0.8)
 HALO_OPACITY = 0.45
 GHOST_MARKERS = 1.4  # ghost sphere radius, in marker radii (a fiducial is 1)
-PROMPT_SUGGEST = ("Press **Suggest** for K more fiducials from the scene's candidate locations (those the sensor "
-                  "cannot see or that lie inside solid geometry are never suggested).")
+PROMPT_SUGGEST = (
+    "Press **Suggest** for K more fiducials from the scene's candidate locations (those the sensor "
+    "cannot see or that lie inside solid geometry are never suggested)."
+)
 
 
 def pct(fraction: float) -> str:
@@ -82,17 +84,24 @@ def method_note(settings) -> str:
     """A warning when the session's method is not the one the planner predicts (least squares + IDW k=4, p=2)."""
     if settings is None:
         return ""
-    same = (settings.registration == "least-squares" and settings.interpolation == "idw"
-            and int(settings.neighbors) == 4 and float(settings.power) == 2.0)
+    same = (
+        settings.registration == "least-squares"
+        and settings.interpolation == "idw"
+        and int(settings.neighbors) == 4
+        and float(settings.power) == 2.0
+    )
     if same:
         return ""
-    interp = settings.interpolation + (f" (k={settings.neighbors}, p={settings.power:g})"
-                                       if settings.interpolation == "idw" else "")
-    return (f"⚠ The session uses {settings.registration} + {interp}; this prediction is for least squares + IDW "
-            "(k=4, p=2), the planner's model.")
+    interp = settings.interpolation + (
+        f" (k={settings.neighbors}, p={settings.power:g})" if settings.interpolation == "idw" else ""
+    )
+    return (
+        f"⚠ The session uses {settings.registration} + {interp}; this prediction is for least squares + IDW "
+        "(k=4, p=2), the planner's model."
+    )
 
 
-def render_state(state: "PlanningState", excluded: int = 0, settings=None) -> str:
+def render_state(state: PlanningState, excluded: int = 0, settings=None) -> str:
     """Predicted RMST and how many targets are covered, for the fiducials as they are now (and a note when the
     session's method differs from the planner's)."""
     pred = state.predicted
@@ -109,10 +118,11 @@ def render_state(state: "PlanningState", excluded: int = 0, settings=None) -> st
     return "\n\n".join(lines + ([note] if note else []))
 
 
-def render_coverage(state: "PlanningState") -> str:
+def render_coverage(state: PlanningState) -> str:
     """Per target: the fraction of its region of variability inside the fiducials' hull."""
     return "| target | coverage |\n|---|---:|\n" + "\n".join(
-        f"| {pid} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |" for pid, c in zip(state.target_ids, state.coverage))
+        f"| {pid} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |" for pid, c in zip(state.target_ids, state.coverage)
+    )
 
 
 def _baseline_text(baselines: dict) -> str:
@@ -142,10 +152,13 @@ def render_suggestion(result, current: bool = True) -> str:
     k = len(result.suggested_ids)
     if k == 0:
         return "⚠ The planner found no usable candidate to add (see the rejected candidates below)." + (
-            f"\n\nRejected candidates: {_rejected_text(result.rejected)}." if result.rejected else "")
+            f"\n\nRejected candidates: {_rejected_text(result.rejected)}." if result.rejected else ""
+        )
     b, a = result.predicted, result.predicted_after
-    rows = "\n".join(f"| +{i + 1} | {cid} | {p[0]:.0f}, {p[1]:.0f}, {p[2]:.0f} |"
-                     for i, (cid, p) in enumerate(zip(result.suggested_ids, np.asarray(result.suggested))))
+    rows = "\n".join(
+        f"| +{i + 1} | {cid} | {p[0]:.0f}, {p[1]:.0f}, {p[2]:.0f} |"
+        for i, (cid, p) in enumerate(zip(result.suggested_ids, np.asarray(result.suggested)))
+    )
     cov_after = np.asarray(result.coverage_after, float)
     short = [f"{pid} {pct(c)}" for pid, c in zip(result.target_ids, cov_after) if c < 1.0]
     change = (a.rrbc_mm / b.rrbc_mm - 1.0) * 100.0 if b.rrbc_mm > 0 else 0.0
@@ -169,22 +182,27 @@ def render_suggestion(result, current: bool = True) -> str:
 class PlanningPanel:
     """The Plan tab's widgets (built inside the tab by `Controls`) and its scene nodes (`build` per source)."""
 
-    def __init__(self, server: viser.ViserServer, app: "RunningApp"):
+    def __init__(self, server: viser.ViserServer, app: RunningApp):
         self.server = server
         self.app = app
         gui = server.gui
         self.info = gui.add_markdown("")
         self.k = gui.add_slider("Fiducials to add (K)", 1, K_MAX, 1, 4)
-        self.suggest_button = gui.add_button("Suggest", icon=viser.Icon.WAND,
-                                             hint="Choose K more fiducials from the scene's candidate locations")
+        self.suggest_button = gui.add_button(
+            "Suggest", icon=viser.Icon.WAND, hint="Choose K more fiducials from the scene's candidate locations"
+        )
         self.suggestion_md = gui.add_markdown(PROMPT_SUGGEST)
-        self.accept_button = gui.add_button("Accept suggestions", icon=viser.Icon.CHECK, disabled=True,
-                                            hint="Add the suggested fiducials to the cell")
+        self.accept_button = gui.add_button(
+            "Accept suggestions", icon=viser.Icon.CHECK, disabled=True, hint="Add the suggested fiducials to the cell"
+        )
         self.clear_button = gui.add_button("Clear suggestions", icon=viser.Icon.TRASH, disabled=True)
         with gui.add_folder("Coverage"):
-            self.colour = gui.add_checkbox("Colour regions by coverage", False,
-                                           hint="Each target's region of variability and a halo around the target, "
-                                                "coloured by the fraction of the region inside the fiducials' hull")
+            self.colour = gui.add_checkbox(
+                "Colour regions by coverage",
+                False,
+                hint="Each target's region of variability and a halo around the target, "
+                "coloured by the fraction of the region inside the fiducials' hull",
+            )
             self.legend = gui.add_markdown(colors.coverage_legend_markdown())
             self.coverage_md = gui.add_markdown("")
 
@@ -225,7 +243,7 @@ class PlanningPanel:
             self._syncing = was
 
     # ------------------------------------------------------------------------------------------ building
-    def build(self, session: "ExplorerSession") -> None:
+    def build(self, session: ExplorerSession) -> None:
         """(Re)create the tab's nodes for a newly installed source (call after SceneNodes.build, in atomic())."""
         self._sent.clear()
         self.cost_s, self._measured = 0.0, False
@@ -245,9 +263,15 @@ class PlanningPanel:
             for pid in session.layout["targets"].ids:
                 if pid in session.regions:
                     self.halos[pid] = self.server.scene.add_icosphere(
-                        f"{gizmo_name('targets', pid)}/coverage", radius=HALO_MARKERS * r, color=colors.REGION,
-                        subdivisions=2, opacity=HALO_OPACITY, visible=bool(self.colour.value), cast_shadow=False,
-                        receive_shadow=False)
+                        f"{gizmo_name('targets', pid)}/coverage",
+                        radius=HALO_MARKERS * r,
+                        color=colors.REGION,
+                        subdivisions=2,
+                        opacity=HALO_OPACITY,
+                        visible=bool(self.colour.value),
+                        cast_shadow=False,
+                        receive_shadow=False,
+                    )
         for h in (self.k, self.suggest_button, self.colour):
             h.disabled = not scene_mode
         self.accept_button.disabled = self.clear_button.disabled = True
@@ -270,12 +294,14 @@ class PlanningPanel:
         """The last planning update took longer than PLAN_LIVE_MAX_S: during drags it runs in the background."""
         return self.cost_s > PLAN_LIVE_MAX_S
 
-    def refresh(self, session: "ExplorerSession", due: bool = True) -> None:
+    def refresh(self, session: ExplorerSession, due: bool = True) -> None:
         """Recompute (or take from the session's cache) and show the planning state (caller holds the app lock,
         inside atomic()). due=False marks it stale instead (a drag update between throttled refreshes)."""
         if session.kind != "scene":
-            self.info.content = ("Planning needs a scene (an error model to predict with and candidate locations "
-                                 "to choose from); measured data have none. Load a scene in the File tab.")
+            self.info.content = (
+                "Planning needs a scene (an error model to predict with and candidate locations "
+                "to choose from); measured data have none. Load a scene in the File tab."
+            )
             self.coverage_md.content = ""
             self.state = None
             return
@@ -295,7 +321,7 @@ class PlanningPanel:
         self._show_state(session, state)
 
     @staticmethod
-    def _compute(session: "ExplorerSession"):
+    def _compute(session: ExplorerSession):
         """session.planning_state(), or the exception that says why not."""
         try:
             return session.planning_state()
@@ -305,11 +331,14 @@ class PlanningPanel:
             traceback.print_exc()
             return exc
 
-    def _show_state(self, session: "ExplorerSession", state) -> None:
+    def _show_state(self, session: ExplorerSession, state) -> None:
         self._time = time.monotonic()
         if isinstance(state, Exception):
-            what = "Cannot plan" if isinstance(state, InputError) else (
-                f"Planning failed: internal error {type(state).__name__}")
+            what = (
+                "Cannot plan"
+                if isinstance(state, InputError)
+                else (f"Planning failed: internal error {type(state).__name__}")
+            )
             self.info.content = f"⚠ {what}: {' '.join(str(state).split())}"
             self.coverage_md.content = ""
             self.state = None
@@ -322,11 +351,12 @@ class PlanningPanel:
         self._assign(self.coverage_md, "content", render_coverage(state))
         self.apply_colours(session)
         if session.suggestion is not None and self.ghosts:
-            self._assign(self.suggestion_md, "content", render_suggestion(session.suggestion,
-                                                                          session.suggestion_current))
+            self._assign(
+                self.suggestion_md, "content", render_suggestion(session.suggestion, session.suggestion_current)
+            )
 
     # ------------------------------------------------------------------------------------------ background
-    def request_background(self, session: "ExplorerSession") -> None:
+    def request_background(self, session: ExplorerSession) -> None:
         """Recompute planning on a snapshot of `session` in the worker thread (caller holds the app lock); drag
         updates of a slow scene do this instead of waiting. Requests coalesce: the newest starts once none has
         come for PLAN_QUIET_S (the drag paused or ended); a result is shown unless a synchronous refresh came
@@ -356,7 +386,7 @@ class PlanningPanel:
                 with self.server.atomic():
                     self._show_state(snapshot, state)
 
-    def apply_colours(self, session: "ExplorerSession") -> None:
+    def apply_colours(self, session: ExplorerSession) -> None:
         """Regions and halos on the coverage scale when the toggle is on; regions back to their colour when off."""
         on = bool(self.colour.value) and self.state is not None
         cov = dict(zip(self.state.target_ids, self.state.coverage)) if self.state is not None else {}
@@ -381,7 +411,7 @@ class PlanningPanel:
         self.suggestion_md.content = f"Planning: choosing {int(self.k.value)} of the scene's candidate locations…"
         return True
 
-    def end(self, session: "ExplorerSession") -> None:
+    def end(self, session: ExplorerSession) -> None:
         with self._busy_lock:
             self._busy = False
         self.suggest_button.disabled = session.kind != "scene"
@@ -395,21 +425,38 @@ class PlanningPanel:
         label = next((a for a in args if isinstance(a, str)), None)
         nums = [a for a in args if isinstance(a, (int, float)) and not isinstance(a, bool)]
         extra = label or (" / ".join(f"{x:g}" for x in nums[:2]) if nums else "")
-        self.suggestion_md.content = (f"Planning: choosing {int(self.k.value)} of the scene's candidate "
-                                      f"locations… {extra}").rstrip()
+        self.suggestion_md.content = (
+            f"Planning: choosing {int(self.k.value)} of the scene's candidate locations… {extra}"
+        ).rstrip()
 
-    def show_suggestion(self, session: "ExplorerSession", result) -> None:
+    def show_suggestion(self, session: ExplorerSession, result) -> None:
         """Ghost spheres +1 … +K at the suggested places and the suggestion's text (caller holds the lock)."""
         self.remove_ghosts()
         r = self.app.display.marker_mm
         for i, (cid, p) in enumerate(zip(result.suggested_ids, np.asarray(result.suggested, float).reshape(-1, 3))):
             name = f"/plan/ghosts/{i}"
-            self.ghosts.append(self.server.scene.add_icosphere(
-                name, radius=GHOST_MARKERS * r, color=colors.GHOST, subdivisions=2, opacity=colors.GHOST_OPACITY,
-                position=np.asarray(p, float), cast_shadow=False, receive_shadow=False))
-            self.ghost_labels.append(self.server.scene.add_label(
-                f"{name}/label", f"+{i + 1} {cid}", position=(0.0, 0.0, 2.0 * r), font_size_mode="screen",
-                font_screen_scale=0.75, anchor="bottom-left"))
+            self.ghosts.append(
+                self.server.scene.add_icosphere(
+                    name,
+                    radius=GHOST_MARKERS * r,
+                    color=colors.GHOST,
+                    subdivisions=2,
+                    opacity=colors.GHOST_OPACITY,
+                    position=np.asarray(p, float),
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
+            )
+            self.ghost_labels.append(
+                self.server.scene.add_label(
+                    f"{name}/label",
+                    f"+{i + 1} {cid}",
+                    position=(0.0, 0.0, 2.0 * r),
+                    font_size_mode="screen",
+                    font_screen_scale=0.75,
+                    anchor="bottom-left",
+                )
+            )
         self.suggestion_md.content = render_suggestion(result, session.suggestion_current)
         has = len(self.ghosts) > 0
         self.accept_button.disabled = not has

@@ -23,8 +23,13 @@ def scale_line(magnification: float) -> str:
 def summary(ev: Evaluation, kind: str) -> str:
     sm = ev.summary
     s = ev.settings
-    interp = s.interpolation + (f" (k={s.neighbors}, p={s.power:g})" if s.interpolation == "idw" else
-                                f" (smoothing {s.smoothing:g})" if s.interpolation == "tps" else "")
+    interp = s.interpolation + (
+        f" (k={s.neighbors}, p={s.power:g})"
+        if s.interpolation == "idw"
+        else f" (smoothing {s.smoothing:g})"
+        if s.interpolation == "tps"
+        else ""
+    )
     lines = [
         f"Registration **{ev.registration.method}**: FRE {ev.registration.fre_rms_mm:.3f} mm RMS "
         f"({len(ev.registration_ids)} points). Interpolation **{interp}** over "
@@ -33,7 +38,8 @@ def summary(ev: Evaluation, kind: str) -> str:
     if sm.get("rmst_rigid_mm") is not None:
         lines.append(
             f"Target error over {sm['scored']} scored: RMS **{_mm(sm['rmst_rigid_mm'])} mm rigid → "
-            f"{_mm(sm['rmst_rrbc_mm'])} mm RRBC**; max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])} mm.")
+            f"{_mm(sm['rmst_rrbc_mm'])} mm RRBC**; max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])} mm."
+        )
     elif kind == "measurements":
         lines.append("No target carries a truth: errors cannot be scored (check rows would be).")
     if sm.get("extrapolated"):
@@ -58,4 +64,5 @@ def target_table(ev: Evaluation) -> str:
         rows.append(row + f"{flag} |")
     return "\n".join(rows) + (
         "\n\nmm. *rigid*, *RRBC*: target error against the truth (— where there is none); |ê|: interpolated "
-        "correction" + ("; *std*: its 1σ from the Gaussian process." if has_std else "."))
+        "correction" + ("; *std*: its 1σ from the Gaussian process." if has_std else ".")
+    )

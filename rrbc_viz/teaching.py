@@ -8,8 +8,8 @@ Frames: robot frame for positions, sensor frame where a sentence says so; millim
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -52,9 +52,11 @@ def _mm(x) -> str:
 
 def _step1(ev: Evaluation, ctx: LessonContext) -> str:
     n = len(ev.registration_ids)
-    return (f"The robot and the sensor both measure **{n} registration points** ({_ids(ev.registration_ids)}, purple). "
-            "At least 3 are needed; they should be well spread over the work volume, because the registration is "
-            "only as good as the volume they span.")
+    return (
+        f"The robot and the sensor both measure **{n} registration points** ({_ids(ev.registration_ids)}, purple). "
+        "At least 3 are needed; they should be well spread over the work volume, because the registration is "
+        "only as good as the volume they span."
+    )
 
 
 def _step2(ev: Evaluation, ctx: LessonContext) -> str:
@@ -62,10 +64,12 @@ def _step2(ev: Evaluation, ctx: LessonContext) -> str:
     res = _norms(reg.residuals)
     worst = int(np.argmax(res)) if len(res) else 0
     t = np.asarray(reg.mapping.translation, float)
-    s = (f"**{reg.method}** registration gives (R, t) taking sensor points to the robot frame; t = {_v(t)} mm. "
-         f"The fit leaves **FRE {reg.fre_rms_mm:.3f} mm** RMS over {len(res)} points"
-         + (f" (largest residual {res[worst]:.3f} mm at {ev.registration_ids[worst]})." if len(res) else ".")
-         + " A low FRE is no evidence of accuracy at the targets.")
+    s = (
+        f"**{reg.method}** registration gives (R, t) taking sensor points to the robot frame; t = {_v(t)} mm. "
+        f"The fit leaves **FRE {reg.fre_rms_mm:.3f} mm** RMS over {len(res)} points"
+        + (f" (largest residual {res[worst]:.3f} mm at {ev.registration_ids[worst]})." if len(res) else ".")
+        + " A low FRE is no evidence of accuracy at the targets."
+    )
     if ctx.kind == "scene":
         s += " The registered sensor frame is drawn beside the true one."
     return s
@@ -79,16 +83,20 @@ def _step3(ev: Evaluation, ctx: LessonContext) -> str:
         if r is not None:
             dims = "×".join(f"{float(x):g}" for x in r.size)
             what = "extents" if r.kind == "box" else "radii"
-            s += (f" Each has a region of variability where the part may really be; {t.ids[0]}'s is a {r.kind} with "
-                  f"{what} {dims} mm (translucent; enlarge it with *Region zoom* in the View tab).")
+            s += (
+                f" Each has a region of variability where the part may really be; {t.ids[0]}'s is a {r.kind} with "
+                f"{what} {dims} mm (translucent; enlarge it with *Region zoom* in the View tab)."
+            )
     return s
 
 
 def _step4(ev: Evaluation, ctx: LessonContext) -> str:
     used = int(np.count_nonzero(ev.included))
     out = ev.summary.get("extrapolated", [])
-    s = (f"**{used} of {len(ev.fiducial_ids)} fiducials** (orange) are measured around the targets; their convex "
-         f"hull (yellow, {len(ev.hull_edges)} edges) must contain every target's region.")
+    s = (
+        f"**{used} of {len(ev.fiducial_ids)} fiducials** (orange) are measured around the targets; their convex "
+        f"hull (yellow, {len(ev.hull_edges)} edges) must contain every target's region."
+    )
     if out:
         verb, its = ("lies", "its correction") if len(out) == 1 else ("lie", "their corrections")
         s += f" **{_ids(out)} {verb} outside the hull**: {its} will be extrapolated (magenta)."
@@ -105,10 +113,12 @@ def _step5(ev: Evaluation, ctx: LessonContext) -> str:
     b = ev.fiducial_readings.robot[i]
     s = ev.fiducial_readings.sensor[i]
     e = ev.corrections[i]
-    return (f"The robot's fiducial readings are taken back into the sensor frame with (R, t)⁻¹. For "
-            f"**{ev.fiducial_ids[i]}** the robot read b = {_v(b)} mm (robot frame); the sensor saw s = {_v(s)} mm "
-            f"(sensor frame). Mapped back, b lands **{float(np.linalg.norm(e)):.3f} mm** from s: the rigid-body "
-            "condition is broken there.")
+    return (
+        f"The robot's fiducial readings are taken back into the sensor frame with (R, t)⁻¹. For "
+        f"**{ev.fiducial_ids[i]}** the robot read b = {_v(b)} mm (robot frame); the sensor saw s = {_v(s)} mm "
+        f"(sensor frame). Mapped back, b lands **{float(np.linalg.norm(e)):.3f} mm** from s: the rigid-body "
+        "condition is broken there."
+    )
 
 
 def _step6(ev: Evaluation, ctx: LessonContext) -> str:
@@ -117,17 +127,21 @@ def _step6(ev: Evaluation, ctx: LessonContext) -> str:
         return "Every fiducial is excluded: there are no corrections."
     n = _norms(ev.corrections[inc])
     hi, lo = int(inc[int(np.argmax(n))]), int(inc[int(np.argmin(n))])
-    return (f"The corrections e_i = Rᵀ(b_i − t) − s_i (orange arrows, ×{ctx.magnification:g}) range from "
-            f"**{n.min():.3f} mm** ({ev.fiducial_ids[lo]}) to **{n.max():.3f} mm** ({ev.fiducial_ids[hi]}). "
-            f"{ev.fiducial_ids[hi]}: e = {_v(ev.corrections[hi])} mm, sensor frame.")
+    return (
+        f"The corrections e_i = Rᵀ(b_i − t) − s_i (orange arrows, ×{ctx.magnification:g}) range from "
+        f"**{n.min():.3f} mm** ({ev.fiducial_ids[lo]}) to **{n.max():.3f} mm** ({ev.fiducial_ids[hi]}). "
+        f"{ev.fiducial_ids[hi]}: e = {_v(ev.corrections[hi])} mm, sensor frame."
+    )
 
 
 def _step7(ev: Evaluation, ctx: LessonContext) -> str:
     t = ev.targets
     if not len(t.ids):
         return "There are no targets."
-    return (f"The sensor measures the {len(t.ids)} targets; **{t.ids[0]}** reads x = {_v(t.sensor[0])} mm "
-            "(sensor frame). Drag a target's handle to move it: everything below follows live.")
+    return (
+        f"The sensor measures the {len(t.ids)} targets; **{t.ids[0]}** reads x = {_v(t.sensor[0])} mm "
+        "(sensor frame). Drag a target's handle to move it: everything below follows live."
+    )
 
 
 def _step8(ev: Evaluation, ctx: LessonContext) -> str:
@@ -135,9 +149,11 @@ def _step8(ev: Evaluation, ctx: LessonContext) -> str:
     if not len(t.ids):
         return "There are no targets."
     n = _norms(t.correction)
-    s = (f"Each target's correction ê(x) is interpolated (**{ev.settings.interpolation}**) from the nearby fiducial "
-         f"corrections (blue arrows, ×{ctx.magnification:g}): {t.ids[0]} gets ê = {_v(t.correction[0])} "
-         f"(|ê| = {n[0]:.3f} mm); over all targets |ê| is {n.min():.3f}–{n.max():.3f} mm.")
+    s = (
+        f"Each target's correction ê(x) is interpolated (**{ev.settings.interpolation}**) from the nearby fiducial "
+        f"corrections (blue arrows, ×{ctx.magnification:g}): {t.ids[0]} gets ê = {_v(t.correction[0])} "
+        f"(|ê| = {n[0]:.3f} mm); over all targets |ê| is {n.min():.3f}–{n.max():.3f} mm."
+    )
     if t.correction_std is not None:
         s += f" The Gaussian process puts ±{float(np.linalg.norm(t.correction_std[0])):.3f} mm (1σ) on {t.ids[0]}'s."
     return s
@@ -146,13 +162,17 @@ def _step8(ev: Evaluation, ctx: LessonContext) -> str:
 def _step9(ev: Evaluation, ctx: LessonContext) -> str:
     sm = ev.summary
     if sm.get("rmst_rigid_mm") is None:
-        return ("b̂ = R(x + ê(x)) + t sends the robot to the corrected targets (green) instead of the rigid-only "
-                "ones (red). These data carry no truth for the targets, so the gain cannot be scored here; "
-                "add check rows to score it.")
-    return (f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (red) versus with RRBC (green), offsets "
-            f"×{ctx.magnification:g} from the truth (dark). Over {sm['scored']} scored targets the RMS error is "
-            f"**{_mm(sm['rmst_rigid_mm'])} rigid → {_mm(sm['rmst_rrbc_mm'])} with RRBC** "
-            f"(max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])}).")
+        return (
+            "b̂ = R(x + ê(x)) + t sends the robot to the corrected targets (green) instead of the rigid-only "
+            "ones (red). These data carry no truth for the targets, so the gain cannot be scored here; "
+            "add check rows to score it."
+        )
+    return (
+        f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (red) versus with RRBC (green), offsets "
+        f"×{ctx.magnification:g} from the truth (dark). Over {sm['scored']} scored targets the RMS error is "
+        f"**{_mm(sm['rmst_rigid_mm'])} rigid → {_mm(sm['rmst_rrbc_mm'])} with RRBC** "
+        f"(max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])})."
+    )
 
 
 STEPS: tuple[Step, ...] = (

@@ -20,7 +20,7 @@ import functools
 import threading
 import time
 import traceback
-from typing import Callable
+from collections.abc import Callable
 
 Job = Callable[[object, Callable[[], bool]], None]  # (the submitted job, fresh) -> None
 

@@ -36,131 +36,34 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from rrbc_core.analysis.diagnosis import diagnose
-from rrbc_core.simulation.errormodels import PointSet
-from rrbc_core.simulation.errorterms import Affine, AnisotropicNoise, Drift, Scale, SmoothField
-from rrbc_core.io.measurements import MeasurementSet
-from rrbc_core.registration.strategies import least_squares
 from rrbc_core.runtime.threads import apply_process_policy
-
-SIGMA = 0.02  # mm per axis
-ALPHA = 0.01
-BASE_SEED = 20_260_601
-EFFECTS = ("scale", "affine", "drift", "outliers", "anisotropic_noise", "smooth_field")
-GEOMETRIES = ("planar 6x6", "volumetric 4x3x3")
-SIZES = {
-    "scale": (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0),
-    "affine": (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0),
-    "drift": (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0),
-    "smooth_field": (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0),
-    "outliers": (2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0),
-    "anisotropic_noise": (1.25, 1.5, 2.0, 2.5, 3.0, 4.0),
-}
-X_LABEL = {
-    "outliers": "outlier displacement / sigma",
-    "anisotropic_noise": "noise ratio along / across line of sight",
-}
-FIELD_LENGTH_MM = 250.0  # smooth-field correlation length (half the 500 mm extent)
-
-
-# extra panels (section "Point count and measurement order"): (effect, geometries, order); seed effect index 10+
-SCANS = (
-    ("smooth_field", ("planar 3x4", "planar 6x6", "planar 10x10"), "random"),
-    ("smooth_field", ("volumetric 3x2x2", "volumetric 4x3x3", "volumetric 5x5x4"), "random"),
-    ("drift", ("planar 6x6", "volumetric 4x3x3"), "raster"),
+from rrbc_core.studies.diagnosis_power import (
+    ALPHA,
+    BASE_SEED,
+    EFFECTS,
+    FIELD_LENGTH_MM,
+    GEOMETRIES,
+    SCANS,
+    SIGMA,
+    SIZES,
+    X_LABEL,
+    _hit,
+    geometry,
+    run_one,
+    trial_seed,
 )
-
-
-def geometry(name: str) -> np.ndarray:
-    """True robot points (mm): a grid on a 500 x 500 mm plate at z = 300 ("planar AxB") or in a 500 x 500 x 400 mm
-    block ("volumetric AxBxC"); the grid size is read from the name (the main panels: 6x6 and 4x3x3, 36 points)."""
-    dims = [int(v) for v in name.split()[1].split("x")]
-    if name.startswith("planar"):
-        g = np.meshgrid(np.linspace(0, 500, dims[0]), np.linspace(0, 500, dims[1]), [0.0], indexing="ij")
-    else:
-        g = np.meshgrid(*(np.linspace(0, e, k) for e, k in zip((500, 500, 400), dims)), indexing="ij")
-    return np.column_stack([a.ravel() for a in g]) + np.array([250.0, -250.0, 300.0])
-
-
-def trial_seed(effect: int, geom: int, size: int, trial: int) -> int:
-    return BASE_SEED + 1_000_000 * effect + 100_000 * geom + 1_000 * size + trial
-
-
-def _nonrigid_rms(robot: np.ndarray, disp: np.ndarray) -> float:
-    res = least_squares(robot, robot + disp).residuals
-    return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
-
-
-def make_set(effect: str, geom: str, size: float, seed: int, order: str = "random"):
-    """A measurement set with `effect` planted at `size` (see the module docstring; effect None = clean data);
-    order "random" or "raster" (grid order, the last grid axis fastest). Returns (mset, outlier_id or None)."""
-    rng = np.random.default_rng(seed)
-    robot = geometry(geom)
-    n = len(robot)
-    rot = Rotation.random(random_state=rng).as_matrix()
-    sensor = robot @ rot
-    sensor = sensor - sensor.mean(axis=0) + np.array([0.0, 0.0, 2000.0])  # the sensor looks along +z
-    perm = rng.permutation(n)  # drawn in both orders: the same seed gives the same rest of the data set
-    t = (perm if order == "random" else np.arange(n)).astype(float) * 10.0  # 10 s per point
-    ps = PointSet(robot=robot, sensor=sensor, time=t)
-    disp = np.zeros((n, 3))
-    outlier = None
-    if effect in ("scale", "affine", "drift", "smooth_field"):
-        if effect == "scale":
-            term = Scale(float(rng.choice([-1.0, 1.0])) * 1000.0, center_mm=tuple(rng.uniform(-99, 99, 3)))
-        elif effect == "affine":
-            a = rng.normal(size=(3, 3))
-            if geom.startswith("planar"):
-                a[2, :] = a[:, 2] = 0.0  # in-plane terms only (the others are invisible on a plate)
-            a = 0.5 * (a + a.T)
-            k = 2 if geom.startswith("planar") else 3
-            a -= np.trace(a) / k * np.diag([1.0, 1.0, 1.0 if k == 3 else 0.0])  # non-uniform: beyond a scale
-            term = Affine(tuple(map(tuple, a * 1e-3)))
-        elif effect == "drift":
-            v = rng.normal(size=3)
-            term = Drift(tuple(v / np.linalg.norm(v) * 1e-3))
-        else:
-            term = SmoothField(rms_mm=1.0, length_mm=FIELD_LENGTH_MM, seed=int(rng.integers(2**31)))
-        unit = term.sample(ps, "robot", rng, 1)[0]
-        disp = unit * (size * SIGMA / _nonrigid_rms(robot, unit))
-    if effect == "anisotropic_noise":
-        e = AnisotropicNoise(SIGMA, size * SIGMA).sample(ps, "sensor", rng, 1)[0]
-    else:
-        e = rng.normal(0.0, SIGMA, (n, 3))
-    if effect == "outliers":
-        i = int(rng.integers(n))
-        v = rng.normal(size=3)
-        disp[i] = v / np.linalg.norm(v) * size * SIGMA
-        outlier = f"P{i}"
-    m = MeasurementSet([f"P{i}" for i in range(n)], ["both"] * n, sensor + e, robot + disp, t, [0] * n)
-    return m, outlier
-
-
-def run_one(job):
-    """(effect or None, geometry, size, seed[, order]) -> (names, outlier ids found, planted outlier id)."""
-    effect, geom, size, seed = job[:4]
-    m, outlier = make_set(effect, geom, size, seed, *job[4:])
-    dg = diagnose(m, alpha=ALPHA)
-    ids = []
-    for e in dg.effects:
-        if e.name == "outliers":
-            ids = list(e.parameters["ids"])
-    return dg.names, ids, outlier
-
-
-def _hit(effect, names, ids, outlier, first: bool) -> bool:
-    if effect not in names or (first and names[0] != effect):
-        return False
-    return effect != "outliers" or outlier is None or outlier in ids
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="8 trials per point, 40 clean (a smoke run); full: 100 per point, 500 clean per geometry")
+    ap.add_argument(
+        "--quick",
+        action="store_true",
+        help="8 trials per point, 40 clean (a smoke run); full: 100 per point, 500 clean per geometry",
+    )
     ap.add_argument("--out", default="docs", help="output directory (default docs)")
     ap.add_argument("--workers", type=int, default=2, help="processes (default 2; results do not depend on it)")
     args = ap.parse_args(argv)
@@ -206,7 +109,7 @@ def main(argv=None) -> int:
                 first[eff, geom, size] = np.mean([_hit(eff, *o, first=True) for o in sel])
     false_alarm = {g: float(np.mean([bool(o[0]) for o in clean[g]])) for g in GEOMETRIES}
     scan = {}  # (scan, geom, size) -> (rate named, rate named first, rate only affine/scale, any effect)
-    for ci, (eff, geoms, order) in enumerate(SCANS):
+    for ci, (eff, geoms, _order) in enumerate(SCANS):
         for geom in geoms:
             for size in (0.0,) + SIZES[eff]:
                 sel = [o for key, o in zip(keys, out) if key == ("scan", ci, geom, size)]
@@ -214,12 +117,17 @@ def main(argv=None) -> int:
                     float(np.mean([eff in o[0] for o in sel])),
                     float(np.mean([bool(o[0]) and o[0][0] == eff for o in sel])),
                     float(np.mean([eff not in o[0] and bool({"affine", "scale"} & set(o[0])) for o in sel])),
-                    float(np.mean([bool(o[0]) for o in sel])))
+                    float(np.mean([bool(o[0]) for o in sel])),
+                )
 
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)
-    cmd = "python scripts/diagnosis_power.py" + (" --quick" if args.quick else "") + \
-          f" --out {args.out}" + (f" --workers {args.workers}" if args.workers != 2 else "")
+    cmd = (
+        "python scripts/diagnosis_power.py"
+        + (" --quick" if args.quick else "")
+        + f" --out {args.out}"
+        + (f" --workers {args.workers}" if args.workers != 2 else "")
+    )
     lines = [
         "# Detection power of `rrbc diagnose`",
         "",
@@ -227,7 +135,7 @@ def main(argv=None) -> int:
         f"*k* of effect *e*, geometry *g*, size index *s* uses seed `{BASE_SEED} + 1000000 e + 100000 g + 1000 s + k` "
         "(clean data: e = 9, s = 0).",
         "",
-        f"* Geometries: planar 6 x 6 grid on a 500 x 500 mm plate; volumetric 4 x 3 x 3 grid in a 500 x 500 x 400 mm "
+        "* Geometries: planar 6 x 6 grid on a 500 x 500 mm plate; volumetric 4 x 3 x 3 grid in a 500 x 500 x 400 mm "
         "block; 36 points each, measured once each in random order (10 s apart), random sensor orientation.",
         f"* Noise: isotropic sensor noise sigma = {SIGMA} mm per axis (anisotropic_noise: sigma across the line of "
         f"sight = {SIGMA} mm, along it = ratio x {SIGMA} mm). `diagnose(mset, alpha={ALPHA})`, family-wise alpha "
@@ -249,40 +157,69 @@ def main(argv=None) -> int:
         "|---|---|---|" + "---|" * len(EFFECTS),
     ]
     for g in GEOMETRIES:
-        lines.append(f"| {g} | {clean_trials} | {false_alarm[g]:.1%} | "
-                     + " | ".join(f"{rate[e, g, 0.0]:.1%}" for e in EFFECTS) + " |")
+        lines.append(
+            f"| {g} | {clean_trials} | {false_alarm[g]:.1%} | "
+            + " | ".join(f"{rate[e, g, 0.0]:.1%}" for e in EFFECTS)
+            + " |"
+        )
     for eff in EFFECTS:
         xl = X_LABEL.get(eff, "non-rigid RMS / sigma")
-        lines += ["", f"## {eff}", "", f"Size: {xl}.", "",
-                  "| geometry | " + " | ".join(("1 (clean)" if eff == "anisotropic_noise" else "0 (clean)")
-                                             if s == 0 else f"{s:g}" for s in ((0.0,) + SIZES[eff])) + " |",
-                  "|---|" + "---|" * (len(SIZES[eff]) + 1)]
+        lines += [
+            "",
+            f"## {eff}",
+            "",
+            f"Size: {xl}.",
+            "",
+            "| geometry | "
+            + " | ".join(
+                ("1 (clean)" if eff == "anisotropic_noise" else "0 (clean)") if s == 0 else f"{s:g}"
+                for s in ((0.0,) + SIZES[eff])
+            )
+            + " |",
+            "|---|" + "---|" * (len(SIZES[eff]) + 1),
+        ]
         for g in GEOMETRIES:
-            cells = [f"{rate[eff, g, 0.0]:.1%}"] + [f"{rate[eff, g, s]:.0%} ({first[eff, g, s]:.0%})"
-                                                    for s in SIZES[eff]]
+            cells = [f"{rate[eff, g, 0.0]:.1%}"] + [
+                f"{rate[eff, g, s]:.0%} ({first[eff, g, s]:.0%})" for s in SIZES[eff]
+            ]
             lines.append(f"| {g} | " + " | ".join(cells) + " |")
-    lines += ["", "## Point count and measurement order", "",
-              f"{scan_trials} data sets per cell (seeds: e = 10 + scan, g = geometry index within the scan, s = size "
-              "index with 0 = clean). Same generator and sizes as above; only the grid (point count) or the "
-              "measurement order changes. Raster order: grid order, 10 s per point, the last grid axis fastest. Cells: "
-              "named (named first) [fraction in which only a linear term was reported: affine or scale named, the "
-              "planted effect not]. Size 0: fraction of clean data "
-              "sets with the effect named / [any effect named]."]
-    lines += ["", "How `diagnose` uses this: with fewer than 40 paired points it adds a limit giving the shortest smooth-field "
-              "correlation length it can see (the median distance to the 6th nearest neighbour, the reach of the Moran "
-              "weights: 333 mm on the 12-point plate, 559 mm in the 12-point block, 200 mm on the 36-point plate, 260 mm "
-              "in the 36-point block, against the planted 250 mm) and, when affine or scale was reported, that it may be "
-              "the linear part of a smooth field. In raster order, drift directions that the fitted transform absorbs "
-              "(less than 10 % of their energy left) are neither tested nor fitted, and a limit says so. On these grids "
-              "raster order makes time an exact linear function of the coordinates, so a drift is indistinguishable from "
-              "a linear map: it is reported as affine or scale (brackets), and the limit says drift cannot be tested."]
+    lines += [
+        "",
+        "## Point count and measurement order",
+        "",
+        f"{scan_trials} data sets per cell (seeds: e = 10 + scan, g = geometry index within the scan, s = size "
+        "index with 0 = clean). Same generator and sizes as above; only the grid (point count) or the "
+        "measurement order changes. Raster order: grid order, 10 s per point, the last grid axis fastest. Cells: "
+        "named (named first) [fraction in which only a linear term was reported: affine or scale named, the "
+        "planted effect not]. Size 0: fraction of clean data "
+        "sets with the effect named / [any effect named].",
+    ]
+    lines += [
+        "",
+        "How `diagnose` uses this: with fewer than 40 paired points it adds a limit giving the shortest smooth-field "
+        "correlation length it can see (the median distance to the 6th nearest neighbour, the reach of the Moran "
+        "weights: 333 mm on the 12-point plate, 559 mm in the 12-point block, 200 mm on the 36-point plate, 260 mm "
+        "in the 36-point block, against the planted 250 mm) and, when affine or scale was reported, that it may be "
+        "the linear part of a smooth field. In raster order, drift directions that the fitted transform absorbs "
+        "(less than 10 % of their energy left) are neither tested nor fitted, and a limit says so. On these grids "
+        "raster order makes time an exact linear function of the coordinates, so a drift is indistinguishable from "
+        "a linear map: it is reported as affine or scale (brackets), and the limit says drift cannot be tested.",
+    ]
     for ci, (eff, geoms, order) in enumerate(SCANS):
         xl = X_LABEL.get(eff, "non-rigid RMS / sigma")
-        lines += ["", f"### {eff}, {order} order, {geoms[0].split()[0]}, by point count" if eff == "smooth_field"
-                  else f"### {eff}, {order} order (compare the random-order table above)", "", f"Size: {xl}.", "",
-                  "| geometry (points) | " + " | ".join("0 (clean)" if v == 0 else f"{v:g}"
-                                                        for v in (0.0,) + SIZES[eff]) + " |",
-                  "|---|" + "---|" * (len(SIZES[eff]) + 1)]
+        lines += [
+            "",
+            f"### {eff}, {order} order, {geoms[0].split()[0]}, by point count"
+            if eff == "smooth_field"
+            else f"### {eff}, {order} order (compare the random-order table above)",
+            "",
+            f"Size: {xl}.",
+            "",
+            "| geometry (points) | "
+            + " | ".join("0 (clean)" if v == 0 else f"{v:g}" for v in (0.0,) + SIZES[eff])
+            + " |",
+            "|---|" + "---|" * (len(SIZES[eff]) + 1),
+        ]
         for geom in geoms:
             c0 = scan[ci, geom, 0.0]
             cells = [f"{c0[0]:.0%} / [{c0[3]:.0%}]"]
@@ -305,8 +242,13 @@ def main(argv=None) -> int:
             ax.plot(xs, [scan[ci, geom, v][0] for v in xs], style, label=f"{geom} ({len(geometry(geom))} pts)")
         if eff == "drift":  # the random-order curves of the main panels, for comparison
             for g, style in zip(GEOMETRIES, ("o:", "s:")):
-                ax.plot(xs, [rate[eff, g, 0.0]] + [rate[eff, g, v] for v in SIZES[eff]], style, alpha=0.6,
-                        label=f"{g} (random order)")
+                ax.plot(
+                    xs,
+                    [rate[eff, g, 0.0]] + [rate[eff, g, v] for v in SIZES[eff]],
+                    style,
+                    alpha=0.6,
+                    label=f"{g} (random order)",
+                )
         ax.axhline(0.9, color="0.6", lw=0.8, ls=":")
         ax.set_title(f"{eff}: {order} order" + (", by point count" if eff == "smooth_field" else " vs random"))
         ax.set_xlabel(X_LABEL.get(eff, "non-rigid RMS / sigma"))
@@ -327,9 +269,11 @@ def main(argv=None) -> int:
         ax.set_ylim(-0.03, 1.03)
         ax.grid(alpha=0.3)
         ax.legend(loc="lower right", fontsize=8)
-    fig.suptitle(f"rrbc diagnose: detection rate, sigma = {SIGMA} mm, alpha = {ALPHA}. Top rows: 36 points, random order, "
-                 f"{trials} data sets per point (size 0 / ratio 1: {clean_trials} clean sets).\n"
-                 f"Bottom row: point count or measurement order varied, {scan_trials} data sets per point.")
+    fig.suptitle(
+        f"rrbc diagnose: detection rate, sigma = {SIGMA} mm, alpha = {ALPHA}. Top rows: 36 points, random order, "
+        f"{trials} data sets per point (size 0 / ratio 1: {clean_trials} clean sets).\n"
+        f"Bottom row: point count or measurement order varied, {scan_trials} data sets per point."
+    )
     fig.savefig(outdir / "diagnosis_power.png", dpi=110)
     print(f"wrote {outdir / 'diagnosis_power.md'} and {outdir / 'diagnosis_power.png'} in {elapsed:.0f} s")
     return 0

@@ -17,9 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rrbc_core.studies import model_fit
-from rrbc_core.studies import reproduction
 from rrbc_core.runtime.threads import apply_process_policy
+from rrbc_core.studies import model_fit, reproduction
 
 #: (model, first weight, extension weight): sizes in each model's own parameter units (see reproduction.MODELS).
 CASES = (
@@ -39,8 +38,9 @@ CASES = (
 
 
 def table(ds, i, rho):
-    return np.round(np.array([ds.values[s][0, i] * rho ** reproduction.SCALE_POWER[s]
-                              for s in reproduction.STATISTICS]), 3)
+    return np.round(
+        np.array([ds.values[s][0, i] * rho ** reproduction.SCALE_POWER[s] for s in reproduction.STATISTICS]), 3
+    )
 
 
 def main(argv=None) -> None:
@@ -69,8 +69,16 @@ def main(argv=None) -> None:
             f"{lab} {np.mean([e[lab] for e in estimates]):.3g} ± {np.std([e[lab] for e in estimates], ddof=1):.2g}"
             for lab in truth
         )
-        rows.append((name, params, named.get(name, 0), separated,
-                     ", ".join(f"{n} {c}" for n, c in sorted(named.items(), key=lambda kv: -kv[1])), est))
+        rows.append(
+            (
+                name,
+                params,
+                named.get(name, 0),
+                separated,
+                ", ".join(f"{n} {c}" for n, c in sorted(named.items(), key=lambda kv: -kv[1])),
+                est,
+            )
+        )
         print(rows[-1], flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -87,8 +95,11 @@ def main(argv=None) -> None:
     ]
     for name, params, right, sep, allnames, est in rows:
         lines.append(f"| {name} | {params} | {right} / {args.tables} | {sep} | {allnames} | {est} |")
-    lines += ["", "For `baseline`, \"named correctly\" means no extension was claimed. The last column fits the planted "
-              "model itself to every table, whatever was named."]
+    lines += [
+        "",
+        'For `baseline`, "named correctly" means no extension was claimed. The last column fits the planted '
+        "model itself to every table, whatever was named.",
+    ]
     (out / "vanwyk2018_identification.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 

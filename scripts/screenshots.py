@@ -38,8 +38,9 @@ import importlib
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -54,28 +55,55 @@ sys.path.insert(0, str(ROOT))
 SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ("app_default.png", []),
     # Step 6 of the lesson: the fiducials' corrections drawn as arrows (x magnification), their numbers alongside.
-    ("app_teaching.png", [("tab", "Learn")] + [("button", "Next")] * 6 + [("wait_text", "Step 6 of 9"),
-                          ("zoom", {"look_at": (490.0, 0.0, 40.0), "factor": 0.6})]),
+    (
+        "app_teaching.png",
+        [("tab", "Learn")]
+        + [("button", "Next")] * 6
+        + [("wait_text", "Step 6 of 9"), ("zoom", {"look_at": (490.0, 0.0, 40.0), "factor": 0.6})],
+    ),
     # Heat map on, coloured by the rigid-only error (the RRBC errors all sit at the low end of the shared scale);
     # "Layers" folded so the legend (mm) shows; a little closer so the rings read.
-    ("app_heatmap.png", [("tab", "View"), ("click", "Heat map of predicted error"),
-                         ("select", ("Colour by", "rigid error")), ("click", "Layers"),
-                         ("zoom", {"look_at": (475.0, 0.0, 15.0), "factor": 0.5})]),
+    (
+        "app_heatmap.png",
+        [
+            ("tab", "View"),
+            ("click", "Heat map of predicted error"),
+            ("select", ("Colour by", "rigid error")),
+            ("click", "Layers"),
+            ("zoom", {"look_at": (475.0, 0.0, 15.0), "factor": 0.5}),
+        ],
+    ),
     # H1 dragged 3.2 gizmo scales along -X, out of the fiducials' hull (magenta, "extrapolated" in the table);
     # closer, so its correction arrow and landing points (rigid red, RRBC green, offsets x magnification) show.
     # The work-cell mesh is hidden: H1's landing offsets point down, into the table top.
-    ("app_drag.png", [("tab", "View"), ("click", "Work-cell mesh"), ("tab", "Explore"),
-                      ("drag", ("/targets/H1/gizmo", 0.7, -2.5)),
-                      ("zoom", {"look_at": (450.0, -60.0, 0.0), "factor": 0.45})]),
+    (
+        "app_drag.png",
+        [
+            ("tab", "View"),
+            ("click", "Work-cell mesh"),
+            ("tab", "Explore"),
+            ("drag", ("/targets/H1/gizmo", 0.7, -2.5)),
+            ("zoom", {"look_at": (450.0, -60.0, 0.0), "factor": 0.45}),
+        ],
+    ),
     # Plan tab: F1 slid in under the plate (as a fiducial drag does), so H1's region leaves the hull (red halo;
     # the others blue, covered); regions coloured by coverage; Suggest's four ghost spheres (+1 … +4) with the
     # predicted gain in the panel. Drag handles, correction arrows and landing points hidden (less clutter).
-    ("planning.png", [("tab", "View"), ("select", ("Drag handles on", "none")), ("click", "Correction arrows"),
-                      ("click", "Landing points (rigid vs RRBC)"), ("tab", "Plan"),
-                      ("click", "Colour regions by coverage"),
-                      ("call", lambda app: app.handle_drag("fiducials", "F1", [400.0, -60.0, 0.0], "end")),
-                      ("button", "Suggest"), ("wait_text", "Suggested: 4 fiducials"),
-                      ("zoom", {"look_at": (500.0, -20.0, 15.0), "factor": 0.45})]),
+    (
+        "planning.png",
+        [
+            ("tab", "View"),
+            ("select", ("Drag handles on", "none")),
+            ("click", "Correction arrows"),
+            ("click", "Landing points (rigid vs RRBC)"),
+            ("tab", "Plan"),
+            ("click", "Colour regions by coverage"),
+            ("call", lambda app: app.handle_drag("fiducials", "F1", [400.0, -60.0, 0.0], "end")),
+            ("button", "Suggest"),
+            ("wait_text", "Suggested: 4 fiducials"),
+            ("zoom", {"look_at": (500.0, -20.0, 15.0), "factor": 0.45}),
+        ],
+    ),
 ]
 
 APP_ENTRY = "rrbc_viz.app:serve"
@@ -210,8 +238,9 @@ def run_action(page: Any, h: Any, app: Any, action: tuple[str, Any]) -> None:
     elif kind == "sleep":
         page.wait_for_timeout(float(arg) * 1000)
     else:
-        raise ValueError(f"unknown action {kind!r} (use click, tab, button, select, drag, zoom, call, wait_text, "
-                         "wait_node, sleep)")
+        raise ValueError(
+            f"unknown action {kind!r} (use click, tab, button, select, drag, zoom, call, wait_text, wait_node, sleep)"
+        )
 
 
 def wait_for_scene(page: Any, h: Any, mesh_node: str | None) -> str:
@@ -259,14 +288,23 @@ def shrink_png(path: Path, max_kb: float) -> None:
         rgb = im.convert("RGB")
     for colours in (256, 128):
         rgb.quantize(colors=colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
-            path, optimize=True)
+            path, optimize=True
+        )
         if path.stat().st_size <= max_kb * 1024:
             return
     print(f"screenshots: {path.name} is still {path.stat().st_size / 1024:.0f} KB", file=sys.stderr)
 
 
-def take_shot(browser: Any, h: Any, serve: Callable[..., Any], mesh_node: str | None, name: str,
-              actions: list[tuple[str, Any]], out: Path, max_kb: float = MAX_KB) -> Path:
+def take_shot(
+    browser: Any,
+    h: Any,
+    serve: Callable[..., Any],
+    mesh_node: str | None,
+    name: str,
+    actions: list[tuple[str, Any]],
+    out: Path,
+    max_kb: float = MAX_KB,
+) -> Path:
     app = serve(port=0)
     try:
         h.wait_for_port(int(app.port), timeout_s=30)
@@ -284,8 +322,10 @@ def take_shot(browser: Any, h: Any, serve: Callable[..., Any], mesh_node: str | 
                 page.wait_for_timeout(300)  # let the server's reaction arrive before checking for stillness
                 wait_for_scene(page, h, mesh_node or found)
             if not wait_settled(page):
-                print(f"screenshots: {name}: page still changing after {SETTLE_TIMEOUT_S:.0f} s; saving anyway",
-                      file=sys.stderr)
+                print(
+                    f"screenshots: {name}: page still changing after {SETTLE_TIMEOUT_S:.0f} s; saving anyway",
+                    file=sys.stderr,
+                )
             h.dismiss_software_webgl_notification(page, timeout_s=0.2)  # in case it reappeared
             path = out / name
             page.screenshot(path=str(path))
@@ -300,9 +340,12 @@ def take_shot(browser: Any, h: Any, serve: Callable[..., Any], mesh_node: str | 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "screenshots", help="output directory")
-    ap.add_argument("--mesh-node", default=None,
-                    help=f"scene node to wait for (default: the app module's MESH_NODE if it defines one, "
-                         f"else {DEFAULT_MESH_NODE}; 'any' for any mesh node)")
+    ap.add_argument(
+        "--mesh-node",
+        default=None,
+        help=f"scene node to wait for (default: the app module's MESH_NODE if it defines one, "
+        f"else {DEFAULT_MESH_NODE}; 'any' for any mesh node)",
+    )
     ap.add_argument("--max-kb", type=float, default=MAX_KB, help=f"quantise PNGs above this size (default {MAX_KB})")
     ap.add_argument("--only", action="append", default=None, help="only this file name (repeatable)")
     ap.add_argument("--app", default=APP_ENTRY, help=f"module:function that starts the app (default {APP_ENTRY})")
@@ -316,8 +359,7 @@ def main(argv: list[str] | None = None) -> int:
     from tests.browser import helpers as h
 
     if not Path(h.CHROMIUM_PATH).exists():
-        unavailable(f"{h.CHROMIUM_PATH} is missing; run `bash scripts/setup.sh --browser` "
-                 "(not `playwright install`).")
+        unavailable(f"{h.CHROMIUM_PATH} is missing; run `bash scripts/setup.sh --browser` (not `playwright install`).")
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
@@ -341,8 +383,7 @@ def main(argv: list[str] | None = None) -> int:
                     failed.append(name)
                     continue
                 written.append(name)
-                print(f"screenshots: wrote {path} ({path.stat().st_size / 1024:.0f} KB, "
-                      f"{time.monotonic() - t0:.1f} s)")
+                print(f"screenshots: wrote {path} ({path.stat().st_size / 1024:.0f} KB, {time.monotonic() - t0:.1f} s)")
         finally:
             browser.close()
     if failed or (shots and shots[0][0] == SHOTS[0][0] and SHOTS[0][0] not in written):

@@ -4,14 +4,18 @@ The `rrbc` command lives in rrbc_core/cli.py; only its `view` subcommand imports
 
 import subprocess
 import sys
-from pathlib import Path
 
-CORE = Path(__file__).resolve().parents[1] / "rrbc_core"
+from tests.paths import ROOT
+
+CORE = ROOT / "rrbc_core"
 
 
 def test_importing_every_core_module_loads_neither_viser_nor_the_app():
-    modules = sorted(".".join(p.relative_to(CORE).with_suffix("").parts) for p in CORE.rglob("*.py")
-                     if p.stem != "__init__" and p.parent.name != "data")
+    modules = sorted(
+        ".".join(p.relative_to(CORE).with_suffix("").parts)
+        for p in CORE.rglob("*.py")
+        if p.stem != "__init__" and p.parent.name != "data"
+    )
     code = (
         "import importlib, sys\n"
         f"for m in {modules!r}: importlib.import_module('rrbc_core.' + m)\n"

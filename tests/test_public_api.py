@@ -6,13 +6,12 @@ import inspect
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 import rrbc_core
+from tests.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 NAMES = [n for n in rrbc_core.__all__ if n != "__version__"]
 
 
@@ -36,12 +35,16 @@ def test_each_exported_name_imports_and_is_documented(name):
     assert not doc.startswith(f"{name}("), f"{name} has only the dataclass signature as its docstring"
     if inspect.isfunction(obj) and inspect.signature(obj).parameters:
         for section in ("Parameters\n----------", "Returns\n-------"):
-            assert section in doc or (section.startswith("Returns") and "Raises\n------" in doc), \
+            assert section in doc or (section.startswith("Returns") and "Raises\n------" in doc), (
                 f"{name}: numpydoc section {section.splitlines()[0]!r} missing"
-        params = [p for p in inspect.signature(obj).parameters.values() if p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)]
+            )
+        params = [
+            p for p in inspect.signature(obj).parameters.values() if p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)
+        ]
         for p in params:
-            assert re.search(rf"^{re.escape(p.name)}\b|, {re.escape(p.name)}\b", doc, re.M), \
+            assert re.search(rf"^{re.escape(p.name)}\b|, {re.escape(p.name)}\b", doc, re.M), (
                 f"{name}: parameter {p.name!r} not documented"
+            )
 
 
 def test_importing_the_package_stays_light():
@@ -59,4 +62,6 @@ def test_the_readme_library_example_runs(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stderr
     lines = out.stdout.strip().splitlines()
-    assert len(lines) >= 2 and all(re.match(r"^\S+ +-?\d+\.\d+ +-?\d+\.\d+ +-?\d+\.\d+$", line) for line in lines[1:]), out.stdout
+    assert len(lines) >= 2 and all(
+        re.match(r"^\S+ +-?\d+\.\d+ +-?\d+\.\d+ +-?\d+\.\d+$", line) for line in lines[1:]
+    ), out.stdout

@@ -22,15 +22,12 @@ import numpy as np
 from scipy import stats
 from scipy.spatial import cKDTree
 
-from rrbc_core.errors import InputError
-from rrbc_core.registration.strategies import least_squares
-from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.analysis.diagnosis_stats import (
     _BOOTSTRAP,
     _DRIFT_KEPT,
-    _Geometry,
     _fit,
     _ftest,
+    _Geometry,
     _length_scale,
     _loo,
     _moran,
@@ -44,6 +41,9 @@ from rrbc_core.analysis.diagnosis_stats import (
     _usable_drift,
     _whitener,
 )
+from rrbc_core.errors import InputError
+from rrbc_core.registration.strategies import least_squares
+from rrbc_core.runtime.threads import thread_limited
 
 __all__ = ["Effect", "Diagnosis", "diagnose"]
 
@@ -59,8 +59,12 @@ class Effect:
     magnitude_mm: float = 0.0  # RMS of the effect's contribution at the points; orders the list
 
     def to_json(self) -> dict:
-        return {"name": self.name, "parameters": self.parameters, "p_value": float(self.p_value),
-                "evidence": self.evidence}
+        return {
+            "name": self.name,
+            "parameters": self.parameters,
+            "p_value": float(self.p_value),
+            "evidence": self.evidence,
+        }
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,7 @@ class Diagnosis:
     p-value of every test run (``tests``) and what these data cannot show (``limits``). `to_json()` is the JSON of
     `rrbc diagnose --json`.
     """
+
     effects: tuple[Effect, ...]
     noise_sigma_mm: tuple[float, float, float]
     noise_source: str  # "repeats" or "fit"
@@ -94,10 +99,12 @@ class Diagnosis:
             "noise_sigma_mm": [float(v) for v in self.noise_sigma_mm],
             "noise_source": self.noise_source,
             "bias_rms_mm": float(self.bias_rms_mm),
-            "rrbc": {"recommended": bool(self.rrbc_recommended),
-                     "expected_rmst_change": float(self.expected_rmst_change),
-                     "loo_rms_rigid_mm": float(self.loo_rms_rigid_mm),
-                     "loo_rms_rrbc_mm": float(self.loo_rms_rrbc_mm)},
+            "rrbc": {
+                "recommended": bool(self.rrbc_recommended),
+                "expected_rmst_change": float(self.expected_rmst_change),
+                "loo_rms_rigid_mm": float(self.loo_rms_rigid_mm),
+                "loo_rms_rrbc_mm": float(self.loo_rms_rrbc_mm),
+            },
             "n_points": int(self.n_points),
             "alpha": float(self.alpha),
             "tests": {k: float(v) for k, v in self.tests.items()},
@@ -175,20 +182,27 @@ def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
         ids = [d.ids[i] for i in out_idx]
         full_reg = least_squares(d.sensor, d.robot, weights=d.count)
         big = np.linalg.norm(d.robot[out_idx] - reg.mapping.apply(d.sensor[out_idx]), axis=1)
-        effects.append(Effect("outliers", {"ids": ids}, p_out,
-                              f"{len(ids)} point(s) deviate from a rigid+linear fit of the others by "
-                              f"{', '.join(f'{b:.3g}' for b in big)} mm (deleted studentised residual, generalised "
-                              f"ESD, Bonferroni-adjusted p {_fmt_p(p_out)} < {a_each:.2g}); they were removed "
-                              f"before the other tests (FRE with them {full_reg.fre_rms_mm:.3g} mm, without "
-                              f"{reg.fre_rms_mm:.3g} mm).",
-                              magnitude_mm=float(np.sqrt(np.sum(big**2) / len(d.ids)))))
+        effects.append(
+            Effect(
+                "outliers",
+                {"ids": ids},
+                p_out,
+                f"{len(ids)} point(s) deviate from a rigid+linear fit of the others by "
+                f"{', '.join(f'{b:.3g}' for b in big)} mm (deleted studentised residual, generalised "
+                f"ESD, Bonferroni-adjusted p {_fmt_p(p_out)} < {a_each:.2g}); they were removed "
+                f"before the other tests (FRE with them {full_reg.fre_rms_mm:.3g} mm, without "
+                f"{reg.fre_rms_mm:.3g} mm).",
+                magnitude_mm=float(np.sqrt(np.sum(big**2) / len(d.ids))),
+            )
+        )
 
     x_rigid = g.rigid()
     if g.planar:
         limits.append(
             "the paired points are coplanar (normal " + ", ".join(f"{v:.3f}" for v in g.normal) + "): only the 3 "
             "in-plane affine terms (two in-plane scales, in-plane shear) are testable; out-of-plane scale, shear and "
-            "errors that depend on the distance from the plane are invisible to these points")
+            "errors that depend on the distance from the plane are invisible to these points"
+        )
 
     # 3a. scale: similarity vs rigid
     x_scale = np.hstack([x_rigid, g.scale_col()])
@@ -214,21 +228,34 @@ def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
         if ga.planar:
             gm = proj @ gm @ proj
         mag = float(np.sqrt(max(0.0, rss0 - rss_af) / wsum))
-        effects.append(Effect("affine", {"matrix": gm.tolist()}, p_af,
-                              f"a linear map beyond rigid + uniform scale reduces the residual sum of squares from "
-                              f"{rss_sc:.3g} to {rss_af:.3g} (F({q_af}, {nu_af}) = {f_af:.3g}, p {_fmt_p(p_af)}); the "
-                              f"matrix is its symmetric part (rotations absorb the rest)"
-                              + ("; only the in-plane terms are identifiable on these coplanar points" if g.planar
-                                 else "") + ".", magnitude_mm=mag))
+        effects.append(
+            Effect(
+                "affine",
+                {"matrix": gm.tolist()},
+                p_af,
+                f"a linear map beyond rigid + uniform scale reduces the residual sum of squares from "
+                f"{rss_sc:.3g} to {rss_af:.3g} (F({q_af}, {nu_af}) = {f_af:.3g}, p {_fmt_p(p_af)}); the "
+                f"matrix is its symmetric part (rotations absorb the rest)"
+                + ("; only the in-plane terms are identifiable on these coplanar points" if g.planar else "")
+                + ".",
+                magnitude_mm=mag,
+            )
+        )
         accepted = [x_aff]
     elif p_sc < a_each:
         se = np.sqrt(rss_sc / max(nu_sc, 1) / float(np.sum(g.scale_col() ** 2))) / g.scale * 1e6
         mag = float(np.sqrt(max(0.0, rss0 - rss_sc) / wsum))
-        effects.append(Effect("scale", {"ppm": ppm, "ppm_standard_error": float(se)}, p_sc,
-                              f"a uniform scale of {ppm:+.4g} ± {se:.2g} ppm between the frames reduces the residual "
-                              f"sum of squares from {rss0:.3g} to {rss_sc:.3g} (F(1, {nu_sc}) = {f_sc:.3g}, "
-                              f"p {_fmt_p(p_sc)}); no significant non-uniform part (p {_fmt_p(p_af)}).",
-                              magnitude_mm=mag))
+        effects.append(
+            Effect(
+                "scale",
+                {"ppm": ppm, "ppm_standard_error": float(se)},
+                p_sc,
+                f"a uniform scale of {ppm:+.4g} ± {se:.2g} ppm between the frames reduces the residual "
+                f"sum of squares from {rss0:.3g} to {rss_sc:.3g} (F(1, {nu_sc}) = {f_sc:.3g}, "
+                f"p {_fmt_p(p_sc)}); no significant non-uniform part (p {_fmt_p(p_af)}).",
+                magnitude_mm=mag,
+            )
+        )
         accepted = [x_scale]
     x_acc = np.hstack(accepted)
 
@@ -241,18 +268,27 @@ def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
         tests["drift"] = p_dr
         lost = int(np.sum(surviving < _DRIFT_KEPT))
         if lost:
-            limits.append(f"with this measurement order, drift along {lost} of 3 directions is (almost) absorbed by "
-                          f"the fitted transform (least fraction kept {max(surviving.min(), 0):.2g}) and cannot be "
-                          "detected; randomise the order")
+            limits.append(
+                f"with this measurement order, drift along {lost} of 3 directions is (almost) absorbed by "
+                f"the fitted transform (least fraction kept {max(surviving.min(), 0):.2g}) and cannot be "
+                "detected; randomise the order"
+            )
         if p_dr < a_each:
             # the rate from the full drift columns (the absorbed directions are poorly determined: see the limit)
             coef_dr = _fit(y, np.hstack([x_acc, dcol]))[0]
             rate = coef_dr[-3:] / g.tscale  # the columns carry the whitening: coefficients are in mm
             mag = float(np.sqrt(max(0.0, rss_a - rss_d) / wsum))
-            effects.append(Effect("drift", {"rate_mm_per_s": rate.tolist()}, p_dr,
-                                  f"the residuals change linearly with measurement time at "
-                                  f"{np.linalg.norm(rate):.3g} mm/s (F({q_dr}, {nu_dr}) = {f_dr:.3g}, "
-                                  f"p {_fmt_p(p_dr)}).", magnitude_mm=mag))
+            effects.append(
+                Effect(
+                    "drift",
+                    {"rate_mm_per_s": rate.tolist()},
+                    p_dr,
+                    f"the residuals change linearly with measurement time at "
+                    f"{np.linalg.norm(rate):.3g} mm/s (F({q_dr}, {nu_dr}) = {f_dr:.3g}, "
+                    f"p {_fmt_p(p_dr)}).",
+                    magnitude_mm=mag,
+                )
+            )
             x_acc = x_dr
 
     # 5. smooth field: Moran's I of the residuals after the accepted model, parametric bootstrap under white noise
@@ -277,10 +313,14 @@ def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
         limits.append(
             f"only {n} paired points: a smooth field with correlation length below about {reach:.0f} mm (the median "
             f"distance to the {nb.shape[1]}th nearest neighbour) cannot be detected reliably; longer fields are largely "
-            "absorbed by the fitted transform" + ("" if smooth else
-                                                  "; an empty or low-order verdict does not rule out a smooth field")
-            + ("; the reported affine/scale term may be the linear part of a smooth field" if
-               any(e.name in ("affine", "scale") for e in effects) else ""))
+            "absorbed by the fitted transform"
+            + ("" if smooth else "; an empty or low-order verdict does not rule out a smooth field")
+            + (
+                "; the reported affine/scale term may be the linear part of a smooth field"
+                if any(e.name in ("affine", "scale") for e in effects)
+                else ""
+            )
+        )
     if smooth:
         res_pts = (res_acc / g.sw).reshape(n, 3) @ np.linalg.inv(white).T  # back to mm, robot frame
         ell, v = _length_scale(p, res_pts)
@@ -289,11 +329,18 @@ def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
         # the field's RMS over the points: all of the rigid residual beyond the noise (its linear part included)
         field_var = float(np.mean(np.sum(resid**2, axis=1))) - float(np.sum(nug)) * (3 * n - 6) / (3 * n)
         rms = float(np.sqrt(max(field_var, v, 0.0)))
-        effects.append(Effect("smooth_field", {"rms_mm": rms, "length_scale_mm": ell}, p_sm,
-                              f"neighbouring residuals point the same way (Moran's I = {i_obs:.3g} with {nb.shape[1]} "
-                              f"nearest neighbours; white-noise bootstrap mean {i_boot.mean():.3g}, p {_fmt_p(p_sm)}) "
-                              f"after removing the accepted lower-order terms; rms_mm is the RMS of the whole non-rigid bias "
-                              f"at the points (its linear part included).", magnitude_mm=rms))
+        effects.append(
+            Effect(
+                "smooth_field",
+                {"rms_mm": rms, "length_scale_mm": ell},
+                p_sm,
+                f"neighbouring residuals point the same way (Moran's I = {i_obs:.3g} with {nb.shape[1]} "
+                f"nearest neighbours; white-noise bootstrap mean {i_boot.mean():.3g}, p {_fmt_p(p_sm)}) "
+                f"after removing the accepted lower-order terms; rms_mm is the RMS of the whole non-rigid bias "
+                f"at the points (its linear part included).",
+                magnitude_mm=rms,
+            )
+        )
         if not repeats:  # the fit residuals hold the field: noise from nearest-neighbour differences instead
             diff = (res_pts - res_pts[nn]) / np.sqrt(2)
             cov = diff.T @ diff / n
@@ -309,12 +356,18 @@ def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
         ratio = float(np.sqrt(ev[2] / max(np.mean(ev[:2]), 1e-300)))
         if p_an < a_each and ratio > 1:
             axis = evec[:, 2] * (1 if evec[np.argmax(np.abs(evec[:, 2])), 2] > 0 else -1)
-            effects.append(Effect("anisotropic_noise", {"axis": axis.tolist(), "ratio": ratio}, p_an,
-                                  f"the noise ({'repeated measurements' if repeats else 'fit residuals'}) is "
-                                  f"{ratio:.3g} times larger along the sensor axis "
-                                  f"({', '.join(f'{a:.3f}' for a in axis)}) than across it (sphericity likelihood "
-                                  f"ratio, p {_fmt_p(p_an)}); the other tests used noise-whitened residuals.",
-                                  magnitude_mm=float(np.sqrt(ev[2]))))
+            effects.append(
+                Effect(
+                    "anisotropic_noise",
+                    {"axis": axis.tolist(), "ratio": ratio},
+                    p_an,
+                    f"the noise ({'repeated measurements' if repeats else 'fit residuals'}) is "
+                    f"{ratio:.3g} times larger along the sensor axis "
+                    f"({', '.join(f'{a:.3f}' for a in axis)}) than across it (sphericity likelihood "
+                    f"ratio, p {_fmt_p(p_an)}); the other tests used noise-whitened residuals.",
+                    magnitude_mm=float(np.sqrt(ev[2])),
+                )
+            )
     else:
         limits.append("too few degrees of freedom to test noise anisotropy")
 
@@ -325,5 +378,17 @@ def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
     change = loo_rrbc / loo_rigid - 1.0 if loo_rigid > 0 else 0.0
 
     effects.sort(key=lambda e: -e.magnitude_mm)
-    return Diagnosis(tuple(effects), tuple(float(v) for v in sigma), noise_source, bias, bool(loo_rrbc < loo_rigid),
-                     float(change), loo_rigid, loo_rrbc, n, float(alpha), tests, tuple(limits))
+    return Diagnosis(
+        tuple(effects),
+        tuple(float(v) for v in sigma),
+        noise_source,
+        bias,
+        bool(loo_rrbc < loo_rigid),
+        float(change),
+        loo_rigid,
+        loo_rrbc,
+        n,
+        float(alpha),
+        tests,
+        tuple(limits),
+    )

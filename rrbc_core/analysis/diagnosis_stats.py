@@ -3,14 +3,16 @@ nested F-tests, outliers by generalised ESD, Moran's I with its bootstrap, the s
 covariance, and leave-one-out RRBC. Memory is linear in the number of points."""
 
 from __future__ import annotations
+
 from dataclasses import dataclass
+
 import numpy as np
 from scipy import stats
 from scipy.linalg import eigh as _geigh
 from scipy.spatial import cKDTree
+
 from rrbc_core.errors import InputError
 from rrbc_core.registration.strategies import least_squares
-
 
 _PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points are treated as coplanar
 
@@ -40,8 +42,11 @@ class _Data:
 def _paired(mset) -> _Data:
     robot = np.asarray(mset.robot, float)
     sensor = np.asarray(mset.sensor, float)
-    rows = [i for i, role in enumerate(mset.roles) if role != "target" and np.all(np.isfinite(robot[i]))
-            and np.all(np.isfinite(sensor[i]))]
+    rows = [
+        i
+        for i, role in enumerate(mset.roles)
+        if role != "target" and np.all(np.isfinite(robot[i])) and np.all(np.isfinite(sensor[i]))
+    ]
     order: dict[str, int] = {}
     row_point = []
     for i in rows:
@@ -49,8 +54,9 @@ def _paired(mset) -> _Data:
     row_point = np.asarray(row_point, int)
     n = len(order)
     if n < 5:
-        raise InputError(f"{mset.source}: diagnose needs at least 5 distinct points with sensor and robot values, "
-                         f"got {n}")
+        raise InputError(
+            f"{mset.source}: diagnose needs at least 5 distinct points with sensor and robot values, got {n}"
+        )
     count = np.bincount(row_point, minlength=n).astype(float)
     rs, rr = sensor[rows], robot[rows]
     s = np.zeros((n, 3))
@@ -310,7 +316,11 @@ def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
     ms = ((w @ s)[None] - w[:, None] * s) / wt[:, None]  # centroid of the others (centred frame)
     mr = ((w @ r)[None] - w[:, None] * r) / wt[:, None]
     full = np.einsum("n,ni,nj->ij", w, s, r)
-    h = full[None] - w[:, None, None] * s[:, :, None] * r[:, None, :] - wt[:, None, None] * ms[:, :, None] * mr[:, None, :]
+    h = (
+        full[None]
+        - w[:, None, None] * s[:, :, None] * r[:, None, :]
+        - wt[:, None, None] * ms[:, :, None] * mr[:, None, :]
+    )
     u, _, vt = np.linalg.svd(h)
     v = np.swapaxes(vt, 1, 2).copy()
     d = np.sign(np.linalg.det(np.matmul(v, np.swapaxes(u, 1, 2))))

@@ -77,24 +77,36 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rrbc_core.errors import InputError
-from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.analysis.planning_model import (
+    _SAME_MM,
     COPLANAR_TOL_MM,
     IDW_K,
     IDW_POWER,
     SAMPLES_PER_TARGET,
     RmstPrediction,
-    _SAME_MM,
     _covered,
     _points,
     _predict_fast,
     _predict_mc,
 )
 from rrbc_core.analysis.planning_search import SURFACE_TOL_MM, _corner_choice, _optimise, _pool, usable_candidates
+from rrbc_core.errors import InputError
+from rrbc_core.runtime.threads import thread_limited
 
-__all__ = ["COPLANAR_TOL_MM", "IDW_K", "IDW_POWER", "RANDOM_DRAWS", "SAMPLES_PER_TARGET", "SURFACE_TOL_MM",
-           "PlanResult", "RmstPrediction", "coverage", "plan", "predict_rmst", "usable_candidates"]
+__all__ = [
+    "COPLANAR_TOL_MM",
+    "IDW_K",
+    "IDW_POWER",
+    "RANDOM_DRAWS",
+    "SAMPLES_PER_TARGET",
+    "SURFACE_TOL_MM",
+    "PlanResult",
+    "RmstPrediction",
+    "coverage",
+    "plan",
+    "predict_rmst",
+    "usable_candidates",
+]
 
 #: Random K-subsets averaged for the "random" baseline.
 RANDOM_DRAWS = 32
@@ -191,8 +203,15 @@ def coverage(fiducials_mm, regions, *, samples_per_region: int = 512, seed: int 
 
 
 @thread_limited
-def predict_rmst(scene, fiducials_mm, *, registration_mm=None, trials: int = 0, seed: int = 0,
-                 samples_per_target: int = SAMPLES_PER_TARGET) -> RmstPrediction:
+def predict_rmst(
+    scene,
+    fiducials_mm,
+    *,
+    registration_mm=None,
+    trials: int = 0,
+    seed: int = 0,
+    samples_per_target: int = SAMPLES_PER_TARGET,
+) -> RmstPrediction:
     """Predicted RMS target error (mm) over the targets' regions of variability, rigid and with RRBC (IDW).
 
     Parameters
@@ -233,8 +252,15 @@ def predict_rmst(scene, fiducials_mm, *, registration_mm=None, trials: int = 0, 
 
 
 @thread_limited
-def plan(scene, add: int = 0, *, fiducials_mm=None, seed: int = 0, progress=None,
-         samples_per_target: int = SAMPLES_PER_TARGET) -> PlanResult:
+def plan(
+    scene,
+    add: int = 0,
+    *,
+    fiducials_mm=None,
+    seed: int = 0,
+    progress=None,
+    samples_per_target: int = SAMPLES_PER_TARGET,
+) -> PlanResult:
     """Coverage, predicted RMST and `add` suggested fiducial locations for a scene (`rrbc plan`).
 
     Parameters
@@ -274,24 +300,47 @@ def plan(scene, add: int = 0, *, fiducials_mm=None, seed: int = 0, progress=None
     mask, rejected = usable_candidates(scene) if add > 0 else (np.ones(len(scene.candidates), bool), {})
     cand_idx = np.flatnonzero(mask)
     if add > len(cand_idx):
-        extra = f" ({len(rejected)} of {len(scene.candidates)} rejected: hidden, inside solids or unreachable)" \
-            if rejected else ""
-        raise InputError(f"{scene.path}: --add {add} asks for more fiducials than the scene's {len(cand_idx)} usable "
-                         f"candidate locations{extra}; add candidates ([[candidate]] or [candidates] grid) or ask for fewer")
+        extra = (
+            f" ({len(rejected)} of {len(scene.candidates)} rejected: hidden, inside solids or unreachable)"
+            if rejected
+            else ""
+        )
+        raise InputError(
+            f"{scene.path}: --add {add} asks for more fiducials than the scene's {len(cand_idx)} usable "
+            f"candidate locations{extra}; add candidates ([[candidate]] or [candidates] grid) or ask for fewer"
+        )
     if add > 0:
         # candidates already at a base fiducial cannot be added again
-        d = np.min(np.linalg.norm(scene.candidates.positions[cand_idx][:, None] - base[None], axis=2), axis=1) \
-            if len(base) else np.full(len(cand_idx), np.inf)
+        d = (
+            np.min(np.linalg.norm(scene.candidates.positions[cand_idx][:, None] - base[None], axis=2), axis=1)
+            if len(base)
+            else np.full(len(cand_idx), np.inf)
+        )
         cand_idx = cand_idx[d > _SAME_MM]
         if add > len(cand_idx):
-            raise InputError(f"{scene.path}: --add {add}: only {len(cand_idx)} usable candidates are not already fiducials")
+            raise InputError(
+                f"{scene.path}: --add {add}: only {len(cand_idx)} usable candidates are not already fiducials"
+            )
     cand_pos = scene.candidates.positions[cand_idx]
     cov0 = coverage(base, scene.targets, seed=seed)
     pred0 = predict_rmst(scene, base, seed=seed, samples_per_target=samples_per_target)
     volumes = np.array([t.region.volume() for t in scene.targets])
     if add == 0:
-        return PlanResult(scene.target_ids, cov0, pred0, (), np.zeros((0, 3)), cov0, pred0, rejected, {},
-                          volumes, scene.name, len(cand_idx), time.perf_counter() - t0)
+        return PlanResult(
+            scene.target_ids,
+            cov0,
+            pred0,
+            (),
+            np.zeros((0, 3)),
+            cov0,
+            pred0,
+            rejected,
+            {},
+            volumes,
+            scene.name,
+            len(cand_idx),
+            time.perf_counter() - t0,
+        )
     pool = _pool(scene, base, cand_pos, samples_per_target, seed)
     chosen, evaluated = _optimise(pool, len(cand_idx), add, progress)
     suggested = cand_pos[chosen]
@@ -309,5 +358,19 @@ def plan(scene, add: int = 0, *, fiducials_mm=None, seed: int = 0, progress=None
         "hull-corners": RmstPrediction(rigid, rigid_std, float(cr[0]), float(cs[0]), "first-order"),
         "random": RmstPrediction(rigid, rigid_std, float(rr.mean()), float(rr.std(ddof=1)), "first-order"),
     }
-    return PlanResult(scene.target_ids, cov0, pred0, ids, suggested, cov1, pred1, rejected, baselines, volumes,
-                      scene.name, len(cand_idx), time.perf_counter() - t0, evaluated)
+    return PlanResult(
+        scene.target_ids,
+        cov0,
+        pred0,
+        ids,
+        suggested,
+        cov1,
+        pred1,
+        rejected,
+        baselines,
+        volumes,
+        scene.name,
+        len(cand_idx),
+        time.perf_counter() - t0,
+        evaluated,
+    )

@@ -3,14 +3,16 @@ model, the least-squares fit and its sensitivities, IDW weights, and the predict
 order — evaluated for many fiducial sets at once; and the Monte Carlo check of it. The method: `planning`."""
 
 from __future__ import annotations
+
 import dataclasses
 from dataclasses import dataclass
+
 import numpy as np
-from rrbc_core.simulation import batch
+
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.points import as_points
 from rrbc_core.interpolation import hull_flags
-
+from rrbc_core.simulation import batch
 
 #: A sample within this distance (mm) of a coplanar fiducial set's plane (and inside its polygon) is covered.
 COPLANAR_TOL_MM = 1.0
@@ -97,8 +99,10 @@ def _named(scene, positions: np.ndarray, kind: str):
                     pid = pool.ids[j]
                     break
         if pid in ids:
-            raise InputError(f"two {kind} positions coincide at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) mm; "
-                             "give each physical point once")
+            raise InputError(
+                f"two {kind} positions coincide at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) mm; "
+                "give each physical point once"
+            )
         ids.append(pid)
     return NamedPoints(tuple(ids), positions, np.full(len(positions), float(scene.tool_yaw_deg)))
 
@@ -162,7 +166,7 @@ class _Registration:
         return evecs * np.sqrt(np.clip(evals, 0.0, None))[:, None, :]
 
     @classmethod
-    def fit(cls, sensor: np.ndarray, robot: np.ndarray, net_cov: np.ndarray) -> "_Registration":
+    def fit(cls, sensor: np.ndarray, robot: np.ndarray, net_cov: np.ndarray) -> _Registration:
         n = len(sensor)
         a0, t0 = batch.least_squares_batch(sensor[None], robot[None])
         h = _FD_STEP_MM
@@ -218,7 +222,7 @@ class _Model:
     n_targets: int
 
     @classmethod
-    def from_cell(cls, cell) -> tuple["_Model", "_Readings"]:
+    def from_cell(cls, cell) -> tuple[_Model, _Readings]:
         rd = _readings(cell)
         ri = cell.index("registration", "both")
         qi = cell.index("check")

@@ -3,12 +3,14 @@ the arm's reach) and the optimiser (greedy forward selection, then exchange, on 
 first, then the predicted RMST with RRBC), scoring many candidate sets at once. The method: `planning`."""
 
 from __future__ import annotations
+
 from dataclasses import dataclass
+
 import numpy as np
+
+from rrbc_core.analysis.planning_model import _SETS_PER_CHUNK, _cell, _covered, _fid_arrays, _Model
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
-from rrbc_core.analysis.planning_model import _Model, _SETS_PER_CHUNK, _cell, _covered, _fid_arrays
-
 
 #: A candidate inside a solid but within this distance (mm) of a surface lies on that surface (usable).
 SURFACE_TOL_MM = 1.0
@@ -42,13 +44,14 @@ def _buried(mesh, points: np.ndarray) -> dict:
     shift = p.mean(axis=0)
     q = o3d.core.Tensor(np.ascontiguousarray(p - shift, dtype=np.float32))
     out: dict = {}
-    for name, start, stop in (mesh.metadata.get("parts") or [("mesh", 0, len(f))]):
+    for name, start, stop in mesh.metadata.get("parts") or [("mesh", 0, len(f))]:
         if stop <= start:
             continue
         used, local = np.unique(f[start:stop], return_inverse=True)
         rc = raycasting_scene(v[used], local.reshape(-1, 3), shift)
         deep = rc.compute_occupancy(q, nsamples=3).numpy().astype(bool) & (
-            rc.compute_distance(q).numpy().astype(float) > SURFACE_TOL_MM)
+            rc.compute_distance(q).numpy().astype(float) > SURFACE_TOL_MM
+        )
         for k in np.flatnonzero(deep):
             out.setdefault(int(flagged[k]), str(name))
     return out
@@ -65,9 +68,13 @@ def _unreachable(scene, positions: np.ndarray) -> dict:
 
     def check(p):
         n = len(p)
-        ps = PointSet(robot=p, sensor=scene.sensor_to_robot.apply_inverse(p), time=np.zeros(n),
-                      tool_rotation=np.broadcast_to(tool_down(scene.tool_yaw_deg), (n, 3, 3)),
-                      joint_seed=scene.joint_seed)
+        ps = PointSet(
+            robot=p,
+            sensor=scene.sensor_to_robot.apply_inverse(p),
+            time=np.zeros(n),
+            tool_rotation=np.broadcast_to(tool_down(scene.tool_yaw_deg), (n, 3, 3)),
+            joint_seed=scene.joint_seed,
+        )
         det.sample(ps, "robot", np.random.default_rng(0), 1)
         det.sample(ps, "sensor", np.random.default_rng(0), 1)
 
@@ -147,15 +154,20 @@ class _Pool:
     def rrbc(self, choices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Predicted RRBC RMST and its std (T,) for T sets of candidate indices (T, K)."""
         choices = np.asarray(choices, int).reshape(len(choices), -1)
-        sq = np.concatenate([self.model.rrbc_sq(*self.stack(choices[i : i + _SETS_PER_CHUNK]))
-                             for i in range(0, len(choices), _SETS_PER_CHUNK)])
+        sq = np.concatenate(
+            [
+                self.model.rrbc_sq(*self.stack(choices[i : i + _SETS_PER_CHUNK]))
+                for i in range(0, len(choices), _SETS_PER_CHUNK)
+            ]
+        )
         return self.model._rmst(sq)
 
     def covered(self, choices: np.ndarray) -> np.ndarray:
         """Fraction (T,) of the region samples (all targets weighted equally) inside the hull of each set."""
         choices = np.asarray(choices, int).reshape(len(choices), -1)
-        return np.array([_covered(np.concatenate([self.base_pos, self.cand_pos[c]]), self.query_pos).mean()
-                         for c in choices])
+        return np.array(
+            [_covered(np.concatenate([self.base_pos, self.cand_pos[c]]), self.query_pos).mean() for c in choices]
+        )
 
     def score(self, choices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(coverage, RRBC RMST) per set: the optimiser's lexicographic objective (more coverage first)."""
@@ -168,8 +180,14 @@ def _pool(scene, base: np.ndarray, cand: np.ndarray, samples_per_target: int, se
     pos = cell.robot[fi]
     arrays = _fid_arrays(model, rd, fi) + (model.shared_index(pos),)
     nb = len(base)
-    return _Pool(model, tuple(a[:nb] for a in arrays), tuple(a[nb:] for a in arrays), pos[:nb], pos[nb:],
-                 cell.robot[cell.index("check")])
+    return _Pool(
+        model,
+        tuple(a[:nb] for a in arrays),
+        tuple(a[nb:] for a in arrays),
+        pos[:nb],
+        pos[nb:],
+        cell.robot[cell.index("check")],
+    )
 
 
 def _best(cov: np.ndarray, rmst: np.ndarray) -> int:

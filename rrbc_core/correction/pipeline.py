@@ -10,13 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rrbc_core import interpolation
+from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
-from rrbc_core import registration
+from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
 from rrbc_core.methods import SEEDED, MethodOptions
-from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.runtime.threads import thread_limited
 
 
@@ -30,6 +29,7 @@ class CorrectionResult:
     none), ``error_rigid`` / ``error_rrbc`` (C,) at the checks. `summary()` gives RMST and max error rigid and with
     RRBC; `to_json()` the JSON of `rrbc correct --json`.
     """
+
     options: MethodOptions
     registration: registration.Registration
     fiducials: PointGroup

@@ -29,8 +29,9 @@ SUBSET_DEGENERACY_RATIO = 0.05
 PLANAR_RATIO = 0.02
 
 
-def as_points(points, what: str = "points", *, single: bool = False, empty: bool = True, minimum: int = 0,
-              frame: str = "mm") -> np.ndarray:
+def as_points(
+    points, what: str = "points", *, single: bool = False, empty: bool = True, minimum: int = 0, frame: str = "mm"
+) -> np.ndarray:
     """The one point validator: `points` as an (N, 3) float array of finite coordinates, or InputError.
 
     Parameters
@@ -128,7 +129,7 @@ class LocalFrame:
     dim: int
 
     @classmethod
-    def of(cls, points) -> "LocalFrame":
+    def of(cls, points) -> LocalFrame:
         p = as_points(points, "interpolation points")
         c, s, vt = principal_spreads(p)
         if s[0] <= COINCIDENT_MM:

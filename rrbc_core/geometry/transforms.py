@@ -110,11 +110,11 @@ class RigidTransform:
 
     # --- construction -------------------------------------------------------------------------------------
     @classmethod
-    def identity(cls) -> "RigidTransform":
+    def identity(cls) -> RigidTransform:
         return cls(np.eye(3), np.zeros(3))
 
     @classmethod
-    def from_matrix(cls, matrix) -> "RigidTransform":
+    def from_matrix(cls, matrix) -> RigidTransform:
         """From a 4x4 homogeneous matrix [[R, t], [0, 0, 0, 1]]."""
         m = np.asarray(matrix, dtype=float)
         if m.shape != (4, 4):
@@ -146,11 +146,11 @@ class RigidTransform:
         return _as_points(vectors) @ self.rotation.T
 
     # --- algebra ------------------------------------------------------------------------------------------
-    def compose(self, other: "RigidTransform") -> "RigidTransform":
+    def compose(self, other: RigidTransform) -> RigidTransform:
         """self ∘ other: first `other`, then `self` (matrix product self @ other)."""
         return RigidTransform(self.rotation @ other.rotation, self.rotation @ other.translation + self.translation)
 
-    def inverse(self) -> "RigidTransform":
+    def inverse(self) -> RigidTransform:
         return RigidTransform(self.rotation.T, -self.rotation.T @ self.translation)
 
     def as_dict(self) -> dict:

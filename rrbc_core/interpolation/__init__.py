@@ -65,8 +65,21 @@ from rrbc_core.interpolation.idw import IDW, NoCorrection
 from rrbc_core.interpolation.linear import SLIVER_QUALITY, Linear
 from rrbc_core.interpolation.tps import TPS
 
-__all__ = ["EXACT_MM", "HULL_TOL", "SLIVER_QUALITY", "METHODS", "FittedInterpolator", "Prediction", "IDW", "Linear",
-           "TPS", "GP", "NoCorrection", "hull_flags", "make_interpolator"]
+__all__ = [
+    "EXACT_MM",
+    "HULL_TOL",
+    "SLIVER_QUALITY",
+    "METHODS",
+    "FittedInterpolator",
+    "Prediction",
+    "IDW",
+    "Linear",
+    "TPS",
+    "GP",
+    "NoCorrection",
+    "hull_flags",
+    "make_interpolator",
+]
 
 METHODS = {"idw": IDW, "linear": Linear, "tps": TPS, "gp": GP, "none": NoCorrection}
 

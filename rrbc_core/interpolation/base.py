@@ -66,8 +66,6 @@ def check_data(points, values) -> tuple[np.ndarray, np.ndarray]:
     return p, v
 
 
-
-
 def too_few(method: str, needed: int, frame_dim: int, given: int, why: str = "") -> InputError:
     if frame_dim == 0:
         return InputError(
@@ -79,8 +77,6 @@ def too_few(method: str, needed: int, frame_dim: int, given: int, why: str = "")
         f"{method} needs at least {needed} fiducials {why} ({given} given, spanning {frame_dim} dimension(s)); "
         "add fiducials or use method 'idw'"
     )
-
-
 
 
 def coincident_groups(local: np.ndarray, tol: float) -> np.ndarray:

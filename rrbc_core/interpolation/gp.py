@@ -12,8 +12,16 @@ from scipy.optimize import minimize
 from scipy.spatial.distance import cdist
 
 from rrbc_core.errors import InputError
-from rrbc_core.interpolation.base import (CHUNK_ELEMENTS, Fitted, FittedInterpolator, Hull, check_data,
-                                         check_float, dim_words, too_few)
+from rrbc_core.interpolation.base import (
+    CHUNK_ELEMENTS,
+    Fitted,
+    FittedInterpolator,
+    Hull,
+    check_data,
+    check_float,
+    dim_words,
+    too_few,
+)
 
 # ---------------------------------------------------------------------------------------------------------------
 # Gaussian process with a linear mean (universal kriging)
@@ -46,9 +54,7 @@ def _design(x: np.ndarray) -> np.ndarray:
     return np.hstack([np.ones((len(x), 1)), x])
 
 
-def _neg_reml(
-    c: np.ndarray, dcs: list[np.ndarray], f: np.ndarray, y: np.ndarray, s2_fixed: float | None, floor: float
-):
+def _neg_reml(c: np.ndarray, dcs: list[np.ndarray], f: np.ndarray, y: np.ndarray, s2_fixed: float | None, floor: float):
     """Negative restricted log-likelihood (up to a constant) of Y (N x 3) ~ N(F beta_c, s2_c C), and gradient.
 
     s2_fixed None: s2_c profiled out per component (floored at `floor`); otherwise s2_c = s2_fixed for all c,

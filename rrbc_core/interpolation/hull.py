@@ -59,7 +59,8 @@ class Hull:
     def _degenerate(self, exc: Exception) -> InputError:
         return InputError(
             f"cannot triangulate the {len(self.local)} fiducials {dim_words(self.frame.dim)} "
-            f"({exc.__class__.__name__}); check for (nearly) degenerate fiducial layouts or use method 'idw'")
+            f"({exc.__class__.__name__}); check for (nearly) degenerate fiducial layouts or use method 'idw'"
+        )
 
     @property
     def tri(self) -> Delaunay:

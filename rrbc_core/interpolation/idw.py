@@ -8,8 +8,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from rrbc_core.interpolation.base import (EXACT_MM, Fitted, FittedInterpolator, Hull, check_data, check_float,
-                                         check_positive_int)
+from rrbc_core.interpolation.base import (
+    EXACT_MM,
+    Fitted,
+    FittedInterpolator,
+    Hull,
+    check_data,
+    check_float,
+    check_positive_int,
+)
 
 # ---------------------------------------------------------------------------------------------------------------
 # No correction

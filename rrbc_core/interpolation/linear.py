@@ -9,8 +9,16 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from rrbc_core.geometry.points import COINCIDENT_MM
-from rrbc_core.interpolation.base import (CHUNK_ELEMENTS, Fitted, FittedInterpolator, Hull, check_data,
-                                         coincident_groups, group_mean, too_few)
+from rrbc_core.interpolation.base import (
+    CHUNK_ELEMENTS,
+    Fitted,
+    FittedInterpolator,
+    Hull,
+    check_data,
+    coincident_groups,
+    group_mean,
+    too_few,
+)
 
 #: Linear extension outside the hull never uses a boundary simplex whose shape quality (d!·volume divided by
 #: its longest edge to the power d: 0.5 for a right isosceles triangle, 0 for a flat one) is below this. Noisy

@@ -10,8 +10,16 @@ from scipy.linalg import LinAlgError
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.points import COINCIDENT_MM
-from rrbc_core.interpolation.base import (Fitted, FittedInterpolator, Hull, check_data, check_float,
-                                         coincident_groups, group_mean, too_few)
+from rrbc_core.interpolation.base import (
+    Fitted,
+    FittedInterpolator,
+    Hull,
+    check_data,
+    check_float,
+    coincident_groups,
+    group_mean,
+    too_few,
+)
 
 # ---------------------------------------------------------------------------------------------------------------
 # Thin-plate spline

@@ -30,8 +30,8 @@ import io
 import math
 import os
 import re
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -575,5 +575,3 @@ def _registration_error(source, frame, reg: PointGroup, pts, last_line, exc) -> 
 
 
 # --------------------------------------------------------------------------------------------------- writing
-
-

@@ -2,11 +2,13 @@
 they read back exactly, the file replaced atomically (a failed write leaves the old file as it was)."""
 
 from __future__ import annotations
+
 import csv
 import math
 import os
 import secrets
-from typing import Sequence
+from collections.abc import Sequence
+
 import numpy as np
 
 from rrbc_core.io.measurements import ROBOT_COLUMNS, SENSOR_COLUMNS, MeasurementSet, _error, validate

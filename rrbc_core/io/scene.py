@@ -166,7 +166,7 @@ class NamedPoints:
     def position(self, point_id: str) -> np.ndarray:
         return self.positions[self.index(point_id)]
 
-    def subset(self, ids) -> "NamedPoints":
+    def subset(self, ids) -> NamedPoints:
         idx = [self.index(i) for i in ids]
         return NamedPoints(tuple(self.ids[i] for i in idx), self.positions[idx], self.tool_yaw_deg[idx])
 
@@ -213,7 +213,9 @@ class Scene:
     check_points_per_target: int = DEFAULT_CHECK_POINTS_PER_TARGET
     measurement_interval_s: float = DEFAULT_MEASUREMENT_INTERVAL_S
     layout: str | None = None  # name of the layout applied by with_layout, None for the file's own points
-    distance_origin: np.ndarray = field(default_factory=lambda: np.zeros(3))  # "distance from the frame origin" is from here
+    distance_origin: np.ndarray = field(
+        default_factory=lambda: np.zeros(3)
+    )  # "distance from the frame origin" is from here
     sensor_look_at: np.ndarray | None = None
     _layout_points: dict = field(default_factory=dict, repr=False)
     _mesh: object = field(default=None, repr=False)
@@ -259,7 +261,7 @@ class Scene:
             pts.append(t.region.sample(rng, n))
         return tuple(ids), (np.concatenate(pts) if pts else np.zeros((0, 3)))
 
-    def with_layout(self, name: str) -> "Scene":
+    def with_layout(self, name: str) -> Scene:
         """The scene with registration points and/or fiducials replaced by layout `name` (a `[layouts.NAME]`
         table); what the layout does not name stays as it is."""
         if name not in self._layout_points:

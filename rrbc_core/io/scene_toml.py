@@ -2,18 +2,34 @@
 the key and, for TOML syntax errors, the line. The format: scenes/README.md; the model it builds: `scene`."""
 
 from __future__ import annotations
+
 import math
 import os
 import re
 import tomllib
 from pathlib import Path
-import numpy as np
-from rrbc_core.geometry import points as geometry
-from rrbc_core.errors import InputError
-from rrbc_core.io.scene import (DEFAULT_CHECK_POINTS_PER_TARGET, DEFAULT_JOINT_SEED_DEG, DEFAULT_MEASUREMENT_INTERVAL_S,
-                                 REGION_KINDS, ROBOT_MODELS, SAME_POINT_TOL_MM, SENSOR_KINDS, MAX_GRID_POINTS, NamedPoints,
-                                 Region, Scene, Target, _frozen, _load_mesh_file, sensor_pose)
 
+import numpy as np
+
+from rrbc_core.errors import InputError
+from rrbc_core.geometry import points as geometry
+from rrbc_core.io.scene import (
+    DEFAULT_CHECK_POINTS_PER_TARGET,
+    DEFAULT_JOINT_SEED_DEG,
+    DEFAULT_MEASUREMENT_INTERVAL_S,
+    MAX_GRID_POINTS,
+    REGION_KINDS,
+    ROBOT_MODELS,
+    SAME_POINT_TOL_MM,
+    SENSOR_KINDS,
+    NamedPoints,
+    Region,
+    Scene,
+    Target,
+    _frozen,
+    _load_mesh_file,
+    sensor_pose,
+)
 
 _TOP_KEYS = (
     "scene",
@@ -169,9 +185,7 @@ def _read_toml(path, source: str, c: _Checker) -> dict:
         msg = str(exc)
         m = _TOML_POS.search(msg)
         if m:
-            raise c.error(
-                f"line {m.group(1)}, column {m.group(2)}", f"TOML syntax error: {msg[: m.start()]}"
-            ) from None
+            raise c.error(f"line {m.group(1)}, column {m.group(2)}", f"TOML syntax error: {msg[: m.start()]}") from None
         m = _TOML_EOF.search(msg)
         if m:
             raise c.error("end of file", f"TOML syntax error: {msg[: m.start()]}") from None
@@ -224,7 +238,8 @@ def load_scene(path) -> Scene:
     robot_model = c.string(rb["model"], "robot.model", choices=ROBOT_MODELS)
     tool_mm = c.number(rb["tool_mm"], "robot.tool_mm", nonneg=True)
     joint_seed_deg = (
-        c.vector(rb["joint_seed_deg"], "robot.joint_seed_deg", 6) if "joint_seed_deg" in rb
+        c.vector(rb["joint_seed_deg"], "robot.joint_seed_deg", 6)
+        if "joint_seed_deg" in rb
         else np.array(DEFAULT_JOINT_SEED_DEG)
     )
     tool_yaw = c.number(rb.get("tool_yaw_deg", 0.0), "robot.tool_yaw_deg")
@@ -268,7 +283,7 @@ def load_scene(path) -> Scene:
             raise c.error(
                 f"{key}.id",
                 f"{pid!r} is also the id of {measured[pid]}; a target needs an id of its "
-                "own (a measurement file gives each id one role); use site = \"<id>\" to put it at a site",
+                'own (a measurement file gives each id one role); use site = "<id>" to put it at a site',
             )
 
     placed: dict[str, tuple[np.ndarray, str]] = {}
@@ -369,8 +384,10 @@ def _points(c: _Checker, doc: dict, kind: str, default_yaw: float, site_pos: dic
     if kind not in doc:
         return []
     blocks = c.array_of_tables(doc[kind], kind)
-    allowed = ("id", "position", "tool_yaw_deg", "note") + (("site",) if kind != "site" else ()) + (
-        ("region",) if with_region else ()
+    allowed = (
+        ("id", "position", "tool_yaw_deg", "note")
+        + (("site",) if kind != "site" else ())
+        + (("region",) if with_region else ())
     )
     required = ("id",) + (("region",) if with_region else ())
     out, seen = [], {}
@@ -487,9 +504,7 @@ def _layouts(c: _Checker, doc: dict, pool: dict) -> tuple[dict, dict]:
                     )
                 if pid in ids[:j]:
                     raise c.error(f"{pkey}[{j}]", f"duplicate id {pid!r}")
-            np_ = NamedPoints(
-                tuple(ids), np.array([pool[i][0] for i in ids]), np.array([pool[i][1] for i in ids])
-            )
+            np_ = NamedPoints(tuple(ids), np.array([pool[i][0] for i in ids]), np.array([pool[i][1] for i in ids]))
             if part == "registration":
                 if len(ids) < 3:
                     raise c.error(pkey, f"{len(ids)} ids given, a registration needs at least 3 points")
@@ -505,7 +520,6 @@ def _with_tool(model, table: dict, tool_mm: float):
     import dataclasses
 
     from rrbc_core.simulation.errormodels import ErrorModel
-
     from rrbc_core.simulation.errorterms import Kinematic
 
     rows = table.get("robot", []) if isinstance(table, dict) else []

@@ -5,11 +5,40 @@ is also callable by itself. The strategies, the mappings they return and the che
 `strategies.py`.
 """
 
-from rrbc_core.registration.strategies import (MAX_SUBSET_POINTS, STRATEGIES, STRATEGY_OPTIONS, LinearMap, PiecewiseMap,
-                                               Registration, annealing, check_subset_count, clustering,
-                                               combinatorial, kabsch, kmeans, least_squares, register, three_point,
-                                               three_point_matrices)
+from rrbc_core.registration.strategies import (
+    MAX_SUBSET_POINTS,
+    STRATEGIES,
+    STRATEGY_OPTIONS,
+    LinearMap,
+    PiecewiseMap,
+    Registration,
+    annealing,
+    check_subset_count,
+    clustering,
+    combinatorial,
+    kabsch,
+    kmeans,
+    least_squares,
+    register,
+    three_point,
+    three_point_matrices,
+)
 
-__all__ = ["MAX_SUBSET_POINTS", "STRATEGIES", "STRATEGY_OPTIONS", "LinearMap", "PiecewiseMap", "Registration", "annealing",
-           "check_subset_count", "clustering", "combinatorial", "kabsch", "kmeans", "least_squares", "register",
-           "three_point", "three_point_matrices"]
+__all__ = [
+    "MAX_SUBSET_POINTS",
+    "STRATEGIES",
+    "STRATEGY_OPTIONS",
+    "LinearMap",
+    "PiecewiseMap",
+    "Registration",
+    "annealing",
+    "check_subset_count",
+    "clustering",
+    "combinatorial",
+    "kabsch",
+    "kmeans",
+    "least_squares",
+    "register",
+    "three_point",
+    "three_point_matrices",
+]

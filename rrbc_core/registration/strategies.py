@@ -26,10 +26,10 @@ from itertools import combinations
 
 import numpy as np
 
-from rrbc_core.geometry import points as geometry
 from rrbc_core.errors import InputError
-from rrbc_core.runtime.threads import thread_limited
+from rrbc_core.geometry import points as geometry
 from rrbc_core.geometry.transforms import RigidTransform, chordal_mean, project_to_so3, rotation_from_euler_zyx
+from rrbc_core.runtime.threads import thread_limited
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -120,9 +120,7 @@ class PiecewiseMap:
             "rotation": self.rotation.tolist(),
             "translation": self.translation.tolist(),
             "piecewise": True,
-            "pieces": [
-                {"kernel": k.tolist(), **pc.as_dict()} for k, pc in zip(self.kernels, self.pieces)
-            ],
+            "pieces": [{"kernel": k.tolist(), **pc.as_dict()} for k, pc in zip(self.kernels, self.pieces)],
         }
 
 
@@ -159,9 +157,7 @@ def _check_pair(sensor, robot, minimum=3):
     s = geometry.check_registration_points(sensor, "sensor registration points", minimum)
     r = geometry.check_registration_points(robot, "robot registration points", minimum)
     if s.shape != r.shape:
-        raise InputError(
-            f"sensor and robot registration points must pair up: {len(s)} sensor vs {len(r)} robot points"
-        )
+        raise InputError(f"sensor and robot registration points must pair up: {len(s)} sensor vs {len(r)} robot points")
     return s, r
 
 
@@ -268,7 +264,8 @@ def check_subset_count(n: int, method: str = "combinatorial") -> None:
             f"{method} registration averages the registrations of every 3-point subset: {n} registration points "
             f"give {math.comb(n, 3):,} subsets; it accepts at most {MAX_SUBSET_POINTS} points "
             f"({math.comb(MAX_SUBSET_POINTS, 3):,} subsets). Use least-squares, which uses every point, or fewer "
-            "registration points")
+            "registration points"
+        )
 
 
 def _subset_registrations(s, r, degeneracy_ratio, method: str = "combinatorial"):
@@ -312,9 +309,7 @@ def combinatorial(
     s, r = _check_pair(sensor, robot)
     combos, mats, rejected = _subset_registrations(s, r, degeneracy_ratio)
     mapping = _average(mats, average, s.mean(axis=0))
-    return _finish(
-        "combinatorial", mapping, s, r, average=average, subsets_used=len(combos), subsets_rejected=rejected
-    )
+    return _finish("combinatorial", mapping, s, r, average=average, subsets_used=len(combos), subsets_rejected=rejected)
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -432,9 +427,7 @@ def kmeans(points, k: int, seed: int = 0, iterations: int = 100) -> tuple[np.nda
     return c, labels
 
 
-def clustering(
-    sensor, robot, clusters: int = 2, seed: int = 0, average: str = "elementwise"
-) -> Registration:
+def clustering(sensor, robot, clusters: int = 2, seed: int = 0, average: str = "elementwise") -> Registration:
     """Clustered registration (our reading of Van Wyk & Marvel 2018, eqs. 16–17): piecewise, not rigid.
 
     1. k-means (seeded) on the sensor registration points gives `clusters` kernels.

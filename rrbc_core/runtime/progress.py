@@ -11,8 +11,9 @@ import time
 
 
 class ProgressBar:
-    def __init__(self, total: int, label: str = "", stream=None, delay_s: float = 1.0, force: bool = False,
-                 width: int = 30):
+    def __init__(
+        self, total: int, label: str = "", stream=None, delay_s: float = 1.0, force: bool = False, width: int = 30
+    ):
         self.total = max(int(total), 1)
         self.label = label
         self.stream = sys.stderr if stream is None else stream

@@ -100,5 +100,7 @@ def thread_limited(fn):
 
 def blas_threads() -> list[dict]:
     """The loaded BLAS/OpenMP runtimes and their current pool sizes: [{"library", "api", "threads"}, ...]."""
-    return [{"library": i["prefix"], "api": i["internal_api"], "threads": int(i["num_threads"])}
-            for i in _get_controller().info()]
+    return [
+        {"library": i["prefix"], "api": i["internal_api"], "threads": int(i["num_threads"])}
+        for i in _get_controller().info()
+    ]

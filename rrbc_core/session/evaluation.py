@@ -4,14 +4,16 @@ correction, landing and error, the fiducials' hull). Display positions are robot
 measurement model (scene) or the file (measured data) give them."""
 
 from __future__ import annotations
+
 from dataclasses import dataclass
+
 import numpy as np
-from rrbc_core import interpolation
+
+from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
-from rrbc_core import registration
+from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.errors import InputError
 from rrbc_core.methods import MethodOptions
-from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 
 
 @dataclass(frozen=True)
@@ -42,9 +44,14 @@ class Settings:
     def method(self) -> MethodOptions:
         """The registration and interpolation chosen, with the options of the chosen interpolation only."""
         idw, tps = self.interpolation == "idw", self.interpolation == "tps"
-        return MethodOptions(registration=self.registration, interpolation=self.interpolation,
-                             neighbors=int(self.neighbors) if idw else None, power=float(self.power) if idw else None,
-                             smoothing=float(self.smoothing) if tps else None, seed=int(self.seed))
+        return MethodOptions(
+            registration=self.registration,
+            interpolation=self.interpolation,
+            neighbors=int(self.neighbors) if idw else None,
+            power=float(self.power) if idw else None,
+            smoothing=float(self.smoothing) if tps else None,
+            seed=int(self.seed),
+        )
 
     def interpolator(self):
         return self.method.interpolator()
@@ -185,8 +192,11 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
     cached = cached or (lambda name, key, compute: compute())
     s = settings
     reg_r, fid_r, tgt_r = readings["registration"], readings["fiducials"], readings["targets"]
-    reg = cached("registration", (s.registration, s.seed, reg_r.sensor.tobytes(), reg_r.robot.tobytes()),
-                 lambda: s.method.register(reg_r.sensor, reg_r.robot))
+    reg = cached(
+        "registration",
+        (s.registration, s.seed, reg_r.sensor.tobytes(), reg_r.robot.tobytes()),
+        lambda: s.method.register(reg_r.sensor, reg_r.robot),
+    )
     fids = layout["fiducials"]
     included = np.array([pid not in s.excluded for pid in fids.ids], dtype=bool)
     corr = np.full((len(fids.ids), 3), np.nan)
@@ -205,9 +215,20 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         cp = correct_points(reg.mapping, fitted, tgt_r.sensor)
         err_rigid = np.linalg.norm(cp.robot_rigid - tgt_r.truth, axis=1)
         err_rrbc = np.linalg.norm(cp.robot_rrbc - tgt_r.truth, axis=1)
-        targets = TargetResult(tg.ids, tg.positions, tgt_r.sensor, cp.correction, cp.correction @ rot.T,
-                               cp.correction_std, cp.robot_rigid, cp.robot_rrbc, tgt_r.truth, err_rigid,
-                               err_rrbc, cp.extrapolated)
+        targets = TargetResult(
+            tg.ids,
+            tg.positions,
+            tgt_r.sensor,
+            cp.correction,
+            cp.correction @ rot.T,
+            cp.correction_std,
+            cp.robot_rigid,
+            cp.robot_rrbc,
+            tgt_r.truth,
+            err_rigid,
+            err_rrbc,
+            cp.extrapolated,
+        )
     else:
         z = np.zeros((0, 3))
         targets = TargetResult((), z, z, z, z, None, z, z, z, np.zeros(0), np.zeros(0), np.zeros(0, bool))
@@ -224,5 +245,19 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         "extrapolated": [pid for pid, e in zip(tg.ids, targets.extrapolated) if e],
         "fiducials_used": int(np.count_nonzero(included)),
     }
-    return Evaluation(s, reg, layout["registration"].ids, layout["registration"].positions, reg_r,
-                      fids.ids, fids.positions, fid_r, included, corr, corr_robot, targets, hull, summary)
+    return Evaluation(
+        s,
+        reg,
+        layout["registration"].ids,
+        layout["registration"].positions,
+        reg_r,
+        fids.ids,
+        fids.positions,
+        fid_r,
+        included,
+        corr,
+        corr_robot,
+        targets,
+        hull,
+        summary,
+    )

@@ -36,17 +36,16 @@ import zlib
 import numpy as np
 
 from rrbc_core import interpolation
-from rrbc_core.errors import InputError
-from rrbc_core.simulation.measurement import MeasurementModel
 from rrbc_core.correction.rrbc import correct_points
+from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate
 from rrbc_core.session.results import HeatMap, MonteCarloPlots, PlanningState, _scaled
+from rrbc_core.simulation.measurement import MeasurementModel
 
 #: Seed of the planner's region samples (coverage, predicted RMST, suggestions): fixed, so the tab's numbers,
 #: a suggestion's "after" and the numbers after accepting it are the same computation.
 PLANNING_SEED = 0
-
 
 
 def _seed_for(seed: int, pid: str) -> list[int]:
@@ -63,8 +62,20 @@ class ExplorerSession:
     `monte_carlo()`, `export_measurements()`, `export_json()`. Positions are robot frame, mm.
     """
 
-    def __init__(self, *, kind, name, layout, settings, scene=None, mset=None, readings=None, regions=None,
-                 mesh_path=None, sensor_to_robot=None):
+    def __init__(
+        self,
+        *,
+        kind,
+        name,
+        layout,
+        settings,
+        scene=None,
+        mset=None,
+        readings=None,
+        regions=None,
+        mesh_path=None,
+        sensor_to_robot=None,
+    ):
         self.kind = kind  # "scene" or "measurements"
         self.name = name
         self.layout = layout  # dict: "registration"/"fiducials"/"targets" -> Group
@@ -85,19 +96,26 @@ class ExplorerSession:
     # ------------------------------------------------------------------------------------------------ sources
     @classmethod
     @thread_limited
-    def from_scene(cls, scene, settings: Settings | None = None) -> "ExplorerSession":
+    def from_scene(cls, scene, settings: Settings | None = None) -> ExplorerSession:
         layout = {
             "registration": Group(tuple(scene.registration.ids), np.array(scene.registration.positions, float)),
             "fiducials": Group(tuple(scene.fiducials.ids), np.array(scene.fiducials.positions, float)),
             "targets": Group(tuple(t.id for t in scene.targets), np.array([t.position for t in scene.targets], float)),
         }
-        return cls(kind="scene", name=scene.name, layout=layout, settings=settings or Settings(seed=scene.seed),
-                   scene=scene, regions={t.id: t.region for t in scene.targets}, mesh_path=scene.mesh_path,
-                   sensor_to_robot=scene.sensor_to_robot)
+        return cls(
+            kind="scene",
+            name=scene.name,
+            layout=layout,
+            settings=settings or Settings(seed=scene.seed),
+            scene=scene,
+            regions={t.id: t.region for t in scene.targets},
+            mesh_path=scene.mesh_path,
+            sensor_to_robot=scene.sensor_to_robot,
+        )
 
     @classmethod
     @thread_limited
-    def from_measurements(cls, mset, mesh_path=None, settings: Settings | None = None) -> "ExplorerSession":
+    def from_measurements(cls, mset, mesh_path=None, settings: Settings | None = None) -> ExplorerSession:
         reg = mset.points("registration")
         fid = mset.points("fiducial")
         tgt = mset.points("target")
@@ -118,8 +136,15 @@ class ExplorerSession:
             "fiducials": Group(tuple(fid.ids), np.array(fid.robot, float)),
             "targets": Group(ids, reg_map.mapping.apply(sensor) if len(ids) else np.zeros((0, 3))),
         }
-        return cls(kind="measurements", name=mset.source, layout=layout, settings=settings, mset=mset,
-                   readings=readings, mesh_path=mesh_path)
+        return cls(
+            kind="measurements",
+            name=mset.source,
+            layout=layout,
+            settings=settings,
+            mset=mset,
+            readings=readings,
+            mesh_path=mesh_path,
+        )
 
     # ------------------------------------------------------------------------------------------- measuring
     def measurement_model(self) -> MeasurementModel:
@@ -142,8 +167,13 @@ class ExplorerSession:
         rnd = model.error_model.random_terms()
         if noise and (rnd.robot or rnd.sensor):
             for i, pid in enumerate(ids):
-                one = PointSet(robot=positions[i:i + 1], sensor=pts.sensor[i:i + 1], time=np.zeros(1),
-                               tool_rotation=pts.tool_rotation[i:i + 1], joint_seed=pts.joint_seed)
+                one = PointSet(
+                    robot=positions[i : i + 1],
+                    sensor=pts.sensor[i : i + 1],
+                    time=np.zeros(1),
+                    tool_rotation=pts.tool_rotation[i : i + 1],
+                    joint_seed=pts.joint_seed,
+                )
                 rng = np.random.default_rng(_seed_for(self.settings.seed, f"{kind}:{pid}"))
                 e_s, e_r = model.noise(one, rng, 1)
                 noise_s[0, i], noise_r[0, i] = e_s[0, 0], e_r[0, 0]
@@ -168,8 +198,12 @@ class ExplorerSession:
         if missing:
             fresh = self._measure_scene(kind, [g.ids[i] for i in missing], g.positions[missing])
             for j, i in enumerate(missing):
-                self._readings[(kind, g.ids[i])] = ((key_settings, tuple(g.positions[i])),
-                                                   fresh.sensor[j], fresh.robot[j], fresh.truth[j])
+                self._readings[(kind, g.ids[i])] = (
+                    (key_settings, tuple(g.positions[i])),
+                    fresh.sensor[j],
+                    fresh.robot[j],
+                    fresh.truth[j],
+                )
         for pid in g.ids:
             _, a, b, c = self._readings[(kind, pid)]
             out_s.append(a), out_r.append(b), out_t.append(c)
@@ -192,7 +226,8 @@ class ExplorerSession:
             if kind != "targets":
                 raise InputError(
                     "measured registration points and fiducials cannot be moved: there is no error model to "
-                    "re-measure them elsewhere (load a scene to experiment with placement)")
+                    "re-measure them elsewhere (load a scene to experiment with placement)"
+                )
             mapping = (self._last or self.evaluate()).registration.mapping
             sensor = mapping.apply_inverse(p[None])[0]
             self._readings[(kind, pid)] = (sensor, np.full(3, np.nan), np.full(3, np.nan))
@@ -252,8 +287,10 @@ class ExplorerSession:
     # ---------------------------------------------------------------------------------------------- planning
     def _require_planning(self) -> None:
         if self.kind != "scene" or self.scene is None:
-            raise InputError("planning needs a scene (an error model and candidate fiducial locations); measured "
-                             "data have none: load a scene (File tab, or `rrbc view SCENE.toml`)")
+            raise InputError(
+                "planning needs a scene (an error model and candidate fiducial locations); measured "
+                "data have none: load a scene (File tab, or `rrbc view SCENE.toml`)"
+            )
 
     def _planning_key(self) -> tuple:
         """What planning depends on: included fiducials, targets and registration points where they are now, and
@@ -261,8 +298,13 @@ class ExplorerSession:
         s = self.settings
         fid = self.layout["fiducials"]
         inc = np.array([pid not in s.excluded for pid in fid.ids], dtype=bool)
-        return (fid.positions[inc].tobytes(), self.layout["targets"].positions.tobytes(),
-                self.layout["registration"].positions.tobytes(), float(s.noise_scale), float(s.bias_scale))
+        return (
+            fid.positions[inc].tobytes(),
+            self.layout["targets"].positions.tobytes(),
+            self.layout["registration"].positions.tobytes(),
+            float(s.noise_scale),
+            float(s.bias_scale),
+        )
 
     def planning_fiducials(self) -> tuple[tuple, np.ndarray]:
         """(ids, (N,3) robot-frame positions) of the included fiducials where they are now."""
@@ -296,19 +338,25 @@ class ExplorerSession:
             by_id = dict(zip(t_ids, regions))
             tg = self.layout["targets"]
             yaw = {t.id: t.tool_yaw_deg for t in sc.targets}
-            targets = tuple(Target(pid, np.asarray(p, float), by_id[pid], yaw.get(pid, sc.tool_yaw_deg))
-                            for pid, p in zip(tg.ids, tg.positions) if pid in by_id)
+            targets = tuple(
+                Target(pid, np.asarray(p, float), by_id[pid], yaw.get(pid, sc.tool_yaw_deg))
+                for pid, p in zip(tg.ids, tg.positions)
+                if pid in by_id
+            )
             s = self.settings
             reg = self.layout["registration"]
             return dataclasses.replace(
-                sc, fiducials=NamedPoints(ids, pos, np.full(len(ids), sc.tool_yaw_deg)),
+                sc,
+                fiducials=NamedPoints(ids, pos, np.full(len(ids), sc.tool_yaw_deg)),
                 registration=NamedPoints(reg.ids, reg.positions, np.full(len(reg.ids), sc.tool_yaw_deg)),
-                targets=targets, error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale))
+                targets=targets,
+                error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale),
+            )
 
         return self._cached("planning_scene", key, build)
 
     @thread_limited
-    def planning_state(self) -> "PlanningState":
+    def planning_state(self) -> PlanningState:
         """Coverage per target and the fast predicted RMST (rigid and RRBC, with their std) for the fiducials as
         they are now (dragged, excluded or accepted ones included as the session has them). Cached: a call with
         nothing changed returns the same object. InputError in measurement mode."""
@@ -322,8 +370,9 @@ class ExplorerSession:
             ids, fids = self.planning_fiducials()
             t_ids, regions = self.planning_regions()
             cov = planning.coverage(fids, regions, seed=PLANNING_SEED) if regions else np.zeros(0)
-            pred = planning.predict_rmst(scene, fids, registration_mm=self.layout["registration"].positions,
-                                         seed=PLANNING_SEED)
+            pred = planning.predict_rmst(
+                scene, fids, registration_mm=self.layout["registration"].positions, seed=PLANNING_SEED
+            )
             return PlanningState(t_ids, np.asarray(cov, float).reshape(-1), pred, len(ids))
 
         return self._cached("planning_state", key, compute)
@@ -345,8 +394,9 @@ class ExplorerSession:
         key = self._planning_key()
         scene = self.planning_scene()
         _, fids = self.planning_fiducials()
-        result = planning.plan(scene, add=k, fiducials_mm=fids, seed=PLANNING_SEED if seed is None else int(seed),
-                               progress=progress)
+        result = planning.plan(
+            scene, add=k, fiducials_mm=fids, seed=PLANNING_SEED if seed is None else int(seed), progress=progress
+        )
         self.suggestion, self._suggestion_key = result, key
         return result
 
@@ -421,7 +471,7 @@ class ExplorerSession:
 
     # ---------------------------------------------------------------------------------------------- heat map
     @thread_limited
-    def heat_map(self, samples_per_target: int = 200) -> "HeatMap":
+    def heat_map(self, samples_per_target: int = 200) -> HeatMap:
         """Predicted error over the targets' regions of variability (scene mode): samples (seeded, fixed per
         target id) inside each region, each measured noise-free (expected sensor reading incl. sensor bias) and
         corrected with the current fiducials; errors against the truth, rigid and RRBC. In measurement mode
@@ -465,7 +515,7 @@ class ExplorerSession:
         self._heat_cache[None] = (stacked_key, pos, owner, sensor, truth)
         return self._heat_values(ev, pos, owner, sensor, truth)
 
-    def _heat_values(self, ev: Evaluation, pos, owner, sensor, truth) -> "HeatMap":
+    def _heat_values(self, ev: Evaluation, pos, owner, sensor, truth) -> HeatMap:
         """The heat map's values at samples pos (S,3) robot frame with their sensor readings and truth."""
         fitted = self._fitted(ev)
         cp = correct_points(ev.registration.mapping, fitted, sensor)
@@ -477,15 +527,23 @@ class ExplorerSession:
     def _fitted(self, ev: Evaluation):
         inc = ev.included
         if np.any(inc):
-            key = (self.settings.interpolator(), ev.fiducial_readings.sensor[inc].tobytes(), ev.corrections[inc].tobytes())
-            return self._cached("fitted", key,
-                                lambda: self.settings.interpolator().fit(ev.fiducial_readings.sensor[inc], ev.corrections[inc]))
-        return interpolation.NoCorrection().fit(ev.registration_readings.sensor,
-                                                np.zeros_like(ev.registration_readings.sensor))
+            key = (
+                self.settings.interpolator(),
+                ev.fiducial_readings.sensor[inc].tobytes(),
+                ev.corrections[inc].tobytes(),
+            )
+            return self._cached(
+                "fitted",
+                key,
+                lambda: self.settings.interpolator().fit(ev.fiducial_readings.sensor[inc], ev.corrections[inc]),
+            )
+        return interpolation.NoCorrection().fit(
+            ev.registration_readings.sensor, np.zeros_like(ev.registration_readings.sensor)
+        )
 
     # ----------------------------------------------------------------------------------------- Monte Carlo
     @thread_limited
-    def monte_carlo(self, trials: int = 200, checks_per_target: int = 10, seed: int | None = None) -> "MonteCarloPlots":
+    def monte_carlo(self, trials: int = 200, checks_per_target: int = 10, seed: int | None = None) -> MonteCarloPlots:
         """Scene mode: Monte Carlo of the current layout and settings (noise redrawn, bias fixed, both scaled);
         errors at check points sampled in the targets' regions, rigid vs RRBC, and their distance from the
         scene's distance origin. Uses the current registration strategy and interpolation."""
@@ -513,15 +571,21 @@ class ExplorerSession:
                 q = p if region is None else p + region.sample(rng, 1)[0] - region.center
                 ids.append(f"{pid}.c{k}"), roles.append("check"), pos.append(q)
         robot = np.array(pos, float).reshape(-1, 3)
-        cell = WorkCell(name=sc.name, sensor_to_robot=sc.sensor_to_robot, ids=tuple(ids), roles=tuple(roles),
-                        robot=robot, time=np.arange(len(ids)) * float(sc.measurement_interval_s),
-                        tool_rotation=np.broadcast_to(tool_down(sc.tool_yaw_deg), (len(ids), 3, 3)).copy(),
-                        error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale), joint_seed=sc.joint_seed,
-                        distance_origin=np.asarray(sc.distance_origin, float))
+        cell = WorkCell(
+            name=sc.name,
+            sensor_to_robot=sc.sensor_to_robot,
+            ids=tuple(ids),
+            roles=tuple(roles),
+            robot=robot,
+            time=np.arange(len(ids)) * float(sc.measurement_interval_s),
+            tool_rotation=np.broadcast_to(tool_down(sc.tool_yaw_deg), (len(ids), 3, 3)).copy(),
+            error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale),
+            joint_seed=sc.joint_seed,
+            distance_origin=np.asarray(sc.distance_origin, float),
+        )
         m = measure(cell, rng, trials)
         opts = s.method.interpolation_kwargs()
-        e = trial_errors(cell, m, s.registration, s.interpolation,
-                         seeds=rng.integers(0, 2**31 - 1, trials), **opts)
+        e = trial_errors(cell, m, s.registration, s.interpolation, seeds=rng.integers(0, 2**31 - 1, trials), **opts)
         chk = cell.index("check")
         dist = np.linalg.norm(cell.robot[chk] - cell.distance_origin, axis=1)
         return MonteCarloPlots(e.rigid, e.rrbc, dist, trials)
@@ -551,9 +615,15 @@ class ExplorerSession:
             ids.append(pid), roles.append("check" if known else "target")
             sensor.append(t.sensor[i]), robot.append(t.truth[i] if known else np.full(3, np.nan))
         n = len(ids)
-        return MeasurementSet(ids=tuple(ids), roles=tuple(roles), sensor=np.array(sensor).reshape(n, 3),
-                              robot=np.array(robot).reshape(n, 3), time=np.full(n, np.nan),
-                              lines=tuple(0 for _ in ids), source=f"<{self.name}>")
+        return MeasurementSet(
+            ids=tuple(ids),
+            roles=tuple(roles),
+            sensor=np.array(sensor).reshape(n, 3),
+            robot=np.array(robot).reshape(n, 3),
+            time=np.full(n, np.nan),
+            lines=tuple(0 for _ in ids),
+            source=f"<{self.name}>",
+        )
 
     @thread_limited
     def export_json(self) -> dict:
@@ -566,5 +636,3 @@ class ExplorerSession:
         out["settings"] = {**dataclasses.asdict(s), "excluded": sorted(s.excluded)}
         out["source"] = {"kind": self.kind, "name": self.name}
         return out
-
-

@@ -3,7 +3,9 @@ planning state (`PlanningState`), the Monte Carlo plots (`MonteCarloPlots`), and
 noise and bias sizes applied (`scaled`)."""
 
 from __future__ import annotations
+
 from dataclasses import dataclass, field
+
 import numpy as np
 
 
@@ -80,7 +82,7 @@ class _Scaled:
         # a noise term's `covariance`, scaled with the term (absent, like here, if the term has none). Nothing else
         # is forwarded: an unscaled parameter read through the wrapper would be silently wrong.
         if name == "covariance" and hasattr(self.term, "covariance"):
-            return lambda x: self.factor ** 2 * self.term.covariance(x)
+            return lambda x: self.factor**2 * self.term.covariance(x)
         raise AttributeError(name)
 
 

@@ -57,16 +57,15 @@ problem raises `InputError`, naming the trial where it is a per-trial problem.
 
 from __future__ import annotations
 
-
 import numpy as np
 
-from rrbc_core.geometry import points as geometry
-from rrbc_core import registration
-from rrbc_core.registration import STRATEGY_OPTIONS
 from rrbc_core import interpolation as interp_mod
-from rrbc_core.errors import InputError
-from rrbc_core.interpolation import EXACT_MM
+from rrbc_core import registration
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
+from rrbc_core.errors import InputError
+from rrbc_core.geometry import points as geometry
+from rrbc_core.interpolation import EXACT_MM
+from rrbc_core.registration import STRATEGY_OPTIONS
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.simulation.batch_checks import (
     _average_name,
@@ -96,8 +95,16 @@ from rrbc_core.simulation.batch_registration import (
     three_point_batch,
 )
 
-__all__ = ["annealing_batch", "apply_batch", "apply_inverse_batch", "combinatorial_batch", "idw_batch",
-           "least_squares_batch", "rrbc_batch", "three_point_batch"]
+__all__ = [
+    "annealing_batch",
+    "apply_batch",
+    "apply_inverse_batch",
+    "combinatorial_batch",
+    "idw_batch",
+    "least_squares_batch",
+    "rrbc_batch",
+    "three_point_batch",
+]
 
 _HULL_MODES = ("mean", "trial", "none")
 
@@ -226,8 +233,12 @@ def _register(method, s, r, seeds, options):
         return (*_finite("combinatorial", *_combinatorial(s, r, average, ratio)), average == "chordal")
     # annealing from the core's default start (element-wise combinatorial): a LinearMap
     iterations, cooling_c = _annealing_options(options.get("iterations", 5000), options.get("cooling_c", 2.0))
-    a0, t0 = _finite("combinatorial", *_combinatorial(s, r, "elementwise", geometry.SUBSET_DEGENERACY_RATIO,
-                                                      "annealing (from the combinatorial average)"))
+    a0, t0 = _finite(
+        "combinatorial",
+        *_combinatorial(
+            s, r, "elementwise", geometry.SUBSET_DEGENERACY_RATIO, "annealing (from the combinatorial average)"
+        ),
+    )
     return (*_finite("annealing", *_annealing(s, r, a0, t0, seeds, iterations, cooling_c)), False)
 
 
@@ -331,14 +342,20 @@ def _ls_idw_compiled(reg_s, reg_b, fid_s, fid_b, query_s, method, hull) -> dict:
     checks and messages as the general path, made on the kernel's by-products in the general path's order."""
     from rrbc_core.simulation.compiled import ls_idw
 
-    names = ("sensor registration points", "robot registration points", "fiducial sensor points",
-             "fiducial robot points", "target sensor points")
+    names = (
+        "sensor registration points",
+        "robot registration points",
+        "fiducial sensor points",
+        "fiducial robot points",
+        "target sensor points",
+    )
     s = _stack(reg_s, names[0], finite=False)
     trials = s.shape[0]
     r = _stack(reg_b, names[1], trials=trials, finite=False)
     if s.shape != r.shape:
         raise InputError(
-            f"sensor and robot registration points must pair up: {s.shape[1]} sensor vs {r.shape[1]} robot points")
+            f"sensor and robot registration points must pair up: {s.shape[1]} sensor vs {r.shape[1]} robot points"
+        )
     if s.shape[1] < 3:
         _raise_non_finite(np.isfinite(s).all(axis=(1, 2)), names[0])
         _raise_non_finite(np.isfinite(r).all(axis=(1, 2)), names[1])
@@ -349,8 +366,11 @@ def _ls_idw_compiled(reg_s, reg_b, fid_s, fid_b, query_s, method, hull) -> dict:
         raise InputError(f"fiducials must pair up: {fs.shape[1]} sensor vs {fb.shape[1]} robot points")
     q = _stack(query_s, names[4], trials=trials, shared=True, finite=False)
     out = ls_idw(s, r, fs, fb, q, method.k, method.power, EXACT_MM) if fs.shape[1] else None
-    finite = out["finite"] if out is not None else np.stack(
-        [np.isfinite(x).all(axis=(1, 2)) for x in (s, r, fs, fb, q)], axis=1)
+    finite = (
+        out["finite"]
+        if out is not None
+        else np.stack([np.isfinite(x).all(axis=(1, 2)) for x in (s, r, fs, fb, q)], axis=1)
+    )
     _raise_non_finite(finite[:, 0], names[0])
     _raise_non_finite(finite[:, 1], names[1])
     _check_registration_batch(s, names[0], deviation=None if out is None else out["deviation"][:, 0])

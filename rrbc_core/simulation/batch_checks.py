@@ -3,11 +3,12 @@ trial (screened, then decided by the core check so the decision and the message 
 weights, seeds and options; and the chunking of trials. Every problem raises `InputError`, naming the trial."""
 
 from __future__ import annotations
+
 import numpy as np
 from scipy.spatial import cKDTree
-from rrbc_core.geometry import points as geometry
-from rrbc_core.errors import InputError
 
+from rrbc_core.errors import InputError
+from rrbc_core.geometry import points as geometry
 
 #: Elements per temporary array: trials are processed in chunks so memory stays bounded (and in cache).
 _CHUNK_ELEMENTS = 250_000
@@ -195,8 +196,11 @@ def _trace_and_minors(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     s = np.matmul(np.swapaxes(c, 1, 2), c)
     tr = s[:, 0, 0] + s[:, 1, 1] + s[:, 2, 2]
     c2 = (
-        s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] ** 2
-        + s[:, 0, 0] * s[:, 2, 2] - s[:, 0, 2] ** 2
-        + s[:, 1, 1] * s[:, 2, 2] - s[:, 1, 2] ** 2
+        s[:, 0, 0] * s[:, 1, 1]
+        - s[:, 0, 1] ** 2
+        + s[:, 0, 0] * s[:, 2, 2]
+        - s[:, 0, 2] ** 2
+        + s[:, 1, 1] * s[:, 2, 2]
+        - s[:, 1, 2] ** 2
     )
     return tr, c2

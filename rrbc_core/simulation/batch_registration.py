@@ -3,11 +3,14 @@ averaging and simulated annealing for T trials at once, and mapping points with 
 numbers as the per-trial core functions (`registration`), to rounding; see `batch` for the whole chain."""
 
 from __future__ import annotations
+
 from itertools import combinations
+
 import numpy as np
-from rrbc_core.geometry import points as geometry
+
 from rrbc_core import registration
 from rrbc_core.errors import InputError
+from rrbc_core.geometry import points as geometry
 from rrbc_core.geometry.transforms import project_to_so3
 from rrbc_core.simulation.batch_checks import (
     _CHUNK_ELEMENTS,
@@ -23,7 +26,6 @@ from rrbc_core.simulation.batch_checks import (
     _stack,
     _trace_and_minors,
 )
-
 
 #: Annealing chains advanced in lockstep per group (bounds memory; larger groups amortise Python overhead).
 _ANNEALING_GROUP = 1024
@@ -306,8 +308,12 @@ def annealing_batch(
     seeds = _check_seeds(seeds, s.shape[0])
     iterations, cooling_c = _annealing_options(iterations, cooling_c)
     if initial is None:
-        a0, t0 = _finite("combinatorial", *_combinatorial(s, r, "elementwise", geometry.SUBSET_DEGENERACY_RATIO,
-                                                      "annealing (from the combinatorial average)"))
+        a0, t0 = _finite(
+            "combinatorial",
+            *_combinatorial(
+                s, r, "elementwise", geometry.SUBSET_DEGENERACY_RATIO, "annealing (from the combinatorial average)"
+            ),
+        )
     else:
         try:
             a0, t0 = initial
@@ -322,9 +328,13 @@ def annealing_batch(
 def _annealing_options(iterations, cooling_c):
     numbers = (int, float, np.integer, np.floating)
     if (
-        isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1
-        or isinstance(cooling_c, bool) or not isinstance(cooling_c, numbers)
-        or not np.isfinite(cooling_c) or cooling_c <= 0
+        isinstance(iterations, bool)
+        or not isinstance(iterations, (int, np.integer))
+        or iterations < 1
+        or isinstance(cooling_c, bool)
+        or not isinstance(cooling_c, numbers)
+        or not np.isfinite(cooling_c)
+        or cooling_c <= 0
     ):
         raise InputError("annealing needs iterations >= 1 and cooling constant C > 0")
     return int(iterations), cooling_c

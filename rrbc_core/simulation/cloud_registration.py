@@ -29,8 +29,8 @@ import math
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.registration.strategies import Registration
 from rrbc_core.geometry.transforms import RigidTransform, project_to_so3, rotation_from_rotvec
+from rrbc_core.registration.strategies import Registration
 from rrbc_core.simulation.visibility import _mesh_arrays, cast_from
 
 
@@ -242,15 +242,22 @@ def icp_registration(
     current = shift @ initial.as_matrix()  # sensor -> shifted robot
     # point-to-point while far (always well conditioned), then point-to-plane at the final distance
     if coarse_to_fine:
-        plan = [("point-to-point", 4.0 * max_distance_mm), ("point-to-point", 2.0 * max_distance_mm),
-                ("point-to-point", max_distance_mm), ("point-to-plane", max_distance_mm)]
+        plan = [
+            ("point-to-point", 4.0 * max_distance_mm),
+            ("point-to-point", 2.0 * max_distance_mm),
+            ("point-to-point", max_distance_mm),
+            ("point-to-plane", max_distance_mm),
+        ]
     else:
         plan = [("point-to-plane", max_distance_mm)]
     crit = reg.ICPConvergenceCriteria(relative_fitness=1e-9, relative_rmse=1e-9, max_iteration=int(iterations))
     stages, result = [], None
     for kind, dist in plan:
-        est = (reg.TransformationEstimationPointToPoint() if kind == "point-to-point"
-               else reg.TransformationEstimationPointToPlane())
+        est = (
+            reg.TransformationEstimationPointToPoint()
+            if kind == "point-to-point"
+            else reg.TransformationEstimationPointToPlane()
+        )
         result = reg.registration_icp(source, target, float(dist), current, est, crit)
         current = np.asarray(result.transformation)
         stages.append(
@@ -282,8 +289,15 @@ def icp_registration(
         )  # keep the sampled result if the refinement made the fit worse (it has not been seen to)
         if accepted:
             mapping = refined
-        stages.append({"kind": "exact point-to-plane on the mesh", "max_distance_mm": float(max_distance_mm),
-                       "iterations": n_iter, "converged": converged, "accepted": bool(accepted)})
+        stages.append(
+            {
+                "kind": "exact point-to-plane on the mesh",
+                "max_distance_mm": float(max_distance_mm),
+                "iterations": n_iter,
+                "converged": converged,
+                "accepted": bool(accepted),
+            }
+        )
     # inlier residuals at the final pose against the exact mesh (closest points), all cloud points
     _, _, _, ok, q = _refine_on_mesh(src, vertices, faces, mapping, float(max_distance_mm), 0)
     mapped = mapping.apply(src)

@@ -26,7 +26,6 @@ lazily (it imports numba, ~0.2 s).
 from __future__ import annotations
 
 import numpy as np
-
 from numba import njit
 
 
@@ -96,9 +95,28 @@ def _svd3(h, u, s, v, a, warm):  # pragma: no cover - compiled; tested through l
     u[1, 2] = u[2, 0] * u[0, 1] - u[0, 0] * u[2, 1]
     u[2, 2] = u[0, 0] * u[1, 1] - u[1, 0] * u[0, 1]
 
+
 @njit(cache=True, error_model="python")
-def _ls_idw(reg_s, reg_b, fid_s, fid_b, q, k, power, exact_mm, a_out, t_out, e_out, c_out, rigid_out,
-            rrbc_out, finite_out, dev_out, fid_sum, q_sum):  # pragma: no cover - compiled; tested against the core in tests/test_batch.py
+def _ls_idw(
+    reg_s,
+    reg_b,
+    fid_s,
+    fid_b,
+    q,
+    k,
+    power,
+    exact_mm,
+    a_out,
+    t_out,
+    e_out,
+    c_out,
+    rigid_out,
+    rrbc_out,
+    finite_out,
+    dev_out,
+    fid_sum,
+    q_sum,
+):  # pragma: no cover - compiled; tested against the core in tests/test_batch.py
     n_t, n_r = reg_s.shape[0], reg_s.shape[1]
     n_f, n_q = fid_s.shape[1], q.shape[1]
     h = np.empty((3, 3))
@@ -167,8 +185,11 @@ def _ls_idw(reg_s, reg_b, fid_s, fid_b, q, k, power, exact_mm, a_out, t_out, e_o
         h[1, 0], h[1, 1], h[1, 2] = h10, h11, h12
         h[2, 0], h[2, 1], h[2, 2] = h20, h21, h22
         _svd3(h, u, s, v, sa, tt > 0)
-        detv = (v[0, 0] * (v[1, 1] * v[2, 2] - v[1, 2] * v[2, 1]) - v[0, 1] * (v[1, 0] * v[2, 2] - v[1, 2] * v[2, 0])
-                + v[0, 2] * (v[1, 0] * v[2, 1] - v[1, 1] * v[2, 0]))
+        detv = (
+            v[0, 0] * (v[1, 1] * v[2, 2] - v[1, 2] * v[2, 1])
+            - v[0, 1] * (v[1, 0] * v[2, 2] - v[1, 2] * v[2, 0])
+            + v[0, 2] * (v[1, 0] * v[2, 1] - v[1, 1] * v[2, 0])
+        )
         sg = 1.0 if detv >= 0.0 else -1.0
         for i in range(3):
             for j in range(3):
@@ -211,7 +232,9 @@ def _ls_idw(reg_s, reg_b, fid_s, fid_b, q, k, power, exact_mm, a_out, t_out, e_o
                 dk[pos] = dd
                 idx[pos] = f
             c0 = c1 = c2 = 0.0
-            if dk[0] < exact_mm * exact_mm and np.sqrt(dk[0]) < exact_mm:  # on a fiducial: the mean correction of all that close
+            if (
+                dk[0] < exact_mm * exact_mm and np.sqrt(dk[0]) < exact_mm
+            ):  # on a fiducial: the mean correction of all that close
                 ws = 0.0
                 for f in range(n_f):
                     if np.sqrt(d2[f]) < exact_mm:
@@ -250,15 +273,35 @@ def ls_idw(reg_s, reg_b, fid_s, fid_b, query, k: int, power: float, exact_mm: fl
     and robot registration points from trial 0's, fiducial_mean (Nf,3) and query_mean (M,3) over trials."""
     arrays = [np.ascontiguousarray(x, dtype=float) for x in (reg_s, reg_b, fid_s, fid_b, query)]
     n_t, n_f, n_q = arrays[0].shape[0], arrays[2].shape[1], arrays[4].shape[1]
-    out = {"matrix": np.empty((n_t, 3, 3)), "translation": np.empty((n_t, 3)),
-           "fiducial_corrections": np.empty((n_t, n_f, 3)), "corrections": np.empty((n_t, n_q, 3)),
-           "robot_rigid": np.empty((n_t, n_q, 3)), "robot_rrbc": np.empty((n_t, n_q, 3)),
-           "finite": np.empty((n_t, 5), dtype=np.bool_), "deviation": np.empty((n_t, 2)),
-           "fiducial_mean": np.empty((n_f, 3)), "query_mean": np.empty((n_q, 3))}
+    out = {
+        "matrix": np.empty((n_t, 3, 3)),
+        "translation": np.empty((n_t, 3)),
+        "fiducial_corrections": np.empty((n_t, n_f, 3)),
+        "corrections": np.empty((n_t, n_q, 3)),
+        "robot_rigid": np.empty((n_t, n_q, 3)),
+        "robot_rrbc": np.empty((n_t, n_q, 3)),
+        "finite": np.empty((n_t, 5), dtype=np.bool_),
+        "deviation": np.empty((n_t, 2)),
+        "fiducial_mean": np.empty((n_f, 3)),
+        "query_mean": np.empty((n_q, 3)),
+    }
     with np.errstate(all="ignore"):
-        _ls_idw(*arrays, int(min(k, n_f)), float(power), float(exact_mm), out["matrix"], out["translation"],
-                out["fiducial_corrections"], out["corrections"], out["robot_rigid"], out["robot_rrbc"],
-                out["finite"], out["deviation"], out["fiducial_mean"], out["query_mean"])
+        _ls_idw(
+            *arrays,
+            int(min(k, n_f)),
+            float(power),
+            float(exact_mm),
+            out["matrix"],
+            out["translation"],
+            out["fiducial_corrections"],
+            out["corrections"],
+            out["robot_rigid"],
+            out["robot_rrbc"],
+            out["finite"],
+            out["deviation"],
+            out["fiducial_mean"],
+            out["query_mean"],
+        )
     out["fiducial_mean"] /= n_t
     out["query_mean"] /= n_t
     return out

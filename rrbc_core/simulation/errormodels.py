@@ -225,20 +225,22 @@ class ErrorModel:
                 cov += t.covariance(x)
         return cov
 
-    def deterministic(self) -> "ErrorModel":
+    def deterministic(self) -> ErrorModel:
         """Only the random=False terms: the bias the robot/sensor carries (the same in every trial)."""
         return ErrorModel(tuple(t for t in self.robot if not t.random), tuple(t for t in self.sensor if not t.random))
 
-    def random_terms(self) -> "ErrorModel":
+    def random_terms(self) -> ErrorModel:
         """Only the random=True terms: noise and outliers (redrawn every trial)."""
         return ErrorModel(tuple(t for t in self.robot if t.random), tuple(t for t in self.sensor if t.random))
 
-    def without(self, *kinds: str) -> "ErrorModel":
+    def without(self, *kinds: str) -> ErrorModel:
         """The model with every term of the given kinds switched off."""
         ks = _check_kinds(kinds)
-        return ErrorModel(tuple(t for t in self.robot if t.kind not in ks), tuple(t for t in self.sensor if t.kind not in ks))
+        return ErrorModel(
+            tuple(t for t in self.robot if t.kind not in ks), tuple(t for t in self.sensor if t.kind not in ks)
+        )
 
-    def only(self, *kinds: str) -> "ErrorModel":
+    def only(self, *kinds: str) -> ErrorModel:
         """The model with only the terms of the given kinds."""
         ks = _check_kinds(kinds)
         return ErrorModel(tuple(t for t in self.robot if t.kind in ks), tuple(t for t in self.sensor if t.kind in ks))
@@ -246,5 +248,3 @@ class ErrorModel:
     @property
     def kinds(self) -> tuple[str, ...]:
         return tuple(t.kind for t in self.robot + self.sensor)
-
-

@@ -3,27 +3,29 @@ and outliers (random, redrawn every trial); scale, affine, smooth field, the arm
 warm-up (deterministic: bias). And the error model's table form, as scene files and reports write it."""
 
 from __future__ import annotations
+
 import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
+
 import numpy as np
+
 from rrbc_core.errors import InputError
 from rrbc_core.simulation.errormodels import (
+    SIDES,
+    TERM_TYPES,
     ErrorModel,
     ErrorTerm,
     PointSet,
-    SIDES,
-    TERM_TYPES,
-    _Term,
     _check_trials,
     _integer,
     _matrix3,
     _number,
     _set,
+    _Term,
     _vector,
 )
 from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, DHParameters, forward, inverse_path, perturbed
-
 
 _FIELD_CHUNK = 8192  # points per block when evaluating a smooth field
 
@@ -125,15 +127,13 @@ class RangeNoise(_Term):
         _set(self, "along_mm", _vector("along_mm", self.along_mm, 3, minimum=0, unit="c0 mm, c1 mm/m, c2 mm/m²"))
 
     @classmethod
-    def laser_tracker(cls) -> "RangeNoise":
+    def laser_tracker(cls) -> RangeNoise:
         """Typical (half-MPE) laser-tracker noise, theory notes §5.2: σ_∥ = (10 µm + 0.3 µm/m·ρ)/2,
         σ_⊥ = (15 µm + 6 µm/m·ρ)/2."""
         return cls(perp_mm=(0.0075, 0.003), along_mm=(0.005, 0.00015, 0.0))
 
     @classmethod
-    def stereo(
-        cls, focal_px: float, baseline_m: float, sigma_disparity_px: float, sigma_pixel_px: float
-    ) -> "RangeNoise":
+    def stereo(cls, focal_px: float, baseline_m: float, sigma_disparity_px: float, sigma_pixel_px: float) -> RangeNoise:
         """Stereo camera, theory notes §5.2: σ_∥ = ρ² σ_d/(f B), σ_⊥ = ρ σ_u/f (ρ in m, result in mm)."""
         f = _number("focal_px", focal_px, positive=True, unit="px")
         b = _number("baseline_m", baseline_m, positive=True, unit="m")
@@ -295,7 +295,7 @@ def _dh_value(value) -> DHParameters:
         tool = _number("dh.tool_mm", value.get("tool_mm", UR5.tool_mm), unit="mm")
         return DHParameters(**vals, tool_mm=tool)
     raise InputError(
-        f"dh must be \"UR5\" or a table with any of the keys {', '.join(_DH_KEYS)} (the rest from UR5); got {value!r}"
+        f'dh must be "UR5" or a table with any of the keys {", ".join(_DH_KEYS)} (the rest from UR5); got {value!r}'
     )
 
 

@@ -73,11 +73,11 @@ class DHParameters:
             raise InputError(f"tool_mm must be one finite number (mm), got {t!r}")
         object.__setattr__(self, "tool_mm", float(self.tool_mm))
 
-    def with_tool(self, tool_mm: float) -> "DHParameters":
+    def with_tool(self, tool_mm: float) -> DHParameters:
         """The same arm with a different tool length (mm along the flange z axis)."""
         return DHParameters(self.a, self.d, self.alpha, self.theta_offset, tool_mm)
 
-    def same_as(self, other: "DHParameters") -> bool:
+    def same_as(self, other: DHParameters) -> bool:
         """True when every parameter is exactly equal (the class compares by identity with ==)."""
         names = ("a", "d", "alpha", "theta_offset")
         return all(np.array_equal(getattr(self, n), getattr(other, n)) for n in names) and self.tool_mm == other.tool_mm
@@ -403,9 +403,9 @@ def inverse_path(dh: DHParameters, positions, rotations, seed_q) -> np.ndarray:
     q, perr, oerr = _solve(dh, p, np.ascontiguousarray(r), np.tile(seed, (len(p), 1)))
     bad = _unreachable(perr, oerr)
     if bad.size:
-        shown = ", ".join(
-            f"{i} at ({p[i, 0]:.1f}, {p[i, 1]:.1f}, {p[i, 2]:.1f}) mm" for i in bad[:5]
-        ) + (f" and {bad.size - 5} more" if bad.size > 5 else "")
+        shown = ", ".join(f"{i} at ({p[i, 0]:.1f}, {p[i, 1]:.1f}, {p[i, 2]:.1f}) mm" for i in bad[:5]) + (
+            f" and {bad.size - 5} more" if bad.size > 5 else ""
+        )
         raise InputError(
             f"{bad.size} of {len(p)} points are not reachable on the seed's configuration branch: point {shown}; "
             "move them inside the arm's reach, change the tool orientation, or change the seed"

@@ -63,8 +63,13 @@ class MeasurementModel:
         (default 0), as the error terms see them."""
         robot = np.asarray(robot, float).reshape(-1, 3)
         time = np.zeros(len(robot)) if time is None else time
-        return PointSet(robot=robot, sensor=self.sensor_to_robot.apply_inverse(robot), time=time,
-                        tool_rotation=tool_rotation, joint_seed=self.joint_seed)
+        return PointSet(
+            robot=robot,
+            sensor=self.sensor_to_robot.apply_inverse(robot),
+            time=time,
+            tool_rotation=tool_rotation,
+            joint_seed=self.joint_seed,
+        )
 
     def bias(self, pts: PointSet) -> tuple[np.ndarray, np.ndarray]:
         """(β_s (P, 3) sensor frame, β_r (P, 3) robot frame), mm, unscaled. Draws nothing."""
@@ -83,7 +88,7 @@ class MeasurementModel:
     def noise_covariance(self, pts: PointSet) -> tuple[np.ndarray, np.ndarray]:
         """Covariances (P, 3, 3) mm² of ε (sensor frame) and η (robot frame), scaled by n²."""
         rnd = self.error_model.random_terms()
-        f = self.noise_scale ** 2
+        f = self.noise_scale**2
         return f * rnd.covariance(pts, "sensor"), f * rnd.covariance(pts, "robot")
 
     def read(self, pts: PointSet, bias=None, noise=None) -> Readings:

@@ -21,15 +21,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rrbc_core.simulation import batch
-from rrbc_core.correction import metrics
-from rrbc_core.simulation.errormodels import ErrorModel, PointSet
-from rrbc_core.simulation.measurement import MeasurementModel
 from rrbc_core import interpolation, registration
+from rrbc_core.correction import metrics
 from rrbc_core.errors import InputError
+from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.runtime.threads import thread_limited
-from rrbc_core.geometry.transforms import RigidTransform
+from rrbc_core.simulation import batch
+from rrbc_core.simulation.errormodels import ErrorModel, PointSet
+from rrbc_core.simulation.measurement import MeasurementModel
 
 STRATEGY_NAMES = tuple(registration.STRATEGIES)  # the registries' names, in their order
 INTERPOLATION_NAMES = tuple(interpolation.METHODS)
@@ -73,8 +73,9 @@ class WorkCell:
         return self.measurement_model().points(self.robot, self.tool_rotation, self.time)
 
 
-def work_cell_from_scene(scene, seed: int | None = None, checks_per_target: int | None = None,
-                         visibility: bool = True) -> WorkCell:
+def work_cell_from_scene(
+    scene, seed: int | None = None, checks_per_target: int | None = None, visibility: bool = True
+) -> WorkCell:
     """Build the true cell of a scene: registration points, fiducials, targets at their nominal positions,
     and check points sampled uniformly inside each target's region of variability (seeded).
 
@@ -143,8 +144,14 @@ def work_cell_from_scene(scene, seed: int | None = None, checks_per_target: int 
 def _check_cell(cell: WorkCell) -> None:
     n_reg = len(cell.index("registration", "both"))
     if n_reg < 3:
-        hidden = f" ({len(cell.occluded)} points are hidden from the sensor: {', '.join(cell.occluded[:6])})" if cell.occluded else ""
-        raise InputError(f"scene '{cell.name}': {n_reg} registration points are visible to the sensor; at least 3 are needed{hidden}")
+        hidden = (
+            f" ({len(cell.occluded)} points are hidden from the sensor: {', '.join(cell.occluded[:6])})"
+            if cell.occluded
+            else ""
+        )
+        raise InputError(
+            f"scene '{cell.name}': {n_reg} registration points are visible to the sensor; at least 3 are needed{hidden}"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,8 +173,11 @@ def measure(cell: WorkCell, rng: np.random.Generator, trials: int = 1) -> Measur
     model = cell.measurement_model()
     pts = cell.point_set()
     r = model.read(pts, noise=model.noise(pts, rng, trials))
-    return Measured(np.ascontiguousarray(np.broadcast_to(r.sensor, (trials,) + pts.sensor.shape)),
-                    np.ascontiguousarray(np.broadcast_to(r.robot, (trials,) + pts.robot.shape)), r.truth)
+    return Measured(
+        np.ascontiguousarray(np.broadcast_to(r.sensor, (trials,) + pts.sensor.shape)),
+        np.ascontiguousarray(np.broadcast_to(r.robot, (trials,) + pts.robot.shape)),
+        r.truth,
+    )
 
 
 def measurement_set(cell: WorkCell, measured: Measured, trial: int = 0) -> MeasurementSet:
@@ -200,8 +210,14 @@ class TrialErrors:
 
 
 @thread_limited
-def trial_errors(cell: WorkCell, measured: Measured, registration: str = "least-squares",
-                 interpolation: str = "idw", seeds=None, **interp_options) -> TrialErrors:
+def trial_errors(
+    cell: WorkCell,
+    measured: Measured,
+    registration: str = "least-squares",
+    interpolation: str = "idw",
+    seeds=None,
+    **interp_options,
+) -> TrialErrors:
     """Run registration + RRBC on every trial (vectorised where `batch` can) and score the check points."""
     reg = cell.index("registration", "both")
     fid = cell.index("fiducial", "both")
@@ -261,6 +277,7 @@ class MonteCarloResult:
     (IDW); per interpolation (`interpolations`, `InterpolationStats`) the RMST after least squares + RRBC; the scene,
     trials, seed and seconds. `to_json()` is the JSON of `rrbc simulate --json`.
     """
+
     scene: str
     trials: int
     seconds: float
@@ -275,17 +292,24 @@ class MonteCarloResult:
 
     def to_json(self) -> dict:
         """JSON of `rrbc simulate --json` (NaN, e.g. a correlation of constant errors, becomes null)."""
-        return _nan_to_none({
-            "scene": self.scene,
-            "trials": self.trials,
-            "seconds": self.seconds,
-            "seed": self.seed,
-            "strategies": [{**s.__dict__, **({"trials": self.icp_trials} if s.name == "icp" else {})}
-                           for s in self.strategies],
-            "interpolations": [s.__dict__ for s in self.interpolations],
-            "points": {"registration": self.n_registration, "fiducials": self.n_fiducials,
-                       "checks": self.n_checks, "occluded": list(self.occluded)},
-        })
+        return _nan_to_none(
+            {
+                "scene": self.scene,
+                "trials": self.trials,
+                "seconds": self.seconds,
+                "seed": self.seed,
+                "strategies": [
+                    {**s.__dict__, **({"trials": self.icp_trials} if s.name == "icp" else {})} for s in self.strategies
+                ],
+                "interpolations": [s.__dict__ for s in self.interpolations],
+                "points": {
+                    "registration": self.n_registration,
+                    "fiducials": self.n_fiducials,
+                    "checks": self.n_checks,
+                    "occluded": list(self.occluded),
+                },
+            }
+        )
 
 
 def _nan_to_none(obj):
@@ -318,8 +342,15 @@ def _pearson(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @thread_limited
-def monte_carlo(cell: WorkCell, trials: int, seed: int = 0, strategies=STRATEGY_NAMES,
-                interpolations=INTERPOLATION_NAMES, chunk: int = 2000, progress=None) -> MonteCarloResult:
+def monte_carlo(
+    cell: WorkCell,
+    trials: int,
+    seed: int = 0,
+    strategies=STRATEGY_NAMES,
+    interpolations=INTERPOLATION_NAMES,
+    chunk: int = 2000,
+    progress=None,
+) -> MonteCarloResult:
     """Monte Carlo over `trials` sessions: per strategy, rigid TRE mean/RMS/max, correlation of the error with
     distance from the origin, and RMST after RRBC (IDW); per interpolation method, RMST after least-squares
     registration + RRBC. Trials run in chunks of `chunk` (memory bound); `progress(n, label)` is called as
@@ -356,8 +387,10 @@ def monte_carlo(cell: WorkCell, trials: int, seed: int = 0, strategies=STRATEGY_
             if progress:
                 progress(n, f"least-squares + {name}")
         done += n
-    stats = [_strategy_stats(name, np.concatenate(acc_s[name][0]), np.concatenate(acc_s[name][1]), dist)
-             for name in strategies]
+    stats = [
+        _strategy_stats(name, np.concatenate(acc_s[name][0]), np.concatenate(acc_s[name][1]), dist)
+        for name in strategies
+    ]
     istats = []
     for name in interpolations:
         e = np.concatenate(acc_i[name])
@@ -377,17 +410,24 @@ def monte_carlo(cell: WorkCell, trials: int, seed: int = 0, strategies=STRATEGY_
 
 
 @thread_limited
-def icp_statistics(scene, cell: WorkCell, trials: int, seed: int = 0, start_error_deg: float = 2.0,
-                   start_error_mm: float = 10.0, progress=None) -> StrategyStats:
+def icp_statistics(
+    scene,
+    cell: WorkCell,
+    trials: int,
+    seed: int = 0,
+    start_error_deg: float = 2.0,
+    start_error_mm: float = 10.0,
+    progress=None,
+) -> StrategyStats:
     """Point-cloud registration as the alternative step 2: per trial, the sensor's view of the cell's mesh is
     ray cast from its true pose (open3d), perturbed by the scene's random sensor terms, and registered to the
     mesh by ICP from the true pose perturbed by a seeded random rotation of `start_error_deg` and shift of
     `start_error_mm`; the check points (measured in the same trial) are then mapped with that transform
     (rigid) and corrected by RRBC with IDW over the fiducials. About 1 s per trial."""
-    from rrbc_core.simulation.cloud_registration import icp_registration, simulate_cloud
-    from rrbc_core.interpolation import IDW
     from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
     from rrbc_core.geometry.transforms import rotation_from_rotvec
+    from rrbc_core.interpolation import IDW
+    from rrbc_core.simulation.cloud_registration import icp_registration, simulate_cloud
 
     if trials < 1:
         raise InputError(f"ICP trials must be >= 1, got {trials}")
@@ -400,7 +440,9 @@ def icp_statistics(scene, cell: WorkCell, trials: int, seed: int = 0, start_erro
 
     def noise(points_sensor, gen):
         ps = PointSet(robot=truth_pose.apply(points_sensor), sensor=points_sensor, time=np.zeros(len(points_sensor)))
-        return rnd.only(*[t.kind for t in rnd.sensor]).sample(ps, "sensor", gen, 1)[0] if rnd.sensor else 0 * points_sensor
+        return (
+            rnd.only(*[t.kind for t in rnd.sensor]).sample(ps, "sensor", gen, 1)[0] if rnd.sensor else 0 * points_sensor
+        )
 
     rigid, rrbc = [], []
     for _ in range(trials):
@@ -423,8 +465,9 @@ def icp_statistics(scene, cell: WorkCell, trials: int, seed: int = 0, start_erro
 
 
 @thread_limited
-def simulate(scene, trials: int = 200, *, seed: int = 0, layout: str | None = None, icp: int = 0,
-             progress=None) -> MonteCarloResult:
+def simulate(
+    scene, trials: int = 200, *, seed: int = 0, layout: str | None = None, icp: int = 0, progress=None
+) -> MonteCarloResult:
     """Monte Carlo of a scene's robot and sensor with its error model: what `rrbc simulate` reports.
 
     Parameters
@@ -456,8 +499,9 @@ def simulate(scene, trials: int = 200, *, seed: int = 0, layout: str | None = No
     res = monte_carlo(cell, trials, seed=seed, progress=progress)
     if icp:
         icp_row = icp_statistics(scene, cell, icp, seed=seed, progress=progress)
-        res = dataclasses.replace(res, strategies=res.strategies + (icp_row,), icp_trials=icp,
-                                  seconds=_time.perf_counter() - start)
+        res = dataclasses.replace(
+            res, strategies=res.strategies + (icp_row,), icp_trials=icp, seconds=_time.perf_counter() - start
+        )
     return res
 
 

@@ -81,10 +81,10 @@ class Moments:
     mu: np.ndarray
     sd: np.ndarray
     cov: np.ndarray
-    power: np.ndarray      # (4,)
+    power: np.ndarray  # (4,)
 
     @classmethod
-    def of(cls, ds: DirectionStats) -> "Moments":
+    def of(cls, ds: DirectionStats) -> Moments:
         x = np.stack([ds.values[s] for s in STATISTICS], axis=2)  # (Φ, R, 4, 7)
         flat = x.reshape(x.shape[0], x.shape[1], _N)
         mu = flat.mean(axis=1)
@@ -94,8 +94,13 @@ class Moments:
         cov[:, idx, idx] += floor
         sd = np.sqrt(cov[:, idx, idx])
         shape = (len(mu), len(STATISTICS), len(METHODS))
-        return cls(np.asarray(ds.phis, dtype=float), mu.reshape(shape), sd.reshape(shape), cov,
-                   np.array([SCALE_POWER[s] for s in STATISTICS]))
+        return cls(
+            np.asarray(ds.phis, dtype=float),
+            mu.reshape(shape),
+            sd.reshape(shape),
+            cov,
+            np.array([SCALE_POWER[s] for s in STATISTICS]),
+        )
 
     @property
     def power_flat(self) -> np.ndarray:
@@ -161,10 +166,10 @@ class Fit:
     phi: float
     params: dict
     deviance: float
-    chi2: float             # Mahalanobis quadratic form of the statistics used
-    mean: np.ndarray        # (4, 7) predicted at the fit
-    sd: np.ndarray          # (4, 7) marginal sd
-    z: np.ndarray           # (4, 7) marginal z = (y − mean) / sd
+    chi2: float  # Mahalanobis quadratic form of the statistics used
+    mean: np.ndarray  # (4, 7) predicted at the fit
+    sd: np.ndarray  # (4, 7) marginal sd
+    z: np.ndarray  # (4, 7) marginal z = (y − mean) / sd
 
     def outside(self, k: float = 2.0) -> int:
         return int(np.sum(np.abs(self.z) > k))
@@ -187,12 +192,14 @@ def fit(moments: Moments, y: np.ndarray, model, mask=None) -> Fit:
         return float(moments.deviance_grid(y, idx, x[:1], x[1:2])[0, 0])
 
     if len(moments.phis) == 1:
-        res = optimize.minimize_scalar(lambda v: f(np.array([v, 0.0])), bounds=(x0[0] - 0.05, x0[0] + 0.05),
-                                       method="bounded")
+        res = optimize.minimize_scalar(
+            lambda v: f(np.array([v, 0.0])), bounds=(x0[0] - 0.05, x0[0] + 0.05), method="bounded"
+        )
         best = np.array([res.x, 0.0]) if res.fun < dev[a, b] else x0
     else:
-        res = optimize.minimize(f, x0, method="L-BFGS-B",
-                                bounds=[(_LOG_RHO[0], _LOG_RHO[-1]), (moments.phis[0], moments.phis[-1])])
+        res = optimize.minimize(
+            f, x0, method="L-BFGS-B", bounds=[(_LOG_RHO[0], _LOG_RHO[-1]), (moments.phis[0], moments.phis[-1])]
+        )
         best = res.x if res.fun < dev[a, b] else x0
     m, s = moments.predict(best[:1], best[1:])
     z = (y - m[0]) / s[0]
@@ -219,8 +226,9 @@ def predictive(moments: Moments, log_rho: float, phi: float) -> tuple[np.ndarray
     return mu * scale, moments.cov_at(phi)[0] * np.outer(scale, scale)
 
 
-def conditional_deviance(y: np.ndarray, mean: np.ndarray, cov: np.ndarray, held: np.ndarray,
-                         given: np.ndarray) -> float:
+def conditional_deviance(
+    y: np.ndarray, mean: np.ndarray, cov: np.ndarray, held: np.ndarray, given: np.ndarray
+) -> float:
     """Deviance of y[held] under the Gaussian (mean, cov) conditioned on y[given] (flat indices)."""
     yf = np.asarray(y, dtype=float).reshape(-1)
     s_gg = cov[np.ix_(given, given)]
@@ -272,10 +280,10 @@ class Assessment:
 
 @dataclass(frozen=True)
 class Selection:
-    assessments: dict              # model name -> Assessment
-    chosen: str                    # "baseline" when no extension is claimed
-    threshold: float               # in-sample deviance gain an extension needs
-    separated: bool                # chosen clearly ahead of the runner-up (or nothing claimed)
+    assessments: dict  # model name -> Assessment
+    chosen: str  # "baseline" when no extension is claimed
+    threshold: float  # in-sample deviance gain an extension needs
+    separated: bool  # chosen clearly ahead of the runner-up (or nothing claimed)
     runner_up: str | None
 
 
@@ -295,8 +303,7 @@ def select(assessments: dict) -> Selection:
     extensions = [a for name, a in assessments.items() if name != "baseline"]
     threshold = float(stats.chi2.ppf(1 - FAMILY_ALPHA / max(len(extensions), 1), 1))
     claimed = [
-        a for a in extensions
-        if base.fit.deviance - a.fit.deviance > threshold and a.cv_deviance < base.cv_deviance
+        a for a in extensions if base.fit.deviance - a.fit.deviance > threshold and a.cv_deviance < base.cv_deviance
     ]
     if not claimed:
         return Selection(assessments, "baseline", threshold, True, None)

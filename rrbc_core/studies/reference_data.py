@@ -38,15 +38,15 @@ class MeasuredRow:
     """One registration method's published statistics (Table II order)."""
 
     method: str
-    order: int                 # row in Table II (1..7)
-    r: float                   # Table I: Pearson r of translation error with distance from the origin of N
-    p: float                   # Table I: its p-value
+    order: int  # row in Table II (1..7)
+    r: float  # Table I: Pearson r of translation error with distance from the origin of N
+    p: float  # Table I: its p-value
     ks_p_vs_prev: float | None  # Table II: two-sample KS p-value against the previous Table II row (None: row 1)
-    mean_mm: float             # Table II
-    var_mm2: float             # Table II
-    max_mm: float              # Table III
-    ps: float                  # Table III: probability of successful one-shot peg insertion (binomial bound)
-    significant: dict          # the paper's significance marks (95 % CL), e.g. {"r": True, "mean": False}
+    mean_mm: float  # Table II
+    var_mm2: float  # Table II
+    max_mm: float  # Table III
+    ps: float  # Table III: probability of successful one-shot peg insertion (binomial bound)
+    significant: dict  # the paper's significance marks (95 % CL), e.g. {"r": True, "mean": False}
 
     def as_dict(self) -> dict:
         return {
@@ -100,7 +100,7 @@ def correlation_p(r: float, n: int) -> float:
     return float(2.0 * stats.t.sf(t, n - 2))
 
 
-def samples_consistent_with(r: float, p: float, n_range=range(10, 400)) -> list[int]:
+def samples_consistent_with(r: float, p: float, n_range: range = range(10, 400)) -> list[int]:  # noqa: B008 - immutable
     """Sample counts n for which a correlation that rounds to r (3 decimals) has a p-value that rounds to p."""
     out = []
     for n in n_range:

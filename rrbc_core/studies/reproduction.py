@@ -31,11 +31,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from rrbc_core.simulation import batch
 from rrbc_core import registration
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, inverse_path, tool_down
 from rrbc_core.geometry.transforms import RigidTransform
+from rrbc_core.simulation import batch
+from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, inverse_path, tool_down
 
 #: Table II order.
 METHODS = (
@@ -57,10 +57,10 @@ METHOD_DATA = {
     "Large 5-point": "large5",
     "SA Large 5-point": "large5",
 }
-REPETITIONS = 5                 # per site: 16 x 5 = 80 samples per method (Table I implies 79-80)
-SA_ITERATIONS = 5000            # not published; our default
-SA_COST_UNIT_MM = 1000.0        # SA cost evaluated in m² (assumption, see module docstring)
-TOOL_MM = 100.0                 # stylus length (assumption, as in scenes/breadboard_vanwyk2018.toml)
+REPETITIONS = 5  # per site: 16 x 5 = 80 samples per method (Table I implies 79-80)
+SA_ITERATIONS = 5000  # not published; our default
+SA_COST_UNIT_MM = 1000.0  # SA cost evaluated in m² (assumption, see module docstring)
+TOOL_MM = 100.0  # stylus length (assumption, as in scenes/breadboard_vanwyk2018.toml)
 #: Reference 1-sigma DH errors of one kinematic unit (theory notes §5.1): joint zero offsets, link lengths, twists.
 KINEMATIC_REFERENCE = {"joint_offset_deg": 0.1, "link_mm": 0.2, "twist_deg": 0.05}
 
@@ -83,7 +83,7 @@ class Layout:
     registration: dict
     n_to_robot: RigidTransform
     assumptions: tuple
-    registrations: int = 1          # registrations per method and experiment; repetition l uses l mod this
+    registrations: int = 1  # registrations per method and experiment; repetition l uses l mod this
 
     @property
     def sites_n(self) -> np.ndarray:
@@ -133,7 +133,10 @@ def layouts() -> tuple[Layout, ...]:
     a = _layout(
         "A",
         "4x4 sites = registration grid over 750 x 525 mm; N at the plate's corner hole; robot 150 mm from the near row",
-        _grid(xs, ys), (425.0, 150.0, 11.0), (0, 1, 4), (425.0, -125.0, 0.0),
+        _grid(xs, ys),
+        (425.0, 150.0, 11.0),
+        (0, 1, 4),
+        (425.0, -125.0, 0.0),
         (
             "sites: regular 4x4 grid at N x = 50..800 step 250, y = 25..550 step 175 (z = 11 mm); registration corners = corner sites",
             "origin of N: centre of the plate's corner hole next to site S1",
@@ -145,7 +148,10 @@ def layouts() -> tuple[Layout, ...]:
     b = _layout(
         "B",
         "as A, but the robot across the plate (150 mm beyond the far row) and P5 mirrored",
-        _grid(xs, ys), (375.0, 400.0, 11.0), (0, 1, 4), (425.0, 700.0, 0.0),
+        _grid(xs, ys),
+        (375.0, 400.0, 11.0),
+        (0, 1, 4),
+        (425.0, 700.0, 0.0),
         (
             "sites: as A; origin of N at the corner hole next to S1, now on the side AWAY from the robot",
             "small 3-point: S1, S2, S5",
@@ -156,7 +162,9 @@ def layouts() -> tuple[Layout, ...]:
     c = _layout(
         "C",
         "sites inset inside the registration rectangle (175 x 150 mm grid), robot shifted sideways",
-        _grid((125.0, 300.0, 475.0, 650.0), (75.0, 225.0, 375.0, 525.0)), (550.0, 300.0, 11.0), (0, 1, 4),
+        _grid((125.0, 300.0, 475.0, 650.0), (75.0, 225.0, 375.0, 525.0)),
+        (550.0, 300.0, 11.0),
+        (0, 1, 4),
         (300.0, -125.0, 0.0),
         (
             "sites: 4x4 grid at N x = 125..650 step 175, y = 75..525 step 150, inside the registration rectangle",
@@ -175,7 +183,8 @@ def layouts() -> tuple[Layout, ...]:
         assumptions=(
             "as layout A, except: every repetition (16 sites) follows its own registration from fresh readings, "
             "so each method's 80 samples come from 5 registrations",
-        ) + tuple(x for x in a.assumptions if not x.startswith("one registration per method")),
+        )
+        + tuple(x for x in a.assumptions if not x.startswith("one registration per method")),
         registrations=REPETITIONS,
     )
     return (a, b, c, d)
@@ -198,19 +207,29 @@ def layout_by_name(name: str) -> Layout:
 @dataclass(frozen=True)
 class Component:
     name: str
-    unit: str          # what weight 1 means, in words
-    random: bool       # drawn per replicate (False: the same in every replicate)
+    unit: str  # what weight 1 means, in words
+    random: bool  # drawn per replicate (False: the same in every replicate)
 
 
 COMPONENTS = {
     "noise": Component("noise", "sigma 1 mm per axis, independent per reading", True),
     "noise_xy": Component("noise_xy", "sigma 1 mm on x and y (horizontal), independent per reading", True),
     "noise_z": Component("noise_z", "sigma 1 mm on z (vertical), independent per reading", True),
-    "noise_reach": Component("noise_reach", "sigma per axis growing linearly with horizontal reach: 1 mm at the farthest point", True),
-    "kinematic": Component("kinematic", "UR5 DH errors: 1 x (0.1 deg offsets, 0.2 mm lengths, 0.05 deg twists), one random robot per experiment", True),
+    "noise_reach": Component(
+        "noise_reach", "sigma per axis growing linearly with horizontal reach: 1 mm at the farthest point", True
+    ),
+    "kinematic": Component(
+        "kinematic",
+        "UR5 DH errors: 1 x (0.1 deg offsets, 0.2 mm lengths, 0.05 deg twists), one random robot per experiment",
+        True,
+    ),
     "scale": Component("scale", "robot/plate scale error of 1000 ppm about the robot base", False),
-    "flatness": Component("flatness", "smooth random plate-height field, RMS 1 mm over the sites, one per experiment", True),
-    "hole": Component("hole", "per-hole seating offset, sigma 1 mm per axis, the same every time the hole is used", True),
+    "flatness": Component(
+        "flatness", "smooth random plate-height field, RMS 1 mm over the sites, one per experiment", True
+    ),
+    "hole": Component(
+        "hole", "per-hole seating offset, sigma 1 mm per axis, the same every time the hole is used", True
+    ),
 }
 _STREAM = {name: i + 1 for i, name in enumerate(COMPONENTS)}
 
@@ -261,16 +280,16 @@ class Geometry:
     """Everything per layout that does not depend on a model: truth, slots, component fields."""
 
     layout: Layout
-    slot_point: np.ndarray          # (S,) point row of every reading slot
-    reg_slots: dict                 # data set -> (G, n) slot indices of its registration readings, G registrations
-    check_slots: np.ndarray         # (7, 80) slot indices of each method's check readings
-    check_reg: np.ndarray           # (80,) which of the G registrations each check sample uses
-    check_point: np.ndarray         # (80,) site row of each check sample
-    distance: np.ndarray            # (80,) distance of each check site from N's origin (mm)
-    kin_g: np.ndarray               # (17, 3, 24)
-    flat_basis: np.ndarray          # (17, 6)
-    reach: np.ndarray               # (17,) horizontal distance from the base axis / its max over the sites
-    scale_field: np.ndarray         # (17, 3) displacement of 1000 ppm about the base (mm)
+    slot_point: np.ndarray  # (S,) point row of every reading slot
+    reg_slots: dict  # data set -> (G, n) slot indices of its registration readings, G registrations
+    check_slots: np.ndarray  # (7, 80) slot indices of each method's check readings
+    check_reg: np.ndarray  # (80,) which of the G registrations each check sample uses
+    check_point: np.ndarray  # (80,) site row of each check sample
+    distance: np.ndarray  # (80,) distance of each check site from N's origin (mm)
+    kin_g: np.ndarray  # (17, 3, 24)
+    flat_basis: np.ndarray  # (17, 6)
+    reach: np.ndarray  # (17,) horizontal distance from the base axis / its max over the sites
+    scale_field: np.ndarray  # (17, 3) displacement of 1000 ppm about the base (mm)
 
 
 def geometry_for(layout: Layout) -> Geometry:
@@ -388,8 +407,13 @@ def method_errors(geo: Geometry, perturbation: np.ndarray, seed: int = 0, sa_see
         return a.reshape(r_count, g_count, 3, 3), t.reshape(r_count, g_count, 3)
 
     def anneal(s, r, a, t, k):
-        sa = batch.annealing_batch(s / SA_COST_UNIT_MM, r / SA_COST_UNIT_MM, seeds=seeds[k],
-                                   iterations=SA_ITERATIONS, initial=(a, t / SA_COST_UNIT_MM))
+        sa = batch.annealing_batch(
+            s / SA_COST_UNIT_MM,
+            r / SA_COST_UNIT_MM,
+            seeds=seeds[k],
+            iterations=SA_ITERATIONS,
+            initial=(a, t / SA_COST_UNIT_MM),
+        )
         return sa[0], sa[1] * SA_COST_UNIT_MM
 
     maps = {}
@@ -403,8 +427,12 @@ def method_errors(geo: Geometry, perturbation: np.ndarray, seed: int = 0, sa_see
     maps["large5"] = shaped(a5, t5)
     maps["SA large5"] = shaped(*anneal(s5, r5, a5, t5, 2))
     key = {
-        "Small 3-point": "small3", "Large 3-point": "large3", "SA Small 3-point": "SA small3",
-        "SA Large 3-point": "SA large3", "Large 5-point": "large5", "SA Large 5-point": "SA large5",
+        "Small 3-point": "small3",
+        "Large 3-point": "large3",
+        "SA Small 3-point": "SA small3",
+        "SA Large 3-point": "SA large3",
+        "Large 5-point": "large5",
+        "SA Large 5-point": "SA large5",
     }
     for m, name in enumerate(METHODS):
         q = readings[:, geo.check_slots[m]]
@@ -476,10 +504,10 @@ class Model:
     """
 
     name: str
-    components: tuple            # 1 or 2 component names
-    labels: tuple                # parameter label per component
-    scales: tuple                # physical value of weight 1 per component
-    cause: str                   # what the extension stands for, in words
+    components: tuple  # 1 or 2 component names
+    labels: tuple  # parameter label per component
+    scales: tuple  # physical value of weight 1 per component
+    cause: str  # what the extension stands for, in words
     phis: tuple = field(default=())  # grid of directions (rad); () = baseline (phi = 0 only)
 
     def params(self, rho: float, phi: float) -> dict:
@@ -497,18 +525,54 @@ _PHIS = tuple(float(np.arctan(r)) for r in _RATIOS) + (float(np.pi / 2),)
 
 MODELS = (
     Model("baseline", ("noise",), ("sigma_mm",), (1.0,), "rigid truth + isotropic Gaussian robot noise"),
-    Model("kinematic", ("noise", "kinematic"), ("sigma_mm", "dh_scale"), (1.0, 1.0),
-          "a UR5 kinematic (DH parameter) error field", _PHIS),
-    Model("scale", ("noise", "scale"), ("sigma_mm", "scale_ppm"), (1.0, 1000.0),
-          "a uniform scale mismatch between robot and plate", _PHIS),
-    Model("flatness", ("noise", "flatness"), ("sigma_mm", "flatness_rms_mm"), (1.0, 1.0),
-          "a smooth plate-height (flatness) error", _PHIS),
-    Model("anisotropic", ("noise_xy", "noise_z"), ("sigma_xy_mm", "sigma_z_mm"), (1.0, 1.0),
-          "anisotropic noise (horizontal vs vertical seating scatter)", _PHIS),
-    Model("site_noise", ("noise", "noise_reach"), ("sigma_mm", "sigma_reach_mm"), (1.0, 1.0),
-          "site-dependent noise growing with the robot's reach", _PHIS),
-    Model("seating", ("noise", "hole"), ("sigma_mm", "hole_offset_mm"), (1.0, 1.0),
-          "a repeatable per-hole collimator seating offset", _PHIS),
+    Model(
+        "kinematic",
+        ("noise", "kinematic"),
+        ("sigma_mm", "dh_scale"),
+        (1.0, 1.0),
+        "a UR5 kinematic (DH parameter) error field",
+        _PHIS,
+    ),
+    Model(
+        "scale",
+        ("noise", "scale"),
+        ("sigma_mm", "scale_ppm"),
+        (1.0, 1000.0),
+        "a uniform scale mismatch between robot and plate",
+        _PHIS,
+    ),
+    Model(
+        "flatness",
+        ("noise", "flatness"),
+        ("sigma_mm", "flatness_rms_mm"),
+        (1.0, 1.0),
+        "a smooth plate-height (flatness) error",
+        _PHIS,
+    ),
+    Model(
+        "anisotropic",
+        ("noise_xy", "noise_z"),
+        ("sigma_xy_mm", "sigma_z_mm"),
+        (1.0, 1.0),
+        "anisotropic noise (horizontal vs vertical seating scatter)",
+        _PHIS,
+    ),
+    Model(
+        "site_noise",
+        ("noise", "noise_reach"),
+        ("sigma_mm", "sigma_reach_mm"),
+        (1.0, 1.0),
+        "site-dependent noise growing with the robot's reach",
+        _PHIS,
+    ),
+    Model(
+        "seating",
+        ("noise", "hole"),
+        ("sigma_mm", "hole_offset_mm"),
+        (1.0, 1.0),
+        "a repeatable per-hole collimator seating offset",
+        _PHIS,
+    ),
 )
 
 
@@ -522,14 +586,13 @@ class DirectionStats:
 
     model: Model
     phis: np.ndarray
-    values: dict                 # statistic -> (Φ, R, 7); also 'ks_p'
-    horizontal: np.ndarray       # (Φ, R, 7, 80) horizontal error norms (peg model)
-    norms: np.ndarray            # (Φ, R, 7, 80)
+    values: dict  # statistic -> (Φ, R, 7); also 'ks_p'
+    horizontal: np.ndarray  # (Φ, R, 7, 80) horizontal error norms (peg model)
+    norms: np.ndarray  # (Φ, R, 7, 80)
     replicates: int
 
 
-def simulate_model(geo: Geometry, model: Model, replicates: int, seed: int, progress=None,
-                   phis=None) -> DirectionStats:
+def simulate_model(geo: Geometry, model: Model, replicates: int, seed: int, progress=None, phis=None) -> DirectionStats:
     """Simulate `replicates` experiments per direction of `model` (unit scale), common random numbers."""
     phis = np.array(model.phis if phis is None else phis, dtype=float)
     if phis.size == 0:
@@ -537,7 +600,9 @@ def simulate_model(geo: Geometry, model: Model, replicates: int, seed: int, prog
     fields = [component_fields(geo, c, replicates, seed) for c in model.components]
     # all directions in one batch (the SA's per-iteration cost is shared by every chain in the batch)
     pert = np.concatenate([sum(wi * f for wi, f in zip(model.weights(phi), fields)) for phi in phis])
-    seeds = np.tile(annealing_seeds(seed, replicates * geo.layout.registrations), (1, len(phis)))  # same chains per direction
+    seeds = np.tile(
+        annealing_seeds(seed, replicates * geo.layout.registrations), (1, len(phis))
+    )  # same chains per direction
     st = statistics(method_errors(geo, pert, seed, seeds), geo.distance)
     shape = (len(phis), replicates)
     vals = {k: st[k].reshape(shape + st[k].shape[1:]) for k in (*STATISTICS, "ks_p")}
@@ -562,8 +627,16 @@ def success_probability(horizontal: np.ndarray, capture_mm) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------------
 # RRBC on the breadboard: leave-one-site-out
 # ------------------------------------------------------------------------------------------------------
-def rrbc_gain(geo: Geometry, model: Model, rho: float, phi: float, replicates: int, seed: int,
-              neighbours: int = 4, power: float = 2.0) -> dict:
+def rrbc_gain(
+    geo: Geometry,
+    model: Model,
+    rho: float,
+    phi: float,
+    replicates: int,
+    seed: int,
+    neighbours: int = 4,
+    power: float = 2.0,
+) -> dict:
     """What `model` at (rho, phi) predicts RRBC does on the plate (RMS errors in mm over sites and experiments).
 
     Registration: Large 5-point (element-wise average, as published). Fiducials: the 16 sites, one reading

@@ -13,11 +13,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from rrbc_core.studies import model_fit
-from rrbc_core.studies import reference_data
-from rrbc_core.studies import reproduction
-from rrbc_core.studies.reproduction import METHODS, MODELS, STATISTICS
+
 from rrbc_core.runtime.threads import thread_limited
+from rrbc_core.studies import model_fit, reference_data, reproduction
+from rrbc_core.studies.reproduction import METHODS, MODELS, STATISTICS
 
 DEFAULT_REPLICATES = 200
 CONFUSION_TABLES = 10
@@ -27,25 +26,25 @@ CONFUSION_SIGMA_MM = 0.15
 
 @dataclass(frozen=True)
 class PegPrediction:
-    capture_mm: float                 # fitted capture radius (one for all methods)
-    probability: np.ndarray           # (7,) predicted success probability per insertion
-    successes: np.ndarray             # (7,) expected successes of 160
-    successes_90: np.ndarray          # (7, 2) 90 % range (experiments x binomial)
-    ps: np.ndarray                    # (7,) the paper's PS bound at the expected count
+    capture_mm: float  # fitted capture radius (one for all methods)
+    probability: np.ndarray  # (7,) predicted success probability per insertion
+    successes: np.ndarray  # (7,) expected successes of 160
+    successes_90: np.ndarray  # (7, 2) 90 % range (experiments x binomial)
+    ps: np.ndarray  # (7,) the paper's PS bound at the expected count
     log_likelihood: float
 
 
 @dataclass(frozen=True)
 class LayoutResult:
     layout: reproduction.Layout
-    directions: dict                  # model name -> DirectionStats
-    moments: dict                     # model name -> Moments
+    directions: dict  # model name -> DirectionStats
+    moments: dict  # model name -> Moments
     selection: model_fit.Selection
-    peg: dict                         # "baseline" / chosen -> PegPrediction
-    rrbc: dict                        # "baseline" / chosen -> rrbc_gain dict
-    intervals: dict                   # chosen parameter -> (lo, hi) at deviance + 1
-    confusion: dict | None            # planted model -> {chosen model: count}
-    noise_sweep: tuple = ()           # RRBC gain of the best extension as its noise shrinks (rrbc_noise_sweep)
+    peg: dict  # "baseline" / chosen -> PegPrediction
+    rrbc: dict  # "baseline" / chosen -> rrbc_gain dict
+    intervals: dict  # chosen parameter -> (lo, hi) at deviance + 1
+    confusion: dict | None  # planted model -> {chosen model: count}
+    noise_sweep: tuple = ()  # RRBC gain of the best extension as its noise shrinks (rrbc_noise_sweep)
 
 
 def nearest_direction(ds, phi) -> int:
@@ -80,8 +79,7 @@ def peg_prediction(ds, fit: model_fit.Fit, successes: np.ndarray) -> PegPredicti
 def _tables_from(geo, model, rho, phi, count, seed) -> list:
     ds = reproduction.simulate_model(geo, model, count, seed, phis=[phi])
     return [
-        np.array([ds.values[s][0, k] * rho ** reproduction.SCALE_POWER[s] for s in STATISTICS])
-        for k in range(count)
+        np.array([ds.values[s][0, k] * rho ** reproduction.SCALE_POWER[s] for s in STATISTICS]) for k in range(count)
     ]
 
 
@@ -103,8 +101,9 @@ def confusion_study(geo, moments, count: int, seed: int, progress=None) -> dict:
     return out
 
 
-def analyse_layout(layout, y: np.ndarray, replicates: int, seed: int, progress=None,
-                   confusion: bool = False) -> LayoutResult:
+def analyse_layout(
+    layout, y: np.ndarray, replicates: int, seed: int, progress=None, confusion: bool = False
+) -> LayoutResult:
     geo = reproduction.geometry_for(layout)
     # with G > 1 registrations per experiment an experiment costs G times more; use half as many experiments
     # (still well over the 28 statistics whose covariance the fit estimates)
@@ -122,8 +121,9 @@ def analyse_layout(layout, y: np.ndarray, replicates: int, seed: int, progress=N
     rrbc = {}
     for n in names:
         f = assessments[n].fit
-        rrbc[n] = reproduction.rrbc_gain(geo, reproduction.model_by_name(n), float(np.exp(f.log_rho)), f.phi,
-                                         replicates, seed + 7)
+        rrbc[n] = reproduction.rrbc_gain(
+            geo, reproduction.model_by_name(n), float(np.exp(f.log_rho)), f.phi, replicates, seed + 7
+        )
     sweep = rrbc_noise_sweep(geo, reproduction.model_by_name(best_ext), assessments[best_ext].fit, replicates, seed)
     model = reproduction.model_by_name(best_ext)
     intervals = {
@@ -146,11 +146,18 @@ def rrbc_noise_sweep(geo, model, fit: model_fit.Fit, replicates: int, seed: int)
     rows = []
     for f in NOISE_FACTORS:
         wn = f * w_noise
-        g = reproduction.rrbc_gain(geo, model, float(np.hypot(wn, w_ext)), float(np.arctan2(w_ext, wn)),
-                                   replicates, seed + 11)
+        g = reproduction.rrbc_gain(
+            geo, model, float(np.hypot(wn, w_ext)), float(np.arctan2(w_ext, wn)), replicates, seed + 11
+        )
         alone = reproduction.rrbc_gain(geo, model, wn, 0.0, replicates, seed + 11)["rmst_rigid_mm"] if wn > 0 else 0.0
-        rows.append(dict(g, factor=f, params=model.params(float(np.hypot(wn, w_ext)), float(np.arctan2(w_ext, wn))),
-                         rmst_noise_part_mm=alone))
+        rows.append(
+            dict(
+                g,
+                factor=f,
+                params=model.params(float(np.hypot(wn, w_ext)), float(np.arctan2(w_ext, wn))),
+                rmst_noise_part_mm=alone,
+            )
+        )
     bias_alone = reproduction.rrbc_gain(geo, model, w_ext, np.pi / 2, replicates, seed + 11)["rmst_rigid_mm"]
     return tuple(dict(r, rmst_extension_part_mm=bias_alone) for r in rows)
 
@@ -173,7 +180,7 @@ class Reproduction:
     measured: tuple
     samples_per_method: int
     successes: np.ndarray
-    layouts: tuple                # LayoutResult per layout, A first
+    layouts: tuple  # LayoutResult per layout, A first
     replicates: int
     seed: int
     seconds: float
@@ -199,8 +206,12 @@ class Reproduction:
                     row[stat] = float(a.fit.mean[s, m])
                     row[stat + "_sd"] = float(a.fit.sd[s, m])
                     row[stat + "_z"] = float(a.fit.z[s, m])
-                row["p"] = reference_data.correlation_p(float(np.clip(row["r"], -0.999, 0.999)), self.samples_per_method)
-                ks = main.directions[a.model].values["ks_p"][nearest_direction(main.directions[a.model], a.fit.phi), :, m]
+                row["p"] = reference_data.correlation_p(
+                    float(np.clip(row["r"], -0.999, 0.999)), self.samples_per_method
+                )
+                ks = main.directions[a.model].values["ks_p"][
+                    nearest_direction(main.directions[a.model], a.fit.phi), :, m
+                ]
                 row["ks_p_vs_prev_median"] = None if m == 0 else float(np.median(ks))
                 row["ps"] = float(peg.ps[m])
                 row["peg_successes"] = float(peg.successes[m])
@@ -216,8 +227,11 @@ class Reproduction:
             "extended_model": ext,
             "claimed": sel.chosen != "baseline",
             "separated": sel.separated,
-            "parameters": {"baseline": base_a.fit.params, "extended": ext_a.fit.params,
-                           "extended_interval": {k: list(v) for k, v in main.intervals.items()}},
+            "parameters": {
+                "baseline": base_a.fit.params,
+                "extended": ext_a.fit.params,
+                "extended_interval": {k: list(v) for k, v in main.intervals.items()},
+            },
             "misfit": {
                 "baseline": base_a.fit.deviance,
                 "extended": ext_a.fit.deviance,
@@ -228,12 +242,20 @@ class Reproduction:
                 "definition": "deviance = (y-m)^T S^-1 (y-m) + ln det S over the 28 statistics (Gaussian -2 log-likelihood, full covariance S over simulated experiments); cv = leave one method out, scored given the other six",
             },
             "models": [
-                {"name": k, "parameters": a.fit.params, "misfit": a.fit.deviance, "misfit_cv": a.cv_deviance,
-                 "chi2": a.fit.chi2, "outside_2sd": a.fit.outside()}
+                {
+                    "name": k,
+                    "parameters": a.fit.params,
+                    "misfit": a.fit.deviance,
+                    "misfit_cv": a.cv_deviance,
+                    "chi2": a.fit.chi2,
+                    "outside_2sd": a.fit.outside(),
+                }
                 for k, a in sel.assessments.items()
             ],
-            "peg": {k: {"capture_mm": v.capture_mm, "successes": v.successes.tolist(), "ps": v.ps.tolist()}
-                    for k, v in main.peg.items()},
+            "peg": {
+                k: {"capture_mm": v.capture_mm, "successes": v.successes.tolist(), "ps": v.ps.tolist()}
+                for k, v in main.peg.items()
+            },
             "rrbc": main.rrbc,
             "rrbc_noise_sweep": list(main.noise_sweep),
             "layouts": [
@@ -303,15 +325,22 @@ def cause_sentence(rep: Reproduction) -> str:
 
 
 @thread_limited
-def run(replicates: int = DEFAULT_REPLICATES, seed: int = 0, progress_factory=None, layout_names=None,
-        confusion: bool = True) -> Reproduction:
+def run(
+    replicates: int = DEFAULT_REPLICATES,
+    seed: int = 0,
+    progress_factory=None,
+    layout_names=None,
+    confusion: bool = True,
+) -> Reproduction:
     """The whole analysis. progress_factory(total) -> an object with update(n) and close(), or None."""
     t0 = time.perf_counter()
     rows = reference_data.vanwyk2018()
     y = model_fit.measured_matrix(rows)
     n, _ = reference_data.samples_per_method(rows)
     successes = np.array([reference_data.successes_from_ps(r.ps)[0] for r in _rows_in_order()])
-    lays = reproduction.layouts() if layout_names is None else tuple(reproduction.layout_by_name(x) for x in layout_names)
+    lays = (
+        reproduction.layouts() if layout_names is None else tuple(reproduction.layout_by_name(x) for x in layout_names)
+    )
     per_layout = sum(max(len(m.phis), 1) for m in MODELS)
     total = per_layout * len(lays) + (CONFUSION_TABLES * len(MODELS) if confusion else 0)
     bar = progress_factory(total) if progress_factory else None

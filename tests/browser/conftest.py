@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import pytest
 
@@ -103,7 +104,11 @@ def viser_app(request: pytest.FixtureRequest) -> Callable[[Callable[[], Any]], A
 @pytest.fixture
 def page_for(browser_context) -> Callable[..., tuple[Any, list[str]]]:
     def open_page(
-        url: str, *, timeout_s: float = 30.0, dismiss_notification: bool = True, wait: bool = True,
+        url: str,
+        *,
+        timeout_s: float = 30.0,
+        dismiss_notification: bool = True,
+        wait: bool = True,
         init_script: str | None = None,
     ) -> tuple[Any, list[str]]:
         page = browser_context.new_page()
@@ -126,8 +131,9 @@ def page_for(browser_context) -> Callable[..., tuple[Any, list[str]]]:
         remaining = lambda: max(1.0, timeout_s - (time.monotonic() - t0))  # noqa: E731
         # The client shows "Inactive" before it first connects, so "no 'Connecting'" alone proves nothing: also
         # require the websocket to have delivered the server's initial messages.
-        helpers.wait_for(lambda: frames_received[0] > 0, remaining(), message=f"websocket messages from {url}",
-                         page=page)
+        helpers.wait_for(
+            lambda: frames_received[0] > 0, remaining(), message=f"websocket messages from {url}", page=page
+        )
         helpers.wait_client_ready(page, remaining())
         if dismiss_notification:
             helpers.dismiss_software_webgl_notification(page, timeout_s=1.0)

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import io
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -249,7 +250,9 @@ def wait_for_node(page: Any, node_name: str, timeout_s: float = 30.0) -> None:
     wait_for(lambda: node_exists(page, node_name), timeout_s, message=f"scene node {node_name!r} in the browser")
 
 
-def node_screen_position(page: Any, node_name: str, local_xyz: Sequence[float] = (0.0, 0.0, 0.0)) -> tuple[float, float]:
+def node_screen_position(
+    page: Any, node_name: str, local_xyz: Sequence[float] = (0.0, 0.0, 0.0)
+) -> tuple[float, float]:
     """Page coordinates (CSS px, as used by ``page.mouse``) of the point ``local_xyz`` given in the local frame of
     scene node ``node_name`` (its viser pose applied; viser's +Z-up root rotation included). Raises LookupError if
     the node is not mounted yet and ValueError if the point is behind the camera."""

@@ -60,8 +60,13 @@ def expected_row(app, pid: str) -> list[str]:
     t = app.session.last.targets
     i = list(t.ids).index(pid)
     hull = "⚠ extrapolated" if bool(t.extrapolated[i]) else "inside"
-    return [pid, f"{t.error_rigid[i]:.3f}", f"{t.error_rrbc[i]:.3f}",
-            f"{float(np.linalg.norm(t.correction[i])):.3f}", hull]
+    return [
+        pid,
+        f"{t.error_rigid[i]:.3f}",
+        f"{t.error_rrbc[i]:.3f}",
+        f"{float(np.linalg.norm(t.correction[i])):.3f}",
+        hull,
+    ]
 
 
 def server_position(app, kind: str, pid: str) -> np.ndarray:
@@ -95,14 +100,22 @@ def drag_until_moved(app, page, pid: str, from_local: float, to_local: float) ->
     for _attempt in range(2):
         drag_axis(page, f"/targets/{pid}/gizmo", scale, from_local, to_local)
         try:
-            wait_for(lambda: not np.allclose(server_position(app, "targets", pid), before), 10,
-                     message=f"{pid} to move on the server", page=page)
+            wait_for(
+                lambda: not np.allclose(server_position(app, "targets", pid), before),
+                10,
+                message=f"{pid} to move on the server",
+                page=page,
+            )
             break
         except TimeoutError:
             continue
     # the drag's "end" update has been handled once the page shows the server's numbers for the final position
-    wait_for(lambda: target_row(page, pid) == expected_row(app, pid), 15,
-             message=f"the page to show {pid}'s numbers after the drag", page=page)
+    wait_for(
+        lambda: target_row(page, pid) == expected_row(app, pid),
+        15,
+        message=f"the page to show {pid}'s numbers after the drag",
+        page=page,
+    )
     return server_position(app, "targets", pid) - before
 
 
@@ -110,21 +123,23 @@ def notification_texts(page) -> list[str]:
     return page.locator(".mantine-Notification-root").all_inner_texts()
 
 
-def _ring_colour_pixels(png: bytes, offset: tuple[float, float], centres: dict, colours: dict,
-                        half: int = 40, tol: int = 10) -> dict:
+def _ring_colour_pixels(
+    png: bytes, offset: tuple[float, float], centres: dict, colours: dict, half: int = 40, tol: int = 10
+) -> dict:
     """Per target: pixels within `half` px of its screen position whose colour is within `tol` (per channel) of
     the target's expected heat-map colour."""
     img = decode_png(png).astype(int)
     out = {}
     for pid, (x, y) in centres.items():
         cx, cy = int(round(x - offset[0])), int(round(y - offset[1]))
-        patch = img[max(0, cy - half):cy + half, max(0, cx - half):cx + half]
+        patch = img[max(0, cy - half) : cy + half, max(0, cx - half) : cx + half]
         out[pid] = int(np.sum(np.all(np.abs(patch - np.asarray(colours[pid], int)) <= tol, axis=2)))
     return out
 
 
 def settled_shot(page, clip: dict, timeout_s: float = 20.0) -> bytes:
     """A screenshot of `clip` once two consecutive ones are identical."""
+
     def same():
         a = page.screenshot(clip=clip, animations="disabled")
         b = page.screenshot(clip=clip, animations="disabled")
@@ -156,14 +171,17 @@ def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for
     ids = list(app.session.last.targets.ids)
     centres = {pid: node_screen_position(page, f"/targets/{pid}/gizmo") for pid in ids}
     xs, ys = [c[0] for c in centres.values()], [c[1] for c in centres.values()]
-    clip = {"x": min(xs) - 60, "y": min(ys) - 60, "width": max(xs) - min(xs) + 120,
-            "height": max(ys) - min(ys) + 120}  # the targets' part of the 3-D view, left of the panel
+    clip = {
+        "x": min(xs) - 60,
+        "y": min(ys) - 60,
+        "width": max(xs) - min(xs) + 120,
+        "height": max(ys) - min(ys) + 120,
+    }  # the targets' part of the 3-D view, left of the panel
     assert clip["x"] + clip["width"] < 880, clip
     off = settled_shot(page, clip)
 
     page.get_by_text("Heat map of predicted error", exact=True).click()
-    wait_for(lambda: app.layers.get("heatmap") and app.heat_map is not None, 15, message="the heat map on",
-             page=page)
+    wait_for(lambda: app.layers.get("heatmap") and app.heat_map is not None, 15, message="the heat map on", page=page)
     # each target's expected colour: the mean predicted error (with RRBC) over its region, on the legend's scale
     hm = app.heat_map
     both = np.concatenate([hm.error_rigid, hm.error_rrbc])
@@ -233,8 +251,7 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
     for bad, says in ((bad_scene, "TOML syntax error"), (bad_csv, "'12.x' is not a number")):
         path_box.fill(str(bad))
         path_box.press("Enter")
-        wait_for(lambda bad=bad: app.controls.path.value == str(bad), 10, message="the path on the server",
-                 page=page)
+        wait_for(lambda bad=bad: app.controls.path.value == str(bad), 10, message="the path on the server", page=page)
         page.get_by_role("button", name="Load file").click()
         # a red notification and the status line at the top of the panel say what is wrong
         note = page.locator(".mantine-Notification-root", has_text=bad.name).filter(has_text="File not loaded")
@@ -253,8 +270,12 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
     assert 300.0 < server_position(app, "targets", "H1")[0] < 650.0
     row3 = target_row(page, "H1")
     assert row3[-1] == "inside" and row3[1:4] != row2[1:4], (row2, row3)
-    wait_for(lambda: "outside the fiducials' hull" not in page.inner_text("body"), 10,
-             message="the extrapolation warning to go", page=page)
+    wait_for(
+        lambda: "outside the fiducials' hull" not in page.inner_text("body"),
+        10,
+        message="the extrapolation warning to go",
+        page=page,
+    )
     assert not [u for u in requests if not is_local_url(u, app.port)]
 
 
@@ -265,11 +286,11 @@ def test_five_tabs_share_one_state(viser_app, page_for):
     # cell would take most of a minute.
     opened = [page_for(app.url, wait=False, init_script=None if i == 0 else UNDRAWN_TAB_SCRIPT) for i in range(5)]
     pages = [p for p, _ in opened]
-    wait_for(lambda: len(app.server.get_clients()) == 5, 45, message="5 clients in server.get_clients()",
-             page=pages[0])
+    wait_for(lambda: len(app.server.get_clients()) == 5, 45, message="5 clients in server.get_clients()", page=pages[0])
     for p in pages:  # every tab shows the panel with the server's numbers
-        wait_for(lambda p=p: target_row(p, "H1") == expected_row(app, "H1"), 45,
-                 message="the H1 row in every tab", page=p)
+        wait_for(
+            lambda p=p: target_row(p, "H1") == expected_row(app, "H1"), 45, message="the H1 row in every tab", page=p
+        )
     assert all(any(u.startswith(f"ws://127.0.0.1:{app.port}") for u in r) for _, r in opened)
     assert all(not [u for u in r if not is_local_url(u, app.port)] for _, r in opened)
     first, last = pages[0], pages[-1]
@@ -279,15 +300,23 @@ def test_five_tabs_share_one_state(viser_app, page_for):
     assert "Interpolation gp" not in last.inner_text("body")
     first.get_by_label("Interpolation").click()
     first.get_by_role("option", name="gp", exact=True).click()
-    wait_for(lambda: app.session.settings.interpolation == "gp", 20, message="interpolation gp on the server",
-             page=first)
+    wait_for(
+        lambda: app.session.settings.interpolation == "gp", 20, message="interpolation gp on the server", page=first
+    )
     wait_for(lambda: "Interpolation gp" in last.inner_text("body"), 15, message="tab 5 to show gp", page=last)
     # gp adds a std column; tab 5 shows the server's new numbers for H1
-    wait_for(lambda: len(target_row(last, "H1") or []) == 6
-             and target_row(last, "H1")[:4] == expected_row(app, "H1")[:4], 15,
-             message="tab 5's H1 row with a std column", page=last)
+    wait_for(
+        lambda: len(target_row(last, "H1") or []) == 6 and target_row(last, "H1")[:4] == expected_row(app, "H1")[:4],
+        15,
+        message="tab 5's H1 row with a std column",
+        page=last,
+    )
     # a move made elsewhere (here from Python, as any tab's drag ends up) shows in tab 3's table
     app.handle_drag("targets", "H2", [420.0, -50.0, 15.0], "end")
-    wait_for(lambda: (target_row(pages[2], "H2") or [])[:4] == expected_row(app, "H2")[:4], 15,
-             message="tab 3 to show H2's new numbers", page=pages[2])
+    wait_for(
+        lambda: (target_row(pages[2], "H2") or [])[:4] == expected_row(app, "H2")[:4],
+        15,
+        message="tab 3 to show H2's new numbers",
+        page=pages[2],
+    )
     assert len(app.server.get_clients()) == 5

@@ -26,8 +26,10 @@ def page_rmst(page) -> tuple[float, ...] | None:
 
 def server_rmst(app) -> tuple[float, ...]:
     p = app.session.planning_state().predicted
-    return tuple(float(f"{x:.{3 if i % 2 == 0 else 4}f}") for i, x in
-                 enumerate((p.rigid_mm, p.rigid_std_mm, p.rrbc_mm, p.rrbc_std_mm)))
+    return tuple(
+        float(f"{x:.{3 if i % 2 == 0 else 4}f}")
+        for i, x in enumerate((p.rigid_mm, p.rigid_std_mm, p.rrbc_mm, p.rrbc_std_mm))
+    )
 
 
 def test_plan_tab_suggest_shows_ghosts_and_accept_lowers_the_predicted_rmst(viser_app, page_for):
@@ -46,8 +48,12 @@ def test_plan_tab_suggest_shows_ghosts_and_accept_lowers_the_predicted_rmst(vise
     page.get_by_text("Suggested: 4 fiducials", exact=False).first.wait_for(state="visible", timeout=60_000)
     result = app.session.suggestion
     assert result is not None and len(result.suggested_ids) == 4
-    wait_for(lambda: all(node_exists(page, f"/plan/ghosts/{i}") for i in range(4)), 20,
-             message="the four ghost spheres in the browser", page=page)
+    wait_for(
+        lambda: all(node_exists(page, f"/plan/ghosts/{i}") for i in range(4)),
+        20,
+        message="the four ghost spheres in the browser",
+        page=page,
+    )
     rect = canvas_rect(page)
     for i in range(4):  # each ghost projects into the 3-D view
         x, y = node_screen_position(page, f"/plan/ghosts/{i}")

@@ -1,0 +1,370 @@
+"""`rrbc diagnose` (issue 6): effects hidden in synthetic measured data must be named, estimated and located.
+
+Effects are planted with rrbc_core.errormodels terms at seeded random size (clearly detectable: signal several
+noise standard errors above the detection limit), direction, point count (12-200), geometry (planar or volumetric)
+and noise. Parameter tolerances are multiples of the estimate's standard error.
+"""
+
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+from scipy.spatial.transform import Rotation
+
+from rrbc_core.analysis.diagnosis import diagnose
+from rrbc_core.cli import main
+from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.io.measurements_write import write_measurements
+from rrbc_core.registration.strategies import least_squares
+from rrbc_core.simulation.errormodels import PointSet
+from rrbc_core.simulation.errorterms import Affine, AnisotropicNoise, Drift, Scale, SmoothField
+
+
+def synth(seed, n=None, planar=None, sigma=None, terms=(), repeats=1, noise=None, order="random"):
+    """A measurement set: true robot points, sensor = rigidly moved robot points + sensor noise, robot values
+    displaced by the planted robot-side terms. Returns (mset, info)."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(12, 201)) if n is None else n
+    planar = bool(rng.integers(2)) if planar is None else planar
+    sigma = float(rng.uniform(0.005, 0.05)) if sigma is None else sigma
+    ext = rng.uniform(200, 800)
+    robot = rng.uniform(-ext / 2, ext / 2, (n, 3)) + np.array([500.0, 0.0, 300.0])
+    if planar:
+        robot[:, 2] = 300.0
+    rot = Rotation.random(random_state=rng).as_matrix()
+    sensor = robot @ rot
+    sensor = sensor - sensor.mean(axis=0) + np.array([0.0, 0.0, 2000.0])  # the sensor looks along +z
+    time = (rng.permutation(n) if order == "random" else np.arange(n)).astype(float) * 10.0
+    ps = PointSet(robot=robot, sensor=sensor, time=time)
+    disp = np.zeros((n, 3))
+    for term in terms:
+        disp += term.sample(ps, "robot", rng, 1)[0]
+    s_rows, r_rows, ids, times = [], [], [], []
+    for rep in range(repeats):
+        e = rng.normal(0.0, sigma, (n, 3)) if noise is None else noise.sample(ps, "sensor", rng, 1)[0]
+        s_rows.append(sensor + e)
+        r_rows.append(robot + disp)
+        ids += [f"P{i}" for i in range(n)]
+        times.append(time + 0.5 * rep)
+    m = MeasurementSet(
+        ids, ["both"] * len(ids), np.vstack(s_rows), np.vstack(r_rows), np.concatenate(times), [0] * len(ids)
+    )
+    return m, dict(n=n, planar=planar, sigma=sigma, robot=robot, ext=ext, disp=disp, time=time)
+
+
+def _case(base, seed):
+    rng = np.random.default_rng(base + seed)
+    return rng, float(rng.uniform(0.005, 0.05)), int(rng.integers(12, 201)), bool(rng.integers(2))
+
+
+def _spread(robot):
+    return float(np.sum((robot - robot.mean(axis=0)) ** 2))
+
+
+# ------------------------------------------------------------------------------------------- clean data
+def test_clean_data_reports_nothing_and_the_json_follows_the_contract():
+    alarms = 0
+    for seed in range(20):
+        m, info = synth(seed)
+        dg = diagnose(m)
+        alarms += bool(dg.effects)
+        out = dg.to_json()
+        json.dumps(out, allow_nan=False)
+        assert set(out) >= {"effects", "noise_sigma_mm", "bias_rms_mm", "rrbc"}
+        assert set(out["rrbc"]) >= {"recommended", "expected_rmst_change"}
+        assert len(out["noise_sigma_mm"]) == 3
+        assert np.allclose(out["noise_sigma_mm"], info["sigma"], rtol=0.5)
+        assert out["bias_rms_mm"] < 3 * info["sigma"]
+    assert alarms <= 1
+
+
+@pytest.mark.slow
+def test_false_alarm_rate_on_clean_data_is_at_most_5_percent():
+    trials, alarms = 100, 0
+    for seed in range(trials):
+        m, _ = synth(10_000 + seed, repeats=1 + seed % 2)
+        alarms += bool(diagnose(m).effects)
+    # goal 5 %; allow binomial scatter (one-sided 99.9 % bound for a true rate of 5 %)
+    assert alarms <= stats.binom.isf(0.001, trials, 0.05), alarms
+
+
+# ------------------------------------------------------------------------------------------- planted effects
+@pytest.mark.parametrize("seed", range(8))
+def test_scale_is_named_scale_with_ppm_within_5_standard_errors(seed):
+    rng, sigma, n, planar = _case(1000, seed)
+    _, info = synth(seed, n=n, planar=planar, sigma=sigma)
+    se_ppm = sigma / np.sqrt(_spread(info["robot"])) * 1e6
+    ppm = float(rng.choice([-1, 1]) * rng.uniform(12, 30) * se_ppm)
+    m, _ = synth(seed, n=n, planar=planar, sigma=sigma, terms=[Scale(ppm, center_mm=tuple(rng.uniform(-99, 99, 3)))])
+    dg = diagnose(m)
+    assert dg.names == ["scale"], dg.tests  # the simplest explanation: not affine, not smooth_field
+    est = dg.effects[0].parameters
+    assert abs(est["ppm"] - ppm) < 5 * est["ppm_standard_error"]
+    assert 0.5 < est["ppm_standard_error"] / se_ppm < 2
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_affine_is_named_affine_with_its_symmetric_matrix(seed):
+    rng, sigma, n, _ = _case(2000, seed)
+    _, info = synth(seed, n=n, planar=False, sigma=sigma)
+    se = sigma / np.sqrt(_spread(info["robot"]) / 3)
+    a = rng.normal(size=(3, 3))
+    a = 0.5 * (a + a.T)
+    a -= np.trace(a) / 3 * np.eye(3)  # non-uniform: beyond a scale
+    a *= rng.uniform(15, 30) * se / np.linalg.norm(a)
+    m, _ = synth(seed, n=n, planar=False, sigma=sigma, terms=[Affine(a)])
+    dg = diagnose(m)
+    assert dg.names[0] == "affine", dg.tests
+    g = np.asarray(dg.effects[0].parameters["matrix"])
+    assert np.allclose(g, g.T)
+    assert np.max(np.abs(g - a)) < 6 * se
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_planar_points_test_only_in_plane_affine_terms_and_say_so(seed):
+    rng, sigma, n, _ = _case(3000, seed)
+    _, info = synth(seed, n=n, planar=True, sigma=sigma)
+    se = sigma / np.sqrt(_spread(info["robot"]) / 2)
+    size = rng.uniform(15, 30) * se
+    # a z-scale (and z-shear) alone is invisible on a plate: nothing may be reported, and the limit is stated
+    hidden = np.zeros((3, 3))
+    hidden[2, 2], hidden[0, 2], hidden[2, 0] = size, size, size
+    m, _ = synth(seed, n=n, planar=True, sigma=sigma, terms=[Affine(hidden)])
+    dg = diagnose(m)
+    clean = diagnose(synth(seed, n=n, planar=True, sigma=sigma)[0])  # same noise, nothing planted
+    assert "affine" not in dg.names and dg.names == clean.names
+    assert abs(dg.tests["affine"] - clean.tests["affine"]) < 0.01
+    assert any("coplanar" in text for text in dg.limits)
+    # an in-plane non-uniform scale is found; the out-of-plane terms of the reported matrix are zero
+    visible = np.diag([size, -size, 0.0])
+    visible[0, 1] = visible[1, 0] = 0.5 * size
+    m, _ = synth(seed, n=n, planar=True, sigma=sigma, terms=[Affine(visible)])
+    dg = diagnose(m)
+    assert dg.names[0] == "affine", dg.tests
+    g = np.asarray(dg.effects[0].parameters["matrix"])
+    assert np.max(np.abs(g[:2, :2] - visible[:2, :2])) < 6 * se
+    assert np.allclose(g[2], 0, atol=1e-9) and np.allclose(g[:, 2], 0, atol=1e-9)
+    assert "in-plane" in dg.effects[0].evidence
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_drift_is_named_drift_with_its_rate(seed):
+    rng, sigma, n, planar = _case(4000, seed)
+    _, info = synth(seed, n=n, planar=planar, sigma=sigma)
+    t = info["time"]
+    se = sigma / np.sqrt(np.sum((t - t.mean()) ** 2))
+    v = rng.normal(size=3)
+    rate = v / np.linalg.norm(v) * rng.uniform(15, 30) * se
+    m, _ = synth(seed, n=n, planar=planar, sigma=sigma, terms=[Drift(tuple(rate))])
+    dg = diagnose(m)
+    assert dg.names[0] == "drift", dg.tests
+    assert np.max(np.abs(np.asarray(dg.effects[0].parameters["rate_mm_per_s"]) - rate)) < 6 * se
+
+
+def test_z_drift_in_raster_order_on_a_plate_is_invisible_and_said_so():
+    rng = np.random.default_rng(5)
+    gx, gy = np.meshgrid(np.arange(6) * 80.0, np.arange(5) * 80.0, indexing="ij")
+    robot = np.column_stack([gx.ravel(), gy.ravel(), np.full(30, 300.0)])
+    time = 10.0 * (gx.ravel() / 80.0 * 5 + gy.ravel() / 80.0)  # raster order: time is linear in x and y
+    rot = Rotation.random(random_state=rng).as_matrix()
+    sensor = robot @ rot + rng.normal(0, 0.01, (30, 3))
+    moved = robot + np.outer(time, [0.0, 0.0, 0.002])  # 0.6 mm of z drift over the run: absorbed by a tilt
+    m = MeasurementSet([f"P{i}" for i in range(30)], ["both"] * 30, sensor, moved, time, [0] * 30)
+    dg = diagnose(m)
+    assert "drift" not in dg.names
+    assert any("drift" in text and "order" in text for text in dg.limits)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_smooth_field_is_named_first_with_rms_and_length_scale(seed):
+    rng, sigma, _, planar = _case(5000, seed)
+    n = int(rng.integers(60, 201))  # a field of length ~0.3 x extent needs enough points to be sampled
+    _, info = synth(seed, n=n, planar=planar, sigma=sigma)
+    length = 0.3 * info["ext"]
+    field = SmoothField(rms_mm=sigma * rng.uniform(5, 10), length_mm=length, seed=seed)
+    m, info = synth(seed, n=n, planar=planar, sigma=sigma, terms=[field])
+    dg = diagnose(m)
+    assert dg.names[0] == "smooth_field", dg.tests
+    est = dg.effects[0].parameters
+    # the non-rigid part of the realised field at the points
+    reg = least_squares(info["robot"], info["robot"] + info["disp"])
+    truth = float(np.sqrt(np.mean(np.sum(reg.residuals**2, axis=1))))
+    assert abs(est["rms_mm"] - truth) < 0.3 * truth + 2 * sigma
+    assert length / 4 < est["length_scale_mm"] < 4 * length
+    assert dg.rrbc_recommended and dg.expected_rmst_change < 0
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_outliers_are_found_by_id_exactly(seed):
+    rng, sigma, n, planar = _case(6000, seed)
+    m, _ = synth(seed, n=n, planar=planar, sigma=sigma)
+    k = int(rng.integers(1, 1 + max(1, min(3, n // 12))))
+    idx = rng.choice(n, k, replace=False)
+    robot = np.array(m.robot)
+    for i in idx:
+        v = rng.normal(size=3)
+        robot[i] += v / np.linalg.norm(v) * sigma * rng.uniform(12, 25)
+    m = MeasurementSet(m.ids, m.roles, m.sensor, robot, m.time, m.lines)
+    dg = diagnose(m)
+    assert dg.names[0] == "outliers", dg.tests
+    assert sorted(dg.effects[0].parameters["ids"]) == sorted(f"P{i}" for i in idx)
+    assert "scale" not in dg.names and "smooth_field" not in dg.names
+
+
+def test_two_effects_at_once_are_reported_as_two():
+    _, info = synth(11, n=80, planar=False, sigma=0.01)
+    se_ppm = 0.01 / np.sqrt(_spread(info["robot"])) * 1e6
+    m, _ = synth(11, n=80, planar=False, sigma=0.01, terms=[Scale(30 * se_ppm)])
+    robot = np.array(m.robot)
+    robot[5] += [0.3, -0.2, 0.1]
+    m = MeasurementSet(m.ids, m.roles, m.sensor, robot, m.time, m.lines)
+    dg = diagnose(m)
+    assert sorted(dg.names) == ["outliers", "scale"]
+    assert dg.effects[[e.name for e in dg.effects].index("outliers")].parameters["ids"] == ["P5"]
+
+
+@pytest.mark.parametrize("repeats", [1, 3])
+@pytest.mark.parametrize("seed", range(4))
+def test_anisotropic_noise_is_named_with_axis_along_the_line_of_sight(seed, repeats):
+    rng, sigma, n, planar = _case(7000, seed)
+    ratio = float(rng.uniform(4, 6))
+    noise = AnisotropicNoise(sigma, ratio * sigma)
+    m, _ = synth(seed, n=n, planar=planar, sigma=sigma, repeats=repeats, noise=noise)
+    dg = diagnose(m)
+    # the line of sight varies over the points: the truth is the ratio of the pooled (mean) noise covariance
+    ev = np.linalg.eigvalsh(noise.covariance(m.sensor[:n]).mean(axis=0))
+    ratio = float(np.sqrt(ev[2] / ev[:2].mean()))
+    assert dg.names[0] == "anisotropic_noise", dg.tests
+    est = dg.effects[0].parameters
+    assert abs(est["axis"][2]) > 0.95  # the sensor looks along +z
+    nu = n * (repeats - 1) if repeats > 1 else n - 4  # degrees of freedom of the noise covariance
+    f = 1 + 3 / np.sqrt(nu)  # ~3 standard errors of a ratio of standard deviations
+    assert ratio / f < est["ratio"] < ratio * f
+    assert dg.noise_source == ("repeats" if repeats > 1 else "fit")
+
+
+def test_rrbc_is_not_recommended_on_clean_data():
+    verdicts = [diagnose(synth(seed, n=60)[0]).rrbc_recommended for seed in range(5)]
+    assert sum(verdicts) <= 1
+
+
+# ------------------------------------------------------------------------------------------- CLI
+def test_cli_diagnose_json(tmp_path, capsys):
+    m, _ = synth(3, n=50, planar=False, sigma=0.01, terms=[Scale(300.0)])
+    path = tmp_path / "m.csv"
+    write_measurements(path, m)
+    assert main(["diagnose", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [e["name"] for e in out["effects"]] == ["scale"]
+    e = out["effects"][0]
+    assert set(e) == {"name", "parameters", "p_value", "evidence"} and "ppm" in e["parameters"]
+    assert len(out["noise_sigma_mm"]) == 3 and isinstance(out["bias_rms_mm"], float)
+    assert isinstance(out["rrbc"]["recommended"], bool) and isinstance(out["rrbc"]["expected_rmst_change"], float)
+    assert main(["diagnose", str(path)]) == 0
+    assert "scale" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "id,role,sensor_x,sensor_y,sensor_z,robot_x,robot_y,robot_z\nA,fiducial,1,2,x,1,2,3\n",
+        "id,role,sensor_x,sensor_y,sensor_z,robot_x,robot_y,robot_z\n"
+        + "".join(f"P{i},fiducial,{i},{i * i % 7},{i % 3},{i},{i * i % 7},{i % 3}\n" for i in range(4)),
+        "",
+    ],
+)
+def test_cli_diagnose_bad_input_exits_2_with_one_line(tmp_path, capsys, text):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    assert main(["diagnose", str(path), "--json"]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and len(cap.err.strip().splitlines()) == 1
+
+
+def test_cli_diagnose_missing_file_and_bad_alpha_exit_2(tmp_path, capsys):
+    assert main(["diagnose", str(tmp_path / "none.csv")]) == 2
+    assert main(["diagnose", str(tmp_path / "none.csv"), "--alpha", "2"]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and len(cap.err.strip().splitlines()) == 2
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_drift_under_anisotropic_noise_gives_both_and_the_rate_from_whitened_residuals(seed):
+    rng, sigma, n, planar = _case(9000, seed)
+    _, info = synth(seed, n=n, planar=planar, sigma=sigma)
+    t = info["time"]
+    se = 5 * sigma / np.sqrt(np.sum((t - t.mean()) ** 2))  # at most: the largest noise axis
+    v = rng.normal(size=3)
+    rate = v / np.linalg.norm(v) * 8 * se
+    m, _ = synth(
+        seed,
+        n=n,
+        planar=planar,
+        sigma=sigma,
+        repeats=2,
+        terms=[Drift(tuple(rate))],
+        noise=AnisotropicNoise(sigma, 5 * sigma),
+    )
+    dg = diagnose(m)
+    assert {"drift", "anisotropic_noise"} <= set(dg.names), dg.tests
+    est = dg.effects[dg.names.index("drift")].parameters["rate_mm_per_s"]
+    assert np.max(np.abs(np.asarray(est) - rate)) < 6 * se
+
+
+# ------------------------------------------------------------------- the O(N) kernels equal the plain formulas
+@pytest.mark.parametrize("seed", range(4))
+def test_loo_equals_the_per_point_loop(seed):
+    """The vectorised leave-one-out (rank-one downdates, kd-tree neighbours) gives the numbers of refitting the
+    others point by point and weighting the k nearest others by 1/d^2; a coincident pair takes the exact branch."""
+    from rrbc_core.analysis.diagnosis_stats import _loo
+    from rrbc_core.registration.strategies import kabsch
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(6, 60))
+    s = rng.uniform(-300, 300, (n, 3)) + [0, 0, 2000]
+    rot = Rotation.random(random_state=rng).as_matrix()
+    r = s @ rot.T + [500, 0, 300] + rng.normal(0, 0.05, (n, 3)) + 0.2 * np.sin(s / 150.0)
+    w = rng.uniform(1, 3, n).round()
+    if seed % 2:
+        s[1], r[1] = s[0], r[0] + 0.01  # a repeated site
+    e_rigid, e_rrbc = np.empty((n, 3)), np.empty((n, 3))
+    for i in range(n):
+        keep = np.arange(n) != i
+        ri, ti, _ = kabsch(s[keep], r[keep], w[keep])
+        e_rigid[i] = r[i] - (ri @ s[i] + ti)
+        others = np.flatnonzero(keep)
+        d = np.linalg.norm(s[others] - s[i], axis=1)
+        j = others[np.argsort(d, kind="stable")[:4]]
+        dj = np.linalg.norm(s[j] - s[i], axis=1)
+        corr = r[j] - (s[j] @ ri.T + ti)
+        c = corr[dj <= 1e-12].mean(0) if np.any(dj <= 1e-12) else (dj**-2.0) @ corr / np.sum(dj**-2.0)
+        e_rrbc[i] = e_rigid[i] - c
+    rms = lambda e: np.sqrt(np.mean(np.sum(e**2, axis=1)))  # noqa: E731
+    got = _loo(s, r, w)
+    assert got[0] == pytest.approx(rms(e_rigid), rel=1e-9)
+    assert got[1] == pytest.approx(rms(e_rrbc), rel=1e-9)
+
+
+def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
+    from rrbc_core.analysis import diagnosis_stats as diagnosis
+    from rrbc_core.analysis.diagnosis_stats import _moran, _moran_bootstrap, _moran_weights, _orth
+
+    monkeypatch.setattr(diagnosis, "_BOOTSTRAP_CHUNK_ELEMENTS", 900 * 40)  # chunks of 40 replicates
+
+    rng = np.random.default_rng(11)
+    n = 300
+    p = rng.uniform(0, 500, (n, 3))
+    nb = _moran_weights(p)
+    res = rng.normal(size=(5, n, 3)) + np.sin(p / 80.0)
+    dense = np.einsum("bic,bikc->b", res, res[:, nb, :]) / nb.shape[1] / np.einsum("bic,bic->b", res, res)
+    assert np.allclose(_moran(res, nb), dense, rtol=1e-12)
+    qa = _orth(rng.normal(size=(3 * n, 7)))
+    eps = np.random.default_rng(3).standard_normal((250, 3 * n))
+    eps -= (eps @ qa) @ qa.T
+    want = (
+        np.einsum("bic,bikc->b", eps.reshape(250, n, 3), eps.reshape(250, n, 3)[:, nb, :])
+        / nb.shape[1]
+        / np.einsum("bi,bi->b", eps, eps)
+    )
+    assert np.allclose(_moran_bootstrap(np.random.default_rng(3), qa, nb, replicates=250), want, rtol=1e-10)

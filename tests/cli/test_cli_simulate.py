@@ -1,0 +1,122 @@
+"""`rrbc simulate` end to end through the console script (shared/spec/cli.md)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.paths import ROOT
+
+RRBC = str(Path(sys.executable).with_name("rrbc"))
+SCENES = ["demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell"]
+
+
+def run(*args, timeout=300):
+    return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_scene_simulates_and_its_data_pass_through_correct(tmp_path, scene):
+    out = tmp_path / f"{scene}.csv"
+    res = run("simulate", ROOT / "scenes" / f"{scene}.toml", "--trials", 30, "--seed", 5, "--out", out, "--json")
+    assert res.returncode == 0, res.stderr
+    js = json.loads(res.stdout)
+    assert js["trials"] == 30 and js["seconds"] >= 0
+    names = [s["name"] for s in js["strategies"]]
+    assert names == ["least-squares", "three-point", "combinatorial", "annealing", "clustering"]
+    for s in js["strategies"]:
+        for key in ("tre_mean_mm", "tre_rms_mm", "tre_max_mm", "r_distance", "rmst_rrbc_mm"):
+            assert key in s
+        assert 0 < s["tre_mean_mm"] <= s["tre_rms_mm"] <= s["tre_max_mm"]
+    corrected = run("correct", out, "--json")
+    assert corrected.returncode == 0, corrected.stderr
+    cj = json.loads(corrected.stdout)
+    assert len(cj["checks"]) > 0
+    assert cj["summary"]["rmst_rigid_mm"] > 0
+
+
+def test_default_scene_bias_dominates_so_rrbc_visibly_helps():
+    res = run("simulate", ROOT / "scenes" / "demo_workcell.toml", "--trials", 50, "--json")
+    assert res.returncode == 0, res.stderr
+    ls = json.loads(res.stdout)["strategies"][0]
+    assert ls["rmst_rrbc_mm"] < 0.7 * ls["tre_rms_mm"], ls
+
+
+def test_simulate_is_seeded():
+    a = run("simulate", ROOT / "scenes" / "peg_in_hole_cell.toml", "--trials", 10, "--seed", 9, "--json")
+    b = run("simulate", ROOT / "scenes" / "peg_in_hole_cell.toml", "--trials", 10, "--seed", 9, "--json")
+    ja, jb = json.loads(a.stdout), json.loads(b.stdout)
+    assert ja["strategies"] == jb["strategies"] and ja["interpolations"] == jb["interpolations"]
+
+
+def test_readable_table_without_json():
+    res = run("simulate", ROOT / "scenes" / "demo_workcell.toml", "--trials", 10)
+    assert res.returncode == 0, res.stderr
+    assert "least-squares" in res.stdout and "rmst_rrbc" in res.stdout
+
+
+def _scene_text():
+    return (ROOT / "scenes" / "demo_workcell.toml").read_text()
+
+
+def _write_variant(tmp_path, text):
+    f = tmp_path / "bad.toml"
+    (tmp_path / "meshes").mkdir(exist_ok=True)
+    for mesh in (ROOT / "scenes" / "meshes").iterdir():
+        (tmp_path / "meshes" / mesh.name).write_bytes(mesh.read_bytes())
+    f.write_text(text)
+    return f
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["missing key", "bad number", "missing mesh", "negative region", "syntax"],
+)
+def test_malformed_scene_exits_2_with_one_line(tmp_path, case):
+    text = _scene_text()
+    if case == "missing key":
+        import re
+
+        text = re.sub(r"(?m)^look_at\s*=.*$", "", text, count=1)
+    elif case == "bad number":
+        text = text.replace("tool_mm =", 'tool_mm = "long"\nold_tool_mm =', 1)
+    elif case == "missing mesh":
+        import re
+
+        text = re.sub(r'(?m)^mesh\s*=\s*".*"$', 'mesh = "meshes/nowhere.glb"', text, count=1)
+    elif case == "negative region":
+        import re
+
+        text = re.sub(r"size\s*=\s*\[\s*([0-9.]+)", r"size = [-\1", text, count=1)
+    elif case == "syntax":
+        text = text + "\n[[target]\n"
+    f = _write_variant(tmp_path, text)
+    out = tmp_path / "never.csv"
+    res = run("simulate", f, "--trials", 5, "--out", out)
+    assert res.returncode == 2, (case, res.returncode, res.stderr)
+    assert res.stdout == ""
+    assert "Traceback" not in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert "bad.toml" in res.stderr
+    assert not out.exists()
+
+
+def test_out_into_missing_directory_is_bad_input_and_writes_nothing(tmp_path):
+    out = tmp_path / "no" / "such" / "dir.csv"
+    res = run("simulate", ROOT / "scenes" / "peg_in_hole_cell.toml", "--trials", 5, "--out", out)
+    assert res.returncode == 2, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_icp_alternative_registration_row():
+    """ICP registers the sensor to the mesh, i.e. to the TRUE geometry, so the robot's kinematic bias stays in
+    the rigid error at the checks; RRBC over the fiducials removes most of it."""
+    res = run("simulate", ROOT / "scenes" / "demo_workcell.toml", "--trials", 10, "--icp", 2, "--json")
+    assert res.returncode == 0, res.stderr
+    rows = {s["name"]: s for s in json.loads(res.stdout)["strategies"]}
+    icp = rows["icp"]
+    assert icp["trials"] == 2
+    assert icp["rmst_rrbc_mm"] < 0.5 * icp["tre_rms_mm"]

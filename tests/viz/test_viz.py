@@ -1,0 +1,531 @@
+"""In-process tests of the browser app (rrbc_viz): a real viser server on a free port, no browser.
+
+Drags are driven through `RunningApp.handle_drag` (what the gizmo callback calls) and through viser's own
+transform-controls handlers (private API, wrapped in `_gizmo_drag`); GUI handles are driven by assigning
+`.value` (viser runs the callbacks synchronously) and fiducial clicks by calling the sphere's click callback.
+Every server is stopped at the end of its test.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import urllib.request
+
+import numpy as np
+import pytest
+import viser
+
+from rrbc_core.errors import InputError
+from rrbc_core.io.measurements import parse_measurements
+from rrbc_viz import colors
+from rrbc_viz.app import RunningApp, serve
+from tests.paths import EXAMPLE_CSV
+from tests.viz.helpers import _gizmo_drag, _press
+
+RRBC = [sys.executable, "-m", "rrbc_core.cli"]
+
+
+def _click(handle) -> None:
+    """Call a scene node's click callbacks as viser would for a click on it."""
+    event = viser.SceneNodePointerEvent(
+        client=None,
+        client_id=0,
+        event="click",
+        target=handle,
+        ray_origin=(0.0, 0.0, 0.0),
+        ray_direction=(0.0, 0.0, -1.0),
+        screen_pos=(0.5, 0.5),
+        instance_index=None,
+        modifier=None,
+    )
+    entries = handle._impl.click_cb
+    assert entries, "the node has no click callback"
+    for entry in entries:
+        entry.callback(event)
+
+
+def _target_arrows(app: RunningApp) -> np.ndarray:
+    return np.asarray(app.nodes.nodes["/corrections/targets"].points, float)
+
+
+def _assert_arrows_match(app: RunningApp, ev) -> None:
+    mag = app.display.magnification
+    pts = _target_arrows(app)
+    np.testing.assert_allclose(pts[:, 0], ev.targets.positions, atol=1e-3)
+    np.testing.assert_allclose(pts[:, 1], ev.targets.positions + mag * ev.targets.correction_robot, atol=1e-2)
+    inc = np.flatnonzero(ev.included)
+    fpts = np.asarray(app.nodes.nodes["/corrections/fiducials"].points, float)
+    assert len(fpts) == len(inc)
+    np.testing.assert_allclose(fpts[:, 1], ev.fiducial_positions[inc] + mag * ev.corrections_robot[inc], atol=1e-2)
+
+
+# ------------------------------------------------------------------------------------------------- start-up
+def test_serve_builds_the_scene_and_panel(app):
+    assert app.port > 0 and app.url == f"http://127.0.0.1:{app.port}"
+    with urllib.request.urlopen(app.url, timeout=10) as r:
+        assert r.status == 200
+    ev = app.session.evaluate()
+    for pid in ev.targets.ids:
+        name = f"/targets/{pid}/gizmo"
+        assert app.gizmo_name("targets", pid) == name
+        assert app.server.scene.get_handle_by_name(name) is app.gizmo("targets", pid)
+    for pid in ev.fiducial_ids:
+        assert app.server.scene.get_handle_by_name(f"/fiducials/{pid}/gizmo") is not None
+    for name in (
+        "/mesh/cell",
+        "/frames/robot",
+        "/frames/sensor_true",
+        "/frames/sensor_registered",
+        "/registration/points",
+        "/hull/edges",
+        "/landing/rigid",
+        "/landing/rrbc",
+        "/heatmap/points",
+    ):
+        assert app.server.scene.get_handle_by_name(name) is not None, name
+    assert set(app.nodes.regions) == set(ev.targets.ids)
+    _assert_arrows_match(app, ev)
+    np.testing.assert_allclose(np.asarray(app.nodes.nodes["/hull/edges"].points), ev.hull_edges, atol=1e-3)
+    mag = app.display.magnification
+    assert f"×{mag:g}" in app.controls.scale.content and f"drawn as {mag:g} mm" in app.controls.scale.content
+    sm = ev.summary
+    assert f"{sm['rmst_rigid_mm']:.3f} mm rigid" in app.controls.summary.content
+    assert f"{sm['rmst_rrbc_mm']:.3f} mm RRBC" in app.controls.summary.content
+    for i, pid in enumerate(ev.targets.ids):
+        assert (
+            f"| {pid} | {ev.targets.error_rigid[i]:.3f} | {ev.targets.error_rrbc[i]:.3f} |"
+            in app.controls.table.content
+        )
+    # camera framed on the cell (mm scale), not viser's default
+    assert np.linalg.norm(app.server.initial_camera.position) > 500
+    assert app.server.initial_camera.far > 5000
+
+
+# ------------------------------------------------------------------------------------------------- dragging
+def test_drag_target_recomputes_everything(app):
+    before = app.session.last
+    label = app.nodes.labels["/targets/H1/gizmo/label"]
+    old_label = label.text
+    new = np.array([405.0, -140.0, 15.0])
+    assert app.handle_drag("targets", "H1", new, "start") is not None
+    ev = app.handle_drag("targets", "H1", new, "update")
+    assert ev is app.session.last
+    np.testing.assert_allclose(ev.targets.positions[0], new)
+    np.testing.assert_allclose(app.gizmo("targets", "H1").position, new)
+    fresh = app.session.evaluate()
+    np.testing.assert_allclose(ev.targets.correction, fresh.targets.correction)
+    assert not np.allclose(ev.targets.correction[0], before.targets.correction[0])
+    _assert_arrows_match(app, fresh)
+    assert label.text != old_label and f"{fresh.targets.error_rrbc[0]:.3f}" in label.text
+    assert (
+        f"| H1 | {fresh.targets.error_rigid[0]:.3f} | {fresh.targets.error_rrbc[0]:.3f} |" in app.controls.table.content
+    )
+    # landing points: truth-anchored offsets, magnified
+    mag = app.display.magnification
+    t = fresh.targets
+    np.testing.assert_allclose(
+        app.nodes.nodes["/landing/rrbc"].batched_positions[0],
+        t.positions[0] + mag * (t.robot_rrbc[0] - t.truth[0]),
+        atol=1e-2,
+    )
+    np.testing.assert_allclose(app.nodes.regions["H1"].position, new)
+    app.handle_drag("targets", "H1", new, "end")
+
+
+def test_gizmo_messages_drive_the_drag(app):
+    path = [np.array([400.0, -150.0, 15.0 + dz]) for dz in (2.0, 5.0, 9.0)]
+    _gizmo_drag(app, "targets", "H2", path)
+    ev = app.session.last
+    i = ev.targets.ids.index("H2")
+    np.testing.assert_allclose(ev.targets.positions[i], path[-1])
+    _assert_arrows_match(app, app.session.evaluate())
+    assert app.mc.wait_idle(60)  # drag end queued a Monte Carlo run
+
+
+def test_drag_fiducial_moves_its_correction_and_hull(app):
+    ev0 = app.session.last
+    ev = app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "update")
+    assert ev is not None
+    i = ev.fiducial_ids.index("F12")
+    assert not np.allclose(ev.corrections[i], ev0.corrections[i])
+    np.testing.assert_allclose(np.asarray(app.nodes.nodes["/hull/edges"].points), ev.hull_edges, atol=1e-3)
+    _assert_arrows_match(app, app.session.evaluate())
+    app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
+
+
+def test_target_outside_the_hull_is_flagged(app):
+    sphere = app.nodes.spheres[("targets", "H1")]
+    assert tuple(sphere.color) == colors.TARGET
+    ev = app.handle_drag("targets", "H1", [150.0, -150.0, 300.0], "end")
+    assert "H1" in ev.summary["extrapolated"] and bool(ev.targets.extrapolated[0])
+    assert tuple(sphere.color) == colors.TARGET_EXTRAPOLATED
+    assert "extrapolated" in app.nodes.labels["/targets/H1/gizmo/label"].text
+    assert "| H1 |" in app.controls.table.content and "⚠ extrapolated |" in app.controls.table.content
+    assert "Extrapolated" in app.controls.summary.content
+    ev = app.handle_drag("targets", "H1", [400.0, -150.0, 15.0], "end")
+    assert not ev.targets.extrapolated[0] and tuple(sphere.color) == colors.TARGET
+
+
+# ------------------------------------------------------------------------------------------------- settings
+def test_clicking_a_fiducial_excludes_and_includes_it(app):
+    sphere = app.nodes.spheres[("fiducials", "F3")]
+    n = len(app.session.last.fiducial_ids)
+    _click(sphere)
+    ev = app.session.last
+    assert "F3" in ev.settings.excluded and ev.summary["fiducials_used"] == n - 1
+    assert tuple(sphere.color) == colors.FIDUCIAL_EXCLUDED
+    assert f"over {n - 1} of {n} fiducials" in app.controls.summary.content
+    assert len(app.nodes.nodes["/corrections/fiducials"].points) == n - 1
+    assert "excluded" in app.nodes.labels["/fiducials/F3/gizmo/label"].text
+    _click(sphere)
+    assert app.session.last.summary["fiducials_used"] == n and tuple(sphere.color) == colors.FIDUCIAL
+
+
+def test_method_controls_change_the_numbers(app):
+    c = app.controls
+    rmst0 = app.session.last.summary["rmst_rrbc_mm"]
+    c.interpolation.value = "gp"
+    ev = app.session.last
+    assert ev.settings.interpolation == "gp" and ev.targets.correction_std is not None
+    assert ev.summary["rmst_rrbc_mm"] != pytest.approx(rmst0)
+    assert "| std |" in c.table.content
+    std0 = float(np.linalg.norm(ev.targets.correction_std[0]))
+    assert f"| {std0:.3f} |" in c.table.content
+    fre0 = ev.registration.fre_rms_mm
+    c.registration.value = "three-point"
+    ev = app.session.last
+    assert ev.registration.method == "three-point" and ev.registration.fre_rms_mm != pytest.approx(fre0)
+    assert f"FRE {ev.registration.fre_rms_mm:.3f} mm" in c.summary.content
+    assert ev.summary == app.session.evaluate().summary
+    c.interpolation.value = "idw"
+    assert c.neighbors.visible and not c.smoothing.visible
+    c.neighbors.value = 2
+    assert app.session.last.settings.neighbors == 2
+    rigid0 = app.session.last.summary["rmst_rigid_mm"]
+    c.bias.value = 2.0
+    assert app.session.last.settings.bias_scale == 2.0
+    assert app.session.last.summary["rmst_rigid_mm"] != pytest.approx(rigid0)
+    seed0 = app.session.last.settings.seed
+    c.new_seed.value = True
+    assert app.session.last.settings.seed != seed0 and str(app.session.last.settings.seed) in c.seed_md.content
+    c.magnification.value = 1000
+    assert "×1000" in c.scale.content
+    _assert_arrows_match(app, app.session.last)
+
+
+def test_refused_setting_keeps_the_session_and_says_why(app):
+    for pid in app.session.last.fiducial_ids:
+        app.toggle_fiducial(pid)
+    # the last one cannot be excluded with idw: the core refuses, the app says so and stays consistent
+    ev = app.session.last
+    assert ev.summary["fiducials_used"] == 1
+    assert app.last_message and "fiducial" in app.last_message
+    assert "⚠" in app.controls.status.content
+
+
+def test_layers_lesson_and_heat_map(app):
+    c = app.controls
+    c.layers["hull"].value = False
+    assert app.nodes.groups["hull"].visible is False
+    c.layers["heatmap"].value = True
+    node = app.nodes.nodes["/heatmap/points"]
+    hm = app.heat_map
+    assert node.visible and len(node.points) == len(hm.positions)
+    assert f"{float(np.nanmin(np.r_[hm.error_rigid, hm.error_rrbc])):.4f} mm" in c.legend.content
+    c.heat_value.value = "rigid error"
+    assert "rigid only" in c.legend.content
+    # lesson: Next starts at step 1 with its layers; numbers are live
+    c.lesson_next.value = True
+    assert app.lesson_index == 0 and "Step 1 of 9" in c.lesson.content
+    assert c.layers["registration"].value and not c.layers["targets"].value
+    assert app.nodes.groups["targets"].visible is False
+    for _ in range(5):
+        c.lesson_next.value = True
+    assert "Step 6 of 9" in c.lesson.content  # fiducial corrections only
+    assert app.nodes.groups["corrections"].visible and not app.nodes.nodes["/corrections/targets"].visible
+    ev = app.session.last
+    n = np.linalg.norm(ev.corrections[ev.included], axis=1)
+    assert f"{n.max():.3f} mm" in c.lesson.content and f"{n.min():.3f} mm" in c.lesson.content
+    c.lesson_prev.value = True
+    assert "Step 5 of 9" in c.lesson.content
+    for _ in range(4):
+        c.lesson_next.value = True
+    sm = app.session.last.summary
+    assert "Step 9 of 9" in c.lesson.content and f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.lesson.content
+    assert c.layers["landing"].value
+    app.handle_drag("targets", "H3", [410.0, 40.0, 15.0], "end")
+    sm = app.session.last.summary
+    assert f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.lesson.content
+    c.lesson_end.value = True
+    assert app.lesson_index is None and c.layers["heatmap"].value and not c.layers["hull"].value
+    assert app.nodes.nodes["/corrections/targets"].visible
+
+
+def test_display_controls_and_heat_map_follow_drags(app):
+    c = app.controls
+    assert c.handles.value == "targets" and app.gizmo("fiducials", "F1").disable_axes
+    c.handles.value = "both"
+    assert not app.gizmo("fiducials", "F1").disable_axes and not app.gizmo("targets", "H1").disable_axes
+    c.handles.value = "fiducials"
+    assert not app.gizmo("fiducials", "F1").disable_axes and app.gizmo("targets", "H1").disable_sliders
+    c.marker.value = 4.0
+    assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(4.0)
+    assert app.gizmo("targets", "H1").scale == pytest.approx(app.nodes._gizmo_scale())
+    c.layers["heatmap"].value = True
+    owner = np.array(app.heat_map.target) == "H1"
+    centre0 = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner].mean(0)
+    c.region_zoom.value = 10.0
+    assert app.nodes.regions["H1"].scale == pytest.approx(10.0)  # H1's region is a box: uniform zoom
+    assert app.nodes.regions["H3"].scale == pytest.approx((6.0, 6.0, 6.0))  # sphere r 0.6 mm, zoomed
+    pts = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner]
+    np.testing.assert_allclose(pts.mean(0), centre0, atol=2.0)
+    app.handle_drag("targets", "H1", [420.0, -150.0, 15.0], "end")  # the heat map follows at drag end
+    pts = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner]
+    assert abs(pts.mean(0)[0] - 420.0) < 3.0
+    hm = app.session.heat_map()
+    np.testing.assert_allclose(app.heat_map.error_rrbc, hm.error_rrbc)
+    with pytest.raises(InputError):
+        app.set_display(handles="sideways")
+
+
+def test_monte_carlo_plots_follow_the_setup(app):
+    assert app.mc.wait_idle(60)
+    first = app.mc_plots
+    assert first is not None
+    centres, rigid, rrbc = first.histogram()
+    np.testing.assert_allclose(app.controls.mc_hist.data[1], rigid)
+    app.controls.interpolation.value = "tps"
+    assert app.mc.wait_idle(60)
+    assert app.mc_plots is not first
+    d, a, b = app.mc_plots.by_distance()
+    np.testing.assert_allclose(app.controls.mc_dist.data[0], d)
+    np.testing.assert_allclose(app.controls.mc_dist.data[2], b)
+    assert "tps" in app.controls.mc_info.content
+
+
+def test_exports_come_from_the_session(app):
+    name, content = app.export("csv")
+    assert name.endswith(".csv")
+    mset = parse_measurements(content.decode("utf-8"), name)
+    ref = app.session.export_measurements()
+    assert mset.ids == ref.ids and mset.roles == ref.roles
+    np.testing.assert_allclose(mset.sensor, ref.sensor)
+    name, content = app.export("json")
+    assert json.loads(content) == json.loads(json.dumps(app.session.export_json()))
+    app.controls.download_csv.value = True  # no tab connected: nothing to send, nothing breaks
+    app.controls.download_json.value = True
+
+
+# ------------------------------------------------------------------------------------------------- bad files
+def test_bad_files_leave_the_server_and_session(app, tmp_path):
+    session = app.session
+    bad_toml = tmp_path / "bad.toml"
+    bad_toml.write_text('[scene]\nname = "x"\nunits = "inch"\nmesh = "m.glb"\n', encoding="utf-8")
+    assert app.load(bad_toml) is False
+    assert app.session is session and "bad.toml" in app.last_message
+    assert "bad.toml" in app.controls.status.content
+    bad_csv = tmp_path / "bad.csv"
+    bad_csv.write_text("id,role,sensor_x\nA,fiducial,1\n", encoding="utf-8")
+    app.controls.path.value = str(bad_csv)
+    app.controls.load.value = True  # the Load button
+    assert app.session is session and "bad.csv" in app.last_message
+    assert app.load_upload("junk.csv", b"\xff\xfe not text") is False
+    assert app.load_upload("broken.toml", b"[scene\n") is False
+    assert app.session is session and "broken.toml" in app.last_message
+    with urllib.request.urlopen(app.url, timeout=10) as r:
+        assert r.status == 200
+    assert app.handle_drag("targets", "H1", [401.0, -150.0, 15.0], "end") is not None
+    # a good measurement upload replaces the session
+    assert app.load_upload("example.csv", EXAMPLE_CSV.read_bytes()) is True
+    assert app.session.kind == "measurements"
+
+
+# ------------------------------------------------------------------------------------------------- measured data
+def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
+    app = measured
+    c = app.controls
+    assert c.noise.disabled and c.bias.disabled
+    assert "Monte Carlo needs a scene" in c.mc_info.content
+    c.interpolation.value = "gp"
+    ev0 = app.session.last
+    i = ev0.targets.ids.index("T1")
+    p0 = ev0.targets.positions[i].copy()
+    ev = app.handle_drag("targets", "T1", p0 + [60.0, 40.0, 0.0], "end")
+    assert ev is not None
+    assert not np.allclose(ev.targets.correction[i], ev0.targets.correction[i])
+    assert not np.allclose(ev.targets.correction_std[i], ev0.targets.correction_std[i])
+    std = float(np.linalg.norm(ev.targets.correction_std[i]))
+    assert f"± {std:.3f}" in app.nodes.labels["/targets/T1/gizmo/label"].text
+    assert f"| {std:.3f} |" in c.table.content
+    _assert_arrows_match(app, app.session.evaluate())
+    # fiducials cannot be moved: refused, the gizmo snaps back, a message says why
+    j = ev.fiducial_ids.index("F22")
+    f0 = ev.fiducial_positions[j].copy()
+    _gizmo_drag(app, "fiducials", "F22", [f0 + [5.0, 0.0, 0.0], f0 + [9.0, 0.0, 0.0]])
+    np.testing.assert_allclose(app.gizmo("fiducials", "F22").position, f0)
+    np.testing.assert_allclose(app.session.last.fiducial_positions[j], f0)
+    assert "cannot be moved" in app.last_message
+    assert app.handle_drag("fiducials", "F22", f0 + [1.0, 0.0, 0.0], "end") is None
+    # heat map in measurement mode: correction size / gp std
+    c.layers["heatmap"].value = True
+    assert app.heat_map is not None and app.nodes.nodes["/heatmap/points"].visible
+    c.heat_value.value = "correction std (gp)"
+    assert "std" in c.legend.content
+
+
+# ------------------------------------------------------------------------------------------------- CLI
+def test_cli_view_help_and_bad_scene(tmp_path):
+    r = subprocess.run(RRBC + ["view", "--help"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "--port" in r.stdout and "--host" in r.stdout
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[scene\n", encoding="utf-8")
+    r = subprocess.run(RRBC + ["view", str(bad), "--port", "0"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stdout == ""
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "bad.toml" in lines[0]
+
+
+def test_cli_view_starts_and_prints_the_url():
+    import signal
+
+    proc = subprocess.Popen(RRBC + ["view", "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert "http://127.0.0.1:" in line
+        url = line.split(" at ")[1].split()[0]
+        with urllib.request.urlopen(url, timeout=10) as r:
+            assert r.status == 200
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0
+
+
+# ------------------------------------------------------------------------------------------------- diagnose
+def _rows_without_targets(app: RunningApp):
+    from rrbc_core.io.measurements import MeasurementSet
+
+    m = app.session.export_measurements()
+    keep = [i for i, role in enumerate(m.roles) if role in ("registration", "fiducial", "both")]
+    return MeasurementSet(
+        ids=tuple(m.ids[i] for i in keep),
+        roles=tuple(m.roles[i] for i in keep),
+        sensor=m.sensor[keep],
+        robot=m.robot[keep],
+        time=m.time[keep],
+        lines=tuple(0 for _ in keep),
+        source=m.source,
+    )
+
+
+def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
+    from rrbc_core.analysis.diagnosis import diagnose
+
+    panel = app.controls.diagnosis
+    assert "Diagnose current data" in app.controls.diagnose.label and "Press" in panel.content
+    m = app.session.export_measurements()
+    assert "check" in m.roles  # the export holds the targets' truth: the diagnosis must not see it
+    rows = _rows_without_targets(app)
+    assert set(rows.roles) <= {"registration", "fiducial", "both"}
+    direct = diagnose(rows)
+    _press(app.controls.diagnose)
+    text = panel.content
+    assert app.diagnosis is not None and not app.diagnosis_stale
+    assert app.diagnosis.to_json() == direct.to_json()  # same rows, same verdict (targets withheld)
+    assert app.diagnosis.n_points == len(set(rows.ids)) and "check" not in app._diagnosis_rows.roles
+    assert f"Diagnosis of **{direct.n_points} points**" in text
+    # the verdict: effects most important first, each with parameters, p-value and evidence
+    assert direct.effects, "the default scene has a bias the diagnosis finds"
+    assert "Verdict:" in text and "consistent with rigid" not in text
+    labels = {
+        "smooth_field": "Smooth field",
+        "affine": "Affine",
+        "scale": "Uniform scale",
+        "outliers": "Outliers",
+        "drift": "Drift",
+        "anisotropic_noise": "Anisotropic noise",
+    }
+    at = [text.index(f"**{labels[e.name]}") for e in direct.effects]
+    assert at == sorted(at)
+    for e in direct.effects:
+        assert e.evidence in text
+        p = f"{e.p_value:.2g}" if e.p_value >= 1e-3 else f"{e.p_value:.1e}"
+        assert f"p = {p}" in text
+    if "smooth_field" in direct.names:
+        e = direct.effects[direct.names.index("smooth_field")]
+        assert f"RMS {e.parameters['rms_mm']:.3f} mm" in text
+    if "affine" in direct.names:
+        assert "ppm" in text
+    assert f"{', '.join(f'{s:.3f}' for s in direct.noise_sigma_mm)} mm" in text
+    assert f"Bias RMS: **{direct.bias_rms_mm:.3f} mm**" in text
+    rec = "recommended" if direct.rrbc_recommended else "not recommended"
+    assert f"RRBC **{rec}**" in text and f"**{100 * direct.expected_rmst_change:+.1f} %**" in text
+    for limit in direct.limits:
+        assert f"- {limit}" in text
+
+    # without bias: a different verdict, again that of diagnose() on the same rows
+    app.change_settings(bias_scale=0.0, noise_scale=1.0)
+    assert panel.content.startswith("**(data changed since — press again)**")
+    assert app.diagnosis_stale
+    _press(app.controls.diagnose)
+    text2 = panel.content
+    assert text2 != text and "data changed since" not in text2
+    direct2 = diagnose(_rows_without_targets(app))
+    assert app.diagnosis.to_json() == direct2.to_json()
+    if not direct2.effects:
+        assert "consistent with rigid + isotropic noise" in text2
+
+
+def test_diagnosis_goes_stale_when_its_data_change(app):
+    panel = app.controls.diagnosis
+    _press(app.controls.diagnose)
+    fresh = panel.content
+    # a target drag, a display or a method change leave the diagnosed rows (no targets) as they are
+    app.handle_drag("targets", "H1", [410.0, -150.0, 40.0], "end")
+    app.set_display(magnification=50.0)
+    app.change_settings(interpolation="tps")
+    assert panel.content == fresh and not app.diagnosis_stale
+    # a fiducial drag changes them: marked stale at once (during the drag), not recomputed
+    verdict = app.diagnosis
+    ev = app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "update")
+    assert ev is not None
+    assert app.diagnosis_stale and app.diagnosis is verdict
+    assert panel.content == "**(data changed since — press again)**\n\n" + fresh
+    app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
+    assert panel.content.count("data changed since") == 1
+    _press(app.controls.diagnose)
+    assert "data changed since" not in panel.content and not app.diagnosis_stale
+
+
+def test_diagnosis_says_why_it_cannot_run(measured):
+    panel = measured.controls.diagnosis
+    # measured data: the file's registration and fiducial rows, its targets withheld
+    _press(measured.controls.diagnose)
+    assert measured.diagnosis is not None and "Verdict:" in panel.content
+    assert "check" in measured.session.export_measurements().roles and "check" not in measured._diagnosis_rows.roles
+    # too few points (excluded fiducials are not part of the current data): the InputError's message in the panel
+    for pid in measured.session.last.fiducial_ids[:-1]:
+        measured.toggle_fiducial(pid)
+    assert "data changed since" in panel.content
+    assert len(set(measured._diagnosis_input().ids)) < 5
+    _press(measured.controls.diagnose)
+    assert measured.diagnosis is None
+    assert panel.content.startswith("⚠ Cannot diagnose:") and "at least 5 distinct points" in panel.content
+    # loading a file clears the tab
+    measured.load(EXAMPLE_CSV)
+    assert panel.content.startswith("Tests the current") and measured.diagnosis is None
+
+
+def test_a_quiet_server_prints_nothing_on_stdout_from_start_to_stop(capfd):
+    """`serve(quiet=True)` (what the benchmarks and tests use) hides viser's banner and its "Server stopped" line,
+    so a caller's stdout (a --json stream) carries only what the caller prints."""
+    a = serve(port=0)
+    a.handle_drag("targets", "H1", a.session.layout["targets"].positions[0] + [0.5, 0.0, 0.0], "end")
+    a.stop()
+    assert capfd.readouterr().out == ""
