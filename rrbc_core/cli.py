@@ -1,4 +1,4 @@
-"""The `rrbc` command line (contract: shared/spec/cli.md). A thin layer over the core.
+"""The `rrbc` command line (contract: docs/cli.md). A thin layer over the core.
 
 Exit status: 0 success; 2 bad input or usage (one line on stderr, nothing on stdout); 1 unexpected internal
 error (one line on stderr; set RRBC_DEBUG=1 for the traceback). Output is built completely before anything is
@@ -63,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     c = sub.add_parser("correct", help="run RRBC on a measurement file", description="Run RRBC on a measurement file.")
-    c.add_argument("measurements", help="measurement CSV (shared/spec/measurement-file.md)")
+    c.add_argument("measurements", help="measurement CSV (docs/formats/measurement-file.md)")
     c.add_argument("--registration", default="least-squares", choices=list(registration.STRATEGIES))
     c.add_argument("--interpolation", default="idw", choices=list(interpolation.METHODS))
     c.add_argument("--neighbors", type=_positive_int, default=None, help="IDW: number of nearest fiducials (default 4)")
@@ -78,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Say what, beyond a rigid transform plus isotropic noise, is in the measured data, "
         "and whether RRBC will help.",
     )
-    g.add_argument("measurements", help="measurement CSV (shared/spec/measurement-file.md)")
+    g.add_argument("measurements", help="measurement CSV (docs/formats/measurement-file.md)")
     g.add_argument(
         "--alpha", type=_positive_float, default=0.01, help="family-wise false-alarm rate over all tests (default 0.01)"
     )

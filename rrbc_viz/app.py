@@ -57,6 +57,7 @@ from .colors import legend_markdown
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
 from .nodes import HANDLE_CHOICES, LAYERS, Display, SceneNodes, gizmo_name
+from .planning_panel import PlanningPanel
 
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
 HEAT_INTERVAL_S = 0.3  # least time between heat-map recomputations while dragging
@@ -123,10 +124,15 @@ class RunningApp:
         self._diagnosis_rows = None  # the rows it was computed from (MeasurementSet), None when nothing is shown
         self._diagnosis_text = ""  # its content without the stale marker
         self.nodes = SceneNodes(server, self._on_gizmo, self._on_fiducial_click)
-        self.controls = Controls(server, self)
-        self.planning = self.controls.plan
+        self.planning: PlanningPanel | None = None
+        self.controls = Controls(server, self, plan_tab=self._build_plan_tab)
         self.mc = MonteCarloRunner(self._mc_result, self._mc_started)
         self._install(loaded, first=True)
+
+    def _build_plan_tab(self) -> PlanningPanel:
+        """Build the Plan tab's panel (Controls calls this inside the tab) with the narrow view it needs."""
+        self.planning = PlanningPanel(self.server, self, _PlanningView(self))
+        return self.planning
 
     # ------------------------------------------------------------------------------------------ lifecycle
     def stop(self) -> None:
@@ -162,12 +168,14 @@ class RunningApp:
                 self.controls.sync_settings(self.session.settings, self.session.kind)
                 self.controls.sync_display(self.display, self.session.kind)
                 self.controls.sync_layers(self.layers)
-                self.controls.source.content = f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}."
-                self.controls.lesson.content = (
+                self.controls.text["source"] = (
+                    f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}."
+                )
+                self.controls.text["lesson"] = (
                     "The nine steps of RRBC, one at a time, each shown in the scene with "
                     "live numbers. Press **Next** to start."
                 )
-                self.controls.diagnosis.content = diagnosis_panel.PROMPT
+                self.controls.text["diagnosis"] = diagnosis_panel.PROMPT
                 self._frame_camera(loaded.mesh, ev)
                 self._show(ev, heat=True)
             if not first:
@@ -220,11 +228,11 @@ class RunningApp:
         recompute the Plan tab now (else it is marked stale until the next due refresh)."""
         self.nodes.update(ev)
         c = self.controls
-        c.scale.content = tables.scale_line(self.display.magnification)
-        c.summary.content = tables.summary(ev, self.session.kind)
-        c.table.content = tables.target_table(ev)
+        c.text["scale"] = tables.scale_line(self.display.magnification)
+        c.text["summary"] = tables.summary(ev, self.session.kind)
+        c.text["table"] = tables.target_table(ev)
         if self.lesson_index is not None:
-            c.lesson.content = teaching.render(self.lesson_index, ev, self._lesson_context())
+            c.text["lesson"] = teaching.render(self.lesson_index, ev, self._lesson_context())
         self._heat_stale = True
         self._check_diagnosis()
         self.planning.refresh(self.session, due=plan)
@@ -241,7 +249,7 @@ class RunningApp:
         self._heat_time = time.monotonic()
         self._heat_stale = False
         legend = self.nodes.update_heatmap(self.heat_map, self.session.last)
-        self.controls.legend.content = "Nothing to show." if legend is None else legend_markdown(*legend)
+        self.controls.text["legend"] = "Nothing to show." if legend is None else legend_markdown(*legend)
 
     def _lesson_context(self) -> teaching.LessonContext:
         return teaching.LessonContext(self.session.kind, self.display.magnification, dict(self.session.regions))
@@ -250,7 +258,7 @@ class RunningApp:
         """Show a message: a notification to `client` (every tab if None) and the status line."""
         line = " ".join(str(text).split())
         self.messages.append(line)
-        self.controls.status.content = ("⚠ " if error else "✓ ") + line
+        self.controls.text["status"] = ("⚠ " if error else "✓ ") + line
         targets = [client] if client is not None else list(self.server.get_clients().values())
         for c in targets:
             try:
@@ -425,7 +433,7 @@ class RunningApp:
                 self.nodes.target_arrows = step.target_arrows
                 self.nodes.update(self.session.last)
                 text = teaching.render(index, self.session.last, self._lesson_context())
-                self.controls.lesson.content = text
+                self.controls.text["lesson"] = text
             return text
 
     def lesson_step(self, delta: int) -> str:
@@ -442,7 +450,7 @@ class RunningApp:
                     self.set_layer(name, visible)
                 self.nodes.target_arrows = True
                 self.nodes.update(self.session.last)
-                self.controls.lesson.content = "Lesson ended. Press **Next** to start again."
+                self.controls.text["lesson"] = "Lesson ended. Press **Next** to start again."
 
     # ------------------------------------------------------------------------------------------ diagnosis
     def _diagnosis_input(self):
@@ -468,7 +476,7 @@ class RunningApp:
             self._diagnosis_rows = rows
             self._diagnosis_text = text
             with self.server.atomic():
-                self.controls.diagnosis.content = text
+                self.controls.text["diagnosis"] = text
         if result is None:
             self._message("diagnosis failed: see the Diagnose tab", client, title="Not diagnosed")
         return result
@@ -489,7 +497,7 @@ class RunningApp:
         )
         if not same:
             self.diagnosis_stale = True
-            self.controls.diagnosis.content = diagnosis_panel.STALE + "\n\n" + self._diagnosis_text
+            self.controls.text["diagnosis"] = diagnosis_panel.STALE + "\n\n" + self._diagnosis_text
 
     # ------------------------------------------------------------------------------------------- planning
     def set_coverage_colours(self, on: bool) -> None:
@@ -537,7 +545,7 @@ class RunningApp:
                 panel.suggestion_md.content = f"⚠ Cannot suggest: {' '.join(error.split())}"
                 self._message(error, client, title="Cannot plan")
                 return None
-            session.suggestion, session._suggestion_key = snapshot.suggestion, snapshot._suggestion_key
+            session.adopt_suggestion(snapshot)
             with self.server.atomic():
                 panel.show_suggestion(session, result)
         return result
@@ -581,33 +589,32 @@ class RunningApp:
         with self._lock:
             if self.session.kind != "scene":
                 self.mc.cancel()
-                self.controls.mc_info.content = (
+                self.controls.text["mc_info"] = (
                     "Monte Carlo needs a scene (an error model to simulate); measured data have none."
                 )
-                self.controls.mc_hist.visible = self.controls.mc_dist.visible = False
+                self.controls.show_monte_carlo_plots(False)
                 return False
             snapshot = copy.copy(self.session)  # settings and layout are immutable values
-            self.controls.mc_hist.visible = self.controls.mc_dist.visible = True
-            self.mc.request(snapshot, int(self.controls.mc_trials.value))
+            self.controls.show_monte_carlo_plots(True)
+            self.mc.request(snapshot, self.controls.monte_carlo_trials)
             return True
 
     def _mc_started(self) -> None:
-        self.controls.mc_info.content = "Monte Carlo: running…"
+        self.controls.text["mc_info"] = "Monte Carlo: running…"
 
     def _mc_result(self, plots, error: str | None, seconds: float) -> None:
         c = self.controls
         if plots is None:
-            c.mc_info.content = f"Monte Carlo failed: {error}"
+            c.text["mc_info"] = f"Monte Carlo failed: {error}"
             return
         centres, rigid, rrbc = plots.histogram()
         dist, mean_rigid, mean_rrbc = plots.by_distance()
         with self._lock, self.server.atomic():
             self.mc_plots = plots
             self.mc_seconds = seconds
-            c.mc_hist.data = (centres, rigid, rrbc)
-            c.mc_dist.data = (dist, mean_rigid, mean_rrbc)
+            c.show_monte_carlo_plots(True, (centres, rigid, rrbc), (dist, mean_rigid, mean_rrbc))
             s = self.session.settings
-            c.mc_info.content = (
+            c.text["mc_info"] = (
                 f"{plots.trials} trials × {plots.rigid.shape[1]} check points in the targets' "
                 f"regions; {s.registration} + {s.interpolation}; noise ×{s.noise_scale:g}, "
                 f"bias ×{s.bias_scale:g} ({seconds:.1f} s). Updates after a setting changes, a "
@@ -683,6 +690,23 @@ class RunningApp:
     @staticmethod
     def gizmo_name(kind: str, pid: str) -> str:
         return gizmo_name(_KINDS.get(kind, kind), pid)
+
+
+class _PlanningView:
+    """`actions.PlanningView` over a RunningApp: what the Plan tab reads, nothing else."""
+
+    def __init__(self, app: RunningApp):
+        self._app = app
+        self.lock = app._lock
+
+    def live_session(self) -> ExplorerSession:
+        return self._app.session
+
+    def marker_mm(self) -> float:
+        return float(self._app.display.marker_mm)
+
+    def region_nodes(self) -> dict:
+        return self._app.nodes.regions
 
 
 def _check_host(host: str) -> None:

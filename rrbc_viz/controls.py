@@ -1,13 +1,14 @@
 """The control panel (shared by every browser tab): settings, display, layers, lesson, Monte Carlo, diagnosis,
 planning (`planning_panel`), files.
 
-The panel only forwards user input to the app (`rrbc_viz.app.RunningApp`) and shows what the app hands back;
+The panel only forwards user input to the app (through `actions.AppActions`) and shows what the app hands back;
 it holds no RRBC state of its own. Programmatic updates (`sync_*`) set `syncing` so that the value callbacks
 they re-enter (viser runs `on_update` when Python assigns `.value`) do nothing.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
@@ -19,10 +20,10 @@ from rrbc_core.session.evaluation import Settings
 
 from .diagnosis_panel import PROMPT
 from .nodes import HANDLE_CHOICES, LAYERS, Display
-from .planning_panel import PlanningPanel
 
 if TYPE_CHECKING:
-    from .app import RunningApp
+    from .actions import AppActions
+    from .planning_panel import PlanningPanel
 
 LAYER_LABELS = {
     "mesh": "Work-cell mesh",
@@ -52,8 +53,27 @@ def _series(label: str, color: str, points: bool = False) -> dict:
     return s
 
 
+_TEXT_WIDGETS = ("source", "lesson", "diagnosis", "legend", "status", "scale", "summary", "table", "mc_info")
+
+
+class _TextAreas:
+    """The Controls' markdown areas by name (only these: the app writes no other widget of the panel)."""
+
+    def __init__(self, controls: Controls):
+        self._controls = controls
+
+    def __setitem__(self, name: str, markdown: str) -> None:
+        self[name]  # noqa: B018 - checks the name
+        getattr(self._controls, name).content = markdown
+
+    def __getitem__(self, name: str) -> str:
+        if name not in _TEXT_WIDGETS:
+            raise KeyError(f"no text area {name!r}")
+        return getattr(self._controls, name).content
+
+
 class Controls:
-    def __init__(self, server: viser.ViserServer, app: RunningApp):
+    def __init__(self, server: viser.ViserServer, app: AppActions, plan_tab: Callable[[], PlanningPanel]):
         self.app = app
         self.syncing = False
         gui = server.gui
@@ -172,7 +192,7 @@ class Controls:
 
         # ------------------------------------------------------------------------------------------- Plan
         with tabs.add_tab("Plan", icon=viser.Icon.MAP_PIN):
-            self.plan = PlanningPanel(server, app)
+            plan_tab()  # the app builds the Plan tab's panel inside the tab, and keeps it
 
         # ------------------------------------------------------------------------------------------- File
         with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
@@ -185,6 +205,26 @@ class Controls:
             self.download_json = gui.add_button("Download results (JSON)", icon=viser.Icon.DOWNLOAD)
 
         self._wire()
+
+    # -------------------------------------------------------------------------------- what the app shows here
+    @property
+    def text(self) -> _TextAreas:
+        """The panel's text areas by name (source, lesson, diagnosis, legend, status, scale, summary, table,
+        mc_info): ``controls.text["summary"] = markdown`` shows it, ``controls.text["summary"]`` reads it."""
+        return _TextAreas(self)
+
+    def show_monte_carlo_plots(self, visible: bool, histogram=None, by_distance=None) -> None:
+        """Show or hide the Monte Carlo plots; with data, (centres, rigid, rrbc) and (distance, rigid, rrbc)."""
+        self.mc_hist.visible = self.mc_dist.visible = bool(visible)
+        if histogram is not None:
+            self.mc_hist.data = histogram
+        if by_distance is not None:
+            self.mc_dist.data = by_distance
+
+    @property
+    def monte_carlo_trials(self) -> int:
+        """The trials the user asked for."""
+        return int(self.mc_trials.value)
 
     # ---------------------------------------------------------------------------------------------- wiring
     def _wire(self) -> None:

@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from rrbc_core.session.explorer import ExplorerSession
     from rrbc_core.session.results import PlanningState
 
-    from .app import RunningApp
+    from .actions import AppActions, PlanningView
 
 PLAN_INTERVAL_S = 0.25  # least time between planning recomputations while dragging
 PLAN_LIVE_MAX_S = 0.05  # a planning update slower than this runs in the background during drags …
@@ -182,9 +182,10 @@ def render_suggestion(result, current: bool = True) -> str:
 class PlanningPanel:
     """The Plan tab's widgets (built inside the tab by `Controls`) and its scene nodes (`build` per source)."""
 
-    def __init__(self, server: viser.ViserServer, app: RunningApp):
+    def __init__(self, server: viser.ViserServer, app: AppActions, view: PlanningView):
         self.server = server
         self.app = app
+        self.view = view
         gui = server.gui
         self.info = gui.add_markdown("")
         self.k = gui.add_slider("Fiducials to add (K)", 1, K_MAX, 1, 4)
@@ -259,7 +260,7 @@ class PlanningPanel:
         self.halos = {}
         scene_mode = session.kind == "scene"
         if scene_mode:
-            r = self.app.display.marker_mm
+            r = self.view.marker_mm()
             for pid in session.layout["targets"].ids:
                 if pid in session.regions:
                     self.halos[pid] = self.server.scene.add_icosphere(
@@ -379,8 +380,8 @@ class PlanningPanel:
         start = time.perf_counter()
         state = self._compute(snapshot)
         cost = time.perf_counter() - start
-        with self.app._lock:
-            if fresh() and self.app.session is live:
+        with self.view.lock:
+            if fresh() and self.view.live_session() is live:
                 if not isinstance(state, Exception) and state is not self.state:  # a cache hit: no cost measured
                     self.cost_s = cost
                 with self.server.atomic():
@@ -390,8 +391,8 @@ class PlanningPanel:
         """Regions and halos on the coverage scale when the toggle is on; regions back to their colour when off."""
         on = bool(self.colour.value) and self.state is not None
         cov = dict(zip(self.state.target_ids, self.state.coverage)) if self.state is not None else {}
-        r = self.app.display.marker_mm
-        for pid, region in self.app.nodes.regions.items():
+        r = self.view.marker_mm()
+        for pid, region in self.view.region_nodes().items():
             c = colors.coverage_color(cov[pid]) if on and pid in cov else colors.REGION
             self._assign(region, "color", c)
         for pid, halo in self.halos.items():
@@ -432,7 +433,7 @@ class PlanningPanel:
     def show_suggestion(self, session: ExplorerSession, result) -> None:
         """Ghost spheres +1 … +K at the suggested places and the suggestion's text (caller holds the lock)."""
         self.remove_ghosts()
-        r = self.app.display.marker_mm
+        r = self.view.marker_mm()
         for i, (cid, p) in enumerate(zip(result.suggested_ids, np.asarray(result.suggested, float).reshape(-1, 3))):
             name = f"/plan/ghosts/{i}"
             self.ghosts.append(

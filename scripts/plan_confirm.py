@@ -70,7 +70,7 @@ def report(conf: list[dict], study: list[dict], trials: int, command: str) -> st
     lines += [
         "",
         f"Largest |Δ| {d_max:.2f} %, largest |z| {z_max:.1f}. The test suite allows 4 Monte Carlo standard "
-        "errors plus 2 % (the first-order truncation, theory notes §2.3: 1–2 %); a |z| above ~3 with a |Δ| of a "
+        "errors plus 2 % (the first-order truncation, docs/theory.md §2.3: 1–2 %); a |z| above ~3 with a |Δ| of a "
         "few tenths of a per cent is that truncation showing once the Monte Carlo error is small.",
     ]
     lines += [

@@ -1,11 +1,11 @@
-"""Find what is hidden in measured point pairs (`rrbc diagnose`; contract: shared/spec/cli.md, theory notes §6).
+"""Find what is hidden in measured point pairs (`rrbc diagnose`; contract: docs/cli.md, docs/theory.md §6).
 
 Starting from a rigid sensor→robot fit plus isotropic noise, the diagnosis tests, in this order:
 outliers (generalised ESD on deleted studentised residuals of a rigid+affine(+drift) model), uniform scale
 (similarity vs rigid), affine beyond scale (full linear map vs similarity; only the identifiable terms), drift
 (residuals vs time), smooth field (Moran's I of the residuals, k-nearest-neighbour weights, parametric bootstrap)
 and anisotropic noise (sphericity likelihood ratio of the noise covariance). All model tests are nested F-tests
-of the linearised residual model (theory §6.1). False alarms are controlled family-wise: each of the m tests
+of the linearised residual model (docs/theory.md §6.1). False alarms are controlled family-wise: each of the m tests
 run is judged at alpha/m (Bonferroni).
 
 Conventions: residual r_i = robot_i − (R sensor_i + t), robot frame, mm. `scale.ppm` is the scale of the

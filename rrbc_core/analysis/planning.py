@@ -1,5 +1,5 @@
 """Fiducial planning: coverage of the targets' regions of variability, predicted RMS target error (RMST), and
-suggested fiducial locations (issue 7; theory notes §7; `rrbc plan`).
+suggested fiducial locations (issue 7; docs/theory.md §7; `rrbc plan`).
 
 Frames and units
 ----------------
@@ -32,7 +32,7 @@ points `simulation.work_cell_from_scene` samples for the same seed), all targets
 * Bias: EXACT, not linearised: the noise-free pipeline is run on the bias-only readings (registration
   `batch.least_squares_batch`, corrections e_i = T̂⁻¹(b_i) − s_i, IDW weights from `batch.idw_batch`).
   Rigid: T̂(s_q) − truth_q; RRBC: that plus R̂ Σ_i w_qi e_i.
-* Noise: first order about the bias-only readings (theory notes §0 error budget, §2.3). With J_q,j = ∂T̂(s_q)/∂b_j
+* Noise: first order about the bias-only readings (docs/theory.md §0 error budget, §2.3). With J_q,j = ∂T̂(s_q)/∂b_j
   the sensitivity of the mapped point to registration point j (central differences of the vectorised
   least-squares fit; exact to ~1e-9 relative) and δ = R ε − η the net FLE (covariance Σ = R Σ_s Rᵀ + Σ_b):
       rigid:  err_q = −Σ_j J_q,j δ_j + R ε_q                    (Danilchenko & Fitzpatrick, any FLE covariance)
@@ -46,7 +46,7 @@ points `simulation.work_cell_from_scene` samples for the same seed), all targets
   `simulation.work_cell_from_scene` gives (in `plan`'s optimiser: at the times of the full candidate cell).
 * Uncertainty (rigid_std_mm, rrbc_std_mm): the standard error of the RMST from the finite sample of region points
   (stratified per target: var(MSE) = Σ_t s_t² / n_t / T², propagated as σ_MSE / (2 RMST)). It does not include
-  the first-order truncation, which theory notes §2.3 measured at 1–2 % of the noise term.
+  the first-order truncation, which docs/theory.md §2.3 measured at 1–2 % of the noise term.
 
 Prediction (trials > 0: "monte-carlo")
 --------------------------------------

@@ -3,12 +3,12 @@
 Frames and units
 ----------------
 All points are rows (N x 3 or M x 3) in millimetres. Prediction functions work in ONE frame, the frame the
-registration maps INTO (the destination / robot frame B of theory notes §0): the fiducials, the targets, the
+registration maps INTO (the destination / robot frame B of docs/theory.md §0): the fiducials, the targets, the
 FLE covariances and the bias fields must all be expressed in that frame. Error-prediction formulas are
 invariant to a rigid motion of that frame, so any frame rigidly attached to B gives the same numbers, provided
 every input (including covariance matrices, rotated as Q Σ Qᵀ) is expressed in it.
 
-Net FLE (theory notes §0): with sensor noise ε_i (covariance Σ_s,i, sensor frame) and robot noise η_i
+Net FLE (docs/theory.md §0): with sensor noise ε_i (covariance Σ_s,i, sensor frame) and robot noise η_i
 (covariance Σ_b,i, robot frame), the fit sees δ_i = R ε_i − η_i in the robot frame, with covariance
 
     Σ_i = R Σ_s,i Rᵀ + Σ_b,i,           isotropic case: <FLE²> = E‖δ_i‖² = 3σ_s² + 3σ_b².
@@ -17,13 +17,13 @@ Sign convention: TRE(r) = (registered position of target r) − (true position o
 
 Formulas
 --------
-* Fitzpatrick, West & Maurer, IEEE TMI 17(5):694–702 (1998), eq. 46 (theory notes §2.1):
+* Fitzpatrick, West & Maurer, IEEE TMI 17(5):694–702 (1998), eq. 46 (docs/theory.md §2.1):
   <TRE²(r)> ≈ <FLE²>/N · (1 + (1/3) Σ_k d_k²/f_k²).
-* <FRE²> ≈ (1 − 2/N) <FLE²> (same paper; theory notes §2.2).
+* <FRE²> ≈ (1 − 2/N) <FLE²> (same paper; docs/theory.md §2.2).
 * Danilchenko & Fitzpatrick, IEEE TMI 30(3):679–693 (2011), general first-order TRE covariance with
-  anisotropic, inhomogeneous FLE and arbitrary weights (theory notes §2.3), with A(x) = [−[x]_× | I₃]:
+  anisotropic, inhomogeneous FLE and arbitrary weights (docs/theory.md §2.3), with A(x) = [−[x]_× | I₃]:
   H = Σ A_iᵀ M_i A_i,  B = Σ A_iᵀ M_i Σ_i M_i A_i,  Cov(p) = H⁻¹ B H⁻¹,  Cov(TRE(r)) = A(r) Cov(p) A(r)ᵀ.
-* Deterministic bias floor (theory notes §2.3): TRE_bias(r) = β(r) − A(r) H⁻¹ Σ A_iᵀ M_i β(x_i).
+* Deterministic bias floor (docs/theory.md §2.3): TRE_bias(r) = β(r) − A(r) H⁻¹ Σ A_iᵀ M_i β(x_i).
 
 Both first-order forms are computed about the fiducial centroid with coordinates divided by the fiducials'
 RMS radius. This reparametrises p = (δθ, δt) linearly and leaves every result unchanged; it only keeps H
@@ -265,7 +265,7 @@ def expected_tre_fitzpatrick(fiducials, targets, fle_rms) -> np.ndarray:
 
 
 def tre_covariance_first_order(fiducials, targets, fle_cov, weights=None, target_cov=None) -> np.ndarray:
-    """First-order covariance of TRE (M,3,3), mm², Danilchenko & Fitzpatrick 2011 (theory notes §2.3).
+    """First-order covariance of TRE (M,3,3), mm², Danilchenko & Fitzpatrick 2011 (docs/theory.md §2.3).
 
     fiducials: (N,3) true fiducial positions in the destination (robot) frame, mm.
     targets: (M,3) in the same frame, mm.
@@ -300,7 +300,7 @@ def tre_covariance_first_order(fiducials, targets, fle_cov, weights=None, target
 
 
 def bias_tre(fiducials, targets, bias_at_fiducials, bias_at_targets, weights=None) -> np.ndarray:
-    """Deterministic (bias) part of TRE (M,3), mm, to first order (theory notes §2.3):
+    """Deterministic (bias) part of TRE (M,3), mm, to first order (docs/theory.md §2.3):
 
         TRE_bias(r) = β(r) − A(r) H⁻¹ Σ_i A_iᵀ M_i β(x_i),   H = Σ A_iᵀ M_i A_i.
 

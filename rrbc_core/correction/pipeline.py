@@ -52,7 +52,7 @@ class CorrectionResult:
         }
 
     def to_json(self) -> dict:
-        """The JSON object of `rrbc correct --json` (shared/spec/cli.md)."""
+        """The JSON object of `rrbc correct --json` (docs/cli.md)."""
         reg = self.registration
         reg_json = {"method": reg.method, **reg.mapping.as_dict(), "fre_rms_mm": reg.fre_rms_mm}
         if self.options.registration in SEEDED:

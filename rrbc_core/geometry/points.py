@@ -2,13 +2,13 @@
 
 All points are rows (N x 3) in one frame, in mm.
 
-Documented thresholds (theory notes §1.2, §3.3, §4.6):
+Documented thresholds (docs/theory.md §1.2, §3.3, §4.6):
 - COINCIDENT_MM: two distinct points closer than this are treated as the same point (1e-3 mm = 1 µm).
 - COLLINEAR_RATIO: a point set whose second principal spread is below this fraction of its first
   (sigma_2 / sigma_1 of the centred coordinates) is "nearly collinear": the rotation about its line is not
   determined, so registration refuses it.
 - SUBSET_DEGENERACY_RATIO: combinatorial averaging drops 3-point subsets whose sigma_2 / sigma_1 is below this
-  (theory notes §1.2 recommend ~0.05; near-collinear triples can wreck an element-wise mean).
+  (docs/theory.md §1.2 recommend ~0.05; near-collinear triples can wreck an element-wise mean).
 - PLANAR_RATIO: a set whose third spread is below this fraction of its first is treated as planar
   (a breadboard) and interpolated in its best-fit plane; 0.02 keeps a 750 mm plate measured with 0.1 mm noise
   (ratio ~1e-4) planar while a fixture with 20 mm of height in 750 mm is 3-D.

@@ -160,7 +160,7 @@ class RigidTransform:
 def mean_transform(transforms, origin=None, weights=None) -> RigidTransform:
     """Average rigid transforms: chordal mean of rotations; translation averaged so that the averaged
     transform maps `origin` (sensor frame, mm; default 0) to the weighted mean of the individual images of
-    `origin` (theory notes §3.2: averaging translations depends on the origin, so root it where it matters).
+    `origin` (docs/theory.md §3.2: averaging translations depends on the origin, so root it where it matters).
     """
     ts = list(transforms)
     if not ts:

@@ -1,4 +1,4 @@
-"""Scattered-data interpolation of RRBC correction fields (theory notes §4).
+"""Scattered-data interpolation of RRBC correction fields (docs/theory.md §4).
 
 Data: fiducial positions x_i (N x 3, sensor frame, mm) and correction vectors e_i (N x 3, mm). A *method* object
 (`IDW`, `Linear`, `TPS`, `GP`, `NoCorrection`: small frozen dataclasses holding options; one module each) is fitted with
@@ -33,7 +33,7 @@ fiducials' affine hull: plane for dim 2, line for dim 1, zero for dim 3). For di
 cluster itself: ``off_plane_mm`` is the distance from the fiducials' centroid and a query is extrapolated when
 that distance exceeds the cluster radius (plus `HULL_TOL` mm).
 
-Methods (theory notes §4.1-4.4):
+Methods (docs/theory.md §4.1-4.4):
 
 - `IDW(k, power)`: the k nearest fiducials (3-D distance, sensor frame), weights 1/d^p normalised to sum 1; a
   query closer than `EXACT_MM` to a fiducial takes its correction (the mean if several fiducials are that

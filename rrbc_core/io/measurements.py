@@ -1,4 +1,4 @@
-"""Measurement files: the CSV interchange format for measured points (spec: shared/spec/measurement-file.md).
+"""Measurement files: the CSV interchange format for measured points (spec: docs/formats/measurement-file.md).
 
 A measurement file holds, per row, a point `id`, its `role` (registration, fiducial, both, target, check), the
 point as measured in the sensor frame (`sensor_x`, `sensor_y`, `sensor_z`, mm), as measured by the robot or, for

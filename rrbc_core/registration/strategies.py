@@ -165,7 +165,7 @@ def _check_pair(sensor, robot, minimum=3):
 # Least squares (Arun/Kabsch/Umeyama)
 # ------------------------------------------------------------------------------------------------------
 def kabsch(sensor, robot, weights=None, with_scale=False):
-    """Weighted Kabsch/Umeyama. Returns (R, t, scale). Theory notes §1.2 and §1.4."""
+    """Weighted Kabsch/Umeyama. Returns (R, t, scale). Theory docs/theory.md §1.2 and §1.4."""
     w = np.ones(len(sensor)) if weights is None else np.asarray(weights, dtype=float)
     w = w / w.sum()
     ps = w @ sensor
@@ -302,7 +302,7 @@ def combinatorial(
     average='elementwise' (as published): the 4x4 matrices are averaged element by element; the linear part
     is then not exactly a rotation, and the mapping is a LinearMap that uses it as is.
     average='chordal': rotations averaged by the chordal mean (a proper rotation), translations averaged so
-    that the mean is exact at the registration points' centroid (theory notes §3.2).
+    that the mean is exact at the registration points' centroid (docs/theory.md §3.2).
     Subsets whose sigma2/sigma1 (in either frame) is below `degeneracy_ratio` are rejected (default
     geometry.SUBSET_DEGENERACY_RATIO = 0.05). Within a subset, the lowest-index point is the frame origin.
     """

@@ -405,6 +405,11 @@ class ExplorerSession:
         """Whether the pending suggestion was made for the fiducials and targets as they are now."""
         return self.suggestion is not None and self._suggestion_key == self._planning_key()
 
+    def adopt_suggestion(self, snapshot: ExplorerSession) -> None:
+        """Take the pending suggestion that `snapshot` (a `copy.copy` of this session, planned outside the app's lock)
+        computed, with the layout it was made for (`suggestion_current` says whether that is still this one's)."""
+        self.suggestion, self._suggestion_key = snapshot.suggestion, snapshot._suggestion_key
+
     def clear_suggestion(self) -> None:
         self.suggestion, self._suggestion_key = None, None
 

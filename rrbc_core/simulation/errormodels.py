@@ -1,4 +1,4 @@
-"""Composable, switchable, seeded error terms for simulating robot and sensor measurements (theory notes §5).
+"""Composable, switchable, seeded error terms for simulating robot and sensor measurements (docs/theory.md §5).
 
 A `PointSet` holds P physical points: their true positions in the robot base frame and in the sensor frame (mm),
 measurement times (s) and, for the robot, the tool orientation and IK seed used to reach them. An error term

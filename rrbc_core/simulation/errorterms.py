@@ -128,13 +128,13 @@ class RangeNoise(_Term):
 
     @classmethod
     def laser_tracker(cls) -> RangeNoise:
-        """Typical (half-MPE) laser-tracker noise, theory notes §5.2: σ_∥ = (10 µm + 0.3 µm/m·ρ)/2,
+        """Typical (half-MPE) laser-tracker noise, docs/theory.md §5.2: σ_∥ = (10 µm + 0.3 µm/m·ρ)/2,
         σ_⊥ = (15 µm + 6 µm/m·ρ)/2."""
         return cls(perp_mm=(0.0075, 0.003), along_mm=(0.005, 0.00015, 0.0))
 
     @classmethod
     def stereo(cls, focal_px: float, baseline_m: float, sigma_disparity_px: float, sigma_pixel_px: float) -> RangeNoise:
-        """Stereo camera, theory notes §5.2: σ_∥ = ρ² σ_d/(f B), σ_⊥ = ρ σ_u/f (ρ in m, result in mm)."""
+        """Stereo camera, docs/theory.md §5.2: σ_∥ = ρ² σ_d/(f B), σ_⊥ = ρ σ_u/f (ρ in m, result in mm)."""
         f = _number("focal_px", focal_px, positive=True, unit="px")
         b = _number("baseline_m", baseline_m, positive=True, unit="m")
         sd = _number("sigma_disparity_px", sigma_disparity_px, minimum=0, unit="px")
@@ -310,7 +310,7 @@ def _dh_table(dh: DHParameters):
 
 @dataclass(frozen=True)
 class Kinematic(_Term):
-    """Robot kinematic (DH) error, robot side only (theory notes §5.1).
+    """Robot kinematic (DH) error, robot side only (docs/theory.md §5.1).
 
     The true robot is `perturbed(dh, np.random.default_rng(seed), joint_offset_deg, link_mm, twist_deg)`. For a
     physical point p (robot frame, mm) reached with tool rotation R_p, the true robot's joints q solve
@@ -385,7 +385,7 @@ class Drift(_Term):
 
 @dataclass(frozen=True)
 class WarmUp(_Term):
-    """Thermal warm-up: δ(t) = amplitude_mm·(1 − exp(−t/tau_s)) (mm; t and tau in s), theory notes §5.1.
+    """Thermal warm-up: δ(t) = amplitude_mm·(1 − exp(−t/tau_s)) (mm; t and tau in s), docs/theory.md §5.1.
     Either side."""
 
     amplitude_mm: tuple[float, float, float]

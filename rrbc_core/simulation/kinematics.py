@@ -11,7 +11,7 @@ Standard (distal) DH: joint i (i = 1..6) contributes
 
 and the tool pose is A_1 · … · A_6 · Tz(tool_mm). Joint i turns about the z axis of frame i−1.
 
-Kinematic errors (theory notes §5.1): a "true" robot is the nominal one with small Gaussian errors on the joint
+Kinematic errors (docs/theory.md §5.1): a "true" robot is the nominal one with small Gaussian errors on the joint
 zero offsets, link lengths and twists (`perturbed`). The nominal controller computes positions with the nominal
 parameters, so the error is smooth in space and depends on the joint configuration.
 """
@@ -98,7 +98,7 @@ UR5 = DHParameters(
     alpha=np.array([np.pi / 2, 0.0, 0.0, np.pi / 2, -np.pi / 2, 0.0]),
     theta_offset=np.zeros(6),
 )
-"""Nominal UR5 (CB3) DH parameters (UR manual; theory notes §5.1), no tool."""
+"""Nominal UR5 (CB3) DH parameters (UR manual; docs/theory.md §5.1), no tool."""
 
 UR5_TOOL_DOWN_SEED = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
 """A UR5 configuration (rad) with the tool pointing straight down (−z of the base), elbow up, about 0.5 m in

@@ -3,7 +3,7 @@
 Frames and units: the scene frame is the robot base frame (mm); the sensor frame has the sensor at its origin
 (z along the view). The true registration is `cell.sensor_to_robot` (robot = R @ sensor + t).
 
-Generative model (theory notes §5.3). For a physical point p (robot frame) reached with tool orientation R_p
+Generative model (docs/theory.md §5.3). For a physical point p (robot frame) reached with tool orientation R_p
 at time τ:
 - the sensor reports  s = T⁻¹(p) + δ_s          (δ_s: the error model's sensor terms, sensor frame)
 - the robot reports   b = p + δ_r               (δ_r: the robot terms, robot frame: kinematic bias, noise, …)

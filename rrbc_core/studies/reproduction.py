@@ -1,6 +1,6 @@
 """Simulating the Van Wyk & Marvel (2018) breadboard experiment under candidate error models.
 
-What is simulated (facts: `reference_data`, shared/reference/README.md): 16 test sites on one breadboard plate,
+What is simulated (facts: `reference_data`, docs/reference/vanwyk2018.md): 16 test sites on one breadboard plate,
 frame N = the plate frame. Seven registration methods (Table II order) map N to the robot frame; each is
 followed by 80 check measurements (16 sites x 5 repetitions, the count Table I implies), and the translation
 error e = |M⁻¹(robot reading) − hole| (mm, frame N) is recorded. The published statistics of those 80 errors
@@ -61,7 +61,7 @@ REPETITIONS = 5  # per site: 16 x 5 = 80 samples per method (Table I implies 79-
 SA_ITERATIONS = 5000  # not published; our default
 SA_COST_UNIT_MM = 1000.0  # SA cost evaluated in m² (assumption, see module docstring)
 TOOL_MM = 100.0  # stylus length (assumption, as in scenes/breadboard_vanwyk2018.toml)
-#: Reference 1-sigma DH errors of one kinematic unit (theory notes §5.1): joint zero offsets, link lengths, twists.
+#: Reference 1-sigma DH errors of one kinematic unit (docs/theory.md §5.1): joint zero offsets, link lengths, twists.
 KINEMATIC_REFERENCE = {"joint_offset_deg": 0.1, "link_mm": 0.2, "twist_deg": 0.05}
 
 

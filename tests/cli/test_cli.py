@@ -1,4 +1,4 @@
-"""`rrbc correct` end to end, through the installed console script, against shared/spec/cli.md."""
+"""`rrbc correct` end to end, through the installed console script, against docs/cli.md."""
 
 import json
 import subprocess

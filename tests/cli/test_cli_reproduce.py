@@ -1,4 +1,4 @@
-"""`rrbc reproduce vanwyk2018` end to end through the console script (shared/spec/cli.md), and the report."""
+"""`rrbc reproduce vanwyk2018` end to end through the console script (docs/cli.md), and the report."""
 
 import json
 import subprocess

@@ -1,4 +1,4 @@
-"""`rrbc simulate` end to end through the console script (shared/spec/cli.md)."""
+"""`rrbc simulate` end to end through the console script (docs/cli.md)."""
 
 import json
 import subprocess

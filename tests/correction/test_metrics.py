@@ -2,7 +2,7 @@
 
 Monte Carlo checks use the project's own least-squares registration (rrbc_core.registration.least_squares)
 on seeded noise applied to BOTH frames, with a non-identity sensor→robot rotation, so the net FLE in the robot
-frame is δ_i = R ε_i − η_i (theory notes §0).
+frame is δ_i = R ε_i − η_i (docs/theory.md §0).
 
 How the Monte Carlo tolerances are derived (never tuned):
 
@@ -15,7 +15,7 @@ How the Monte Carlo tolerances are derived (never tuned):
 * First-order (model) part: the formulas are the first term of an expansion in FLE / f (f = fiducial spread).
   For zero-mean Gaussian noise the product of the linear and quadratic terms has zero mean, so the first
   neglected term of a second moment is relatively O((FLE / f_min)²), f_min the smallest principal spread
-  f_k of theory notes §2.1. We allow REL_FIRST_ORDER = 10 · (FLE_rms / f_min)² relative (constant 10 as a
+  f_k of docs/theory.md §2.1. We allow REL_FIRST_ORDER = 10 · (FLE_rms / f_min)² relative (constant 10 as a
   generous bound on the O(1) coefficient). For the layouts here that is ≤ 1e-4, i.e. the tolerances are
   essentially statistical: the formulas must agree with the simulation to within its own noise.
 """
@@ -73,7 +73,7 @@ LAYOUTS = {
 
 
 def f_min(points) -> float:
-    """Smallest principal spread f_k (theory notes §2.1), mm."""
+    """Smallest principal spread f_k (docs/theory.md §2.1), mm."""
     c = points - points.mean(0)
     lam2 = np.linalg.svd(c, compute_uv=False) ** 2
     return float(np.sqrt(np.min(lam2.sum() - lam2) / len(points)))

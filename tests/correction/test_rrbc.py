@@ -84,7 +84,7 @@ def test_hidden_smooth_bias_field_is_removed_by_rrbc(method):
 @pytest.mark.parametrize("method", ["idw", "linear", "tps"])
 def test_rrbc_does_not_help_when_there_is_only_noise(method):
     """No bias, noise 0.05 mm/axis on each side: an exact interpolator carries each fiducial's noise into the
-    targets, where the 8-point rigid fit averages it (theory notes §0: ≈2.5x worse); RRBC must not lower the
+    targets, where the 8-point rigid fit averages it (docs/theory.md §0: ≈2.5x worse); RRBC must not lower the
     error on any seed. Measured ratios over seeds 0–11 (2026-11-21, `pytest -s` prints them): idw 1.08–1.35,
     linear 1.08–1.36, tps 1.10–1.42."""
     ratios = [_run(seed, 0.0, 0.05, method) for seed in SEEDS]

@@ -1,4 +1,4 @@
-"""Tests for rrbc_core.interpolation (theory notes §4): IDW, Delaunay-linear, TPS, GP, no correction.
+"""Tests for rrbc_core.interpolation (docs/theory.md §4): IDW, Delaunay-linear, TPS, GP, no correction.
 
 All randomness is seeded (numpy Generators with fixed seeds; hypothesis runs derandomized).
 Units: positions and corrections in mm, sensor frame.

@@ -16,7 +16,7 @@ from tests.paths import SCENES
 
 SHIPPED = ("demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell")
 
-# UR5 (CB3) DH lengths, mm (theory notes §5.1)
+# UR5 (CB3) DH lengths, mm (docs/theory.md §5.1)
 D1, A2, A3, D4, D5, D6 = 89.159, 425.0, 392.25, 109.15, 94.65, 82.3
 
 

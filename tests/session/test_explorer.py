@@ -147,7 +147,7 @@ def test_monte_carlo_plots(scene):
     assert np.sqrt(np.mean(mc.rrbc**2)) < np.sqrt(np.mean(mc.rigid**2))
     d, r, q = mc.by_distance()
     assert np.all(np.diff(d) >= 0) and len(d) == 5 * len(scene.targets)
-    # more noise and no bias: RRBC no longer helps (theory notes §0)
+    # more noise and no bias: RRBC no longer helps (docs/theory.md §0)
     ses.update(bias_scale=0.0, noise_scale=3.0)
     mc2 = ses.monte_carlo(trials=50, checks_per_target=5)
     assert np.sqrt(np.mean(mc2.rrbc**2)) > np.sqrt(np.mean(mc2.rigid**2))

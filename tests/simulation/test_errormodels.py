@@ -117,7 +117,7 @@ def test_anisotropic_terms_are_sensor_only_and_need_a_viewing_direction():
 
 
 def test_range_noise_sigmas_follow_the_published_models():
-    # laser tracker (theory notes §5.2): half MPE, at 2 m: along (10 + 0.3·2)/2 µm, across (15 + 6·2)/2 µm
+    # laser tracker (docs/theory.md §5.2): half MPE, at 2 m: along (10 + 0.3·2)/2 µm, across (15 + 6·2)/2 µm
     lt = RangeNoise.laser_tracker()
     perp, along = lt.sigmas([[0.0, 0.0, 2000.0]])
     assert perp[0] == pytest.approx(0.0135) and along[0] == pytest.approx(0.0053)
@@ -295,7 +295,7 @@ def test_smooth_field_correlation_near_one_at_small_lag_and_zero_at_large_lag():
 
 # --- kinematic ------------------------------------------------------------------------------------------------------
 def test_kinematic_error_magnitude_matches_theory_notes():
-    # theory notes §5.1: raw kinematic error RMS over a 750 x 525 mm plate, default sigmas, median 1.53 mm
+    # docs/theory.md §5.1: raw kinematic error RMS over a 750 x 525 mm plate, default sigmas, median 1.53 mm
     # (5-95 %: 0.68-2.66 mm) over random robots; the brief asks for the order 0.5-3 mm.
     pts = plate(seed_q=UR5_TOOL_DOWN_SEED)
     values = np.array([rms(Kinematic(seed=s).sample(pts, "robot", None, 1)[0]) for s in range(20)])
