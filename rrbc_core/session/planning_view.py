@@ -1,0 +1,215 @@
+"""The session's planning (scene mode; thin wrappers over `rrbc_core.analysis.planning`): coverage and predicted RMST
+for the fiducials as they are now, suggested fiducials, accepting them."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from rrbc_core.errors import InputError
+from rrbc_core.runtime.threads import thread_limited
+from rrbc_core.session.evaluation import Evaluation, Group
+from rrbc_core.session.results import PlanningState, _scaled
+
+if TYPE_CHECKING:
+    from rrbc_core.session.explorer import ExplorerSession
+
+#: Seed of the planner's region samples (coverage, predicted RMST, suggestions): fixed, so the tab's numbers,
+#: a suggestion's "after" and the numbers after accepting it are the same computation.
+PLANNING_SEED = 0
+
+
+class SessionPlanning:
+    """Part of `ExplorerSession` (see there); split out to keep modules short."""
+
+    # ---------------------------------------------------------------------------------------------- planning
+    def _require_planning(self) -> None:
+        if self.kind != "scene" or self.scene is None:
+            raise InputError(
+                "planning needs a scene (an error model and candidate fiducial locations); measured "
+                "data have none: load a scene (File tab, or `rrbc view SCENE.toml`)"
+            )
+
+    def _planning_key(self) -> tuple:
+        """What planning depends on: included fiducials, targets and registration points where they are now, and
+        the noise/bias sizes."""
+        s = self.settings
+        fid = self.layout["fiducials"]
+        inc = np.array([pid not in s.excluded for pid in fid.ids], dtype=bool)
+        return (
+            fid.positions[inc].tobytes(),
+            self.layout["targets"].positions.tobytes(),
+            self.layout["registration"].positions.tobytes(),
+            float(s.noise_scale),
+            float(s.bias_scale),
+        )
+
+    def planning_fiducials(self) -> tuple[tuple, np.ndarray]:
+        """(ids, (N,3) robot-frame positions) of the included fiducials where they are now."""
+        fid = self.layout["fiducials"]
+        inc = [i for i, pid in enumerate(fid.ids) if pid not in self.settings.excluded]
+        return tuple(fid.ids[i] for i in inc), fid.positions[inc].reshape(-1, 3)
+
+    def planning_regions(self) -> tuple[tuple, list]:
+        """(target ids, their regions of variability centred where each target is now)."""
+        tg = self.layout["targets"]
+        ids, regions = [], []
+        for pid, p in zip(tg.ids, tg.positions):
+            region = self.regions.get(pid)
+            if region is not None:
+                ids.append(pid)
+                regions.append(dataclasses.replace(region, center=np.asarray(p, float)))
+        return tuple(ids), regions
+
+    def planning_scene(self):
+        """The scene as the session has it now: fiducials = the included ones at their current positions,
+        targets (and their regions) where they are now, the error model with the noise/bias sizes applied."""
+        from rrbc_core.io.scene import NamedPoints, Target
+
+        self._require_planning()
+        sc = self.scene
+        key = ("planning_scene",) + self._planning_key()
+
+        def build():
+            ids, pos = self.planning_fiducials()
+            t_ids, regions = self.planning_regions()
+            by_id = dict(zip(t_ids, regions))
+            tg = self.layout["targets"]
+            yaw = {t.id: t.tool_yaw_deg for t in sc.targets}
+            targets = tuple(
+                Target(pid, np.asarray(p, float), by_id[pid], yaw.get(pid, sc.tool_yaw_deg))
+                for pid, p in zip(tg.ids, tg.positions)
+                if pid in by_id
+            )
+            s = self.settings
+            reg = self.layout["registration"]
+            return dataclasses.replace(
+                sc,
+                fiducials=NamedPoints(ids, pos, np.full(len(ids), sc.tool_yaw_deg)),
+                registration=NamedPoints(reg.ids, reg.positions, np.full(len(reg.ids), sc.tool_yaw_deg)),
+                targets=targets,
+                error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale),
+            )
+
+        return self._cached("planning_scene", key, build)
+
+    @thread_limited
+    def planning_state(self) -> PlanningState:
+        """Coverage per target and the fast predicted RMST (rigid and RRBC, with their std) for the fiducials as
+        they are now (dragged, excluded or accepted ones included as the session has them). Cached: a call with
+        nothing changed returns the same object. InputError in measurement mode."""
+        from rrbc_core.analysis import planning
+
+        self._require_planning()
+        key = self._planning_key()
+
+        def compute():
+            scene = self.planning_scene()
+            ids, fids = self.planning_fiducials()
+            t_ids, regions = self.planning_regions()
+            cov = planning.coverage(fids, regions, seed=PLANNING_SEED) if regions else np.zeros(0)
+            pred = planning.predict_rmst(
+                scene, fids, registration_mm=self.layout["registration"].positions, seed=PLANNING_SEED
+            )
+            return PlanningState(t_ids, np.asarray(cov, float).reshape(-1), pred, len(ids))
+
+        return self._cached("planning_state", key, compute)
+
+    @thread_limited
+    def suggest_fiducials(self, k: int, seed: int | None = None, progress=None):
+        """Ask the planner for `k` more fiducials from the scene's candidates, given the included fiducials as
+        they are now; keeps the result as `suggestion` and returns it (a planning.PlanResult). seed: the
+        planner's (default PLANNING_SEED, the seed of `planning_state`, so its "before" is the tab's numbers)."""
+        from rrbc_core.analysis import planning
+
+        self._require_planning()
+        try:
+            k = int(k)
+        except (TypeError, ValueError):
+            raise InputError(f"the number of fiducials to add must be a whole number, got {k!r}") from None
+        if k < 1:
+            raise InputError(f"the number of fiducials to add must be at least 1, got {k}")
+        key = self._planning_key()
+        scene = self.planning_scene()
+        _, fids = self.planning_fiducials()
+        result = planning.plan(
+            scene, add=k, fiducials_mm=fids, seed=PLANNING_SEED if seed is None else int(seed), progress=progress
+        )
+        self.suggestion, self._suggestion_key = result, key
+        return result
+
+    @property
+    def suggestion_current(self) -> bool:
+        """Whether the pending suggestion was made for the fiducials and targets as they are now."""
+        return self.suggestion is not None and self._suggestion_key == self._planning_key()
+
+    def adopt_suggestion(self, snapshot: ExplorerSession) -> None:
+        """Take the pending suggestion that `snapshot` (a `copy.copy` of this session, planned outside the app's lock)
+        computed, with the layout it was made for (`suggestion_current` says whether that is still this one's)."""
+        self.suggestion, self._suggestion_key = snapshot.suggestion, snapshot._suggestion_key
+
+    def clear_suggestion(self) -> None:
+        self.suggestion, self._suggestion_key = None, None
+
+    @thread_limited
+    def accept_suggestions(self, which=None) -> Evaluation:
+        """Add fiducials and re-evaluate. `which`: None = every fiducial of the pending suggestion; a list of
+        candidate ids (of the scene's candidates); or (K,3) robot-frame positions (mm). New fiducials get the
+        candidate's id (or P1, P2, … for bare positions; a suffix if taken), are included, and are measured from
+        the error model with noise seeded by their id. Refused with InputError (session unchanged) if there is
+        nothing to add or a point is not usable."""
+        self._require_planning()
+        ids, pos = self._new_fiducials(which)
+        fid = self.layout["fiducials"]
+        taken = set(fid.ids) | set(self.layout["registration"].ids) | set(self.layout["targets"].ids)
+        new_ids = []
+        for pid in ids:
+            base, n, name = pid, 1, pid
+            while name in taken:
+                n += 1
+                name = f"{base}-{n}"
+            taken.add(name)
+            new_ids.append(name)
+        old_layout, old_settings = self.layout, self.settings
+        self.layout = {**self.layout, "fiducials": Group(fid.ids + tuple(new_ids), np.vstack([fid.positions, pos]))}
+        self.settings = dataclasses.replace(self.settings, excluded=self.settings.excluded - set(new_ids))
+        try:
+            ev = self.evaluate()
+        except InputError:
+            self.layout, self.settings = old_layout, old_settings
+            raise
+        self.clear_suggestion()
+        self.accepted = self.accepted + tuple(new_ids)
+        return ev
+
+    def _new_fiducials(self, which) -> tuple[list, np.ndarray]:
+        cands = self.scene.candidates
+        if which is None:
+            if self.suggestion is None:
+                raise InputError("no suggestion to accept: press Suggest first")
+            sug = self.suggestion
+            ids = [str(x) for x in sug.suggested_ids]
+            pos = np.asarray(sug.suggested, float).reshape(-1, 3)
+            if len(ids) != len(pos):
+                ids = [f"P{i + 1}" for i in range(len(pos))]
+        else:
+            arr = np.asarray(which, dtype=object)
+            if arr.size and all(isinstance(x, str) for x in arr.reshape(-1)):
+                ids = [str(x) for x in arr.reshape(-1)]
+                unknown = [x for x in ids if x not in cands.ids]
+                if unknown:
+                    raise InputError(f"not a candidate location of this scene: {', '.join(unknown[:5])}")
+                pos = np.array([cands.position(x) for x in ids], float).reshape(-1, 3)
+            else:
+                try:
+                    pos = np.asarray(which, float).reshape(-1, 3)
+                except (TypeError, ValueError):
+                    raise InputError("fiducials to add: candidate ids or (K,3) positions in mm") from None
+                ids = [f"P{i + 1}" for i in range(len(pos))]
+        if not len(pos):
+            raise InputError("nothing to add: the suggestion is empty")
+        if not np.all(np.isfinite(pos)):
+            raise InputError("a fiducial position must be 3 finite numbers (mm)")
+        return ids, pos

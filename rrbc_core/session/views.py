@@ -1,0 +1,187 @@
+"""The session's views besides its evaluation: the heat map over the targets' regions, the Monte Carlo plots, and
+the exports (a measurement file, the JSON of `rrbc correct`)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from rrbc_core import interpolation
+from rrbc_core.correction.rrbc import correct_points
+from rrbc_core.errors import InputError
+from rrbc_core.runtime.threads import thread_limited
+from rrbc_core.session.evaluation import Evaluation, seed_for
+from rrbc_core.session.results import HeatMap, MonteCarloPlots, _scaled
+
+
+class SessionViews:
+    """Part of `ExplorerSession` (see there); split out to keep modules short."""
+
+    # ---------------------------------------------------------------------------------------------- heat map
+    @thread_limited
+    def heat_map(self, samples_per_target: int = 200) -> HeatMap:
+        """Predicted error over the targets' regions of variability (scene mode): samples (seeded, fixed per
+        target id) inside each region, each measured noise-free (expected sensor reading incl. sensor bias) and
+        corrected with the current fiducials; errors against the truth, rigid and RRBC. In measurement mode
+        (no truth) samples around each target report the interpolated correction's size and, for gp, its
+        standard deviation instead (error fields NaN)."""
+        ev = self.last
+        s = self.settings
+        tg = self.layout["targets"]
+        stacked_key = (tg.ids, tg.positions.tobytes(), s.bias_scale, samples_per_target, s.seed, self.kind)
+        stacked = self._heat_cache.get(None)
+        if stacked is not None and stacked[0] == stacked_key and self.kind == "scene":
+            _, pos, owner, sensor, truth = stacked  # no target moved: only the correction changes
+            return self._heat_values(ev, pos, owner, sensor, truth)
+        pos, owner, sens, truth = [], [], [], []
+        for i, pid in enumerate(tg.ids):
+            key = (tuple(tg.positions[i]), s.bias_scale, samples_per_target, s.seed)
+            cached = self._heat_cache.get(pid)
+            if cached is None or cached[0] != key:
+                region = self.regions.get(pid)
+                rng = np.random.default_rng(seed_for(0, f"heat:{pid}"))
+                if region is not None:
+                    local = region.sample(rng, samples_per_target) - region.center
+                else:
+                    local = rng.normal(0.0, 5.0, (samples_per_target, 3))
+                p = tg.positions[i] + local
+                if self.kind == "scene":
+                    r = self._measure_scene("heat", [f"{pid}.{k}" for k in range(len(p))], p, noise=False)
+                    cached = (key, p, r.sensor, r.truth)
+                else:
+                    cached = (key, p, None, np.full_like(p, np.nan))
+                self._heat_cache[pid] = cached
+            _, p, sensor_i, truth_i = cached
+            if sensor_i is None:  # measurement mode: the sample's sensor position under the current registration
+                sensor_i = ev.registration.mapping.apply_inverse(p)
+            pos.append(p), sens.append(sensor_i), truth.append(truth_i)
+            owner += [pid] * len(p)
+        pos = np.vstack(pos) if pos else np.zeros((0, 3))
+        sensor = np.vstack(sens) if sens else np.zeros((0, 3))
+        truth = np.vstack(truth) if truth else np.zeros((0, 3))
+        owner = tuple(owner)
+        self._heat_cache[None] = (stacked_key, pos, owner, sensor, truth)
+        return self._heat_values(ev, pos, owner, sensor, truth)
+
+    def _heat_values(self, ev: Evaluation, pos, owner, sensor, truth) -> HeatMap:
+        """The heat map's values at samples pos (S,3) robot frame with their sensor readings and truth."""
+        fitted = self._fitted(ev)
+        cp = correct_points(ev.registration.mapping, fitted, sensor)
+        e_rigid = np.linalg.norm(cp.robot_rigid - truth, axis=1)
+        e_rrbc = np.linalg.norm(cp.robot_rrbc - truth, axis=1)
+        std = None if cp.correction_std is None else np.linalg.norm(cp.correction_std, axis=1)
+        return HeatMap(pos, owner, e_rigid, e_rrbc, np.linalg.norm(cp.correction, axis=1), std, cp.extrapolated)
+
+    def _fitted(self, ev: Evaluation):
+        inc = ev.included
+        if np.any(inc):
+            key = (
+                self.settings.interpolator(),
+                ev.fiducial_readings.sensor[inc].tobytes(),
+                ev.corrections[inc].tobytes(),
+            )
+            return self._cached(
+                "fitted",
+                key,
+                lambda: self.settings.interpolator().fit(ev.fiducial_readings.sensor[inc], ev.corrections[inc]),
+            )
+        return interpolation.NoCorrection().fit(
+            ev.registration_readings.sensor, np.zeros_like(ev.registration_readings.sensor)
+        )
+
+    # ----------------------------------------------------------------------------------------- Monte Carlo
+    @thread_limited
+    def monte_carlo(self, trials: int = 200, checks_per_target: int = 10, seed: int | None = None) -> MonteCarloPlots:
+        """Scene mode: Monte Carlo of the current layout and settings (noise redrawn, bias fixed, both scaled);
+        errors at check points sampled in the targets' regions, rigid vs RRBC, and their distance from the
+        scene's distance origin. Uses the current registration strategy and interpolation."""
+        from rrbc_core.simulation.montecarlo import WorkCell, measure, trial_errors
+
+        if self.kind != "scene":
+            raise InputError("Monte Carlo needs a scene (an error model); measured data have none")
+        from rrbc_core.simulation.kinematics import tool_down
+
+        s = self.settings
+        sc = self.scene
+        rng = np.random.default_rng(s.seed if seed is None else seed)
+        ids, roles, pos = [], [], []
+        reg_ids = set(self.layout["registration"].ids)
+        fid = self.layout["fiducials"]
+        for pid, p in zip(self.layout["registration"].ids, self.layout["registration"].positions):
+            both = pid in fid.ids and pid not in s.excluded
+            ids.append(pid), roles.append("both" if both else "registration"), pos.append(p)
+        for pid, p in zip(fid.ids, fid.positions):
+            if pid not in reg_ids and pid not in s.excluded:
+                ids.append(pid), roles.append("fiducial"), pos.append(p)
+        for pid, p in zip(self.layout["targets"].ids, self.layout["targets"].positions):
+            region = self.regions.get(pid)
+            for k in range(checks_per_target):
+                q = p if region is None else p + region.sample(rng, 1)[0] - region.center
+                ids.append(f"{pid}.c{k}"), roles.append("check"), pos.append(q)
+        robot = np.array(pos, float).reshape(-1, 3)
+        cell = WorkCell(
+            name=sc.name,
+            sensor_to_robot=sc.sensor_to_robot,
+            ids=tuple(ids),
+            roles=tuple(roles),
+            robot=robot,
+            time=np.arange(len(ids)) * float(sc.measurement_interval_s),
+            tool_rotation=np.broadcast_to(tool_down(sc.tool_yaw_deg), (len(ids), 3, 3)).copy(),
+            error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale),
+            joint_seed=sc.joint_seed,
+            distance_origin=np.asarray(sc.distance_origin, float),
+        )
+        m = measure(cell, rng, trials)
+        opts = s.method.interpolation_kwargs()
+        e = trial_errors(cell, m, s.registration, s.interpolation, seeds=rng.integers(0, 2**31 - 1, trials), **opts)
+        chk = cell.index("check")
+        dist = np.linalg.norm(cell.robot[chk] - cell.distance_origin, axis=1)
+        return MonteCarloPlots(e.rigid, e.rrbc, dist, trials)
+
+    # -------------------------------------------------------------------------------------------- exporting
+    def export_measurements(self):
+        """The current data as a MeasurementSet (scene mode: targets become `check` rows with their truth, so
+        `rrbc correct` on the export reproduces the app's numbers)."""
+        from rrbc_core.io.measurements import MeasurementSet
+
+        ev = self.last
+        ids, roles, sensor, robot = [], [], [], []
+        fid_ids = set(ev.fiducial_ids)
+        for i, pid in enumerate(ev.registration_ids):
+            both = pid in fid_ids and pid not in self.settings.excluded
+            ids.append(pid), roles.append("both" if both else "registration")
+            sensor.append(ev.registration_readings.sensor[i]), robot.append(ev.registration_readings.robot[i])
+        reg_ids = set(ev.registration_ids)
+        for i, pid in enumerate(ev.fiducial_ids):
+            if pid in reg_ids or not ev.included[i]:
+                continue
+            ids.append(pid), roles.append("fiducial")
+            sensor.append(ev.fiducial_readings.sensor[i]), robot.append(ev.fiducial_readings.robot[i])
+        t = ev.targets
+        for i, pid in enumerate(t.ids):
+            known = np.all(np.isfinite(t.truth[i]))
+            ids.append(pid), roles.append("check" if known else "target")
+            sensor.append(t.sensor[i]), robot.append(t.truth[i] if known else np.full(3, np.nan))
+        n = len(ids)
+        return MeasurementSet(
+            ids=tuple(ids),
+            roles=tuple(roles),
+            sensor=np.array(sensor).reshape(n, 3),
+            robot=np.array(robot).reshape(n, 3),
+            time=np.full(n, np.nan),
+            lines=tuple(0 for _ in ids),
+            source=f"<{self.name}>",
+        )
+
+    @thread_limited
+    def export_json(self) -> dict:
+        """Results as `rrbc correct --json` would give them for `export_measurements()`, plus the settings."""
+        from rrbc_core.correction.pipeline import correct_measurements
+
+        s = self.settings
+        opts = s.method
+        out = correct_measurements(self.export_measurements(), opts).to_json()
+        out["settings"] = {**dataclasses.asdict(s), "excluded": sorted(s.excluded)}
+        out["source"] = {"kind": self.kind, "name": self.name}
+        return out
