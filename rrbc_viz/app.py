@@ -33,10 +33,7 @@ Frames and units: the scene is drawn in the robot frame, in millimetres (see `no
 from __future__ import annotations
 
 import contextlib
-import copy
 import io
-import json
-import re
 import socket
 import threading
 import time
@@ -46,13 +43,14 @@ from dataclasses import replace
 import numpy as np
 import viser
 
-from rrbc_core.analysis.diagnosis import Diagnosis, diagnose
+from rrbc_core.analysis.diagnosis import Diagnosis
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
 from . import diagnosis_panel, files, tables, teaching
+from .app_tabs import TabActions
 from .colors import legend_markdown
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
@@ -92,7 +90,7 @@ def _nice(x: float) -> float:
     return e
 
 
-class RunningApp:
+class RunningApp(TabActions):
     """A running app. `server` is the viser server, `session` the shared ExplorerSession (replaced when a file
     is loaded), `port`/`url` where to point a browser. `stop()` frees the port."""
 
@@ -451,237 +449,6 @@ class RunningApp:
                 self.nodes.target_arrows = True
                 self.nodes.update(self.session.last)
                 self.controls.text["lesson"] = "Lesson ended. Press **Next** to start again."
-
-    # ------------------------------------------------------------------------------------------ diagnosis
-    def _diagnosis_input(self):
-        """The session's current data without its targets (roles registration, fiducial, both): no truth."""
-        return diagnosis_panel.diagnosis_rows(self.session.export_measurements())
-
-    def run_diagnosis(self, client=None) -> Diagnosis | None:
-        """Diagnose the current data (what the Diagnose button does) and show the verdict in the Diagnose tab.
-        Synchronous: ~15 ms on the bundled scene. Returns None (and says why in the tab) on InputError."""
-        with self._lock:
-            rows = self._diagnosis_input()
-            try:
-                result = diagnose(rows)
-            except InputError as exc:
-                result, text = None, diagnosis_panel.render_error(str(exc))
-            except Exception as exc:  # noqa: BLE001 - keep serving
-                traceback.print_exc()
-                result, text = None, diagnosis_panel.render_error(f"internal error: {type(exc).__name__}: {exc}")
-            else:
-                text = diagnosis_panel.render(result, self.session.name)
-            self.diagnosis = result
-            self.diagnosis_stale = False
-            self._diagnosis_rows = rows
-            self._diagnosis_text = text
-            with self.server.atomic():
-                self.controls.text["diagnosis"] = text
-        if result is None:
-            self._message("diagnosis failed: see the Diagnose tab", client, title="Not diagnosed")
-        return result
-
-    def _check_diagnosis(self) -> None:
-        """Mark the Diagnose tab's content stale once the rows it was computed from changed (caller holds the
-        lock). Compares data, so a target drag or a method change (which leave the diagnosed rows as they are)
-        keeps the verdict current; a fiducial drag, an exclusion or a noise/bias/seed change makes it stale."""
-        old = self._diagnosis_rows
-        if old is None or self.diagnosis_stale:
-            return
-        new = self._diagnosis_input()
-        same = (
-            new.ids == old.ids
-            and new.roles == old.roles
-            and np.array_equal(new.sensor, old.sensor, equal_nan=True)
-            and np.array_equal(new.robot, old.robot, equal_nan=True)
-        )
-        if not same:
-            self.diagnosis_stale = True
-            self.controls.text["diagnosis"] = diagnosis_panel.STALE + "\n\n" + self._diagnosis_text
-
-    # ------------------------------------------------------------------------------------------- planning
-    def set_coverage_colours(self, on: bool) -> None:
-        """Colour each target's region (and a halo around it) by coverage, or back to the region colour."""
-        with self._lock:
-            if bool(self.planning.colour.value) != bool(on):
-                with self.planning.quiet():
-                    self.planning.colour.value = bool(on)
-            with self.server.atomic():
-                self.planning.apply_colours(self.session)
-
-    def suggest_fiducials(self, k: int | None = None, client=None, seed: int | None = None):
-        """Suggest `k` (default: the tab's K) more fiducials for the session as it is now and show them as ghost
-        spheres. The planner runs on a snapshot of the session outside the app's lock (a drag meanwhile goes on;
-        the suggestion is then marked as made for the old layout). Returns the planning.PlanResult, or None (and
-        a visible message) when refused."""
-        panel = self.planning
-        with self._lock:
-            session = self.session
-            k = int(panel.k.value) if k is None else k
-            if session.kind != "scene":
-                self._message(
-                    "planning needs a scene (an error model and candidate locations); measured data have none",
-                    client,
-                    title="Cannot plan",
-                )
-                return None
-            if not panel.begin():
-                self._message("a suggestion is already being computed", client, title="Planning")
-                return None
-            snapshot = copy.copy(session)  # settings and layout are immutable values
-        result, error = None, None
-        try:
-            result = snapshot.suggest_fiducials(k, seed=seed, progress=panel.progress)
-        except InputError as exc:
-            error = str(exc)
-        except Exception as exc:  # noqa: BLE001 - keep serving
-            traceback.print_exc()
-            error = f"internal error: {type(exc).__name__}: {exc}"
-        with self._lock:
-            panel.end(self.session)
-            if self.session is not session:  # another source was loaded meanwhile
-                return None
-            if error is not None:
-                panel.suggestion_md.content = f"⚠ Cannot suggest: {' '.join(error.split())}"
-                self._message(error, client, title="Cannot plan")
-                return None
-            session.adopt_suggestion(snapshot)
-            with self.server.atomic():
-                panel.show_suggestion(session, result)
-        return result
-
-    def accept_suggestions(self, client=None) -> Evaluation | None:
-        """Add the suggested fiducials to the cell (measured from the error model), remove the ghosts, update
-        everything (planning included). None, and a message, when there is nothing to accept."""
-        with self._lock:
-            before = self.planning.state
-            known = set(self.session.layout["fiducials"].ids)
-            try:
-                ev = self.session.accept_suggestions()
-            except InputError as exc:
-                self._message(str(exc), client, title="Not accepted")
-                return None
-            new = [pid for pid in ev.fiducial_ids if pid not in known]
-            with self.server.atomic():
-                self.nodes.add_new_fiducials(ev)
-                self.planning.remove_ghosts(prompt=True)
-                self._show(ev, heat=True)
-            after = self.planning.state
-            text = f"Added {len(new)} fiducial{'s' if len(new) != 1 else ''}: {', '.join(new)}."
-            if before is not None and after is not None:
-                text += (
-                    f" Predicted RMST with RRBC {before.predicted.rrbc_mm:.3f} → {after.predicted.rrbc_mm:.3f} mm, "
-                    f"rigid {before.predicted.rigid_mm:.3f} → {after.predicted.rigid_mm:.3f} mm."
-                )
-            self._message(text, client, error=False, title="Fiducials added")
-        self.request_monte_carlo()
-        return ev
-
-    def clear_suggestions(self) -> None:
-        with self._lock:
-            self.session.clear_suggestion()
-            with self.server.atomic():
-                self.planning.remove_ghosts(prompt=True)
-
-    # ---------------------------------------------------------------------------------------- Monte Carlo
-    def request_monte_carlo(self) -> bool:
-        """Queue a Monte Carlo run of the current setup (scene mode); False when there is no error model."""
-        with self._lock:
-            if self.session.kind != "scene":
-                self.mc.cancel()
-                self.controls.text["mc_info"] = (
-                    "Monte Carlo needs a scene (an error model to simulate); measured data have none."
-                )
-                self.controls.show_monte_carlo_plots(False)
-                return False
-            snapshot = copy.copy(self.session)  # settings and layout are immutable values
-            self.controls.show_monte_carlo_plots(True)
-            self.mc.request(snapshot, self.controls.monte_carlo_trials)
-            return True
-
-    def _mc_started(self) -> None:
-        self.controls.text["mc_info"] = "Monte Carlo: running…"
-
-    def _mc_result(self, plots, error: str | None, seconds: float) -> None:
-        c = self.controls
-        if plots is None:
-            c.text["mc_info"] = f"Monte Carlo failed: {error}"
-            return
-        centres, rigid, rrbc = plots.histogram()
-        dist, mean_rigid, mean_rrbc = plots.by_distance()
-        with self._lock, self.server.atomic():
-            self.mc_plots = plots
-            self.mc_seconds = seconds
-            c.show_monte_carlo_plots(True, (centres, rigid, rrbc), (dist, mean_rigid, mean_rrbc))
-            s = self.session.settings
-            c.text["mc_info"] = (
-                f"{plots.trials} trials × {plots.rigid.shape[1]} check points in the targets' "
-                f"regions; {s.registration} + {s.interpolation}; noise ×{s.noise_scale:g}, "
-                f"bias ×{s.bias_scale:g} ({seconds:.1f} s). Updates after a setting changes, a "
-                "drag ends or the seed changes."
-            )
-
-    # --------------------------------------------------------------------------------------------- files
-    def load(self, source=None, mesh=None, client=None) -> bool:
-        """Open a scene (.toml) or measurement file (.csv; optional mesh). On bad input the current session
-        stays and a message says why; returns whether the file was loaded."""
-        try:
-            loaded = files.load_source(source, mesh)
-        except InputError as exc:
-            self._message(str(exc), client, title="File not loaded")
-            return False
-        except Exception as exc:  # noqa: BLE001 - e.g. OSError: keep serving
-            self._message(f"{source}: cannot open: {type(exc).__name__}: {exc}", client, title="File not loaded")
-            return False
-        self._install(loaded)
-        return True
-
-    def load_upload(self, name: str, content: bytes, client=None) -> bool:
-        try:
-            loaded = files.load_upload(name, content)
-        except InputError as exc:
-            self._message(str(exc), client, title="Upload not loaded")
-            return False
-        except Exception as exc:  # noqa: BLE001
-            self._message(f"{name}: cannot open: {type(exc).__name__}: {exc}", client, title="Upload not loaded")
-            return False
-        self._install(loaded)
-        return True
-
-    def export(self, what: str) -> tuple[str, bytes]:
-        """(file name, content) of "csv" (session.export_measurements() as a measurement file) or "json"
-        (session.export_json())."""
-        with self._lock:
-            slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", self.session.name).strip("-.") or "rrbc"
-            if what == "csv":
-                s = self.session.settings
-                text = files.measurements_csv(
-                    self.session.export_measurements(),
-                    comments=[
-                        f"exported by the rrbc browser app from {self.session.name}",
-                        f"settings: registration {s.registration}, interpolation {s.interpolation}, noise x{s.noise_scale:g}, "
-                        f"bias x{s.bias_scale:g}, seed {s.seed}",
-                    ],
-                )
-                return f"rrbc-{slug}.csv", text.encode("utf-8")
-            if what == "json":
-                return f"rrbc-{slug}-results.json", (json.dumps(self.session.export_json(), indent=2) + "\n").encode(
-                    "utf-8"
-                )
-        raise InputError(f"unknown export '{what}': csv or json")
-
-    def download(self, what: str, client=None) -> tuple[str, bytes] | None:
-        """Send an export to `client` (every tab if None) as a file download."""
-        try:
-            name, content = self.export(what)
-        except (InputError, ValueError) as exc:
-            self._message(str(exc), client, title="Export failed")
-            return None
-        if client is not None:
-            client.send_file_download(name, content)
-        else:
-            self.server.send_file_download(name, content)
-        return name, content
 
     # ------------------------------------------------------------------------------------------ for tests
     def gizmo(self, kind: str, pid: str) -> viser.TransformControlsHandle:
