@@ -65,3 +65,10 @@ def test_the_readme_library_example_runs(tmp_path):
     assert len(lines) >= 2 and all(
         re.match(r"^\S+ +-?\d+\.\d+ +-?\d+\.\d+ +-?\d+\.\d+$", line) for line in lines[1:]
     ), out.stdout
+
+
+@pytest.mark.parametrize("name", [n for n in NAMES if inspect.isfunction(getattr(rrbc_core, n))])
+def test_each_exported_function_is_typed(name):
+    sig = inspect.signature(getattr(rrbc_core, name))
+    untyped = [p.name for p in sig.parameters.values() if p.annotation is p.empty and p.kind is not p.VAR_KEYWORD]
+    assert not untyped and sig.return_annotation is not sig.empty, f"{name}: untyped {untyped or 'return'}"

@@ -42,6 +42,7 @@ from rrbc_core.analysis.diagnosis_stats import (
     _whitener,
 )
 from rrbc_core.errors import InputError
+from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.registration.strategies import least_squares
 from rrbc_core.runtime.threads import thread_limited
 
@@ -118,7 +119,7 @@ def _fmt_p(p: float) -> str:
 
 
 @thread_limited
-def diagnose(mset, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
+def diagnose(mset: MeasurementSet, alpha: float = 0.01, seed: int = 0) -> Diagnosis:
     """What, beyond a rigid transform plus isotropic noise, is in measured point pairs; and whether RRBC will help.
 
     Parameters

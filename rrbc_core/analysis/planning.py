@@ -73,9 +73,12 @@ over `RANDOM_DRAWS` seeded random K-subsets).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from rrbc_core.analysis.planning_model import (
     _SAME_MM,
@@ -92,6 +95,9 @@ from rrbc_core.analysis.planning_model import (
 from rrbc_core.analysis.planning_search import SURFACE_TOL_MM, _corner_choice, _optimise, _pool, usable_candidates
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
+
+if TYPE_CHECKING:
+    from rrbc_core.io.scene import Scene
 
 __all__ = [
     "COPLANAR_TOL_MM",
@@ -170,7 +176,7 @@ class PlanResult:
 
 
 @thread_limited
-def coverage(fiducials_mm, regions, *, samples_per_region: int = 512, seed: int = 0) -> np.ndarray:
+def coverage(fiducials_mm: ArrayLike, regions: Sequence, *, samples_per_region: int = 512, seed: int = 0) -> np.ndarray:
     """Per region of variability, the fraction of its volume inside the convex hull of the fiducials.
 
     Parameters
@@ -204,10 +210,10 @@ def coverage(fiducials_mm, regions, *, samples_per_region: int = 512, seed: int 
 
 @thread_limited
 def predict_rmst(
-    scene,
-    fiducials_mm,
+    scene: Scene,
+    fiducials_mm: ArrayLike,
     *,
-    registration_mm=None,
+    registration_mm: ArrayLike | None = None,
     trials: int = 0,
     seed: int = 0,
     samples_per_target: int = SAMPLES_PER_TARGET,
@@ -253,12 +259,12 @@ def predict_rmst(
 
 @thread_limited
 def plan(
-    scene,
+    scene: Scene,
     add: int = 0,
     *,
-    fiducials_mm=None,
+    fiducials_mm: ArrayLike | None = None,
     seed: int = 0,
-    progress=None,
+    progress: Callable[[int, str], object] | None = None,
     samples_per_target: int = SAMPLES_PER_TARGET,
 ) -> PlanResult:
     """Coverage, predicted RMST and `add` suggested fiducial locations for a scene (`rrbc plan`).

@@ -84,7 +84,7 @@ __all__ = [
 METHODS = {"idw": IDW, "linear": Linear, "tps": TPS, "gp": GP, "none": NoCorrection}
 
 
-def make_interpolator(name: str, **options):
+def make_interpolator(name: str, **options) -> IDW | Linear | TPS | GP | NoCorrection:
     """The interpolation method object for a command-line name, ready to ``fit(points, values)``.
 
     Parameters

@@ -4,6 +4,7 @@ docstring states the rule for volumes, planes, lines and coincident points."""
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial import ConvexHull, Delaunay, QhullError
 
 from rrbc_core.errors import InputError
@@ -97,7 +98,7 @@ class Hull:
         return np.asarray(extra, dtype=bool), np.asarray(off, dtype=float)
 
 
-def hull_flags(points, query) -> tuple[np.ndarray, np.ndarray]:
+def hull_flags(points: ArrayLike, query: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Whether query points lie outside the fiducials' convex hull, and how far they are from its plane.
 
     Parameters

@@ -32,6 +32,7 @@ import os
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
+from os import PathLike
 
 import numpy as np
 
@@ -204,7 +205,7 @@ def _selected_roles(role: str) -> tuple[str, ...]:
 # --------------------------------------------------------------------------------------------------- reading
 
 
-def read_measurements(path) -> MeasurementSet:
+def read_measurements(path: str | PathLike) -> MeasurementSet:
     """Read and validate a measurement file (UTF-8 CSV; format: docs/formats/measurement-file.md).
 
     Parameters

@@ -8,6 +8,7 @@ import math
 import os
 import secrets
 from collections.abc import Sequence
+from os import PathLike
 
 import numpy as np
 
@@ -19,7 +20,7 @@ def _cell(value: float) -> str:
     return "" if math.isnan(v) else repr(v)
 
 
-def write_measurements(path, mset: MeasurementSet, comments: Sequence[str] = ()) -> None:
+def write_measurements(path: str | PathLike, mset: MeasurementSet, comments: Sequence[str] = ()) -> None:
     """Validate a measurement set and write it as a measurement file, atomically.
 
     Columns: the standard ones, plus ``time`` when any row has a time. Numbers are written with ``repr`` so they read

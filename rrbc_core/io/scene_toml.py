@@ -7,6 +7,7 @@ import math
 import os
 import re
 import tomllib
+from os import PathLike
 from pathlib import Path
 
 import numpy as np
@@ -192,7 +193,7 @@ def _read_toml(path, source: str, c: _Checker) -> dict:
         raise c.error("", f"TOML syntax error: {msg}") from None
 
 
-def load_scene(path) -> Scene:
+def load_scene(path: str | PathLike) -> Scene:
     """Read and validate a scene TOML file (format: scenes/README.md).
 
     Parameters

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry import points as geometry
@@ -493,7 +494,7 @@ STRATEGY_OPTIONS = {
 
 
 @thread_limited
-def register(method: str, sensor, robot, **options) -> Registration:
+def register(method: str, sensor: ArrayLike, robot: ArrayLike, **options) -> Registration:
     """Register paired points with a named strategy: the sensor→robot mapping and its residuals.
 
     Parameters

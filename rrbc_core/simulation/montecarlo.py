@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import dataclasses
 import time as _time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +32,9 @@ from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.simulation import batch
 from rrbc_core.simulation.errormodels import ErrorModel, PointSet
 from rrbc_core.simulation.measurement import MeasurementModel
+
+if TYPE_CHECKING:
+    from rrbc_core.io.scene import Scene
 
 STRATEGY_NAMES = tuple(registration.STRATEGIES)  # the registries' names, in their order
 INTERPOLATION_NAMES = tuple(interpolation.METHODS)
@@ -466,7 +471,13 @@ def icp_statistics(
 
 @thread_limited
 def simulate(
-    scene, trials: int = 200, *, seed: int = 0, layout: str | None = None, icp: int = 0, progress=None
+    scene: Scene,
+    trials: int = 200,
+    *,
+    seed: int = 0,
+    layout: str | None = None,
+    icp: int = 0,
+    progress: Callable[[int, str], object] | None = None,
 ) -> MonteCarloResult:
     """Monte Carlo of a scene's robot and sensor with its error model: what `rrbc simulate` reports.
 
@@ -505,7 +516,7 @@ def simulate(
     return res
 
 
-def simulated_data(scene, *, seed: int = 0, layout: str | None = None) -> MeasurementSet:
+def simulated_data(scene: Scene, *, seed: int = 0, layout: str | None = None) -> MeasurementSet:
     """One simulated measurement of a scene, as a measurement file holds it: what `rrbc simulate --out` writes.
 
     Parameters

@@ -78,10 +78,10 @@ def test_cli_command_runs_with_the_documented_pool_size():
 def test_app_server_callbacks_run_with_the_documented_pool_size():
     res = _run("""
         import threading
-        from rrbc_core.session import explorer
+        from rrbc_core.session import evaluation
         from rrbc_viz import tables
         from rrbc_viz.app import serve
-        recording(explorer, "correct_points")
+        recording(evaluation, "correct_points")
         recording(tables, "target_table")  # the app's own code, outside the library: the process policy
         app = serve(port=0)
         try:
