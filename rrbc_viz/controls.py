@@ -1,9 +1,11 @@
-"""The control panel (shared by every browser tab): settings, display, layers, lesson, Monte Carlo, diagnosis,
-planning (`planning_panel`), files.
+"""The control panel (shared by every browser tab): one panel class per tab, each owning its widgets.
 
-The panel only forwards user input to the app (through `actions.AppActions`) and shows what the app hands back;
-it holds no RRBC state of its own. Programmatic updates (`sync_*`) set `syncing` so that the value callbacks
-they re-enter (viser runs `on_update` when Python assigns `.value`) do nothing.
+`ExplorePanel` (results, method, errors), `ViewPanel` (display, layers, heat map), `LearnPanel` (the lesson),
+`MonteCarloPanel`, `DiagnosePanel`, `FilePanel`, and the Plan tab (`planning_panel.PlanningPanel`, built by the app).
+`Controls` lays the tabs out and holds the status line. A panel only forwards user input to the app (through
+`actions.AppActions`) and shows what the app hands back; it holds no RRBC state of its own. Programmatic updates
+(`sync_*`) run under the shared `Syncing` flag so that the value callbacks they re-enter (viser runs `on_update`
+when Python assigns `.value`) do nothing.
 """
 
 from __future__ import annotations
@@ -53,261 +55,100 @@ def _series(label: str, color: str, points: bool = False) -> dict:
     return s
 
 
-_TEXT_WIDGETS = ("source", "lesson", "diagnosis", "legend", "status", "scale", "summary", "table", "mc_info")
+class Syncing:
+    """A flag the panels share: while it is set, their value callbacks do nothing (programmatic updates)."""
 
+    def __init__(self):
+        self.on = False
 
-class _TextAreas:
-    """The Controls' markdown areas by name (only these: the app writes no other widget of the panel)."""
-
-    def __init__(self, controls: Controls):
-        self._controls = controls
-
-    def __setitem__(self, name: str, markdown: str) -> None:
-        self[name]  # noqa: B018 - checks the name
-        getattr(self._controls, name).content = markdown
-
-    def __getitem__(self, name: str) -> str:
-        if name not in _TEXT_WIDGETS:
-            raise KeyError(f"no text area {name!r}")
-        return getattr(self._controls, name).content
-
-
-class Controls:
-    def __init__(self, server: viser.ViserServer, app: AppActions, plan_tab: Callable[[], PlanningPanel]):
-        self.app = app
-        self.syncing = False
-        gui = server.gui
-        gui.configure_theme(show_share_button=False, control_width="large", brand_color=(40, 120, 255))
-        gui.set_panel_label("RRBC explorer")
-        self.status = gui.add_markdown("")
-        tabs = gui.add_tab_group()
-
-        # ---------------------------------------------------------------------------------------- Explore
-        with tabs.add_tab("Explore", icon=viser.Icon.ADJUSTMENTS):
-            self.source = gui.add_markdown("")
-            with gui.add_folder("Results"):
-                self.magnification = gui.add_slider(
-                    "Arrow magnification",
-                    1,
-                    MAG_MAX,
-                    1,
-                    200,
-                    hint="Correction arrows and landing offsets are drawn this many times longer than they are",
-                )
-                self.scale = gui.add_markdown("")
-                self.summary = gui.add_markdown("")
-                self.table = gui.add_markdown("")
-            with gui.add_folder("Method"):
-                self.registration = gui.add_dropdown(
-                    "Registration", tuple(registration.STRATEGIES), initial_value="least-squares"
-                )
-                self.interpolation = gui.add_dropdown(
-                    "Interpolation", tuple(interpolation.METHODS), initial_value="idw"
-                )
-                self.neighbors = gui.add_slider("IDW neighbours k", 1, 16, 1, 4)
-                self.power = gui.add_slider("IDW power p", 0.5, 6.0, 0.1, 2.0)
-                self.smoothing = gui.add_slider(
-                    "TPS smoothing",
-                    0.0,
-                    1.0,
-                    0.005,
-                    0.0,
-                    hint="scipy RBF smoothing in the fiducials' local units; 0 = exact",
-                )
-            with gui.add_folder("Errors (scene)"):
-                self.noise = gui.add_slider(
-                    "Noise size ×", 0.0, 3.0, 0.05, 1.0, hint="Multiplies the scene's random error terms"
-                )
-                self.bias = gui.add_slider(
-                    "Bias size ×", 0.0, 3.0, 0.05, 1.0, hint="Multiplies the scene's systematic error terms"
-                )
-                self.seed_md = gui.add_markdown("")
-                self.new_seed = gui.add_button("New random seed", icon=viser.Icon.DICE)
-            gui.add_markdown(
-                "Drag the arrows at a target or fiducial to move it (View → *Drag handles on* chooses "
-                "which); click a fiducial to exclude or include it. Robot frame, mm."
-            )
-
-        # ------------------------------------------------------------------------------------------- View
-        with tabs.add_tab("View", icon=viser.Icon.EYE):
-            self.handles = gui.add_dropdown("Drag handles on", HANDLE_CHOICES, initial_value="targets")
-            self.marker = gui.add_slider("Marker radius (mm)", 0.5, 50.0, 0.5, 8.0)
-            self.region_zoom = gui.add_slider(
-                "Region zoom ×",
-                1.0,
-                50.0,
-                0.5,
-                1.0,
-                hint="Regions of variability and heat-map samples drawn this many times larger about their target",
-            )
-            with gui.add_folder("Layers"):
-                self.layers = {name: gui.add_checkbox(LAYER_LABELS.get(name, name), True) for name in LAYERS}
-            with gui.add_folder("Heat map"):
-                self.heat_value = gui.add_dropdown("Colour by", tuple(k for k, _ in HEAT_CHOICES["scene"]))
-                self.legend = gui.add_markdown(
-                    "Turn on the heat-map layer to see predicted error over the targets' regions of variability."
-                )
-
-        # ------------------------------------------------------------------------------------------ Learn
-        with tabs.add_tab("Learn", icon=viser.Icon.SCHOOL):
-            self.lesson = gui.add_markdown(
-                "The nine steps of RRBC, one at a time, each shown in the scene with "
-                "live numbers. Press **Next** to start."
-            )
-            self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
-            self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
-            self.lesson_end = gui.add_button("End lesson (restore layers)")
-
-        # ------------------------------------------------------------------------------------ Monte Carlo
-        with tabs.add_tab("Monte Carlo", icon=viser.Icon.CHART_HISTOGRAM):
-            self.mc_info = gui.add_markdown("")
-            self.mc_trials = gui.add_slider("Trials", 20, 1000, 10, 200)
-            self.mc_run = gui.add_button("Run again")
-            z2 = (np.array([0.0, 1.0]), np.zeros(2), np.zeros(2))
-            self.mc_hist = gui.add_uplot(
-                z2,
-                ({"label": "error (mm)"}, _series("rigid", "#dc2828"), _series("RRBC", "#1eb43c")),
-                title="Error at check points: histogram",
-                scales={"x": {"time": False}},
-                axes=({"label": "error (mm)"}, {"label": "fraction"}),
-                aspect=1.4,
-            )
-            self.mc_dist = gui.add_uplot(
-                z2,
-                ({"label": "distance (mm)"}, _series("rigid", "#dc2828", True), _series("RRBC", "#1eb43c", True)),
-                title="Mean error vs distance from the origin",
-                scales={"x": {"time": False}},
-                axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}),
-                aspect=1.4,
-            )
-
-        # --------------------------------------------------------------------------------------- Diagnose
-        with tabs.add_tab("Diagnose", icon=viser.Icon.STETHOSCOPE):
-            self.diagnose = gui.add_button(
-                "Diagnose current data",
-                icon=viser.Icon.STETHOSCOPE,
-                hint="Test the registration points and fiducials (not the targets) for effects a rigid fit misses",
-            )
-            self.diagnosis = gui.add_markdown(PROMPT)
-
-        # ------------------------------------------------------------------------------------------- Plan
-        with tabs.add_tab("Plan", icon=viser.Icon.MAP_PIN):
-            plan_tab()  # the app builds the Plan tab's panel inside the tab, and keeps it
-
-        # ------------------------------------------------------------------------------------------- File
-        with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
-            self.path = gui.add_text("Scene or data file", "", hint="A scene .toml or a measurement .csv on the server")
-            self.mesh_path = gui.add_text("Mesh (for .csv, optional)", "")
-            self.load = gui.add_button("Load file", icon=viser.Icon.FILE)
-            self.upload = gui.add_upload_button("Upload CSV or TOML", icon=viser.Icon.UPLOAD)
-            gui.add_markdown("An uploaded scene cannot bring its mesh along: open scenes with meshes by path.")
-            self.download_csv = gui.add_button("Download data (CSV)", icon=viser.Icon.DOWNLOAD)
-            self.download_json = gui.add_button("Download results (JSON)", icon=viser.Icon.DOWNLOAD)
-
-        self._wire()
-
-    # -------------------------------------------------------------------------------- what the app shows here
-    @property
-    def text(self) -> _TextAreas:
-        """The panel's text areas by name (source, lesson, diagnosis, legend, status, scale, summary, table,
-        mc_info): ``controls.text["summary"] = markdown`` shows it, ``controls.text["summary"]`` reads it."""
-        return _TextAreas(self)
-
-    def show_monte_carlo_plots(self, visible: bool, histogram=None, by_distance=None) -> None:
-        """Show or hide the Monte Carlo plots; with data, (centres, rigid, rrbc) and (distance, rigid, rrbc)."""
-        self.mc_hist.visible = self.mc_dist.visible = bool(visible)
-        if histogram is not None:
-            self.mc_hist.data = histogram
-        if by_distance is not None:
-            self.mc_dist.data = by_distance
-
-    @property
-    def monte_carlo_trials(self) -> int:
-        """The trials the user asked for."""
-        return int(self.mc_trials.value)
-
-    # ---------------------------------------------------------------------------------------------- wiring
-    def _wire(self) -> None:
-        app = self.app
-
-        def setting(handle, name, cast):
-            @handle.on_update
-            def _(event: viser.GuiEvent) -> None:
-                if not self.syncing:
-                    app.change_settings(client=event.client, **{name: cast(handle.value)})
-
-        setting(self.registration, "registration", str)
-        setting(self.interpolation, "interpolation", str)
-        setting(self.neighbors, "neighbors", int)
-        setting(self.power, "power", float)
-        setting(self.smoothing, "smoothing", float)
-        setting(self.noise, "noise_scale", float)
-        setting(self.bias, "bias_scale", float)
-
-        def display(handle, name, cast):
-            @handle.on_update
-            def _(event: viser.GuiEvent) -> None:
-                if not self.syncing:
-                    app.set_display(client=event.client, **{name: cast(handle.value)})
-
-        display(self.magnification, "magnification", float)
-        display(self.marker, "marker_mm", float)
-        display(self.region_zoom, "region_zoom", float)
-        display(self.handles, "handles", str)
-
-        @self.heat_value.on_update
-        def _(event: viser.GuiEvent) -> None:
-            if not self.syncing:
-                choices = dict(HEAT_CHOICES[app.session.kind])
-                app.set_display(client=event.client, heat_value=choices.get(self.heat_value.value, "rrbc"))
-
-        for name, box in self.layers.items():
-
-            def on_layer(event: viser.GuiEvent, name=name, box=box) -> None:
-                if not self.syncing:
-                    app.set_layer(name, bool(box.value))
-
-            box.on_update(on_layer)
-
-        self.new_seed.on_click(lambda event: app.new_seed(client=event.client))
-        self.lesson_next.on_click(lambda event: app.lesson_step(+1))
-        self.lesson_prev.on_click(lambda event: app.lesson_step(-1))
-        self.lesson_end.on_click(lambda event: app.lesson_stop())
-        self.mc_run.on_click(lambda event: app.request_monte_carlo())
-        self.diagnose.on_click(lambda event: app.run_diagnosis(client=event.client))
-
-        @self.mc_trials.on_update
-        def _(event: viser.GuiEvent) -> None:
-            if not self.syncing:
-                app.request_monte_carlo()
-
-        @self.load.on_click
-        def _(event: viser.GuiEvent) -> None:
-            path = self.path.value.strip()
-            mesh = self.mesh_path.value.strip() or None
-            app.load(path or None, mesh=mesh, client=event.client)
-
-        @self.upload.on_upload
-        def _(event: viser.GuiEvent) -> None:
-            f = self.upload.value
-            app.load_upload(f.name, f.content, client=event.client)
-
-        self.download_csv.on_click(lambda event: app.download("csv", client=event.client))
-        self.download_json.on_click(lambda event: app.download("json", client=event.client))
-
-    # -------------------------------------------------------------------------------------------- syncing
     @contextmanager
     def quiet(self):
-        """Assign GUI values without acting on them."""
-        was = self.syncing
-        self.syncing = True
+        was = self.on
+        self.on = True
         try:
             yield
         finally:
-            self.syncing = was
+            self.on = was
 
-    def sync_settings(self, settings: Settings, kind: str) -> None:
-        with self.quiet():
+
+class ExplorePanel:
+    """Explore tab: the source, the results (scale line, summary, per-target table), the method and error sizes."""
+
+    def __init__(self, gui, app: AppActions, syncing: Syncing):
+        self.app, self.syncing = app, syncing
+        self.source = gui.add_markdown("")
+        with gui.add_folder("Results"):
+            self.magnification = gui.add_slider(
+                "Arrow magnification",
+                1,
+                MAG_MAX,
+                1,
+                200,
+                hint="Correction arrows and landing offsets are drawn this many times longer than they are",
+            )
+            self.scale = gui.add_markdown("")
+            self.summary = gui.add_markdown("")
+            self.table = gui.add_markdown("")
+        with gui.add_folder("Method"):
+            self.registration = gui.add_dropdown(
+                "Registration", tuple(registration.STRATEGIES), initial_value="least-squares"
+            )
+            self.interpolation = gui.add_dropdown("Interpolation", tuple(interpolation.METHODS), initial_value="idw")
+            self.neighbors = gui.add_slider("IDW neighbours k", 1, 16, 1, 4)
+            self.power = gui.add_slider("IDW power p", 0.5, 6.0, 0.1, 2.0)
+            self.smoothing = gui.add_slider(
+                "TPS smoothing",
+                0.0,
+                1.0,
+                0.005,
+                0.0,
+                hint="scipy RBF smoothing in the fiducials' local units; 0 = exact",
+            )
+        with gui.add_folder("Errors (scene)"):
+            self.noise = gui.add_slider(
+                "Noise size ×", 0.0, 3.0, 0.05, 1.0, hint="Multiplies the scene's random error terms"
+            )
+            self.bias = gui.add_slider(
+                "Bias size ×", 0.0, 3.0, 0.05, 1.0, hint="Multiplies the scene's systematic error terms"
+            )
+            self.seed_md = gui.add_markdown("")
+            self.new_seed = gui.add_button("New random seed", icon=viser.Icon.DICE)
+        gui.add_markdown(
+            "Drag the arrows at a target or fiducial to move it (View → *Drag handles on* chooses "
+            "which); click a fiducial to exclude or include it. Robot frame, mm."
+        )
+        for handle, name, cast in (
+            (self.registration, "registration", str),
+            (self.interpolation, "interpolation", str),
+            (self.neighbors, "neighbors", int),
+            (self.power, "power", float),
+            (self.smoothing, "smoothing", float),
+            (self.noise, "noise_scale", float),
+            (self.bias, "bias_scale", float),
+        ):
+            handle.on_update(self._setting(handle, name, cast))
+        self.magnification.on_update(self._display(self.magnification, "magnification", float))
+        self.new_seed.on_click(lambda event: app.new_seed(client=event.client))
+
+    def _setting(self, handle, name, cast):
+        def on_update(event: viser.GuiEvent) -> None:
+            if not self.syncing.on:
+                self.app.change_settings(client=event.client, **{name: cast(handle.value)})
+
+        return on_update
+
+    def _display(self, handle, name, cast):
+        def on_update(event: viser.GuiEvent) -> None:
+            if not self.syncing.on:
+                self.app.set_display(client=event.client, **{name: cast(handle.value)})
+
+        return on_update
+
+    def sync(self, settings: Settings, kind: str, display: Display | None = None) -> None:
+        with self.syncing.quiet():
+            if display is not None:
+                self.magnification.value = float(min(max(display.magnification, 1), MAG_MAX))
+                return
             self.registration.value = settings.registration
             self.interpolation.value = settings.interpolation
             self.neighbors.value = int(settings.neighbors)
@@ -327,9 +168,57 @@ class Controls:
                 "seeds annealing and clustering)."
             )
 
-    def sync_display(self, display: Display, kind: str) -> None:
-        with self.quiet():
-            self.magnification.value = float(min(max(display.magnification, 1), MAG_MAX))
+
+class ViewPanel:
+    """View tab: drag handles, marker size, region zoom, layers, the heat map's value and legend."""
+
+    def __init__(self, gui, app: AppActions, syncing: Syncing):
+        self.app, self.syncing = app, syncing
+        self.handles = gui.add_dropdown("Drag handles on", HANDLE_CHOICES, initial_value="targets")
+        self.marker = gui.add_slider("Marker radius (mm)", 0.5, 50.0, 0.5, 8.0)
+        self.region_zoom = gui.add_slider(
+            "Region zoom ×",
+            1.0,
+            50.0,
+            0.5,
+            1.0,
+            hint="Regions of variability and heat-map samples drawn this many times larger about their target",
+        )
+        with gui.add_folder("Layers"):
+            self.layers = {name: gui.add_checkbox(LAYER_LABELS.get(name, name), True) for name in LAYERS}
+        with gui.add_folder("Heat map"):
+            self.heat_value = gui.add_dropdown("Colour by", tuple(k for k, _ in HEAT_CHOICES["scene"]))
+            self.legend = gui.add_markdown(
+                "Turn on the heat-map layer to see predicted error over the targets' regions of variability."
+            )
+        for handle, name, cast in (
+            (self.marker, "marker_mm", float),
+            (self.region_zoom, "region_zoom", float),
+            (self.handles, "handles", str),
+        ):
+
+            def on_update(event: viser.GuiEvent, handle=handle, name=name, cast=cast) -> None:
+                if not self.syncing.on:
+                    app.set_display(client=event.client, **{name: cast(handle.value)})
+
+            handle.on_update(on_update)
+
+        @self.heat_value.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if not self.syncing.on:
+                choices = dict(HEAT_CHOICES[app.session.kind])
+                app.set_display(client=event.client, heat_value=choices.get(self.heat_value.value, "rrbc"))
+
+        for name, box in self.layers.items():
+
+            def on_layer(event: viser.GuiEvent, name=name, box=box) -> None:
+                if not self.syncing.on:
+                    app.set_layer(name, bool(box.value))
+
+            box.on_update(on_layer)
+
+    def sync(self, display: Display, kind: str) -> None:
+        with self.syncing.quiet():
             self.marker.value = float(display.marker_mm)
             self.region_zoom.value = float(display.region_zoom)
             self.handles.value = display.handles
@@ -338,8 +227,191 @@ class Controls:
             self.heat_value.value = next((k for k, v in labels if v == display.heat_value), labels[0][0])
 
     def sync_layers(self, layers: dict[str, bool]) -> None:
-        """Show the layer visibilities on the checkboxes (the app applies them to the scene)."""
-        with self.quiet():
+        with self.syncing.quiet():
             for name, box in self.layers.items():
                 if name in layers:
                     box.value = bool(layers[name])
+
+
+class LearnPanel:
+    """Learn tab: the nine-step lesson's text and its buttons."""
+
+    def __init__(self, gui, app: AppActions):
+        self.lesson = gui.add_markdown(
+            "The nine steps of RRBC, one at a time, each shown in the scene with live numbers. Press **Next** to start."
+        )
+        self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
+        self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
+        self.lesson_end = gui.add_button("End lesson (restore layers)")
+        self.lesson_next.on_click(lambda event: app.lesson_step(+1))
+        self.lesson_prev.on_click(lambda event: app.lesson_step(-1))
+        self.lesson_end.on_click(lambda event: app.lesson_stop())
+
+
+class MonteCarloPanel:
+    """Monte Carlo tab: what ran, the trials, and the two plots."""
+
+    def __init__(self, gui, app: AppActions, syncing: Syncing):
+        self.mc_info = gui.add_markdown("")
+        self.mc_trials = gui.add_slider("Trials", 20, 1000, 10, 200)
+        self.mc_run = gui.add_button("Run again")
+        z2 = (np.array([0.0, 1.0]), np.zeros(2), np.zeros(2))
+        self.mc_hist = gui.add_uplot(
+            z2,
+            ({"label": "error (mm)"}, _series("rigid", "#dc2828"), _series("RRBC", "#1eb43c")),
+            title="Error at check points: histogram",
+            scales={"x": {"time": False}},
+            axes=({"label": "error (mm)"}, {"label": "fraction"}),
+            aspect=1.4,
+        )
+        self.mc_dist = gui.add_uplot(
+            z2,
+            ({"label": "distance (mm)"}, _series("rigid", "#dc2828", True), _series("RRBC", "#1eb43c", True)),
+            title="Mean error vs distance from the origin",
+            scales={"x": {"time": False}},
+            axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}),
+            aspect=1.4,
+        )
+        self.mc_run.on_click(lambda event: app.request_monte_carlo())
+
+        @self.mc_trials.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if not syncing.on:
+                app.request_monte_carlo()
+
+
+class DiagnosePanel:
+    """Diagnose tab: the button and the verdict."""
+
+    def __init__(self, gui, app: AppActions):
+        self.diagnose = gui.add_button(
+            "Diagnose current data",
+            icon=viser.Icon.STETHOSCOPE,
+            hint="Test the registration points and fiducials (not the targets) for effects a rigid fit misses",
+        )
+        self.diagnosis = gui.add_markdown(PROMPT)
+        self.diagnose.on_click(lambda event: app.run_diagnosis(client=event.client))
+
+
+class FilePanel:
+    """File tab: open a file on the server or upload one; download the data or the results."""
+
+    def __init__(self, gui, app: AppActions):
+        self.path = gui.add_text("Scene or data file", "", hint="A scene .toml or a measurement .csv on the server")
+        self.mesh_path = gui.add_text("Mesh (for .csv, optional)", "")
+        self.load = gui.add_button("Load file", icon=viser.Icon.FILE)
+        self.upload = gui.add_upload_button("Upload CSV or TOML", icon=viser.Icon.UPLOAD)
+        gui.add_markdown("An uploaded scene cannot bring its mesh along: open scenes with meshes by path.")
+        self.download_csv = gui.add_button("Download data (CSV)", icon=viser.Icon.DOWNLOAD)
+        self.download_json = gui.add_button("Download results (JSON)", icon=viser.Icon.DOWNLOAD)
+
+        @self.load.on_click
+        def _(event: viser.GuiEvent) -> None:
+            path = self.path.value.strip()
+            mesh = self.mesh_path.value.strip() or None
+            app.load(path or None, mesh=mesh, client=event.client)
+
+        @self.upload.on_upload
+        def _(event: viser.GuiEvent) -> None:
+            f = self.upload.value
+            app.load_upload(f.name, f.content, client=event.client)
+
+        self.download_csv.on_click(lambda event: app.download("csv", client=event.client))
+        self.download_json.on_click(lambda event: app.download("json", client=event.client))
+
+
+#: The text areas the app writes, and the panel that owns each.
+_TEXT_AREAS = {
+    "status": None,
+    "source": "explore",
+    "scale": "explore",
+    "summary": "explore",
+    "table": "explore",
+    "legend": "view",
+    "lesson": "learn",
+    "mc_info": "montecarlo",
+    "diagnosis": "diagnose",
+}
+
+
+class _TextAreas:
+    """The panels' markdown areas by name (only these: the app writes no other widget)."""
+
+    def __init__(self, controls: Controls):
+        self._controls = controls
+
+    def _widget(self, name: str):
+        if name not in _TEXT_AREAS:
+            raise KeyError(f"no text area {name!r}")
+        owner = _TEXT_AREAS[name]
+        return getattr(self._controls if owner is None else getattr(self._controls, owner), name)
+
+    def __setitem__(self, name: str, markdown: str) -> None:
+        self._widget(name).content = markdown
+
+    def __getitem__(self, name: str) -> str:
+        return self._widget(name).content
+
+
+class Controls:
+    """The control panel: the status line and the tabs, one panel each (module docstring)."""
+
+    def __init__(self, server: viser.ViserServer, app: AppActions, plan_tab: Callable[[], PlanningPanel]):
+        self.app = app
+        self.syncing = Syncing()
+        gui = server.gui
+        gui.configure_theme(show_share_button=False, control_width="large", brand_color=(40, 120, 255))
+        gui.set_panel_label("RRBC explorer")
+        self.status = gui.add_markdown("")
+        tabs = gui.add_tab_group()
+        with tabs.add_tab("Explore", icon=viser.Icon.ADJUSTMENTS):
+            self.explore = ExplorePanel(gui, app, self.syncing)
+        with tabs.add_tab("View", icon=viser.Icon.EYE):
+            self.view = ViewPanel(gui, app, self.syncing)
+        with tabs.add_tab("Learn", icon=viser.Icon.SCHOOL):
+            self.learn = LearnPanel(gui, app)
+        with tabs.add_tab("Monte Carlo", icon=viser.Icon.CHART_HISTOGRAM):
+            self.montecarlo = MonteCarloPanel(gui, app, self.syncing)
+        with tabs.add_tab("Diagnose", icon=viser.Icon.STETHOSCOPE):
+            self.diagnose = DiagnosePanel(gui, app)
+        with tabs.add_tab("Plan", icon=viser.Icon.MAP_PIN):
+            plan_tab()  # the app builds the Plan tab's panel inside the tab, and keeps it
+        with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
+            self.file = FilePanel(gui, app)
+
+    # -------------------------------------------------------------------------------- what the app shows here
+    @property
+    def text(self) -> _TextAreas:
+        """The text areas by name (status, source, scale, summary, table, legend, lesson, mc_info, diagnosis):
+        ``controls.text["summary"] = markdown`` shows it, ``controls.text["summary"]`` reads it."""
+        return _TextAreas(self)
+
+    def show_monte_carlo_plots(self, visible: bool, histogram=None, by_distance=None) -> None:
+        """Show or hide the Monte Carlo plots; with data, (centres, rigid, rrbc) and (distance, rigid, rrbc)."""
+        mc = self.montecarlo
+        mc.mc_hist.visible = mc.mc_dist.visible = bool(visible)
+        if histogram is not None:
+            mc.mc_hist.data = histogram
+        if by_distance is not None:
+            mc.mc_dist.data = by_distance
+
+    @property
+    def monte_carlo_trials(self) -> int:
+        """The trials the user asked for."""
+        return int(self.montecarlo.mc_trials.value)
+
+    # -------------------------------------------------------------------------------------------- syncing
+    def quiet(self):
+        """Assign GUI values without acting on them."""
+        return self.syncing.quiet()
+
+    def sync_settings(self, settings: Settings, kind: str) -> None:
+        self.explore.sync(settings, kind)
+
+    def sync_display(self, display: Display, kind: str) -> None:
+        self.explore.sync(None, kind, display)
+        self.view.sync(display, kind)
+
+    def sync_layers(self, layers: dict[str, bool]) -> None:
+        """Show the layer visibilities on the checkboxes (the app applies them to the scene)."""
+        self.view.sync_layers(layers)

@@ -251,7 +251,9 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
     for bad, says in ((bad_scene, "TOML syntax error"), (bad_csv, "'12.x' is not a number")):
         path_box.fill(str(bad))
         path_box.press("Enter")
-        wait_for(lambda bad=bad: app.controls.path.value == str(bad), 10, message="the path on the server", page=page)
+        wait_for(
+            lambda bad=bad: app.controls.file.path.value == str(bad), 10, message="the path on the server", page=page
+        )
         page.get_by_role("button", name="Load file").click()
         # a red notification and the status line at the top of the panel say what is wrong
         note = page.locator(".mantine-Notification-root", has_text=bad.name).filter(has_text="File not loaded")

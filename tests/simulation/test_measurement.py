@@ -25,16 +25,18 @@ def test_readings_follow_the_documented_formula(scene):
     rng = np.random.default_rng(3)
     p = rng.uniform([350, -150, 10], [600, 150, 80], (7, 3))
     base = MeasurementModel(scene.sensor_to_robot, scene.error_model, scene.joint_seed)
-    scaled = MeasurementModel(scene.sensor_to_robot, scene.error_model, scene.joint_seed, bias_scale=2.5,
-                              noise_scale=0.3)
+    scaled = MeasurementModel(
+        scene.sensor_to_robot, scene.error_model, scene.joint_seed, bias_scale=2.5, noise_scale=0.3
+    )
     pts = base.points(p, tool_down(0.0))
     bias_s, bias_r = base.bias(pts)
     assert np.abs(bias_r).max() > 1e-3  # the demo's kinematic bias is there
     noise = base.noise(pts, np.random.default_rng(5), trials=4)
     r = scaled.read(pts, noise=noise)
     np.testing.assert_allclose(r.truth, p + 2.5 * bias_r, atol=1e-12)
-    np.testing.assert_allclose(r.sensor, scene.sensor_to_robot.apply_inverse(p)[None] + 2.5 * bias_s + 0.3 * noise[0],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        r.sensor, scene.sensor_to_robot.apply_inverse(p)[None] + 2.5 * bias_s + 0.3 * noise[0], atol=1e-12
+    )
     np.testing.assert_allclose(r.robot, (p + 2.5 * bias_r)[None] + 0.3 * noise[1], atol=1e-12)
     again = base.noise(pts, np.random.default_rng(5), trials=4)  # seeded: the same draws
     np.testing.assert_array_equal(again[0], noise[0])

@@ -89,14 +89,17 @@ def test_serve_builds_the_scene_and_panel(app):
     _assert_arrows_match(app, ev)
     np.testing.assert_allclose(np.asarray(app.nodes.nodes["/hull/edges"].points), ev.hull_edges, atol=1e-3)
     mag = app.display.magnification
-    assert f"×{mag:g}" in app.controls.scale.content and f"drawn as {mag:g} mm" in app.controls.scale.content
+    assert (
+        f"×{mag:g}" in app.controls.explore.scale.content
+        and f"drawn as {mag:g} mm" in app.controls.explore.scale.content
+    )
     sm = ev.summary
-    assert f"{sm['rmst_rigid_mm']:.3f} mm rigid" in app.controls.summary.content
-    assert f"{sm['rmst_rrbc_mm']:.3f} mm RRBC" in app.controls.summary.content
+    assert f"{sm['rmst_rigid_mm']:.3f} mm rigid" in app.controls.explore.summary.content
+    assert f"{sm['rmst_rrbc_mm']:.3f} mm RRBC" in app.controls.explore.summary.content
     for i, pid in enumerate(ev.targets.ids):
         assert (
             f"| {pid} | {ev.targets.error_rigid[i]:.3f} | {ev.targets.error_rrbc[i]:.3f} |"
-            in app.controls.table.content
+            in app.controls.explore.table.content
         )
     # camera framed on the cell (mm scale), not viser's default
     assert np.linalg.norm(app.server.initial_camera.position) > 500
@@ -120,7 +123,8 @@ def test_drag_target_recomputes_everything(app):
     _assert_arrows_match(app, fresh)
     assert label.text != old_label and f"{fresh.targets.error_rrbc[0]:.3f}" in label.text
     assert (
-        f"| H1 | {fresh.targets.error_rigid[0]:.3f} | {fresh.targets.error_rrbc[0]:.3f} |" in app.controls.table.content
+        f"| H1 | {fresh.targets.error_rigid[0]:.3f} | {fresh.targets.error_rrbc[0]:.3f} |"
+        in app.controls.explore.table.content
     )
     # landing points: truth-anchored offsets, magnified
     mag = app.display.magnification
@@ -162,8 +166,8 @@ def test_target_outside_the_hull_is_flagged(app):
     assert "H1" in ev.summary["extrapolated"] and bool(ev.targets.extrapolated[0])
     assert tuple(sphere.color) == colors.TARGET_EXTRAPOLATED
     assert "extrapolated" in app.nodes.labels["/targets/H1/gizmo/label"].text
-    assert "| H1 |" in app.controls.table.content and "⚠ extrapolated |" in app.controls.table.content
-    assert "Extrapolated" in app.controls.summary.content
+    assert "| H1 |" in app.controls.explore.table.content and "⚠ extrapolated |" in app.controls.explore.table.content
+    assert "Extrapolated" in app.controls.explore.summary.content
     ev = app.handle_drag("targets", "H1", [400.0, -150.0, 15.0], "end")
     assert not ev.targets.extrapolated[0] and tuple(sphere.color) == colors.TARGET
 
@@ -176,7 +180,7 @@ def test_clicking_a_fiducial_excludes_and_includes_it(app):
     ev = app.session.last
     assert "F3" in ev.settings.excluded and ev.summary["fiducials_used"] == n - 1
     assert tuple(sphere.color) == colors.FIDUCIAL_EXCLUDED
-    assert f"over {n - 1} of {n} fiducials" in app.controls.summary.content
+    assert f"over {n - 1} of {n} fiducials" in app.controls.explore.summary.content
     assert len(app.nodes.nodes["/corrections/fiducials"].points) == n - 1
     assert "excluded" in app.nodes.labels["/fiducials/F3/gizmo/label"].text
     _click(sphere)
@@ -186,32 +190,32 @@ def test_clicking_a_fiducial_excludes_and_includes_it(app):
 def test_method_controls_change_the_numbers(app):
     c = app.controls
     rmst0 = app.session.last.summary["rmst_rrbc_mm"]
-    c.interpolation.value = "gp"
+    c.explore.interpolation.value = "gp"
     ev = app.session.last
     assert ev.settings.interpolation == "gp" and ev.targets.correction_std is not None
     assert ev.summary["rmst_rrbc_mm"] != pytest.approx(rmst0)
-    assert "| std |" in c.table.content
+    assert "| std |" in c.explore.table.content
     std0 = float(np.linalg.norm(ev.targets.correction_std[0]))
-    assert f"| {std0:.3f} |" in c.table.content
+    assert f"| {std0:.3f} |" in c.explore.table.content
     fre0 = ev.registration.fre_rms_mm
-    c.registration.value = "three-point"
+    c.explore.registration.value = "three-point"
     ev = app.session.last
     assert ev.registration.method == "three-point" and ev.registration.fre_rms_mm != pytest.approx(fre0)
-    assert f"FRE {ev.registration.fre_rms_mm:.3f} mm" in c.summary.content
+    assert f"FRE {ev.registration.fre_rms_mm:.3f} mm" in c.explore.summary.content
     assert ev.summary == app.session.evaluate().summary
-    c.interpolation.value = "idw"
-    assert c.neighbors.visible and not c.smoothing.visible
-    c.neighbors.value = 2
+    c.explore.interpolation.value = "idw"
+    assert c.explore.neighbors.visible and not c.explore.smoothing.visible
+    c.explore.neighbors.value = 2
     assert app.session.last.settings.neighbors == 2
     rigid0 = app.session.last.summary["rmst_rigid_mm"]
-    c.bias.value = 2.0
+    c.explore.bias.value = 2.0
     assert app.session.last.settings.bias_scale == 2.0
     assert app.session.last.summary["rmst_rigid_mm"] != pytest.approx(rigid0)
     seed0 = app.session.last.settings.seed
-    c.new_seed.value = True
-    assert app.session.last.settings.seed != seed0 and str(app.session.last.settings.seed) in c.seed_md.content
-    c.magnification.value = 1000
-    assert "×1000" in c.scale.content
+    c.explore.new_seed.value = True
+    assert app.session.last.settings.seed != seed0 and str(app.session.last.settings.seed) in c.explore.seed_md.content
+    c.explore.magnification.value = 1000
+    assert "×1000" in c.explore.scale.content
     _assert_arrows_match(app, app.session.last)
 
 
@@ -227,56 +231,58 @@ def test_refused_setting_keeps_the_session_and_says_why(app):
 
 def test_layers_lesson_and_heat_map(app):
     c = app.controls
-    c.layers["hull"].value = False
+    c.view.layers["hull"].value = False
     assert app.nodes.groups["hull"].visible is False
-    c.layers["heatmap"].value = True
+    c.view.layers["heatmap"].value = True
     node = app.nodes.nodes["/heatmap/points"]
     hm = app.heat_map
     assert node.visible and len(node.points) == len(hm.positions)
-    assert f"{float(np.nanmin(np.r_[hm.error_rigid, hm.error_rrbc])):.4f} mm" in c.legend.content
-    c.heat_value.value = "rigid error"
-    assert "rigid only" in c.legend.content
+    assert f"{float(np.nanmin(np.r_[hm.error_rigid, hm.error_rrbc])):.4f} mm" in c.view.legend.content
+    c.view.heat_value.value = "rigid error"
+    assert "rigid only" in c.view.legend.content
     # lesson: Next starts at step 1 with its layers; numbers are live
-    c.lesson_next.value = True
-    assert app.lesson_index == 0 and "Step 1 of 9" in c.lesson.content
-    assert c.layers["registration"].value and not c.layers["targets"].value
+    c.learn.lesson_next.value = True
+    assert app.lesson_index == 0 and "Step 1 of 9" in c.learn.lesson.content
+    assert c.view.layers["registration"].value and not c.view.layers["targets"].value
     assert app.nodes.groups["targets"].visible is False
     for _ in range(5):
-        c.lesson_next.value = True
-    assert "Step 6 of 9" in c.lesson.content  # fiducial corrections only
+        c.learn.lesson_next.value = True
+    assert "Step 6 of 9" in c.learn.lesson.content  # fiducial corrections only
     assert app.nodes.groups["corrections"].visible and not app.nodes.nodes["/corrections/targets"].visible
     ev = app.session.last
     n = np.linalg.norm(ev.corrections[ev.included], axis=1)
-    assert f"{n.max():.3f} mm" in c.lesson.content and f"{n.min():.3f} mm" in c.lesson.content
-    c.lesson_prev.value = True
-    assert "Step 5 of 9" in c.lesson.content
+    assert f"{n.max():.3f} mm" in c.learn.lesson.content and f"{n.min():.3f} mm" in c.learn.lesson.content
+    c.learn.lesson_prev.value = True
+    assert "Step 5 of 9" in c.learn.lesson.content
     for _ in range(4):
-        c.lesson_next.value = True
+        c.learn.lesson_next.value = True
     sm = app.session.last.summary
-    assert "Step 9 of 9" in c.lesson.content and f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.lesson.content
-    assert c.layers["landing"].value
+    assert (
+        "Step 9 of 9" in c.learn.lesson.content and f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
+    )
+    assert c.view.layers["landing"].value
     app.handle_drag("targets", "H3", [410.0, 40.0, 15.0], "end")
     sm = app.session.last.summary
-    assert f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.lesson.content
-    c.lesson_end.value = True
-    assert app.lesson_index is None and c.layers["heatmap"].value and not c.layers["hull"].value
+    assert f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
+    c.learn.lesson_end.value = True
+    assert app.lesson_index is None and c.view.layers["heatmap"].value and not c.view.layers["hull"].value
     assert app.nodes.nodes["/corrections/targets"].visible
 
 
 def test_display_controls_and_heat_map_follow_drags(app):
     c = app.controls
-    assert c.handles.value == "targets" and app.gizmo("fiducials", "F1").disable_axes
-    c.handles.value = "both"
+    assert c.view.handles.value == "targets" and app.gizmo("fiducials", "F1").disable_axes
+    c.view.handles.value = "both"
     assert not app.gizmo("fiducials", "F1").disable_axes and not app.gizmo("targets", "H1").disable_axes
-    c.handles.value = "fiducials"
+    c.view.handles.value = "fiducials"
     assert not app.gizmo("fiducials", "F1").disable_axes and app.gizmo("targets", "H1").disable_sliders
-    c.marker.value = 4.0
+    c.view.marker.value = 4.0
     assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(4.0)
     assert app.gizmo("targets", "H1").scale == pytest.approx(app.nodes._gizmo_scale())
-    c.layers["heatmap"].value = True
+    c.view.layers["heatmap"].value = True
     owner = np.array(app.heat_map.target) == "H1"
     centre0 = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner].mean(0)
-    c.region_zoom.value = 10.0
+    c.view.region_zoom.value = 10.0
     assert app.nodes.regions["H1"].scale == pytest.approx(10.0)  # H1's region is a box: uniform zoom
     assert app.nodes.regions["H3"].scale == pytest.approx((6.0, 6.0, 6.0))  # sphere r 0.6 mm, zoomed
     pts = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner]
@@ -295,14 +301,14 @@ def test_monte_carlo_plots_follow_the_setup(app):
     first = app.mc_plots
     assert first is not None
     centres, rigid, rrbc = first.histogram()
-    np.testing.assert_allclose(app.controls.mc_hist.data[1], rigid)
-    app.controls.interpolation.value = "tps"
+    np.testing.assert_allclose(app.controls.montecarlo.mc_hist.data[1], rigid)
+    app.controls.explore.interpolation.value = "tps"
     assert app.mc.wait_idle(60)
     assert app.mc_plots is not first
     d, a, b = app.mc_plots.by_distance()
-    np.testing.assert_allclose(app.controls.mc_dist.data[0], d)
-    np.testing.assert_allclose(app.controls.mc_dist.data[2], b)
-    assert "tps" in app.controls.mc_info.content
+    np.testing.assert_allclose(app.controls.montecarlo.mc_dist.data[0], d)
+    np.testing.assert_allclose(app.controls.montecarlo.mc_dist.data[2], b)
+    assert "tps" in app.controls.montecarlo.mc_info.content
 
 
 def test_exports_come_from_the_session(app):
@@ -314,8 +320,8 @@ def test_exports_come_from_the_session(app):
     np.testing.assert_allclose(mset.sensor, ref.sensor)
     name, content = app.export("json")
     assert json.loads(content) == json.loads(json.dumps(app.session.export_json()))
-    app.controls.download_csv.value = True  # no tab connected: nothing to send, nothing breaks
-    app.controls.download_json.value = True
+    app.controls.file.download_csv.value = True  # no tab connected: nothing to send, nothing breaks
+    app.controls.file.download_json.value = True
 
 
 # ------------------------------------------------------------------------------------------------- bad files
@@ -328,8 +334,8 @@ def test_bad_files_leave_the_server_and_session(app, tmp_path):
     assert "bad.toml" in app.controls.status.content
     bad_csv = tmp_path / "bad.csv"
     bad_csv.write_text("id,role,sensor_x\nA,fiducial,1\n", encoding="utf-8")
-    app.controls.path.value = str(bad_csv)
-    app.controls.load.value = True  # the Load button
+    app.controls.file.path.value = str(bad_csv)
+    app.controls.file.load.value = True  # the Load button
     assert app.session is session and "bad.csv" in app.last_message
     assert app.load_upload("junk.csv", b"\xff\xfe not text") is False
     assert app.load_upload("broken.toml", b"[scene\n") is False
@@ -346,9 +352,9 @@ def test_bad_files_leave_the_server_and_session(app, tmp_path):
 def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
     app = measured
     c = app.controls
-    assert c.noise.disabled and c.bias.disabled
-    assert "Monte Carlo needs a scene" in c.mc_info.content
-    c.interpolation.value = "gp"
+    assert c.explore.noise.disabled and c.explore.bias.disabled
+    assert "Monte Carlo needs a scene" in c.montecarlo.mc_info.content
+    c.explore.interpolation.value = "gp"
     ev0 = app.session.last
     i = ev0.targets.ids.index("T1")
     p0 = ev0.targets.positions[i].copy()
@@ -358,7 +364,7 @@ def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
     assert not np.allclose(ev.targets.correction_std[i], ev0.targets.correction_std[i])
     std = float(np.linalg.norm(ev.targets.correction_std[i]))
     assert f"± {std:.3f}" in app.nodes.labels["/targets/T1/gizmo/label"].text
-    assert f"| {std:.3f} |" in c.table.content
+    assert f"| {std:.3f} |" in c.explore.table.content
     _assert_arrows_match(app, app.session.evaluate())
     # fiducials cannot be moved: refused, the gizmo snaps back, a message says why
     j = ev.fiducial_ids.index("F22")
@@ -369,10 +375,10 @@ def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
     assert "cannot be moved" in app.last_message
     assert app.handle_drag("fiducials", "F22", f0 + [1.0, 0.0, 0.0], "end") is None
     # heat map in measurement mode: correction size / gp std
-    c.layers["heatmap"].value = True
+    c.view.layers["heatmap"].value = True
     assert app.heat_map is not None and app.nodes.nodes["/heatmap/points"].visible
-    c.heat_value.value = "correction std (gp)"
-    assert "std" in c.legend.content
+    c.view.heat_value.value = "correction std (gp)"
+    assert "std" in c.view.legend.content
 
 
 # ------------------------------------------------------------------------------------------------- CLI
@@ -427,14 +433,14 @@ def _rows_without_targets(app: RunningApp):
 def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
     from rrbc_core.analysis.diagnosis import diagnose
 
-    panel = app.controls.diagnosis
-    assert "Diagnose current data" in app.controls.diagnose.label and "Press" in panel.content
+    panel = app.controls.diagnose.diagnosis
+    assert "Diagnose current data" in app.controls.diagnose.diagnose.label and "Press" in panel.content
     m = app.session.export_measurements()
     assert "check" in m.roles  # the export holds the targets' truth: the diagnosis must not see it
     rows = _rows_without_targets(app)
     assert set(rows.roles) <= {"registration", "fiducial", "both"}
     direct = diagnose(rows)
-    _press(app.controls.diagnose)
+    _press(app.controls.diagnose.diagnose)
     text = panel.content
     assert app.diagnosis is not None and not app.diagnosis_stale
     assert app.diagnosis.to_json() == direct.to_json()  # same rows, same verdict (targets withheld)
@@ -473,7 +479,7 @@ def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
     app.change_settings(bias_scale=0.0, noise_scale=1.0)
     assert panel.content.startswith("**(data changed since — press again)**")
     assert app.diagnosis_stale
-    _press(app.controls.diagnose)
+    _press(app.controls.diagnose.diagnose)
     text2 = panel.content
     assert text2 != text and "data changed since" not in text2
     direct2 = diagnose(_rows_without_targets(app))
@@ -483,8 +489,8 @@ def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
 
 
 def test_diagnosis_goes_stale_when_its_data_change(app):
-    panel = app.controls.diagnosis
-    _press(app.controls.diagnose)
+    panel = app.controls.diagnose.diagnosis
+    _press(app.controls.diagnose.diagnose)
     fresh = panel.content
     # a target drag, a display or a method change leave the diagnosed rows (no targets) as they are
     app.handle_drag("targets", "H1", [410.0, -150.0, 40.0], "end")
@@ -499,14 +505,14 @@ def test_diagnosis_goes_stale_when_its_data_change(app):
     assert panel.content == "**(data changed since — press again)**\n\n" + fresh
     app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
     assert panel.content.count("data changed since") == 1
-    _press(app.controls.diagnose)
+    _press(app.controls.diagnose.diagnose)
     assert "data changed since" not in panel.content and not app.diagnosis_stale
 
 
 def test_diagnosis_says_why_it_cannot_run(measured):
-    panel = measured.controls.diagnosis
+    panel = measured.controls.diagnose.diagnosis
     # measured data: the file's registration and fiducial rows, its targets withheld
-    _press(measured.controls.diagnose)
+    _press(measured.controls.diagnose.diagnose)
     assert measured.diagnosis is not None and "Verdict:" in panel.content
     assert "check" in measured.session.export_measurements().roles and "check" not in measured._diagnosis_rows.roles
     # too few points (excluded fiducials are not part of the current data): the InputError's message in the panel
@@ -514,7 +520,7 @@ def test_diagnosis_says_why_it_cannot_run(measured):
         measured.toggle_fiducial(pid)
     assert "data changed since" in panel.content
     assert len(set(measured._diagnosis_input().ids)) < 5
-    _press(measured.controls.diagnose)
+    _press(measured.controls.diagnose.diagnose)
     assert measured.diagnosis is None
     assert panel.content.startswith("⚠ Cannot diagnose:") and "at least 5 distinct points" in panel.content
     # loading a file clears the tab

@@ -50,7 +50,7 @@ def test_plan_tab_shows_the_sessions_planning(app):
     assert f"**{len(st.target_ids)} of {len(st.target_ids)} targets**" in app.planning.info.content
     assert "Coverage" in app.planning.legend.content and "0 % (red)" in app.planning.legend.content
     assert "⚠ The session uses" not in app.planning.info.content
-    app.controls.interpolation.value = "tps"  # not the planner's model: the tab says so (numbers unchanged)
+    app.controls.explore.interpolation.value = "tps"  # not the planner's model: the tab says so (numbers unchanged)
     assert "⚠ The session uses least-squares + tps" in app.planning.info.content
     assert shown_rmst(app) == pytest.approx((p.rigid_mm, p.rigid_std_mm, p.rrbc_mm, p.rrbc_std_mm), abs=5e-4)
 
@@ -144,7 +144,7 @@ def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(ap
     rmst1 = shown_rmst(app)
     assert rmst1[2] < rmst0[2], (rmst0, rmst1)  # predicted RMST with RRBC, as the tab says it, went down
     assert f"{rmst0[2]:.3f} → {rmst1[2]:.3f} mm" in app.last_message
-    assert f"over {len(ev.fiducial_ids)} of {len(ev.fiducial_ids)} fiducials" in app.controls.summary.content
+    assert f"over {len(ev.fiducial_ids)} of {len(ev.fiducial_ids)} fiducials" in app.controls.explore.summary.content
     assert app.mc.wait_idle(60)  # accepting queued a Monte Carlo run of the new layout
     # an accepted fiducial drags like any other
     cid = result.suggested_ids[0]
