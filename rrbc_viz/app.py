@@ -127,6 +127,11 @@ class RunningApp(TabActions):
         self.mc = MonteCarloRunner(self._mc_result, self._mc_started)
         self._install(loaded, first=True)
 
+    @property
+    def lock(self) -> threading.RLock:
+        """The re-entrant lock every change to the session and the scene goes through (module docstring)."""
+        return self._lock
+
     def _build_plan_tab(self) -> PlanningPanel:
         """Build the Plan tab's panel (Controls calls this inside the tab) with the narrow view it needs."""
         self.planning = PlanningPanel(self.server, self, _PlanningView(self))
@@ -464,7 +469,7 @@ class _PlanningView:
 
     def __init__(self, app: RunningApp):
         self._app = app
-        self.lock = app._lock
+        self.lock = app.lock
 
     def live_session(self) -> ExplorerSession:
         return self._app.session

@@ -236,7 +236,7 @@ class _Model:
         model = cls(reg, cell.robot[ri], qs, reg.apply(qs) - rd.truth[qi], jac, var_t, var_reg + var_t, n_t)
         return model, rd
 
-    def _rmst(self, sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def rmst(self, sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """RMST and its sampling std from squared errors (..., M) with M = n_targets x n per target."""
         per = sq.reshape(sq.shape[:-1] + (self.n_targets, -1))
         n = per.shape[-1]
@@ -249,7 +249,7 @@ class _Model:
 
     def rigid(self) -> tuple[float, float]:
         sq = np.sum(self.q_rigid_err**2, axis=1) + self.q_rigid_noise_var
-        r, s = self._rmst(sq)
+        r, s = self.rmst(sq)
         return float(r), float(s)
 
     def rrbc_sq(self, f_sensor, f_corr, f_jac, f_cov, shared) -> np.ndarray:
@@ -295,7 +295,7 @@ def _predict_fast(scene, fid: np.ndarray, registration, samples_per_target: int,
     s, corr, jac, cov = _fid_arrays(model, rd, fi)
     shared = model.shared_index(cell.robot[fi])
     sq = model.rrbc_sq(s[None], corr[None], jac[None], cov[None], shared[None])
-    r, st = model._rmst(sq)
+    r, st = model.rmst(sq)
     return RmstPrediction(rigid, rigid_std, float(r[0]), float(st[0]), "first-order")
 
 

@@ -160,7 +160,7 @@ class _Pool:
                 for i in range(0, len(choices), _SETS_PER_CHUNK)
             ]
         )
-        return self.model._rmst(sq)
+        return self.model.rmst(sq)
 
     def covered(self, choices: np.ndarray) -> np.ndarray:
         """Fraction (T,) of the region samples (all targets weighted equally) inside the hull of each set."""
