@@ -125,6 +125,8 @@ class RunningApp(TabActions):
         self.planning: PlanningPanel | None = None
         self.controls = Controls(server, self, plan_tab=self._build_plan_tab)
         self.mc = MonteCarloRunner(self._mc_result, self._mc_started)
+        self.mc_draw = 0  # "Run again" presses so far (each draws new noise)
+        self.mc_seed: int | None = None  # the noise seed of the last run requested (None: the session's)
         self._install(loaded, first=True)
 
     @property

@@ -152,8 +152,10 @@ class TabActions:
                 self.planning.remove_ghosts(prompt=True)
 
     # ---------------------------------------------------------------------------------------- Monte Carlo
-    def request_monte_carlo(self) -> bool:
-        """Queue a Monte Carlo run of the current setup (scene mode); False when there is no error model."""
+    def request_monte_carlo(self, new_noise: bool = False) -> bool:
+        """Queue a Monte Carlo run of the current setup (scene mode); False when there is no error model.
+        new_noise ("Run again"): a fresh noise seed, so the run differs from the last; otherwise the noise is
+        seeded by the session's seed (the same setup gives the same plots)."""
         with self._lock:
             if self.session.kind != "scene":
                 self.mc.cancel()
@@ -164,7 +166,12 @@ class TabActions:
                 return False
             snapshot = copy.copy(self.session)  # settings and layout are immutable values
             self.controls.show_monte_carlo_plots(True)
-            self.mc.request(snapshot, self.controls.monte_carlo_trials)
+            seed = None
+            if new_noise:
+                self.mc_draw += 1
+                seed = int(np.random.default_rng([self.session.settings.seed, self.mc_draw]).integers(2**31 - 1))
+            self.mc_seed = seed
+            self.mc.request(snapshot, self.controls.monte_carlo_trials, seed)
             return True
 
     def _mc_started(self) -> None:
@@ -176,17 +183,35 @@ class TabActions:
             c.text["mc_info"] = f"Monte Carlo failed: {error}"
             return
         centres, rigid, rrbc = plots.histogram()
-        dist, mean_rigid, mean_rrbc = plots.by_distance()
+        dist, mean_rigid, mean_rrbc, half_rigid, half_rrbc = plots.by_distance()
         with self._lock, self.server.atomic():
             self.mc_plots = plots
             self.mc_seconds = seconds
-            c.show_monte_carlo_plots(True, (centres, rigid, rrbc), (dist, mean_rigid, mean_rrbc))
+            c.show_monte_carlo_plots(
+                True,
+                (centres, rigid, rrbc),
+                (
+                    dist,
+                    mean_rigid,
+                    mean_rrbc,
+                    mean_rigid - half_rigid,
+                    mean_rigid + half_rigid,
+                    mean_rrbc - half_rrbc,
+                    mean_rrbc + half_rrbc,
+                ),
+            )
             s = self.session.settings
             c.text["mc_info"] = (
                 f"{plots.trials} trials × {plots.rigid.shape[1]} check points in the targets' "
                 f"regions; {s.registration} + {s.interpolation}; noise ×{s.noise_scale:g}, "
-                f"bias ×{s.bias_scale:g} ({seconds:.1f} s). Updates after a setting changes, a "
-                "drag ends or the seed changes."
+                f"bias ×{s.bias_scale:g} ({seconds:.1f} s); "
+                + (
+                    f"noise draw {self.mc_draw} (**Run again** draws new noise). "
+                    if self.mc_seed is not None
+                    else "noise seeded by the session's seed (**Run again** draws new noise). "
+                )
+                + "Error vs distance: mean over the check points in each distance bin, with its 95 % interval. "
+                "Updates after a setting changes, a drag ends or the seed changes."
             )
 
     # --------------------------------------------------------------------------------------------- files

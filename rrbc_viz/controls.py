@@ -47,6 +47,11 @@ HEAT_CHOICES = {
 MAG_MAX = 2000
 
 
+def _band(label: str, color: str) -> dict:
+    """A thin dashed line: one edge of an interval."""
+    return {"label": label, "stroke": color, "width": 1, "dash": [4, 4]}
+
+
 def _series(label: str, color: str, points: bool = False) -> dict:
     s: dict = {"label": label, "stroke": color, "width": 2}
     if points:
@@ -157,8 +162,7 @@ class ExplorePanel:
             self.noise.value = float(settings.noise_scale)
             self.bias.value = float(settings.bias_scale)
             scene = kind == "scene"
-            self.noise.disabled = not scene
-            self.bias.disabled = not scene
+            self.noise.visible = self.bias.visible = self.new_seed.visible = scene  # measured data: nothing to scale
             self.neighbors.visible = self.power.visible = settings.interpolation == "idw"
             self.smoothing.visible = settings.interpolation == "tps"
             self.seed_md.content = (
@@ -265,14 +269,22 @@ class MonteCarloPanel:
             aspect=1.4,
         )
         self.mc_dist = gui.add_uplot(
-            z2,
-            ({"label": "distance (mm)"}, _series("rigid", "#dc2828", True), _series("RRBC", "#1eb43c", True)),
-            title="Mean error vs distance from the origin",
+            (np.array([0.0, 1.0]),) + (np.zeros(2),) * 6,
+            (
+                {"label": "distance (mm)"},
+                _series("rigid", "#dc2828", True),
+                _series("RRBC", "#1eb43c", True),
+                _band("rigid 95 % low", "#dc2828"),
+                _band("rigid 95 % high", "#dc2828"),
+                _band("RRBC 95 % low", "#1eb43c"),
+                _band("RRBC 95 % high", "#1eb43c"),
+            ),
+            title="Mean error vs distance from the origin (binned, 95 % intervals)",
             scales={"x": {"time": False}},
             axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}),
             aspect=1.4,
         )
-        self.mc_run.on_click(lambda event: app.request_monte_carlo())
+        self.mc_run.on_click(lambda event: app.request_monte_carlo(new_noise=True))
 
         @self.mc_trials.on_update
         def _(event: viser.GuiEvent) -> None:
@@ -387,9 +399,10 @@ class Controls:
         return _TextAreas(self)
 
     def show_monte_carlo_plots(self, visible: bool, histogram=None, by_distance=None) -> None:
-        """Show or hide the Monte Carlo plots; with data, (centres, rigid, rrbc) and (distance, rigid, rrbc)."""
+        """Show or hide the Monte Carlo tab's plots and controls (hidden for measured data: no error model to
+        simulate); with data, (centres, rigid, rrbc) and (distance, rigid, rrbc, and their intervals' edges)."""
         mc = self.montecarlo
-        mc.mc_hist.visible = mc.mc_dist.visible = bool(visible)
+        mc.mc_hist.visible = mc.mc_dist.visible = mc.mc_trials.visible = mc.mc_run.visible = bool(visible)
         if histogram is not None:
             mc.mc_hist.data = histogram
         if by_distance is not None:

@@ -29,9 +29,10 @@ class MonteCarloRunner:
         self._worker = CoalescingWorker(self._run, delay_s, name="rrbc-monte-carlo")
         self._worker.start()
 
-    def request(self, session, trials: int) -> int:
-        """Queue a run on `session` (a snapshot); returns the request's generation number."""
-        return self._worker.submit((session, int(trials)), supersede=True)
+    def request(self, session, trials: int, seed: int | None = None) -> int:
+        """Queue a run on `session` (a snapshot) with the noise seeded by `seed` (None: the session's seed, so the
+        same setup gives the same plots); returns the request's generation number."""
+        return self._worker.submit((session, int(trials), seed), supersede=True)
 
     def cancel(self) -> None:
         """Forget queued work and make a running result stale (e.g. the source changed)."""
@@ -49,7 +50,7 @@ class MonteCarloRunner:
         self._worker.stop()
 
     def _run(self, job, fresh: Callable[[], bool]) -> None:
-        session, trials = job
+        session, trials, seed = job
         if self._on_start is not None:
             try:
                 self._on_start()
@@ -58,7 +59,7 @@ class MonteCarloRunner:
         start = time.perf_counter()
         plots, error = None, None
         try:
-            plots = session.monte_carlo(trials=trials)
+            plots = session.monte_carlo(trials=trials, seed=seed)
         except InputError as exc:
             error = " ".join(str(exc).split())
         except Exception as exc:  # noqa: BLE001 - report, keep the worker alive

@@ -14,7 +14,7 @@ What the user sees:
   spheres labelled +1 … +K with the predicted gain; "Accept suggestions" makes them fiducials (measured from the
   error model like any fiducial), "Clear suggestions" removes the ghosts.
 
-Measured data have no error model and no candidates: the tab says so and its buttons are disabled.
+Measured data have no error model and no candidates: the tab says so and hides its buttons.
 
 Nodes: /plan (group), /plan/ghosts/<k> (icosphere) with /plan/ghosts/<k>/label, and per target
 /targets/<id>/gizmo/coverage (a halo that follows the target's gizmo in the browser with no round trip).
@@ -273,8 +273,9 @@ class PlanningPanel:
                         cast_shadow=False,
                         receive_shadow=False,
                     )
-        for h in (self.k, self.suggest_button, self.colour):
+        for h in (self.k, self.suggest_button, self.colour, self.accept_button, self.clear_button):
             h.disabled = not scene_mode
+            h.visible = scene_mode  # measured data: no candidates and no error model, so nothing to suggest
         self.accept_button.disabled = self.clear_button.disabled = True
         self.suggestion_md.content = PROMPT_SUGGEST if scene_mode else ""
 

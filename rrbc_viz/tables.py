@@ -52,7 +52,7 @@ def target_table(ev: Evaluation) -> str:
     t = ev.targets
     has_std = t.correction_std is not None
     head = "| target | rigid | RRBC | \\|ê\\| | " + ("std | " if has_std else "") + "hull |"
-    sep = "|---|---:|---:|---:|" + ("---:|" if has_std else "") + "---|"
+    sep = "|---|---:|---:|---:|" + ("---:|" if has_std else "") + ":---:|"  # centred: never runs into the number
     rows = [head, sep]
     corr = np.linalg.norm(t.correction.reshape(-1, 3), axis=1)
     std = np.linalg.norm(t.correction_std.reshape(-1, 3), axis=1) if has_std else None

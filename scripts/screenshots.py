@@ -86,6 +86,8 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
             ("zoom", {"look_at": (450.0, -60.0, 0.0), "factor": 0.45}),
         ],
     ),
+    # The results table with gp (a std column beside the others), the method chosen in the panel.
+    ("app_gp_table.png", [("select", ("Interpolation", "gp")), ("wait_text", "std")]),
     # Plan tab: F1 slid in under the plate (as a fiducial drag does), so H1's region leaves the hull (red halo;
     # the others blue, covered); regions coloured by coverage; Suggest's four ghost spheres (+1 … +4) with the
     # predicted gain in the panel. Drag handles, correction arrows and landing points hidden (less clutter).

@@ -56,10 +56,23 @@ class MonteCarloPlots:
         n = self.rigid.size
         return 0.5 * (edges[1:] + edges[:-1]), a / n, b / n
 
-    def by_distance(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(distance sorted, mean rigid error, mean RRBC error) per check point."""
+    def by_distance(self, bins: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Error against distance from the scene's origin, binned: (bin centre (B,), mean rigid error (B,), mean RRBC
+        error (B,), half-widths (B,) of their 95 % intervals), mm, over equal-count bins of the check points. The
+        mean of a bin is over its check points and trials; its interval is 1.96 standard errors of the mean of the
+        per-check-point means (trials average out the noise; the spread across check points is what varies)."""
         order = np.argsort(self.distance)
-        return self.distance[order], self.rigid.mean(0)[order], self.rrbc.mean(0)[order]
+        groups = [g for g in np.array_split(order, min(int(bins), len(order))) if len(g)]
+        centre = np.array([self.distance[g].mean() for g in groups])
+        out = [centre]
+        halves = []
+        for err in (self.rigid, self.rrbc):
+            per_check = err.mean(axis=0)
+            out.append(np.array([per_check[g].mean() for g in groups]))
+            halves.append(
+                np.array([1.96 * per_check[g].std(ddof=1) / np.sqrt(len(g)) if len(g) > 1 else 0.0 for g in groups])
+            )
+        return out[0], out[1], out[2], halves[0], halves[1]
 
 
 @dataclass(frozen=True)

@@ -305,10 +305,36 @@ def test_monte_carlo_plots_follow_the_setup(app):
     app.controls.explore.interpolation.value = "tps"
     assert app.mc.wait_idle(60)
     assert app.mc_plots is not first
-    d, a, b = app.mc_plots.by_distance()
-    np.testing.assert_allclose(app.controls.montecarlo.mc_dist.data[0], d)
-    np.testing.assert_allclose(app.controls.montecarlo.mc_dist.data[2], b)
+    d, a, b, ha, hb = app.mc_plots.by_distance()
+    data = app.controls.montecarlo.mc_dist.data
+    np.testing.assert_allclose(data[0], d)
+    np.testing.assert_allclose(data[2], b)
+    np.testing.assert_allclose(data[3], a - ha)  # the rigid mean's interval, drawn as two dashed lines
+    np.testing.assert_allclose(data[6], b + hb)
     assert "tps" in app.controls.montecarlo.mc_info.content
+
+
+def test_run_again_draws_new_noise_and_a_setting_change_does_not(app):
+    assert app.mc.wait_idle(60)
+    seeded = app.mc_plots
+    app.request_monte_carlo()  # the same setup, seeded by the session's seed: the same numbers
+    assert app.mc.wait_idle(60)
+    np.testing.assert_array_equal(app.mc_plots.rigid, seeded.rigid)
+    _press(app.controls.montecarlo.mc_run)  # Run again
+    assert app.mc.wait_idle(60)
+    again = app.mc_plots
+    assert not np.array_equal(again.rigid, seeded.rigid) and "noise draw 1" in app.controls.montecarlo.mc_info.content
+    _press(app.controls.montecarlo.mc_run)
+    assert app.mc.wait_idle(60)
+    assert not np.array_equal(app.mc_plots.rigid, again.rigid) and "noise draw 2" in app.controls.text["mc_info"]
+
+
+def test_measured_data_hide_the_controls_that_do_not_apply(app, measured):
+    for a, scene in ((app, True), (measured, False)):
+        e, mc, plan = a.controls.explore, a.controls.montecarlo, a.planning
+        assert e.noise.visible is scene and e.bias.visible is scene and e.new_seed.visible is scene
+        assert mc.mc_run.visible is scene and mc.mc_trials.visible is scene and mc.mc_hist.visible is scene
+        assert plan.suggest_button.visible is scene and plan.k.visible is scene
 
 
 def test_exports_come_from_the_session(app):
@@ -352,7 +378,7 @@ def test_bad_files_leave_the_server_and_session(app, tmp_path):
 def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
     app = measured
     c = app.controls
-    assert c.explore.noise.disabled and c.explore.bias.disabled
+    assert not c.explore.noise.visible and not c.explore.bias.visible  # hidden: measured data have no error model
     assert "Monte Carlo needs a scene" in c.montecarlo.mc_info.content
     c.explore.interpolation.value = "gp"
     ev0 = app.session.last
@@ -535,3 +561,12 @@ def test_a_quiet_server_prints_nothing_on_stdout_from_start_to_stop(capfd):
     a.handle_drag("targets", "H1", a.session.layout["targets"].positions[0] + [0.5, 0.0, 0.0], "end")
     a.stop()
     assert capfd.readouterr().out == ""
+
+
+def test_the_results_table_keeps_its_columns_apart_with_gp(app):
+    """With gp a right-aligned std column stands before the hull column: that one is centred, so the two never
+    run together (they did, left-aligned: '0.081inside')."""
+    app.controls.explore.interpolation.value = "gp"
+    lines = app.controls.text["table"].splitlines()
+    assert lines[0].split("|")[-2].strip() == "hull" and lines[1].split("|")[-2] == ":---:"
+    assert lines[0].count("|") == lines[1].count("|") == lines[2].count("|")
