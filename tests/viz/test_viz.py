@@ -9,6 +9,7 @@ Every server is stopped at the end of its test.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import urllib.request
@@ -569,4 +570,5 @@ def test_the_results_table_keeps_its_columns_apart_with_gp(app):
     app.controls.explore.interpolation.value = "gp"
     lines = app.controls.text["table"].splitlines()
     assert lines[0].split("|")[-2].strip() == "hull" and lines[1].split("|")[-2] == ":---:"
-    assert lines[0].count("|") == lines[1].count("|") == lines[2].count("|")
+    cells = [len(re.findall(r"(?<!\\)\|", line)) for line in lines[:3]]  # unescaped separators
+    assert cells[0] == cells[1] == cells[2]
