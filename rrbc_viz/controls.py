@@ -76,6 +76,17 @@ class Syncing:
             self.on = was
 
 
+def _forward(handle, syncing: Syncing, send, name: str, cast):
+    """A value callback that hands the widget's new value to the app as ``send(client=..., name=cast(value))`` (a
+    setting or a display option), unless the value was assigned by a `sync` (`syncing.on`)."""
+
+    def on_update(event: viser.GuiEvent) -> None:
+        if not syncing.on:
+            send(client=event.client, **{name: cast(handle.value)})
+
+    return on_update
+
+
 class ExplorePanel:
     """Explore tab: the source, the results (scale line, summary, per-target table), the method and error sizes."""
 
@@ -131,23 +142,9 @@ class ExplorePanel:
             (self.noise, "noise_scale", float),
             (self.bias, "bias_scale", float),
         ):
-            handle.on_update(self._setting(handle, name, cast))
-        self.magnification.on_update(self._display(self.magnification, "magnification", float))
+            handle.on_update(_forward(handle, syncing, app.change_settings, name, cast))
+        self.magnification.on_update(_forward(self.magnification, syncing, app.set_display, "magnification", float))
         self.new_seed.on_click(lambda event: app.new_seed(client=event.client))
-
-    def _setting(self, handle, name, cast):
-        def on_update(event: viser.GuiEvent) -> None:
-            if not self.syncing.on:
-                self.app.change_settings(client=event.client, **{name: cast(handle.value)})
-
-        return on_update
-
-    def _display(self, handle, name, cast):
-        def on_update(event: viser.GuiEvent) -> None:
-            if not self.syncing.on:
-                self.app.set_display(client=event.client, **{name: cast(handle.value)})
-
-        return on_update
 
     def sync(self, settings: Settings, kind: str, display: Display | None = None) -> None:
         with self.syncing.quiet():
@@ -200,12 +197,7 @@ class ViewPanel:
             (self.region_zoom, "region_zoom", float),
             (self.handles, "handles", str),
         ):
-
-            def on_update(event: viser.GuiEvent, handle=handle, name=name, cast=cast) -> None:
-                if not self.syncing.on:
-                    app.set_display(client=event.client, **{name: cast(handle.value)})
-
-            handle.on_update(on_update)
+            handle.on_update(_forward(handle, syncing, app.set_display, name, cast))
 
         @self.heat_value.on_update
         def _(event: viser.GuiEvent) -> None:

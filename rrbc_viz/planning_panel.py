@@ -317,7 +317,7 @@ class PlanningPanel:
         if state is not self.state and not isinstance(state, Exception):  # a cache hit says nothing about the cost
             cost = time.perf_counter() - start
             # the first computation for a source pays one-off start-up costs (up to ~5x): it counts at a fifth, so a
-            # scene whose planning is slow even then (the 200-fiducial stress cell: 0.25 s) never blocks a drag
+            # scene whose planning is slow even then (the 200-fiducial stress cell) never blocks a drag
             self.cost_s = cost if self._measured else cost / 5.0
             self._measured = True
         self._show_state(session, state)

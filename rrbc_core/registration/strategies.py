@@ -253,7 +253,7 @@ def three_point(sensor, robot) -> Registration:
 # Combinatorial averaging (eqs. 6-7)
 # ------------------------------------------------------------------------------------------------------
 #: Most registration points the subset-averaging strategies (combinatorial, annealing's start, clustering's
-#: pieces) accept: they register every 3-point subset, C(N, 3) of them (41 664 at 64 points, ~0.1 s), which grows
+#: pieces) accept: they register every 3-point subset, C(N, 3) of them (41 664 at 64 points), which grows
 #: as N³ (26 million subsets and out of memory near N = 540). Least squares uses any number of points.
 MAX_SUBSET_POINTS = 64
 

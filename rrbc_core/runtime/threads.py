@@ -44,7 +44,7 @@ _process_policy = False
 
 def _get_controller():
     """A threadpoolctl controller over every BLAS/OpenMP runtime loaded once numpy and scipy's linear algebra are
-    imported (built once: 2 ms; setting a limit through it then costs ~10 µs)."""
+    imported (built once; setting a limit through it is then cheap)."""
     global _controller
     if _controller is None:
         import numpy  # noqa: F401 - loads numpy's OpenBLAS

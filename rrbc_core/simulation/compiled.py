@@ -3,8 +3,8 @@
 `rrbc_batch("least-squares", "idw", ...)` (no weights) runs here: one compiled loop over trials (numba, made for
 exactly this: numeric Python loops compiled to machine code) instead of numpy calls over (T, N, 3) stacks, whose
 per-call overhead and small-axis reductions cost more than the arithmetic (benchmarks/run.py,
-`mc_throughput_ls_rrbc`, holds it against a per-trial numpy loop). The first call compiles it (about 2 s); the
-machine code is cached on disk beside this file (numba's cache), so later processes load it in ~0.1 s.
+`mc_throughput_ls_rrbc`, holds it against a per-trial numpy loop). The first call on a machine compiles it; the
+machine code is cached on disk beside this file (numba's cache), so later processes only load it.
 
 Per trial, the same arithmetic as the core (`registration.kabsch`, `rrbc.fiducial_corrections`,
 `interpolation.IDW`), to rounding:
@@ -20,7 +20,7 @@ Per trial, the same arithmetic as the core (`registration.kabsch`, `rrbc.fiducia
 
 Shapes are checked by the caller (`batch.rrbc_batch`), which also makes the value checks with the by-products
 the kernel returns (finiteness per trial and input, deviation from trial 0's layout). Import this module
-lazily (it imports numba, ~0.2 s).
+lazily (it imports numba).
 """
 
 from __future__ import annotations
