@@ -51,10 +51,12 @@ from rrbc_core.session.explorer import ExplorerSession
 
 from . import diagnosis_panel, files, tables, teaching
 from .app_tabs import TabActions
+from .app_views import ViewActions
+from .camera import OPENING, CameraDirector, preset_view
 from .colors import legend_markdown
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
-from .nodes import HANDLE_CHOICES, LAYERS, Display, SceneNodes, gizmo_name
+from .nodes import LAYERS, Display, SceneNodes, gizmo_name
 from .planning_panel import PlanningPanel
 
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
@@ -90,7 +92,7 @@ def _nice(x: float) -> float:
     return e
 
 
-class RunningApp(TabActions):
+class RunningApp(TabActions, ViewActions):
     """A running app. `server` is the viser server, `session` the shared ExplorerSession (replaced when a file
     is loaded), `port`/`url` where to point a browser. `stop()` frees the port."""
 
@@ -121,13 +123,17 @@ class RunningApp(TabActions):
         self.diagnosis_stale = False  # the data changed since the Diagnose tab's content was computed
         self._diagnosis_rows = None  # the rows it was computed from (MeasurementSet), None when nothing is shown
         self._diagnosis_text = ""  # its content without the stale marker
-        self.nodes = SceneNodes(server, self._on_gizmo, self._on_fiducial_click)
+        self.selected: tuple[str, str] | None = None  # (kind, id) of the selected point (the one with a gizmo)
+        self.camera = CameraDirector(server)
+        self.camera_preset = OPENING
+        self.nodes = SceneNodes(server, self._on_gizmo, self._on_point_click)
         self.planning: PlanningPanel | None = None
         self.controls = Controls(server, self, plan_tab=self._build_plan_tab)
         self.mc = MonteCarloRunner(self._mc_result, self._mc_started)
         self.mc_draw = 0  # "Run again" presses so far (each draws new noise)
         self.mc_seed: int | None = None  # the noise seed of the last run requested (None: the session's)
         self._install(loaded, first=True)
+        server.on_client_connect(self._frame_new_client)
 
     @property
     def lock(self) -> threading.RLock:
@@ -167,6 +173,9 @@ class RunningApp(TabActions):
             self.diagnosis_stale = False
             self._diagnosis_rows = None
             self.display = self._default_display(ev)
+            self.selected = ("targets", ev.targets.ids[0]) if len(ev.targets.ids) else None
+            self.nodes.selected = self.selected
+            self.camera_preset = OPENING
             with self.server.atomic():
                 self.nodes.build(self.session, ev, loaded.mesh, self.display, self.layers)
                 self.planning.build(self.session)
@@ -181,8 +190,8 @@ class RunningApp(TabActions):
                     "live numbers. Press **Next** to start."
                 )
                 self.controls.text["diagnosis"] = diagnosis_panel.PROMPT
-                self._frame_camera(loaded.mesh, ev)
                 self._show(ev, heat=True)
+                self._frame_camera(loaded.mesh, ev)
             if not first:
                 self._message(f"Loaded {loaded.label}", error=False)
         self.request_monte_carlo()
@@ -196,36 +205,22 @@ class RunningApp(TabActions):
         sizes = sizes[np.isfinite(sizes) & (sizes > 0)]
         mag = _nice(0.08 * extent / float(np.median(sizes))) if len(sizes) else 200.0
         heat = "rrbc" if self.session.kind == "scene" else "correction"
-        # fiducial handles start hidden: at the overview they crowd the targets' (View -> Drag handles on)
         return Display(
             magnification=float(np.clip(mag, 1, 2000)),
             marker_mm=marker,
             region_zoom=1.0,
-            handles="targets",
             heat_value=heat,
         )
 
     def _frame_camera(self, mesh, ev: Evaluation) -> None:
-        """Initial camera (and that of open tabs): looking at the points' centre, far enough to see the cell."""
-        pts = _all_points(ev)
-        lo, hi = pts.min(0), pts.max(0)
-        if mesh is not None:
-            b = np.asarray(mesh.bounds, float)
-            lo, hi = np.minimum(lo, b[0]), np.maximum(hi, b[1])
-        look = 0.5 * (pts.min(0) + pts.max(0))
-        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 10.0)
-        cam = self.server.initial_camera
-        fov = float(cam.fov)
-        direction = np.array([0.25, -1.0, 0.75]) / np.linalg.norm([0.25, -1.0, 0.75])
-        position = look + direction * radius / np.tan(fov / 2) * 0.65
-        cam.near = max(radius * 3e-4, 0.05)  # mm: close enough to look at a region of variability
-        cam.far = radius * 30.0
-        cam.up = (0.0, 0.0, 1.0)
-        cam.look_at = look
-        cam.position = position
-        for client in self.server.get_clients().values():
-            client.camera.look_at = look
-            client.camera.position = position
+        """The initial camera of new tabs, and that of open tabs: the work area, framed beside the panel."""
+        cell = self.cell_geometry()
+        view = preset_view(OPENING, cell, marker_mm=self.display.marker_mm)
+        whole = preset_view("whole cell", cell).points
+        radius = max(0.5 * float(np.linalg.norm(whole.max(0) - whole.min(0))), 10.0)
+        # mm: near close enough to look at a region of variability, far enough for the whole cell from afar
+        self.camera.set_initial(view, near=max(radius * 3e-4, 0.05), far=radius * 30.0)
+        self.camera.show(view)
 
     # -------------------------------------------------------------------------------------------- showing
     def _show(self, ev: Evaluation, heat: bool = False, plan: bool = True) -> None:
@@ -238,6 +233,7 @@ class RunningApp(TabActions):
         c.text["table"] = tables.target_table(ev)
         if self.lesson_index is not None:
             c.text["lesson"] = teaching.render(self.lesson_index, ev, self._lesson_context())
+        self._show_selection(ev)
         self._heat_stale = True
         self._check_diagnosis()
         self.planning.refresh(self.session, due=plan)
@@ -322,6 +318,11 @@ class RunningApp(TabActions):
                 self._show(ev, heat=bool(heat_due), plan=plan_due)
             if slow_plan:  # a slow scene: planning follows in the background, the drag does not wait
                 self.planning.request_background(session)
+            if end and key in self._refused:
+                # a move in this drag was refused: the tab that dragged may have kept its handle where the
+                # refusal happened (its own drag state wins over messages received mid-drag); send the
+                # session's place again now that the drag is over
+                self.nodes.resnap(kind, pid)
             if end:
                 self._refused.discard(key)
         if end:
@@ -347,13 +348,6 @@ class RunningApp(TabActions):
             self._refused.discard(key)
 
     # ------------------------------------------------------------------------------------------- settings
-    def _on_fiducial_click(self, pid: str, client=None) -> None:
-        try:
-            self.toggle_fiducial(pid, client=client)
-        except Exception:  # noqa: BLE001
-            traceback.print_exc()
-            self._message("internal error (see the server log)", client)
-
     def toggle_fiducial(self, pid: str, client=None) -> Evaluation | None:
         """Exclude an included fiducial or include an excluded one (what clicking its sphere does)."""
         with self._lock:
@@ -390,12 +384,15 @@ class RunningApp(TabActions):
         return ev
 
     def set_display(self, client=None, **changes) -> None:
-        """Display-only options (Display fields): magnification, marker_mm, region_zoom, handles, heat_value."""
+        """Display-only options (Display fields): magnification, marker_mm, region_zoom, heat_value."""
         with self._lock:
+            unknown = sorted(set(changes) - set(Display.__dataclass_fields__))
+            if unknown:
+                raise InputError(
+                    f"unknown display option(s) {', '.join(unknown)}: {', '.join(Display.__dataclass_fields__)}"
+                )
             new = replace(self.display, **changes)
             heat_values = [v for _, v in HEAT_CHOICES[self.session.kind]]
-            if new.handles not in HANDLE_CHOICES:
-                raise InputError(f"handles must be one of {', '.join(HANDLE_CHOICES)}, got {new.handles!r}")
             if new.heat_value not in heat_values:
                 raise InputError(f"heat_value must be one of {', '.join(heat_values)} here, got {new.heat_value!r}")
             if not (new.magnification > 0 and new.marker_mm > 0 and new.region_zoom > 0):
@@ -403,8 +400,6 @@ class RunningApp(TabActions):
             self.display = new
             self.nodes.display = self.display
             with self.server.atomic():
-                if "handles" in changes:
-                    self.nodes.set_handles(self.display.handles)
                 if "marker_mm" in changes or "region_zoom" in changes:
                     self.nodes.apply_sizes()
                 self.controls.sync_display(self.display, self.session.kind)
@@ -422,40 +417,6 @@ class RunningApp(TabActions):
                 self.controls.sync_layers({layer: bool(visible)})
                 if layer == "heatmap" and visible and (self._heat_stale or self.heat_map is None):
                     self._update_heat()
-
-    # --------------------------------------------------------------------------------------------- lesson
-    def lesson_go(self, index: int) -> str:
-        """Show lesson step `index` (0-based, clamped): its layers and its text. Returns the text."""
-        with self._lock:
-            index = int(np.clip(index, 0, len(teaching.STEPS) - 1))
-            if self.lesson_index is None:
-                self._lesson_saved_layers = dict(self.layers)
-            self.lesson_index = index
-            step = teaching.STEPS[index]
-            with self.server.atomic():
-                for name in LAYERS:
-                    self.set_layer(name, name in step.layers)
-                self.nodes.target_arrows = step.target_arrows
-                self.nodes.update(self.session.last)
-                text = teaching.render(index, self.session.last, self._lesson_context())
-                self.controls.text["lesson"] = text
-            return text
-
-    def lesson_step(self, delta: int) -> str:
-        """Next (+1) or previous (-1) step; the first press of either starts the lesson at step 1."""
-        return self.lesson_go(0 if self.lesson_index is None else self.lesson_index + delta)
-
-    def lesson_stop(self) -> None:
-        with self._lock:
-            saved = self._lesson_saved_layers
-            self.lesson_index = None
-            self._lesson_saved_layers = None
-            with self.server.atomic():
-                for name, visible in (saved or {}).items():
-                    self.set_layer(name, visible)
-                self.nodes.target_arrows = True
-                self.nodes.update(self.session.last)
-                self.controls.text["lesson"] = "Lesson ended. Press **Next** to start again."
 
     # ------------------------------------------------------------------------------------------ for tests
     def gizmo(self, kind: str, pid: str) -> viser.TransformControlsHandle:

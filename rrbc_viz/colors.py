@@ -12,20 +12,70 @@ Rgb = tuple[int, int, int]
 REGISTRATION: Rgb = (150, 90, 220)
 FIDUCIAL: Rgb = (255, 150, 30)
 FIDUCIAL_EXCLUDED: Rgb = (150, 150, 150)
-TARGET: Rgb = (40, 120, 255)
+TARGET: Rgb = (20, 40, 110)
 TARGET_EXTRAPOLATED: Rgb = (235, 30, 200)
 REGION: Rgb = (80, 170, 255)
 HULL: Rgb = (240, 190, 40)
 CORRECTION_FIDUCIAL: Rgb = (255, 110, 0)
 CORRECTION_TARGET: Rgb = (0, 175, 255)
-LAND_RIGID: Rgb = (220, 40, 40)
-LAND_RRBC: Rgb = (30, 180, 60)
+LAND_RIGID: Rgb = (213, 94, 0)
+LAND_RRBC: Rgb = (0, 150, 170)
 LAND_ANCHOR: Rgb = (40, 40, 40)
+LAND_STALK: Rgb = (110, 110, 110)
+LAND_RING: Rgb = (60, 60, 60)
+SELECTION: Rgb = (255, 255, 255)
+
+#: The drag gizmo's axis colours (drei PivotControls' defaults in viser 1.1.1's client: x, y, z). Data colours
+#: keep a CIE76 colour difference of at least MIN_GIZMO_DELTA_E from each (tests/viz check it).
+GIZMO_AXES: tuple[Rgb, ...] = ((255, 32, 96), (32, 223, 128), (32, 128, 255))
+MIN_GIZMO_DELTA_E = 30.0
+#: The colours data are drawn in (those the legend names).
+DATA_COLORS: dict[str, Rgb] = {
+    "registration point": REGISTRATION,
+    "fiducial": FIDUCIAL,
+    "excluded fiducial": FIDUCIAL_EXCLUDED,
+    "target": TARGET,
+    "target outside the hull (extrapolated)": TARGET_EXTRAPOLATED,
+    "region of variability": REGION,
+    "fiducials' hull": HULL,
+    "correction at a fiducial": CORRECTION_FIDUCIAL,
+    "correction at a target": CORRECTION_TARGET,
+    "rigid landing": LAND_RIGID,
+    "RRBC landing": LAND_RRBC,
+    "truth (bullseye centre)": LAND_ANCHOR,
+}
 FRAME_ORIGIN: Rgb = (236, 236, 0)
 NO_VALUE: Rgb = (128, 128, 128)
 
 #: The heat-map scale, low → high (viridis-like stops, perceptually ordered, colour-blind safe).
 SCALE_STOPS = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=float)
+
+
+def cie_lab(rgb) -> np.ndarray:
+    """CIE L*a*b* (D65) of an sRGB colour (0..255)."""
+    c = np.asarray(rgb, float) / 255.0
+    c = np.where(c > 0.04045, ((c + 0.055) / 1.055) ** 2.4, c / 12.92)
+    m = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
+    xyz = m @ c / np.array([0.95047, 1.0, 1.08883])
+    f = np.where(xyz > 0.008856, np.cbrt(xyz), 7.787 * xyz + 16.0 / 116.0)
+    return np.array([116.0 * f[1] - 16.0, 500.0 * (f[0] - f[1]), 200.0 * (f[1] - f[2])])
+
+
+def delta_e(a, b) -> float:
+    """CIE76 colour difference of two sRGB colours (about 2.3 is just noticeable; 100 is black to white)."""
+    return float(np.linalg.norm(cie_lab(a) - cie_lab(b)))
+
+
+def legend_html(names=None) -> str:
+    """The colour legend: a swatch and a name per data colour (inline HTML)."""
+    items = DATA_COLORS if names is None else {k: DATA_COLORS[k] for k in names}
+    chips = "".join(
+        f'<span style="display:inline-block;margin:0 10px 2px 0;white-space:nowrap">'
+        f'<span style="display:inline-block;width:0.8em;height:0.8em;border-radius:50%;background:{hex_color(c)};'
+        f'vertical-align:middle;margin-right:4px;border:1px solid #888"></span>{name}</span>'
+        for name, c in items.items()
+    )
+    return f'<div style="font-size:0.8em;line-height:1.5">{chips}</div>'
 
 
 def hex_color(rgb) -> str:

@@ -11,7 +11,6 @@ when Python assigns `.value`) do nothing.
 from __future__ import annotations
 
 from collections.abc import Callable
-from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -20,8 +19,12 @@ import viser
 from rrbc_core import interpolation, registration
 from rrbc_core.session.evaluation import Settings
 
+from .camera import PRESETS
+from .colors import legend_html
 from .diagnosis_panel import PROMPT
-from .nodes import HANDLE_CHOICES, LAYERS, Display
+from .nodes import LAYERS, Display
+from .selection_panel import Bullseye, SelectionPanel
+from .syncing import Syncing
 
 if TYPE_CHECKING:
     from .actions import AppActions
@@ -58,22 +61,6 @@ def _series(label: str, color: str, points: bool = False) -> dict:
         s["width"] = 1
         s["points"] = {"show": True, "size": 5, "fill": color}
     return s
-
-
-class Syncing:
-    """A flag the panels share: while it is set, their value callbacks do nothing (programmatic updates)."""
-
-    def __init__(self):
-        self.on = False
-
-    @contextmanager
-    def quiet(self):
-        was = self.on
-        self.on = True
-        try:
-            yield
-        finally:
-            self.on = was
 
 
 def _forward(handle, syncing: Syncing, send, name: str, cast):
@@ -130,8 +117,8 @@ class ExplorePanel:
             self.seed_md = gui.add_markdown("")
             self.new_seed = gui.add_button("New random seed", icon=viser.Icon.DICE)
         gui.add_markdown(
-            "Drag the arrows at a target or fiducial to move it (View → *Drag handles on* chooses "
-            "which); click a fiducial to exclude or include it. Robot frame, mm."
+            "Click a target or fiducial (or pick it under *Selected point*) to select it; drag the arrows of its "
+            "handle to move it. Robot frame, mm."
         )
         for handle, name, cast in (
             (self.registration, "registration", str),
@@ -171,11 +158,16 @@ class ExplorePanel:
 
 
 class ViewPanel:
-    """View tab: drag handles, marker size, region zoom, layers, the heat map's value and legend."""
+    """View tab: camera presets, marker size, region zoom, layers, the heat map's value and legend."""
 
     def __init__(self, gui, app: AppActions, syncing: Syncing):
         self.app, self.syncing = app, syncing
-        self.handles = gui.add_dropdown("Drag handles on", HANDLE_CHOICES, initial_value="targets")
+        self.camera = gui.add_button_group("Camera", PRESETS)
+        self.camera.on_click(lambda event: app.show_camera(self.camera.value, client=event.client))
+        self.see_through = gui.add_checkbox("See-through cell", False, hint="Show what lies under the cell's surfaces")
+        self.see_through.on_update(
+            lambda event: None if self.syncing.on else app.set_see_through(self.see_through.value)
+        )
         self.marker = gui.add_slider("Marker radius (mm)", 0.5, 50.0, 0.5, 8.0)
         self.region_zoom = gui.add_slider(
             "Region zoom ×",
@@ -195,7 +187,6 @@ class ViewPanel:
         for handle, name, cast in (
             (self.marker, "marker_mm", float),
             (self.region_zoom, "region_zoom", float),
-            (self.handles, "handles", str),
         ):
             handle.on_update(_forward(handle, syncing, app.set_display, name, cast))
 
@@ -217,7 +208,6 @@ class ViewPanel:
         with self.syncing.quiet():
             self.marker.value = float(display.marker_mm)
             self.region_zoom.value = float(display.region_zoom)
-            self.handles.value = display.handles
             labels = HEAT_CHOICES[kind]
             self.heat_value.options = tuple(k for k, _ in labels)
             self.heat_value.value = next((k for k, v in labels if v == display.heat_value), labels[0][0])
@@ -242,6 +232,7 @@ class LearnPanel:
         self.lesson_next.on_click(lambda event: app.lesson_step(+1))
         self.lesson_prev.on_click(lambda event: app.lesson_step(-1))
         self.lesson_end.on_click(lambda event: app.lesson_stop())
+        self.bullseye = Bullseye(gui)
 
 
 class MonteCarloPanel:
@@ -331,6 +322,7 @@ _TEXT_AREAS = {
     "scale": "explore",
     "summary": "explore",
     "table": "explore",
+    "info": "selection",
     "legend": "view",
     "lesson": "learn",
     "mc_info": "montecarlo",
@@ -367,8 +359,10 @@ class Controls:
         gui.configure_theme(show_share_button=False, control_width="large", brand_color=(40, 120, 255))
         gui.set_panel_label("RRBC explorer")
         self.status = gui.add_markdown("")
+        self.legend = gui.add_html(legend_html())
         tabs = gui.add_tab_group()
         with tabs.add_tab("Explore", icon=viser.Icon.ADJUSTMENTS):
+            self.selection = SelectionPanel(gui, app, self.syncing)
             self.explore = ExplorePanel(gui, app, self.syncing)
         with tabs.add_tab("View", icon=viser.Icon.EYE):
             self.view = ViewPanel(gui, app, self.syncing)
@@ -420,3 +414,16 @@ class Controls:
     def sync_layers(self, layers: dict[str, bool]) -> None:
         """Show the layer visibilities on the checkboxes (the app applies them to the scene)."""
         self.view.sync_layers(layers)
+
+    def sync_see_through(self, on: bool) -> None:
+        with self.syncing.quiet():
+            self.view.see_through.value = bool(on)
+
+    def sync_selection(self, choices: tuple[str, ...], value: str, selected) -> None:
+        """The selection dropdown's choices and value (selection_card.point_names / choice_of)."""
+        self.selection.sync(choices, value, selected)
+
+    def show_bullseye(self, svg: str | None, caption: str = "", key: str = "") -> None:
+        """Show the landing bullseye (selection_card.bullseye_svg) in the Explore and Learn tabs, or hide it."""
+        self.selection.bullseye.show(svg, caption, key)
+        self.learn.bullseye.show(svg, caption, key)

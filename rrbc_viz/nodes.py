@@ -7,7 +7,7 @@ times larger about their target. Both are display-only transforms.
 
 Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's):
 
-    /mesh/cell                         the work-cell mesh
+    /mesh/cell, /mesh/ghost            the work-cell mesh, solid / see-through (one of them shown)
     /frames/robot, /frames/sensor_true, /frames/sensor_registered   (+ …/label)
     /registration/points               batched spheres (+ /registration/labels/<id>)
     /fiducials/<id>/gizmo              transform controls, translation only (drag a fiducial)
@@ -17,7 +17,8 @@ Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's)
     /targets/<id>/gizmo                transform controls, translation only (drag a target)
     /targets/<id>/gizmo/sphere         the target (magenta when extrapolated), …/label
     /regions/<id>                      translucent box / icosphere with per-axis scale
-    /landing/anchor, /landing/rigid, /landing/rrbc, /landing/lines
+    /landing/anchor, /landing/rigid, /landing/rrbc   the landing bullseye of the selected target (LandingDisplay),
+    /landing/lines, /landing/rings, /landing/scale   floating above it: stalk, offsets, scale rings, ring label
     /heatmap/points                    point cloud, float32: the samples, in their region (true size × region zoom)
     /heatmap/rings                     point cloud, unlit: a flat ring of dots around each target, coloured by
                                        its region's mean value (regions are mm-sized in a metre-sized cell)
@@ -58,7 +59,7 @@ LAYERS = (
 
 #: (kind, id, robot-frame position mm, phase, client=...) -> anything
 DragCallback = Callable[..., object]
-#: (fiducial id, client=...) -> anything
+#: (kind, id, client=...) -> anything: a target or fiducial sphere was clicked
 ClickCallback = Callable[..., object]
 
 GIZMO_LIMITS = ((-1e7, 1e7),) * 3
@@ -80,11 +81,7 @@ class Display:
     magnification: float = 200.0  # arrows and landing offsets drawn this many times longer
     marker_mm: float = 8.0  # radius of fiducial / target spheres
     region_zoom: float = 1.0  # regions and heat-map samples drawn this many times larger about their target
-    handles: str = "targets"  # which points show drag handles: targets, fiducials, both, none
     heat_value: str = "rrbc"  # rrbc | rigid (scene); correction | std (measurements)
-
-
-HANDLE_CHOICES = ("targets", "fiducials", "both", "none")
 
 
 def _wxyz(rotation) -> np.ndarray:
@@ -140,14 +137,76 @@ def target_label(pid: str, ev: Evaluation, i: int) -> str:
     return target_labels(ev)[i]
 
 
+RING_SEGMENTS = 36
+
+
+@dataclass(frozen=True)
+class LandingDisplay:
+    """The landing bullseye of one target, floating `lift` mm above it so no part geometry can hide it (robot
+    frame, mm; display only): `anchor` (3,) stands for the truth, `rigid` and `rrbc` (3,) for the landings, their
+    offsets from the truth drawn ×`scale`; a horizontal scale ring of real radius `ring_mm` (a 1-2-5 number at
+    least as large as the larger offset) is drawn `ring_mm × scale` = RING_MARKERS marker radii wide, whatever the
+    arrows' magnification. Without truth the offsets are taken from the rigid landing (rigid at the centre)."""
+
+    target: str
+    position: np.ndarray
+    anchor: np.ndarray
+    rigid: np.ndarray
+    rrbc: np.ndarray
+    lift: float
+    ring_mm: float
+    scale: float
+
+    def rings(self) -> np.ndarray:
+        """(2 * RING_SEGMENTS, 2, 3) segments: the scale ring and a dashed half-size ring (every other segment)."""
+        a = np.linspace(0.0, 2 * np.pi, RING_SEGMENTS + 1)
+        c = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1) * self.ring_mm * self.scale
+        outer = np.stack([c[:-1], c[1:]], 1)
+        inner = 0.5 * outer
+        inner[1::2] = inner[::2][: len(inner[1::2])]  # dashed: odd segments collapse onto even ones
+        return self.anchor + np.concatenate([outer, inner])
+
+
+RING_SEGMENTS = 48
+RING_MARKERS = 6.0
+
+
+def nice_up(x: float) -> float:
+    """The 1-2-5 number at or above x (x > 0)."""
+    e = 10.0 ** np.floor(np.log10(x))
+    for m in (1.0, 2.0, 5.0, 10.0):
+        if m * e >= x * (1 - 1e-12):
+            return m * e
+    return 10.0 * e
+
+
+def landing_display(t, i: int, marker_mm: float) -> LandingDisplay:
+    """The landing bullseye of target i of `t` (evaluation.TargetResult)."""
+    known = bool(np.all(np.isfinite(t.truth[i])))
+    ref = t.truth[i] if known else t.robot_rigid[i]
+    off_rigid, off_rrbc = t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref
+    biggest = float(max(np.linalg.norm(off_rigid), np.linalg.norm(off_rrbc)))
+    ring = nice_up(biggest) if biggest > 0 else 0.1
+    radius = RING_MARKERS * marker_mm
+    scale = radius / ring
+    lift = 2.0 * radius + 2.0 * marker_mm
+    anchor = t.positions[i] + np.array([0.0, 0.0, lift])
+    return LandingDisplay(
+        str(t.ids[i]), t.positions[i], anchor, anchor + scale * off_rigid, anchor + scale * off_rrbc, lift, ring, scale
+    )
+
+
 class SceneNodes(HeatMapNodes):
     """Creates the nodes of a session (`build`) and refreshes them from an Evaluation (`update`)."""
 
-    def __init__(self, server: viser.ViserServer, on_drag: DragCallback, on_fiducial_click: ClickCallback):
+    def __init__(self, server: viser.ViserServer, on_drag: DragCallback, on_point_click: ClickCallback):
         self.server = server
         self.scene = server.scene
         self._on_drag = on_drag
-        self._on_click = on_fiducial_click
+        self._on_click = on_point_click
+        self.selected: tuple[str, str] | None = None  # (kind, id) of the point carrying the drag gizmo
+        self.landing_lift = 0.0  # mm: the landing display floats this far above the targets
+        self.see_through = False  # the work cell drawn see-through (ghost) instead of solid
         self._sphere_v, self._sphere_f = _unit_sphere()
         self.groups: dict[str, viser.SceneNodeHandle] = {}
         self.gizmos: dict[tuple[str, str], viser.TransformControlsHandle] = {}
@@ -198,7 +257,20 @@ class SceneNodes(HeatMapNodes):
         r = display.marker_mm
 
         if mesh is not None:
-            self.nodes["/mesh/cell"] = sc.add_mesh_trimesh("/mesh/cell", mesh, cast_shadow=False, receive_shadow=False)
+            self.nodes["/mesh/cell"] = sc.add_mesh_trimesh(
+                "/mesh/cell", mesh, cast_shadow=False, receive_shadow=False, visible=not self.see_through
+            )
+            self.nodes["/mesh/ghost"] = sc.add_mesh_simple(  # the see-through cell: shows what lies under surfaces
+                "/mesh/ghost",
+                np.asarray(mesh.vertices, np.float32),
+                np.asarray(mesh.faces, np.uint32),
+                color=(170, 170, 175),
+                opacity=0.18,
+                side="double",
+                cast_shadow=False,
+                receive_shadow=False,
+                visible=self.see_through,
+            )
 
         # frames ---------------------------------------------------------------------------------------
         axes = 0.12 * self.extent_mm
@@ -294,31 +366,35 @@ class SceneNodes(HeatMapNodes):
             self.regions[pid] = h
             self.region_kind[pid] = (region.kind, size)
 
-        # landing points --------------------------------------------------------------------------------
-        m_t = len(ev.targets.ids)
-        if m_t:
-            for key, color, s in (
-                ("anchor", colors.LAND_ANCHOR, 0.35),
-                ("rigid", colors.LAND_RIGID, 0.45),
-                ("rrbc", colors.LAND_RRBC, 0.45),
+        # landing bullseye of one target (filled by update) --------------------------------------------------
+        self.landing = None
+        if len(ev.targets.ids):
+            for key, color, f in (
+                ("anchor", colors.LAND_ANCHOR, 0.45),
+                ("rigid", colors.LAND_RIGID, 0.6),
+                ("rrbc", colors.LAND_RRBC, 0.6),
             ):
-                self.nodes[f"/landing/{key}"] = sc.add_batched_meshes_simple(
+                self.nodes[f"/landing/{key}"] = sc.add_icosphere(
                     f"/landing/{key}",
-                    self._sphere_v,
-                    self._sphere_f,
-                    batched_wxyzs=_identity_wxyzs(m_t),
-                    batched_positions=ev.targets.positions.astype(np.float32),
-                    batched_scales=np.full(m_t, s * r, np.float32),
-                    batched_colors=color,
+                    radius=f * r,
+                    color=color,
+                    subdivisions=2,
                     cast_shadow=False,
                     receive_shadow=False,
                 )
+            z = np.zeros((3, 2, 3), np.float32)
             self.nodes["/landing/lines"] = sc.add_line_segments(
-                "/landing/lines",
-                np.zeros((2 * m_t, 2, 3), np.float32),
-                self._landing_line_colors(m_t),
-                thickness=2.0,
+                "/landing/lines", z, self._landing_line_colors(), thickness=2.5, thickness_units="screen"
+            )
+            self.nodes["/landing/rings"] = sc.add_line_segments(
+                "/landing/rings",
+                np.zeros((2 * RING_SEGMENTS, 2, 3), np.float32),
+                np.array(colors.LAND_RING, np.uint8),
+                thickness=1.5,
                 thickness_units="screen",
+            )
+            self.nodes["/landing/scale"] = sc.add_label(
+                "/landing/scale", "", font_size_mode="screen", font_screen_scale=0.8, anchor="bottom-left"
             )
 
         # heat map (filled by update_heatmap) ------------------------------------------------------------
@@ -331,7 +407,9 @@ class SceneNodes(HeatMapNodes):
             precision="float32",
             visible=False,
         )
-        if m_t:  # unlit points (flat shading): the ring shows the legend's colours, whatever the lighting
+        if len(
+            ev.targets.ids
+        ):  # unlit points (flat shading): the ring shows the legend's colours, whatever the lighting
             self.nodes["/heatmap/rings"] = sc.add_point_cloud(
                 "/heatmap/rings",
                 np.zeros((1, 3), np.float32),
@@ -343,7 +421,7 @@ class SceneNodes(HeatMapNodes):
                 visible=False,
             )
 
-        self.set_handles(display.handles)
+        self.set_selected(self.selected)
         self.set_layer("labels", self.layers["labels"])
         self.update(ev)
 
@@ -357,7 +435,7 @@ class SceneNodes(HeatMapNodes):
                 self._point("fiducials", pid, ev.fiducial_positions[i], colors.FIDUCIAL, texts[i])
                 new.append(pid)
         if new:
-            self.set_handles(self.display.handles)
+            self.set_selected(self.selected)
         return new
 
     def _label(self, name: str, text: str, position) -> None:
@@ -397,12 +475,11 @@ class SceneNodes(HeatMapNodes):
             cast_shadow=False,
             receive_shadow=False,
         )
-        if kind == "fiducials":
 
-            def on_click(event: viser.SceneNodePointerEvent, pid=pid) -> None:
-                self._on_click(pid, client=event.client)
+        def on_click(event: viser.SceneNodePointerEvent, kind=kind, pid=pid) -> None:
+            self._on_click(kind, pid, client=event.client)
 
-            sphere.on_click(on_click)
+        sphere.on_click(on_click)
         self.gizmos[(kind, pid)] = tc
         self.spheres[(kind, pid)] = sphere
         self._label(f"{name}/label", label, (0.0, 0.0, 1.6 * r))
@@ -415,10 +492,9 @@ class SceneNodes(HeatMapNodes):
         return {"shaft_radius": 0.22 * r, "head_radius": 0.55 * r, "head_length": 1.4 * r}
 
     @staticmethod
-    def _landing_line_colors(m: int) -> np.ndarray:
-        c = np.empty((2 * m, 2, 3), np.uint8)
-        c[:m] = colors.LAND_RIGID
-        c[m:] = colors.LAND_RRBC
+    def _landing_line_colors() -> np.ndarray:
+        c = np.empty((3, 2, 3), np.uint8)
+        c[0], c[1], c[2] = colors.LAND_STALK, colors.LAND_RIGID, colors.LAND_RRBC
         return c
 
     # ------------------------------------------------------------------------------------------ updating
@@ -479,19 +555,22 @@ class SceneNodes(HeatMapNodes):
             tarrows.points = np.stack([t.positions, t.positions + mag * t.correction_robot], axis=1).astype(np.float32)
         tarrows.visible = bool(len(t.ids)) and self.target_arrows
 
-        # landing: anchor = the target; offsets from the truth (or from the rigid landing without truth)
+        # landing: the bullseye of the selected target (the first target while a fiducial or nothing is selected)
         if len(t.ids):
-            known = np.all(np.isfinite(t.truth), axis=1)[:, None]
-            ref = np.where(known, t.truth, t.robot_rigid)
-            anchor = t.positions
-            rigid = anchor + mag * (t.robot_rigid - ref)
-            rrbc = anchor + mag * (t.robot_rrbc - ref)
-            self.nodes["/landing/anchor"].batched_positions = anchor.astype(np.float32)
-            self.nodes["/landing/rigid"].batched_positions = rigid.astype(np.float32)
-            self.nodes["/landing/rrbc"].batched_positions = rrbc.astype(np.float32)
-            self.nodes["/landing/lines"].points = np.concatenate(
-                [np.stack([anchor, rigid], 1), np.stack([anchor, rrbc], 1)]
-            ).astype(np.float32)
+            sel = self.selected
+            i = t.ids.index(sel[1]) if sel is not None and sel[0] == "targets" else 0
+            land = landing_display(t, i, self.display.marker_mm)
+            self.landing = land
+            self.nodes["/landing/anchor"].position = land.anchor
+            self.nodes["/landing/rigid"].position = land.rigid
+            self.nodes["/landing/rrbc"].position = land.rrbc
+            self.nodes["/landing/lines"].points = np.array(
+                [[land.position, land.anchor], [land.anchor, land.rigid], [land.anchor, land.rrbc]], np.float32
+            )
+            self.nodes["/landing/rings"].points = land.rings().astype(np.float32)
+            scale = self.nodes["/landing/scale"]
+            scale.position = land.anchor + np.array([0.71, -0.71, 0.0]) * land.ring_mm * land.scale
+            self._assign(scale, "text", f"{land.target}: ring {land.ring_mm:g} mm")
 
     def _assign(self, handle, attr: str, value) -> None:
         """Set handle.attr = value unless it is the value this object last set there (tuples/str compare
@@ -505,22 +584,48 @@ class SceneNodes(HeatMapNodes):
     def snap(self, kind: str, pid: str, position) -> None:
         """Put a gizmo back (a refused move)."""
         self.gizmos[(kind, pid)].position = np.asarray(position, float)
+        self._sent[(id(self.gizmos[(kind, pid)]), "position")] = tuple(np.asarray(position, float))
+
+    def resnap(self, kind: str, pid: str) -> None:
+        """Send a gizmo's position again even though the server's copy has not changed. viser skips a value
+        np.allclose to the one it holds, so step off by more than its tolerance and back; the two messages share
+        a redundancy key, so a tab receives only the last."""
+        tc = self.gizmos[(kind, pid)]
+        p = np.array(tc.position, float)
+        tc.position = p + np.array([1e-4 * (1.0 + float(np.abs(p).max())), 0.0, 0.0])
+        tc.position = p
+
+    def set_see_through(self, on: bool) -> None:
+        """Draw the work cell solid or see-through (what lies under its surfaces shows)."""
+        self.see_through = bool(on)
+        if "/mesh/cell" in self.nodes:
+            self.nodes["/mesh/cell"].visible = not self.see_through
+            self.nodes["/mesh/ghost"].visible = self.see_through
 
     def set_layer(self, layer: str, visible: bool) -> None:
         self.layers[layer] = bool(visible)
         if layer == "labels":
-            for h in self.labels.values():
-                h.visible = bool(visible)
+            self._show_labels()
         elif layer in self.groups:
             self.groups[layer].visible = bool(visible)
 
-    def set_handles(self, which: str) -> None:
-        """Show drag handles on targets, fiducials, both or none (hidden handles keep their sphere)."""
-        self.display.handles = which
-        for (kind, _), tc in self.gizmos.items():
-            on = which == "both" or which == kind
-            tc.disable_axes = not on
-            tc.disable_sliders = not on
+    def set_selected(self, selected: tuple[str, str] | None) -> None:
+        """Select a point (kind, id) or none: only the selected point carries a drag gizmo (the others keep their
+        sphere, clickable), and its label shows even when the labels layer is off."""
+        if selected is not None and selected not in self.gizmos:
+            selected = None
+        self.selected = selected
+        for key, tc in self.gizmos.items():
+            on = key == selected
+            self._assign(tc, "disable_axes", not on)
+            self._assign(tc, "disable_sliders", not on)
+        self._show_labels()
+
+    def _show_labels(self) -> None:
+        on = bool(self.layers.get("labels"))
+        mine = None if self.selected is None else f"{gizmo_name(*self.selected)}/label"
+        for name, h in self.labels.items():
+            self._assign(h, "visible", on or name == mine)
 
     def apply_sizes(self) -> None:
         """Marker size and region zoom changed: resize spheres, gizmos, arrows, regions."""
@@ -538,10 +643,10 @@ class SceneNodes(HeatMapNodes):
         reg = self.nodes.get("/registration/points")
         if reg is not None:
             reg.batched_scales = np.full(len(reg.batched_positions), 0.8 * r, np.float32)
-        for key, s in (("anchor", 0.35), ("rigid", 0.45), ("rrbc", 0.45)):
+        for key, f in (("anchor", 0.45), ("rigid", 0.6), ("rrbc", 0.6)):
             h = self.nodes.get(f"/landing/{key}")
             if h is not None:
-                h.batched_scales = np.full(len(h.batched_positions), s * r, np.float32)
+                h.radius = f * r
         for pid, h in self.regions.items():
             kind, size = self.region_kind[pid]
             h.scale = float(self.display.region_zoom) if kind == "box" else tuple(size * self.display.region_zoom)

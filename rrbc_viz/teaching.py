@@ -31,6 +31,10 @@ class Step:
     layers: tuple[str, ...]  # layers shown at this step (the others are hidden)
     text: Callable[[Evaluation, LessonContext], str]
     target_arrows: bool = True  # with the "corrections" layer: also the targets' arrows (step 6 shows fiducials' only)
+    #: what the camera frames at this step: names of `camera.CellGeometry.points` ("registration", "fiducials",
+    #: "targets", "robot", "sensor", "mesh") and "corrections" (arrow tips) or "landing" (the landing display)
+    focus: tuple[str, ...] = ("targets", "fiducials")
+    see_through: bool = False  # the work cell drawn see-through: arrows may point into surfaces
 
 
 def _v(x) -> str:
@@ -77,7 +81,7 @@ def _step2(ev: Evaluation, ctx: LessonContext) -> str:
 
 def _step3(ev: Evaluation, ctx: LessonContext) -> str:
     t = ev.targets
-    s = f"**{len(t.ids)} targets** ({_ids(t.ids)}, blue): the places where the robot must act accurately."
+    s = f"**{len(t.ids)} targets** ({_ids(t.ids)}, dark blue): the places where the robot must act accurately."
     if ctx.regions and len(t.ids):
         r = ctx.regions.get(t.ids[0])
         if r is not None:
@@ -163,28 +167,57 @@ def _step9(ev: Evaluation, ctx: LessonContext) -> str:
     sm = ev.summary
     if sm.get("rmst_rigid_mm") is None:
         return (
-            "b̂ = R(x + ê(x)) + t sends the robot to the corrected targets (green) instead of the rigid-only "
-            "ones (red). These data carry no truth for the targets, so the gain cannot be scored here; "
+            "b̂ = R(x + ê(x)) + t sends the robot to the corrected targets (teal) instead of the rigid-only "
+            "ones (vermillion). These data carry no truth for the targets, so the gain cannot be scored here; "
             "add check rows to score it."
         )
     return (
-        f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (red) versus with RRBC (green), offsets "
-        f"×{ctx.magnification:g} from the truth (dark). Over {sm['scored']} scored targets the RMS error is "
+        f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (vermillion) versus with RRBC (teal), "
+        f"offsets ×{ctx.magnification:g} from the truth (dark centre of each bullseye floating above its target; "
+        f"the panel's bullseye shows them at true size). Over {sm['scored']} scored targets the RMS error is "
         f"**{_mm(sm['rmst_rigid_mm'])} rigid → {_mm(sm['rmst_rrbc_mm'])} with RRBC** "
         f"(max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])})."
     )
 
 
 STEPS: tuple[Step, ...] = (
-    Step("Measure registration points", ("mesh", "frames", "registration", "labels"), _step1),
-    Step("Register the sensor to the robot", ("mesh", "frames", "registration"), _step2),
-    Step("Identify the targets", ("mesh", "targets", "regions", "labels"), _step3),
+    Step(
+        "Measure registration points",
+        ("mesh", "frames", "registration", "labels"),
+        _step1,
+        focus=("registration", "robot"),
+    ),
+    Step(
+        "Register the sensor to the robot",
+        ("mesh", "frames", "registration"),
+        _step2,
+        focus=("registration", "robot", "sensor"),
+    ),
+    Step("Identify the targets", ("mesh", "targets", "regions"), _step3, focus=("targets",)),
     Step("Choose fiducials around the targets", ("mesh", "targets", "fiducials", "hull", "regions"), _step4),
-    Step("Map the robot's fiducials back", ("mesh", "frames", "fiducials", "labels"), _step5),
-    Step("Corrections at the fiducials", ("mesh", "fiducials", "corrections"), _step6, target_arrows=False),
+    Step(
+        "Map the robot's fiducials back",
+        ("mesh", "frames", "fiducials"),
+        _step5,
+        focus=("fiducials", "sensor"),
+    ),
+    Step(
+        "Corrections at the fiducials",
+        ("mesh", "fiducials", "corrections"),
+        _step6,
+        target_arrows=False,
+        focus=("fiducials", "corrections"),
+        see_through=True,
+    ),
     Step("Measure the targets", ("mesh", "targets", "fiducials"), _step7),
-    Step("Interpolate corrections to the targets", ("mesh", "fiducials", "targets", "corrections"), _step8),
-    Step("Correct and map to the robot", ("mesh", "targets", "landing"), _step9),
+    Step(
+        "Interpolate corrections to the targets",
+        ("mesh", "fiducials", "targets", "corrections"),
+        _step8,
+        focus=("targets", "fiducials", "corrections"),
+        see_through=True,
+    ),
+    Step("Correct and map to the robot", ("mesh", "targets", "landing"), _step9, focus=("targets", "landing")),
 )
 
 

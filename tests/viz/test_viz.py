@@ -127,14 +127,26 @@ def test_drag_target_recomputes_everything(app):
         f"| H1 | {fresh.targets.error_rigid[0]:.3f} | {fresh.targets.error_rrbc[0]:.3f} |"
         in app.controls.explore.table.content
     )
-    # landing points: truth-anchored offsets, magnified
-    mag = app.display.magnification
+    # the landing bullseye of the selected target (H1): truth-anchored offsets at the bullseye's scale, floating
+    # above the target, and the same offsets at true size in the panel's SVG
+    land = app.nodes.landing
     t = fresh.targets
+    assert land.target == "H1" and land.lift > 0
+    np.testing.assert_allclose(land.anchor, t.positions[0] + [0, 0, land.lift])
     np.testing.assert_allclose(
-        app.nodes.nodes["/landing/rrbc"].batched_positions[0],
-        t.positions[0] + mag * (t.robot_rrbc[0] - t.truth[0]),
-        atol=1e-2,
+        app.nodes.nodes["/landing/rrbc"].position, land.anchor + land.scale * (t.robot_rrbc[0] - t.truth[0]), atol=1e-6
     )
+    np.testing.assert_allclose(
+        app.nodes.nodes["/landing/rigid"].position,
+        land.anchor + land.scale * (t.robot_rigid[0] - t.truth[0]),
+        atol=1e-6,
+    )
+    assert land.ring_mm >= max(
+        np.linalg.norm(t.robot_rigid[0] - t.truth[0]), np.linalg.norm(t.robot_rrbc[0] - t.truth[0])
+    )
+    svg = app.controls.selection.bullseye.html.content
+    dx = float(re.search(r'data-kind="rrbc" data-dx-mm="([^"]+)"', svg).group(1))
+    assert dx == pytest.approx(t.robot_rrbc[0, 0] - t.truth[0, 0], rel=1e-5, abs=1e-9)
     np.testing.assert_allclose(app.nodes.regions["H1"].position, new)
     app.handle_drag("targets", "H1", new, "end")
 
@@ -174,18 +186,34 @@ def test_target_outside_the_hull_is_flagged(app):
 
 
 # ------------------------------------------------------------------------------------------------- settings
-def test_clicking_a_fiducial_excludes_and_includes_it(app):
+def test_selecting_a_fiducial_then_excluding_and_including_it(app):
     sphere = app.nodes.spheres[("fiducials", "F3")]
     n = len(app.session.last.fiducial_ids)
-    _click(sphere)
+    _click(sphere)  # a click selects: F3 alone carries the drag gizmo, its card shows its numbers
+    assert app.selected == ("fiducials", "F3") and app.controls.selection.choice.value == "fiducial F3"
+    assert [key for key, tc in app.nodes.gizmos.items() if not tc.disable_axes] == [("fiducials", "F3")]
+    assert "**Fiducial F3**" in app.controls.selection.info.content and app.controls.selection.exclude.visible
+    assert app.nodes.labels["/fiducials/F3/gizmo/label"].visible  # its label, with the labels layer off
+    assert not app.nodes.labels["/fiducials/F1/gizmo/label"].visible
+    assert app.session.last.summary["fiducials_used"] == n
+    _press(app.controls.selection.exclude)
     ev = app.session.last
     assert "F3" in ev.settings.excluded and ev.summary["fiducials_used"] == n - 1
     assert tuple(sphere.color) == colors.FIDUCIAL_EXCLUDED
     assert f"over {n - 1} of {n} fiducials" in app.controls.explore.summary.content
     assert len(app.nodes.nodes["/corrections/fiducials"].points) == n - 1
     assert "excluded" in app.nodes.labels["/fiducials/F3/gizmo/label"].text
-    _click(sphere)
+    assert "**excluded**" in app.controls.selection.info.content
+    _press(app.controls.selection.exclude)
     assert app.session.last.summary["fiducials_used"] == n and tuple(sphere.color) == colors.FIDUCIAL
+    app.controls.selection.choice.value = "target H2"  # picking from the list selects too
+    assert app.selected == ("targets", "H2") and not app.gizmo("targets", "H2").disable_axes
+    assert app.gizmo("fiducials", "F3").disable_axes and app.nodes.landing.target == "H2"
+    assert "**Target H2**" in app.controls.selection.info.content and app.controls.selection.bullseye.html.visible
+    app.controls.selection.choice.value = "none"
+    assert app.selected is None and all(tc.disable_axes for tc in app.nodes.gizmos.values())
+    with pytest.raises(InputError, match="no target 'H99'"):
+        app.select("targets", "H99")
 
 
 def test_method_controls_change_the_numbers(app):
@@ -272,11 +300,10 @@ def test_layers_lesson_and_heat_map(app):
 
 def test_display_controls_and_heat_map_follow_drags(app):
     c = app.controls
-    assert c.view.handles.value == "targets" and app.gizmo("fiducials", "F1").disable_axes
-    c.view.handles.value = "both"
-    assert not app.gizmo("fiducials", "F1").disable_axes and not app.gizmo("targets", "H1").disable_axes
-    c.view.handles.value = "fiducials"
-    assert not app.gizmo("fiducials", "F1").disable_axes and app.gizmo("targets", "H1").disable_sliders
+    # the first target starts selected: it alone has a drag handle
+    assert app.selected == ("targets", "H1")
+    assert [key for key, tc in app.nodes.gizmos.items() if not tc.disable_axes] == [("targets", "H1")]
+    assert all(tc.disable_sliders for key, tc in app.nodes.gizmos.items() if key != ("targets", "H1"))
     c.view.marker.value = 4.0
     assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(4.0)
     assert app.gizmo("targets", "H1").scale == pytest.approx(app.nodes._gizmo_scale())
@@ -294,7 +321,7 @@ def test_display_controls_and_heat_map_follow_drags(app):
     hm = app.session.heat_map()
     np.testing.assert_allclose(app.heat_map.error_rrbc, hm.error_rrbc)
     with pytest.raises(InputError):
-        app.set_display(handles="sideways")
+        app.set_display(handles="both")  # no such option any more: selection decides
 
 
 def test_monte_carlo_plots_follow_the_setup(app):

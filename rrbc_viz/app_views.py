@@ -1,0 +1,193 @@
+"""What the app does for what a user looks at: the camera (presets, per-step framing, framing new tabs for their
+window), the selected point (its drag gizmo, info card and landing bullseye) and the lesson. Part of `RunningApp`
+(`app.py`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rrbc_core.errors import InputError
+from rrbc_core.session.evaluation import Evaluation
+
+from . import selection_card, teaching
+from .camera import PRESETS, CellGeometry, View, preset_view
+from .nodes import LAYERS
+
+
+class ViewActions:
+    """Part of `RunningApp` (see there); split out to keep modules short."""
+
+    # --------------------------------------------------------------------------------------------- camera
+    def cell_geometry(self) -> CellGeometry:
+        ev = self.session.last
+        mesh = self.loaded.mesh
+        scene = getattr(self.session, "scene", None)
+        sensor = None if self.session.sensor_to_robot is None else np.asarray(self.session.sensor_to_robot.translation)
+        return CellGeometry(
+            registration=ev.registration_positions.reshape(-1, 3),
+            fiducials=ev.fiducial_positions.reshape(-1, 3),
+            targets=ev.targets.positions.reshape(-1, 3),
+            mesh_bounds=None if mesh is None else np.asarray(mesh.bounds, float),
+            sensor_position=sensor,
+            sensor_kind=None if scene is None else scene.sensor_kind,
+        )
+
+    def focus_points(self, names) -> np.ndarray:
+        """Robot-frame points (K, 3) of what a lesson step talks about (teaching.Step.focus)."""
+        cell = self.cell_geometry()
+        plain = [n for n in names if n not in ("corrections", "landing")]
+        parts = [cell.points(*plain)] if plain else []
+        ev = self.session.last
+        r = self.display.marker_mm
+        if "corrections" in names:
+            inc = np.flatnonzero(ev.included)
+            mag = self.display.magnification
+            parts.append(ev.fiducial_positions[inc] + mag * ev.corrections_robot[inc])
+            if self.nodes.target_arrows:
+                parts.append(ev.targets.positions + mag * ev.targets.correction_robot)
+        if "landing" in names and getattr(self.nodes, "landing", None) is not None:
+            land = self.nodes.landing
+            ring = land.ring_mm * land.scale
+            parts += [land.anchor, land.rigid, land.rrbc, land.position]
+            parts += [land.anchor + d for d in ([ring, 0, 0], [-ring, 0, 0], [0, ring, 0], [0, -ring, 0])]
+        pts = np.vstack([p.reshape(-1, 3) for p in parts if len(p)]) if parts else np.zeros((0, 3))
+        # a margin of a few marker radii: the spheres themselves must fit, not just their centres
+        d = np.vstack([np.eye(3), -np.eye(3)]) * 2.0 * r
+        return np.vstack([pts, (pts[:, None, :] + d[None]).reshape(-1, 3)])
+
+    def current_view(self) -> View:
+        """What the camera should show now: the lesson step's focus, else the last preset."""
+        if self.lesson_index is not None:
+            step = teaching.STEPS[self.lesson_index]
+            from .camera import OBLIQUE
+
+            return View(self.focus_points(step.focus), OBLIQUE)
+        return self._preset_view(self.camera_preset)
+
+    def _preset_view(self, name: str) -> View:
+        selected = None
+        if self.selected is not None:
+            kind, pid = self.selected
+            ev = self.session.last
+            if kind == "targets":
+                i = ev.targets.ids.index(pid)
+                selected = [ev.targets.positions[i]]
+                land = getattr(self.nodes, "landing", None)
+                if land is not None and self.layers.get("landing") and land.target == pid:
+                    selected += [land.anchor, land.rigid, land.rrbc]
+            else:
+                selected = [ev.fiducial_positions[ev.fiducial_ids.index(pid)]]
+        return preset_view(name, self.cell_geometry(), selected=selected, marker_mm=self.display.marker_mm)
+
+    def show_camera(self, preset: str, client=None) -> dict:
+        """Move the camera to a preset (camera.PRESETS): of `client`'s tab, or of every tab (client None).
+        Returns the poses sent, by client id."""
+        if preset not in PRESETS:
+            raise InputError(f"unknown camera preset '{preset}': {', '.join(PRESETS)}")
+        with self._lock:
+            self.camera_preset = preset
+            return self.camera.show(self._preset_view(preset), None if client is None else [client])
+
+    def _frame_new_client(self, client) -> None:
+        """A tab connected: once it reports its camera (window size), frame the current view for it."""
+        done = {"flag": False}
+
+        def on_camera(_camera) -> None:
+            if done["flag"]:
+                return
+            done["flag"] = True
+            try:
+                with self._lock:
+                    self.camera.show(self.current_view(), [client])
+            except Exception:  # noqa: BLE001 - a closing tab must not break the app
+                pass
+
+        client.camera.on_update(on_camera)
+
+    def set_see_through(self, on: bool) -> None:
+        """Draw the work cell see-through (View tab checkbox; lesson steps whose arrows point into surfaces)."""
+        with self._lock:
+            self.nodes.set_see_through(on)
+            self.controls.sync_see_through(on)
+
+    # ------------------------------------------------------------------------------------------ selection
+    def select(self, kind: str | None, pid: str | None = None, client=None) -> None:
+        """Select a point (kind "targets"/"fiducials", id) or none (kind None): it alone carries the drag gizmo;
+        the info card and the bullseye show its numbers."""
+        with self._lock:
+            ev = self.session.last
+            if kind is None:
+                sel = None
+            else:
+                kind = {"target": "targets", "fiducial": "fiducials"}.get(kind, kind)
+                ids = ev.targets.ids if kind == "targets" else ev.fiducial_ids if kind == "fiducials" else ()
+                if pid not in ids:
+                    raise InputError(f"there is no {kind[:-1] if kind.endswith('s') else kind} '{pid}' to select")
+                sel = (kind, pid)
+            self.selected = sel
+            with self.server.atomic():
+                self.nodes.set_selected(sel)
+                self.nodes.update(ev)  # the landing bullseye follows the selected target
+                self._show_selection(ev)
+
+    def _on_point_click(self, kind: str, pid: str, client=None) -> None:
+        try:
+            self.select(kind, pid, client=client)
+        except Exception as exc:  # noqa: BLE001 - keep serving
+            self._message(str(exc), client)
+
+    def _show_selection(self, ev: Evaluation) -> None:
+        """Refresh the info card, the bullseye and the selection dropdown (caller holds the lock)."""
+        c = self.controls
+        sel = self.selected
+        c.sync_selection(selection_card.point_names(ev), selection_card.choice_of(sel), sel)
+        c.text["info"] = selection_card.info_card(ev, sel)
+        land = getattr(self.nodes, "landing", None)
+        target = land.target if land is not None else None  # the target whose bullseye the scene shows
+        if not (sel is not None and sel[0] == "targets") and self.lesson_index != len(teaching.STEPS) - 1:
+            target = None  # the panel's bullseye: for a selected target, and in the lesson's last step
+        if target is None:
+            c.show_bullseye(None)
+        else:
+            c.show_bullseye(*selection_card.bullseye_svg(ev, target))
+
+    # --------------------------------------------------------------------------------------------- lesson
+    def lesson_go(self, index: int) -> str:
+        """Show lesson step `index` (0-based, clamped): its layers, its text, and every tab's camera framed on
+        what the step talks about. Returns the text."""
+        with self._lock:
+            index = int(np.clip(index, 0, len(teaching.STEPS) - 1))
+            if self.lesson_index is None:
+                self._lesson_saved_layers = dict(self.layers)
+            self.lesson_index = index
+            step = teaching.STEPS[index]
+            with self.server.atomic():
+                for name in LAYERS:
+                    self.set_layer(name, name in step.layers)
+                self.nodes.target_arrows = step.target_arrows
+                self.set_see_through(step.see_through)
+                self.nodes.update(self.session.last)
+                text = teaching.render(index, self.session.last, self._lesson_context())
+                self.controls.text["lesson"] = text
+                self._show_selection(self.session.last)
+                self.camera.show(self.current_view())
+            return text
+
+    def lesson_step(self, delta: int) -> str:
+        """Next (+1) or previous (-1) step; the first press of either starts the lesson at step 1."""
+        return self.lesson_go(0 if self.lesson_index is None else self.lesson_index + delta)
+
+    def lesson_stop(self) -> None:
+        with self._lock:
+            saved = self._lesson_saved_layers
+            self.lesson_index = None
+            self._lesson_saved_layers = None
+            with self.server.atomic():
+                for name, visible in (saved or {}).items():
+                    self.set_layer(name, visible)
+                self.nodes.target_arrows = True
+                self.set_see_through(False)
+                self.nodes.update(self.session.last)
+                self.controls.text["lesson"] = "Lesson ended. Press **Next** to start again."
+                self._show_selection(self.session.last)
+                self.camera.show(self.current_view())

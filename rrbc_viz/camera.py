@@ -1,0 +1,159 @@
+"""Camera with intent: views framed on what they are about, with the control panel's width allowed for.
+
+A view is a set of points that must be on screen and a viewing direction (`View`); `CameraDirector` frames it
+for each browser tab's own image size (`rrbc_core.geometry.framing.frame_points`: the closest camera that shows
+every point inside the part of the image the floating panel leaves free) and moves that tab's camera, or sets the
+initial camera of tabs still to come. Frames and units: robot frame, mm (the scene frame).
+
+Presets (View tab → Camera): the whole cell (mesh, robot, sensor), the work area (the point sets and the robot's
+base: the opening view), a close-up from above on the targets and fiducials, the sensor's view, the selected point. The Learn tab's steps frame what each step talks about (`teaching.Step.focus`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import viser
+
+from rrbc_core.errors import InputError
+from rrbc_core.geometry.framing import CameraPose, frame_points
+
+#: The floating control panel (theme control_width="large": 24 em × 16 px) plus its gap to the window's edge.
+PANEL_PX = 24 * 16 + 24
+#: The image the initial camera is framed for (tabs report their own size once connected).
+DEFAULT_IMAGE = (1280, 800)
+FOV_Y = np.deg2rad(50.0)
+
+#: Viewing directions (camera → scene), robot frame.
+OBLIQUE = np.array([-0.25, 1.0, -0.75])  # from the front (−y) left, looking down at ~35°
+STEEP = np.array([-0.15, 0.55, -1.0])  # a close-up from above the work area
+TOP = np.array([0.0, 0.05, -1.0])
+
+PRESETS = ("whole cell", "work area", "close-up", "sensor's view", "selected point")
+#: The view a scene opens with.
+OPENING = "work area"
+
+
+@dataclass(frozen=True)
+class View:
+    """What a camera must show: `points` (N, 3) robot frame, mm; `direction` (3,) camera → scene; `position`
+    (3,) a fixed camera position (the sensor's view) or None to frame from `direction`."""
+
+    points: np.ndarray
+    direction: np.ndarray
+    position: np.ndarray | None = None
+
+
+def _pose_from(view: View, fov_y: float, aspect: float, width_px: float) -> CameraPose:
+    panel = float(np.clip(PANEL_PX / max(width_px, 1.0), 0.0, 0.6))
+    if view.position is not None:  # from a fixed place: look at the points' centre, framed by the fov alone
+        centre = 0.5 * (view.points.min(0) + view.points.max(0))
+        up = np.array([0.0, 0.0, 1.0])
+        return CameraPose(np.asarray(view.position, float), centre, up, fov_y, aspect)
+    return frame_points(view.points, view.direction, fov_y, aspect, panel_fraction=panel)
+
+
+class CameraDirector:
+    """Moves the cameras of the server's tabs (or one tab's) to a `View`."""
+
+    def __init__(self, server: viser.ViserServer):
+        self.server = server
+        self.last: dict[int, CameraPose] = {}  # client id -> the pose last sent to it
+        self.initial: CameraPose | None = None
+
+    def set_initial(self, view: View, near: float, far: float) -> CameraPose:
+        """The camera every newly opened tab starts with."""
+        w, h = DEFAULT_IMAGE
+        pose = _pose_from(view, FOV_Y, w / h, w)
+        cam = self.server.initial_camera
+        cam.fov = float(FOV_Y)
+        cam.near = near
+        cam.far = far
+        cam.up = (0.0, 0.0, 1.0)
+        cam.position = tuple(pose.position)
+        cam.look_at = tuple(pose.look_at)
+        self.initial = pose
+        return pose
+
+    def show(self, view: View, clients=None) -> dict[int, CameraPose]:
+        """Move the camera of each client in `clients` (default: every connected tab) to `view`, framed for that
+        tab's image; tabs that have not reported their camera yet keep the initial one. Returns the poses sent."""
+        if not len(view.points):
+            raise InputError("nothing to show")
+        out = {}
+        targets = list(self.server.get_clients().values()) if clients is None else list(clients)
+        for client in targets:
+            cam = client.camera
+            try:
+                aspect, width = float(cam.aspect), float(cam.image_width)
+            except AssertionError:  # no camera message from this tab yet
+                continue
+            if not (aspect > 0 and width > 0):
+                continue
+            pose = _pose_from(view, float(cam.fov), aspect, width)
+            with client.atomic():
+                cam.up_direction = (0.0, 0.0, 1.0)
+                cam.position = tuple(pose.position)  # moves look_at along: set it after
+                cam.look_at = tuple(pose.look_at)
+            self.last[client.client_id] = pose
+            out[client.client_id] = pose
+        return out
+
+
+@dataclass(frozen=True)
+class CellGeometry:
+    """What the views are made of (robot frame, mm): the point sets, the mesh's bounds (2, 3) or None, the
+    sensor's origin and what it looks at (None without a sensor pose) and its kind."""
+
+    registration: np.ndarray
+    fiducials: np.ndarray
+    targets: np.ndarray
+    mesh_bounds: np.ndarray | None
+    sensor_position: np.ndarray | None
+    sensor_kind: str | None
+
+    def points(self, *names: str) -> np.ndarray:
+        parts = {
+            "registration": self.registration,
+            "fiducials": self.fiducials,
+            "targets": self.targets,
+            "robot": np.zeros((1, 3)),
+            "sensor": self.sensor_position.reshape(1, 3) if self.sensor_position is not None else np.zeros((0, 3)),
+            "mesh": _corners(self.mesh_bounds) if self.mesh_bounds is not None else np.zeros((0, 3)),
+        }
+        out = np.vstack([parts[n].reshape(-1, 3) for n in names])
+        if not len(out):
+            out = np.vstack([self.registration, self.fiducials, self.targets, np.zeros((1, 3))])
+        return out
+
+
+def _corners(bounds) -> np.ndarray:
+    b = np.asarray(bounds, float).reshape(2, 3)
+    return np.array([[b[i, 0], b[j, 1], b[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+
+
+def _halo(points: np.ndarray, radius: float) -> np.ndarray:
+    """`points` and the 6 points ±radius along each axis around each of them."""
+    d = np.vstack([np.eye(3), -np.eye(3)]) * radius
+    return np.vstack([points, (points[:, None, :] + d[None]).reshape(-1, 3)])
+
+
+def preset_view(name: str, cell: CellGeometry, selected=None, marker_mm: float = 8.0) -> View:
+    """The View of a camera preset (`PRESETS`). `selected`: (M, 3) points the selected-point view must show (the
+    point, its region, its landings), None for the work area."""
+    work = cell.points("targets", "fiducials")
+    if name == "whole cell":
+        return View(cell.points("mesh", "registration", "fiducials", "targets", "robot", "sensor"), OBLIQUE)
+    if name == "sensor's view":
+        if cell.sensor_position is not None and cell.sensor_kind in ("stereo", "mocap", "laser_tracker"):
+            return View(_halo(work, 2 * marker_mm), OBLIQUE, position=cell.sensor_position)
+        return View(_halo(work, 2 * marker_mm), TOP)  # no camera to look through: straight down on the work
+    if name == "work area":  # where the robot works: registration points, fiducials, targets, the robot's base
+        return View(_halo(cell.points("registration", "fiducials", "targets", "robot"), 2 * marker_mm), OBLIQUE)
+    if name == "close-up":  # the targets and fiducials from above (the fixture plate)
+        return View(_halo(work, 2 * marker_mm), STEEP)
+    if name == "selected point":
+        pts = work if selected is None or not len(selected) else np.asarray(selected, float).reshape(-1, 3)
+        return View(_halo(pts, 4 * marker_mm), STEEP)
+    raise InputError(f"unknown camera preset '{name}': {', '.join(PRESETS)}")

@@ -1,0 +1,161 @@
+"""The selected point's info card (markdown) and its landing bullseye (an SVG drawn in the panel, never hidden by
+scene geometry).
+
+Formatting only: every number comes from an `Evaluation`. The bullseye is a top view in the robot frame (x to the
+right, y up, mm, unmagnified): the truth at the centre, the rigid and RRBC landings as dots at their x-y offsets,
+scale rings at 1-2-5 radii; the z offsets are drawn on a vertical bar at the right with the same scale. Without
+truth (measured targets) the rigid landing is the centre and only the RRBC shift is drawn.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rrbc_core.session.evaluation import Evaluation
+
+from . import colors
+from .nodes import nice_up
+
+SIZE_PX = 220  # the bullseye's drawing, square
+BAR_PX = 34  # the z bar at its right
+
+
+def _v(x) -> str:
+    return "[" + ", ".join(f"{float(c):.3f}" for c in np.asarray(x).reshape(-1)) + "]"
+
+
+def _mm(x) -> str:
+    return "—" if x is None or not np.isfinite(x) else f"{float(x):.3f} mm"
+
+
+def point_names(ev: Evaluation) -> tuple[str, ...]:
+    """Choices of the "Selected point" dropdown: 'target H1', 'fiducial F1', … ('none' first)."""
+    return ("none",) + tuple(f"target {p}" for p in ev.targets.ids) + tuple(f"fiducial {p}" for p in ev.fiducial_ids)
+
+
+def parse_choice(choice: str) -> tuple[str, str] | None:
+    """(kind, id) of a dropdown choice, None for 'none'."""
+    if choice == "none" or " " not in choice:
+        return None
+    word, pid = choice.split(" ", 1)
+    return ({"target": "targets", "fiducial": "fiducials"}[word], pid)
+
+
+def choice_of(selected: tuple[str, str] | None) -> str:
+    if selected is None:
+        return "none"
+    kind, pid = selected
+    return f"{'target' if kind == 'targets' else 'fiducial'} {pid}"
+
+
+def landing_offsets(ev: Evaluation, i: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Target i's rigid and RRBC landing offsets (3,) each, robot frame, mm, from the truth (known=True) or
+    from the rigid landing (known=False)."""
+    t = ev.targets
+    known = bool(np.all(np.isfinite(t.truth[i])))
+    ref = t.truth[i] if known else t.robot_rigid[i]
+    return t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref, known
+
+
+def info_card(ev: Evaluation, selected: tuple[str, str] | None) -> str:
+    """Markdown: the selected point's numbers (or how to select one)."""
+    if selected is None:
+        return "*Click a target or fiducial in the scene (or pick one above) to select it: it gets the drag handle.*"
+    kind, pid = selected
+    if kind == "targets":
+        t = ev.targets
+        i = t.ids.index(pid)
+        lines = [
+            f"**Target {pid}** at {_v(t.positions[i])} mm (robot frame)",
+            f"- sensor reading x = {_v(t.sensor[i])} mm (sensor frame)",
+            f"- correction ê = {_v(t.correction[i])} mm, |ê| = {float(np.linalg.norm(t.correction[i])):.3f} mm"
+            + (f" ± {float(np.linalg.norm(t.correction_std[i])):.3f} (1σ)" if t.correction_std is not None else ""),
+            f"- error rigid **{_mm(t.error_rigid[i])}** → RRBC **{_mm(t.error_rrbc[i])}**",
+            "- ⚠ extrapolated (beyond the hull of the fiducials)"
+            if bool(t.extrapolated[i])
+            else "- inside the fiducials' hull",
+        ]
+        return "\n".join(lines)
+    i = ev.fiducial_ids.index(pid)
+    r = ev.fiducial_readings
+    lines = [
+        f"**Fiducial {pid}** at {_v(ev.fiducial_positions[i])} mm (robot frame)",
+        f"- robot read b = {_v(r.robot[i])} mm; sensor saw s = {_v(r.sensor[i])} mm",
+    ]
+    if bool(ev.included[i]):
+        e = ev.corrections[i]
+        lines.append(f"- correction e = {_v(e)} mm (sensor frame), |e| = {float(np.linalg.norm(e)):.3f} mm")
+    else:
+        lines.append("- **excluded** from the interpolation")
+    return "\n".join(lines)
+
+
+def bullseye_svg(ev: Evaluation, pid: str) -> tuple[str, str, str]:
+    """The landing bullseye of target `pid` (module docstring): (inline SVG, markdown caption, HTML key)."""
+    t = ev.targets
+    i = t.ids.index(pid)
+    rigid, rrbc, known = landing_offsets(ev, i)
+    biggest = float(max(np.linalg.norm(rigid), np.linalg.norm(rrbc), 1e-6))
+    ring = nice_up(biggest)
+    c = SIZE_PX / 2
+    px = 0.42 * SIZE_PX / ring  # px per mm: the outer ring fills ~84 % of the square
+
+    def xy(off) -> tuple[float, float]:
+        return c + px * float(off[0]), c - px * float(off[1])
+
+    parts = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{SIZE_PX + BAR_PX}" height="{SIZE_PX}" '
+        f'viewBox="0 0 {SIZE_PX + BAR_PX} {SIZE_PX}" data-ring-mm="{ring:g}" data-px-per-mm="{px:.6g}">',
+        f'<rect x="0" y="0" width="{SIZE_PX}" height="{SIZE_PX}" fill="#fbfbfb" stroke="#ccc"/>',
+    ]
+    for k, frac in enumerate((1.0, 0.5)):
+        parts.append(
+            f'<circle cx="{c}" cy="{c}" r="{px * ring * frac:.2f}" fill="none" stroke="#999" '
+            f'stroke-dasharray="{"" if k == 0 else "3 3"}"/>'
+        )
+    parts.append(f'<line x1="{c}" y1="4" x2="{c}" y2="{SIZE_PX - 4}" stroke="#ddd"/>')
+    parts.append(f'<line x1="4" y1="{c}" x2="{SIZE_PX - 4}" y2="{c}" stroke="#ddd"/>')
+    parts.append(
+        f'<text x="{c + px * ring * 0.71 + 3:.1f}" y="{c - px * ring * 0.71 - 3:.1f}" font-size="11" fill="#555">'
+        f"{ring:g} mm</text>"
+    )
+    parts.append(f'<text x="{SIZE_PX - 16}" y="{c - 4}" font-size="10" fill="#777">x</text>')
+    parts.append(f'<text x="{c + 4}" y="12" font-size="10" fill="#777">y</text>')
+    dots = [("rigid", rigid, colors.LAND_RIGID)] if known else []
+    dots.append(("rrbc", rrbc, colors.LAND_RRBC))
+    parts.append(f'<circle cx="{c}" cy="{c}" r="4" fill="{colors.hex_color(colors.LAND_ANCHOR)}" data-kind="truth"/>')
+    for name, off, col in dots:
+        x, y = xy(off)
+        parts.append(f'<line x1="{c}" y1="{c}" x2="{x:.2f}" y2="{y:.2f}" stroke="{colors.hex_color(col)}"/>')
+        parts.append(
+            f'<circle cx="{x:.2f}" cy="{y:.2f}" r="6" fill="{colors.hex_color(col)}" stroke="#fff" '
+            f'data-kind="{name}" data-dx-mm="{float(off[0]):.6g}" data-dy-mm="{float(off[1]):.6g}"/>'
+        )
+    # z bar: the same scale, vertical
+    bx = SIZE_PX + BAR_PX / 2
+    parts.append(f'<line x1="{bx}" y1="{c - px * ring}" x2="{bx}" y2="{c + px * ring}" stroke="#999"/>')
+    parts.append(f'<line x1="{bx - 6}" y1="{c}" x2="{bx + 6}" y2="{c}" stroke="#333"/>')
+    parts.append(f'<text x="{bx - 4}" y="{c - px * ring - 4:.1f}" font-size="10" fill="#777">z</text>')
+    for name, off, col in dots:
+        z = c - px * float(off[2])
+        parts.append(
+            f'<rect x="{bx - 5}" y="{z - 2:.2f}" width="10" height="4" fill="{colors.hex_color(col)}" '
+            f'data-kind="{name}-z" data-dz-mm="{float(off[2]):.6g}"/>'
+        )
+    parts.append("</svg>")
+    if known:
+        caption = (
+            f"**{pid}**: where the robot lands, seen from above (offsets from the truth, true size, mm): rigid "
+            f"{float(np.linalg.norm(rigid)):.3f} mm, RRBC {float(np.linalg.norm(rrbc)):.3f} mm. "
+            "The bar at the right: z."
+        )
+    else:
+        caption = (
+            f"**{pid}**: no truth here; the dot is RRBC's shift from the rigid landing "
+            f"({float(np.linalg.norm(rrbc)):.3f} mm)."
+        )
+    legend = (
+        f'<span style="color:{colors.hex_color(colors.LAND_RIGID)}">● rigid</span> &nbsp; '
+        f'<span style="color:{colors.hex_color(colors.LAND_RRBC)}">● RRBC</span> &nbsp; ● truth'
+    )
+    return "".join(parts), caption, legend

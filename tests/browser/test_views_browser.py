@@ -1,0 +1,186 @@
+"""What a user sees of the camera, the selection and the landings, in headless Chromium on the real app.
+
+For every Learn step, after the server moves the tab's camera, the objects the step talks about are projected with
+the camera the page itself renders with (three.js, read from the page): each must fall inside the canvas and on the
+canvas itself (`document.elementFromPoint` is the canvas there, so no panel or notification covers it), and the
+segment from the camera to it must not cross the work-cell mesh (a ray test with trimesh against the mesh the app
+drew), so no geometry hides it. Also: only the selected point has a gizmo in the page, and a refused drag (out of
+the arm's reach) returns the handle to its place in the page.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rrbc_viz import teaching
+from rrbc_viz.app import serve
+
+from .helpers import dismiss_software_webgl_notification, drag, node_screen_position, wait_for
+
+pytestmark = pytest.mark.browser
+
+# Robot-frame points -> page pixels with the page's camera; the camera's position in the robot frame.
+_JS_PROJECT_MANY = """(pts) => {
+  const m = window.__viserMutable;
+  const obj = m.nodeRefFromName['/mesh'];
+  const cam = m.camera;
+  obj.updateWorldMatrix(true, false);
+  cam.updateMatrixWorld();
+  const V = cam.position.constructor;
+  const r = m.canvas.getBoundingClientRect();
+  const out = pts.map((p) => {
+    const w = obj.localToWorld(new V(p[0], p[1], p[2]));
+    const inFront = w.clone().applyMatrix4(cam.matrixWorldInverse).z < 0;
+    const q = w.clone().project(cam);
+    const x = r.left + (q.x + 1) / 2 * r.width, y = r.top + (1 - q.y) / 2 * r.height;
+    const el = document.elementFromPoint(x, y);
+    return {x: x, y: y, inFront: inFront, onCanvas: el === m.canvas,
+            over: el ? (el.tagName + '.' + el.className + ':' + (el.innerText || '').slice(0, 60)) : null};
+  });
+  const c = obj.worldToLocal(cam.position.clone());
+  return {points: out, camera: [c.x, c.y, c.z], canvas: [r.left, r.top, r.width, r.height]};
+}"""
+
+_JS_CAMERA = """() => { const m = window.__viserMutable; const obj = m.nodeRefFromName['/mesh'];
+  obj.updateWorldMatrix(true, false); const c = obj.worldToLocal(m.camera.position.clone()); return [c.x, c.y, c.z]; }"""
+
+
+_JS_SOLID_CELL = (
+    """() => { const o = window.__viserMutable.nodeRefFromName['/mesh/cell']; return !!(o && o.visible); }"""
+)
+
+
+def _wait_camera(page, app) -> None:
+    """Wait until the page renders with the camera the server last sent it, and a moment more (a frame)."""
+    cid = next(iter(app.server.get_clients()))
+    sent = app.camera.last[cid].position
+    wait_for(
+        lambda: np.linalg.norm(np.array(page.evaluate(_JS_CAMERA)) - sent) < 1e-3 * np.linalg.norm(sent),
+        10.0,
+        message="the page's camera",
+    )
+    page.wait_for_timeout(300)
+    # viser's own "software WebGL" notice (headless only; a user closes it once) can come late, top left
+    dismiss_software_webgl_notification(page, timeout_s=0.2)
+
+
+def _step_objects(app, step) -> dict[str, np.ndarray]:
+    """Robot-frame points of what a step talks about, by name (the visible part of each marker: its top)."""
+    ev = app.session.last
+    r = app.display.marker_mm
+    up = np.array([0.0, 0.0, 0.9 * r])
+    out = {}
+    for name in step.focus:
+        if name == "registration":
+            out[name] = ev.registration_positions + up
+        elif name == "fiducials":
+            out[name] = ev.fiducial_positions + up
+        elif name == "targets":
+            out[name] = ev.targets.positions + up
+        elif name == "robot":
+            out[name] = np.zeros((1, 3))
+        elif name == "sensor":
+            out[name] = np.asarray(app.session.sensor_to_robot.translation, float).reshape(1, 3)
+        elif name == "corrections":
+            inc = np.flatnonzero(ev.included)
+            out[name] = ev.fiducial_positions[inc] + app.display.magnification * ev.corrections_robot[inc]
+        elif name == "landing":
+            land = app.nodes.landing
+            out[name] = np.array([land.anchor, land.rigid, land.rrbc])
+    return out
+
+
+def _hidden_by_mesh(mesh, camera: np.ndarray, points: np.ndarray, slack_mm: float) -> np.ndarray:
+    """Per point: whether the segment camera -> point crosses the mesh more than `slack_mm` before the point."""
+    d = points - camera
+    dist = np.linalg.norm(d, axis=1)
+    dirs = d / dist[:, None]
+    locs, idx, _ = mesh.ray.intersects_location(np.repeat(camera[None], len(points), 0), dirs, multiple_hits=True)
+    hidden = np.zeros(len(points), bool)
+    if len(idx):
+        hit = np.linalg.norm(locs - camera, axis=1)
+        hidden[np.unique(idx[hit < dist[idx] - slack_mm])] = True
+    return hidden
+
+
+def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_app, page_for):
+    app = viser_app(lambda: serve())
+    page, _ = page_for(app.url, dismiss_notification=False)
+    # viser's own "software WebGL" notice (headless only; a user closes it once) would cover the top left
+    dismiss_software_webgl_notification(page, timeout_s=10.0)
+    mesh = app.loaded.mesh
+    for i, step in enumerate(teaching.STEPS):
+        app.lesson_go(i)
+        _wait_camera(page, app)
+        objects = _step_objects(app, step)
+        for name, pts in objects.items():
+            res = page.evaluate(_JS_PROJECT_MANY, pts.tolist())
+            left, top, w, h = res["canvas"]
+            for j, p in enumerate(res["points"]):
+                where = f"step {i + 1}: {name} #{j} at {p['x']:.0f},{p['y']:.0f}"
+                assert p["inFront"], where
+                assert left <= p["x"] <= left + w and top <= p["y"] <= top + h, where + " off the canvas"
+                assert p["onCanvas"], where + f" under {p['over']}"
+            if not page.evaluate(_JS_SOLID_CELL):
+                continue  # the cell is drawn see-through at this step: nothing opaque can hide anything
+            if name in ("robot", "sensor"):
+                continue  # frame origins sit inside the robot's base and the sensor head's casing by design
+            hidden = _hidden_by_mesh(mesh, np.array(res["camera"]), pts, slack_mm=0.5 * app.display.marker_mm)
+            assert not hidden.any(), f"step {i + 1}: {name} {np.flatnonzero(hidden).tolist()} hidden by the mesh"
+    app.lesson_stop()
+
+
+# Meshes and lines of a gizmo the user can see (itself and every ancestor visible), outside its own children (the
+# point's sphere and label): the gizmo's arrows and planes.
+_JS_GIZMO_VISIBLE = """(name) => { const m = window.__viserMutable.nodeRefFromName; const o = m[name];
+  if (!o) return null; const own = new Set();
+  for (const child of [name + '/sphere', name + '/label']) { if (m[child]) m[child].traverse((c) => own.add(c)); }
+  let n = 0;
+  o.traverse((c) => { if (!(c.isMesh || c.isLine2) || own.has(c)) return;
+    let v = true; for (let q = c; q; q = q.parent) if (!q.visible) v = false; if (v) n += 1; });
+  return n; }"""
+
+
+def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser_app, page_for):
+    app = viser_app(lambda: serve())
+    page, _ = page_for(app.url)
+    app.show_camera("close-up")
+    _wait_camera(page, app)
+    wait_for(lambda: page.evaluate(_JS_GIZMO_VISIBLE, "/targets/H1/gizmo"), 10.0, message="H1's gizmo")
+    page.wait_for_timeout(500)
+
+    def gizmo_meshes(name: str) -> int:
+        wait_for(lambda: page.evaluate("(n) => !!window.__viserMutable.nodeRefFromName[n]", name + "/sphere"), 10.0)
+        return int(page.evaluate(_JS_GIZMO_VISIBLE, name))
+
+    assert gizmo_meshes("/targets/H1/gizmo") > 0
+    for kind, ids in (("targets", app.session.last.targets.ids), ("fiducials", app.session.last.fiducial_ids)):
+        for pid in ids:
+            if (kind, pid) != ("targets", "H1"):
+                assert gizmo_meshes(f"/{kind}/{pid}/gizmo") == 0, pid
+    # a refused drag: pull H1's z arrow far up, beyond the arm's reach. The session keeps the last place it
+    # accepted; the handle in the page must end there, not where the mouse let go
+    app.show_camera("whole cell")
+    _wait_camera(page, app)
+    grip = node_screen_position(page, "/targets/H1/gizmo", (0.0, 0.0, 0.7 * app.nodes._gizmo_scale()))
+    drag(page, grip, (grip[0], 5.0), steps=25, step_ms=25)
+    wait_for(lambda: app.messages, 5.0, message="a refusal message")
+    assert "reach" in app.last_message, app.last_message
+    refused_z = float(app.last_message.split("point 0 at (")[1].split(")")[0].split(",")[2])
+    page.wait_for_timeout(300)  # the drag's end reaches the server
+    kept = np.array(app.session.last.targets.positions[0])
+    assert kept[2] < refused_z - 10.0
+    np.testing.assert_allclose(app.gizmo("targets", "H1").position, kept)
+
+    def page_position():
+        return np.array(
+            page.evaluate(
+                "(n) => { const o = window.__viserMutable.nodeRefFromName[n]; o.updateWorldMatrix(true, false);"
+                " const m = window.__viserMutable.nodeRefFromName['/mesh']; const V = o.position.constructor;"
+                " const w = o.localToWorld(new V(0, 0, 0)); const l = m.worldToLocal(w); return [l.x, l.y, l.z]; }",
+                "/targets/H1/gizmo/sphere",
+            )
+        )
+
+    wait_for(lambda: np.linalg.norm(page_position() - kept) < 0.5, 5.0, message="H1's handle at the kept place")

@@ -1,0 +1,68 @@
+"""Camera framing (rrbc_core.geometry.framing): every point inside the window left free by the panel, and no
+closer camera along the same axis would do (the framing is tight)."""
+
+import numpy as np
+import pytest
+
+from rrbc_core.errors import InputError
+from rrbc_core.geometry.framing import CameraPose, camera_basis, frame_points, project
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_framed_points_lie_inside_the_free_window_and_the_framing_is_tight(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 40))
+    pts = rng.normal(0, rng.uniform(1, 500), (n, 3)) + rng.uniform(-1000, 1000, 3)
+    direction = rng.normal(size=3)
+    fov = rng.uniform(0.3, 1.5)
+    aspect = rng.uniform(0.6, 2.2)
+    panel = rng.uniform(0.0, 0.45)
+    margin = 0.08
+    pose = frame_points(pts, direction, fov, aspect, panel_fraction=panel, margin=margin, min_distance=1.0)
+    ndc, depth = project(pts, pose)
+    assert np.all(depth >= 1.0 - 1e-6)
+    x_hi = 1 - 2 * panel
+    half = 0.5 * (x_hi + 1)
+    tol = 1e-6
+    assert np.all(ndc[:, 0] >= -1 + margin * half - tol) and np.all(ndc[:, 0] <= x_hi - margin * half + tol)
+    assert np.all(np.abs(ndc[:, 1]) <= 1 - margin + tol)
+    # tight: some point touches an edge of the window (or the nearest-distance limit)
+    edges = np.concatenate(
+        [
+            np.abs(ndc[:, 0] - (-1 + margin * half)),
+            np.abs(ndc[:, 0] - (x_hi - margin * half)),
+            np.abs(np.abs(ndc[:, 1]) - (1 - margin)),
+            np.abs(depth - 1.0) / 1000,
+        ]
+    )
+    assert edges.min() < 1e-5
+    # stepping 1 % closer along the axis pushes some point out of the window
+    f = pose.forward
+    closer = CameraPose(pose.position + 0.01 * depth.max() * f, pose.look_at, pose.up, fov, aspect)
+    ndc2, depth2 = project(pts, closer)
+    outside = (
+        (ndc2[:, 0] < -1 + margin * half - tol)
+        | (ndc2[:, 0] > x_hi - margin * half + tol)
+        | (np.abs(ndc2[:, 1]) > 1 - margin + tol)
+        | (depth2 < 1.0)
+    )
+    assert outside.any()
+    # the look-at point is on the optical axis, in front of the camera
+    d = pose.look_at - pose.position
+    np.testing.assert_allclose(d / np.linalg.norm(d), camera_basis(direction)[0], atol=1e-12)
+
+
+def test_a_panel_shifts_the_points_left():
+    pts = np.array([[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [0.0, 100.0, 50.0]])
+    free = project(pts, frame_points(pts, [0, 1, -0.5], 0.9, 1.6, panel_fraction=0.0))[0]
+    panel = project(pts, frame_points(pts, [0, 1, -0.5], 0.9, 1.6, panel_fraction=0.3))[0]
+    assert panel[:, 0].max() <= 1 - 0.6 and free[:, 0].max() > panel[:, 0].max()
+
+
+def test_bad_framing_input_is_refused():
+    with pytest.raises(InputError):
+        frame_points(np.zeros((0, 3)), [0, 1, 0], 0.9, 1.6)
+    with pytest.raises(InputError):
+        frame_points(np.zeros((2, 3)), [0, 0, 0], 0.9, 1.6)
+    with pytest.raises(InputError):
+        frame_points(np.zeros((2, 3)), [0, 1, 0], 4.0, 1.6)

@@ -1,0 +1,106 @@
+"""The app's views without a browser: colours distinct from the gizmo's, the landing bullseye's geometry, the
+camera presets' contents, lesson steps switching the see-through cell, the panel's bullseye numbers."""
+
+import re
+
+import numpy as np
+import pytest
+
+from rrbc_core.errors import InputError
+from rrbc_viz import colors, selection_card, teaching
+from rrbc_viz.camera import PRESETS, CellGeometry, preset_view
+from rrbc_viz.nodes import landing_display, nice_up
+
+
+def test_delta_e_is_cie76_and_every_data_colour_stands_apart_from_the_gizmo_axes():
+    assert colors.delta_e((0, 0, 0), (255, 255, 255)) == pytest.approx(100.0, abs=0.05)  # L* 0 -> 100
+    assert colors.delta_e((10, 20, 30), (10, 20, 30)) == 0.0
+    for name, c in colors.DATA_COLORS.items():
+        for axis in colors.GIZMO_AXES:
+            assert colors.delta_e(c, axis) >= colors.MIN_GIZMO_DELTA_E, (name, c, axis)
+    html = colors.legend_html()
+    for name, c in colors.DATA_COLORS.items():
+        assert name in html and colors.hex_color(c) in html
+
+
+def test_nice_up_is_the_next_1_2_5_number():
+    assert [nice_up(x) for x in (0.7, 1.0, 1.3, 3.0, 7.0, 0.012)] == pytest.approx([1, 1, 2, 5, 10, 0.02])
+
+
+def test_the_landing_bullseye_floats_above_its_target_with_a_ring_holding_both_landings(app):
+    t = app.session.last.targets
+    for i in range(len(t.ids)):
+        land = landing_display(t, i, marker_mm=8.0)
+        off_rigid = t.robot_rigid[i] - t.truth[i]
+        off_rrbc = t.robot_rrbc[i] - t.truth[i]
+        np.testing.assert_allclose(land.anchor, t.positions[i] + [0, 0, land.lift])
+        np.testing.assert_allclose(land.rigid - land.anchor, land.scale * off_rigid)
+        np.testing.assert_allclose(land.rrbc - land.anchor, land.scale * off_rrbc)
+        assert max(np.linalg.norm(off_rigid), np.linalg.norm(off_rrbc)) <= land.ring_mm
+        assert land.ring_mm * land.scale == pytest.approx(6 * 8.0)  # the ring is drawn 6 marker radii wide
+        # the whole bullseye (ring and landings) lies above the target: nothing at the target's height hides it
+        assert land.rings()[..., 2].min() > t.positions[i, 2] + 8.0
+        assert min(land.rigid[2], land.rrbc[2]) > t.positions[i, 2] + 8.0
+
+
+def test_the_panel_bullseye_draws_the_offsets_at_its_stated_scale(app):
+    ev = app.session.last
+    svg, caption, key = selection_card.bullseye_svg(ev, "H2")
+    i = ev.targets.ids.index("H2")
+    px = float(re.search(r'data-px-per-mm="([^"]+)"', svg).group(1))
+    ring = float(re.search(r'data-ring-mm="([^"]+)"', svg).group(1))
+    for kind, p in (("rigid", ev.targets.robot_rigid[i]), ("rrbc", ev.targets.robot_rrbc[i])):
+        off = p - ev.targets.truth[i]
+        m = re.search(rf'<circle cx="([^"]+)" cy="([^"]+)" r="6" fill="[^"]+" stroke="#fff" data-kind="{kind}"', svg)
+        cx, cy = float(m.group(1)), float(m.group(2))
+        c = selection_card.SIZE_PX / 2
+        assert cx == pytest.approx(c + px * off[0], abs=0.01) and cy == pytest.approx(c - px * off[1], abs=0.01)
+        assert np.linalg.norm(off) <= ring
+    assert "rigid" in caption and "RRBC" in caption and "rigid" in key
+
+
+def test_camera_presets_show_what_they_name():
+    rng = np.random.default_rng(3)
+    cell = CellGeometry(
+        registration=rng.uniform(0, 500, (6, 3)),
+        fiducials=rng.uniform(300, 600, (8, 3)),
+        targets=rng.uniform(350, 550, (4, 3)),
+        mesh_bounds=np.array([[-300, -500, -700], [1200, 500, 1300.0]]),
+        sensor_position=np.array([1100, -450, 1250.0]),
+        sensor_kind="stereo",
+    )
+    whole = preset_view("whole cell", cell)
+    for p in np.vstack([cell.registration, cell.fiducials, cell.targets, [cell.sensor_position], [[0, 0, 0]]]):
+        assert np.any(np.all(np.isclose(whole.points, p), axis=1))
+    for corner in ((-300, -500, -700), (1200, 500, 1300), (-300, 500, 1300), (1200, -500, -700)):
+        assert np.any(np.all(np.isclose(whole.points, corner), axis=1))  # the mesh's bounding box
+    sensor = preset_view("sensor's view", cell)
+    np.testing.assert_allclose(sensor.position, cell.sensor_position)
+    work = preset_view("close-up", cell)
+    assert work.position is None and work.points.max(0)[2] < 700  # no sensor, no mesh: the work only
+    assert work.points.min(0)[0] > 250  # nor the registration points
+    area = preset_view("work area", cell)
+    assert area.points.max(0)[2] < 700 and np.any(np.all(area.points == 0, axis=1))  # the robot's base, no sensor
+    sel = preset_view("selected point", cell, selected=[cell.targets[0]], marker_mm=8.0)
+    assert np.abs(sel.points - cell.targets[0]).max() == pytest.approx(32.0)
+    no_sensor = CellGeometry(**{**cell.__dict__, "sensor_kind": "ground_truth"})
+    assert preset_view("sensor's view", no_sensor).position is None  # a reference artefact: looked at from above
+    with pytest.raises(InputError, match="unknown camera preset"):
+        preset_view("fisheye", cell)
+    assert set(PRESETS) == {"whole cell", "work area", "close-up", "sensor's view", "selected point"}
+
+
+def test_lesson_steps_frame_their_focus_and_switch_the_see_through_cell(app):
+    for i, step in enumerate(teaching.STEPS):
+        app.lesson_go(i)
+        assert app.nodes.see_through == step.see_through
+        assert app.nodes.nodes["/mesh/cell"].visible == (not step.see_through)
+        assert app.nodes.nodes["/mesh/ghost"].visible == step.see_through
+        assert app.controls.view.see_through.value == step.see_through
+        view = app.current_view()
+        if "sensor" in step.focus:
+            d = np.linalg.norm(view.points - app.session.sensor_to_robot.translation, axis=1)
+            assert d.min() <= 2 * app.display.marker_mm * 1.001
+    assert app.controls.learn.bullseye.html.visible  # step 9 shows the bullseye in the Learn tab
+    app.lesson_stop()
+    assert not app.nodes.see_through and app.nodes.nodes["/mesh/cell"].visible
