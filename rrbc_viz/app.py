@@ -253,7 +253,9 @@ class RunningApp(TabActions, ViewActions):
         self.controls.text["legend"] = "Nothing to show." if legend is None else legend_markdown(*legend)
 
     def _lesson_context(self) -> teaching.LessonContext:
-        return teaching.LessonContext(self.session.kind, self.display.magnification, dict(self.session.regions))
+        return teaching.LessonContext(
+            self.session.kind, self.display.magnification, dict(self.session.regions), self.nodes.frame_mag
+        )
 
     def _message(self, text: str, client=None, error: bool = True, title: str | None = None) -> None:
         """Show a message: a notification to `client` (every tab if None) and the status line."""

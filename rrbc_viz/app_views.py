@@ -10,7 +10,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session.evaluation import Evaluation
 
 from . import selection_card, teaching
-from .camera import PRESETS, CellGeometry, View, preset_view
+from .camera import OBLIQUE, PRESETS, CellGeometry, View, preset_view
 from .nodes import LAYERS
 
 
@@ -45,6 +45,16 @@ class ViewActions:
             parts.append(ev.fiducial_positions[inc] + mag * ev.corrections_robot[inc])
             if self.nodes.target_arrows:
                 parts.append(ev.targets.positions + mag * ev.targets.correction_robot)
+        if "sensor" in names and "/frames/sensor_registered" in self.nodes.nodes:
+            # both sensor frames with their axes (a sphere of one axis length around each origin)
+            axes = 0.12 * self.nodes.extent_mm * 1.3
+            d = np.vstack([np.eye(3), -np.eye(3)]) * axes
+            for origin in (
+                np.asarray(self.nodes.nodes["/frames/sensor_registered"].position, float),
+                cell.sensor_position,
+            ):
+                if origin is not None:
+                    parts.append(origin + d)
         if "landing" in names and getattr(self.nodes, "landing", None) is not None:
             land = self.nodes.landing
             ring = land.ring_mm * land.scale
@@ -59,9 +69,8 @@ class ViewActions:
         """What the camera should show now: the lesson step's focus, else the last preset."""
         if self.lesson_index is not None:
             step = teaching.STEPS[self.lesson_index]
-            from .camera import OBLIQUE
-
-            return View(self.focus_points(step.focus), OBLIQUE)
+            direction = OBLIQUE if step.direction is None else np.asarray(step.direction, float)
+            return View(self.focus_points(step.focus), direction)
         return self._preset_view(self.camera_preset)
 
     def _preset_view(self, name: str) -> View:
@@ -144,12 +153,10 @@ class ViewActions:
         c.text["info"] = selection_card.info_card(ev, sel)
         land = getattr(self.nodes, "landing", None)
         target = land.target if land is not None else None  # the target whose bullseye the scene shows
-        if not (sel is not None and sel[0] == "targets") and self.lesson_index != len(teaching.STEPS) - 1:
-            target = None  # the panel's bullseye: for a selected target, and in the lesson's last step
-        if target is None:
-            c.show_bullseye(None)
-        else:
-            c.show_bullseye(*selection_card.bullseye_svg(ev, target))
+        explore = sel[1] if sel is not None and sel[0] == "targets" else None
+        last_step = self.lesson_index == len(teaching.STEPS) - 1
+        c.show_bullseye(*(selection_card.bullseye_svg(ev, explore) if explore else (None,)), where="explore")
+        c.show_bullseye(*(selection_card.bullseye_svg(ev, target) if target and last_step else (None,)), where="learn")
 
     # --------------------------------------------------------------------------------------------- lesson
     def lesson_go(self, index: int) -> str:

@@ -423,7 +423,6 @@ class Controls:
         """The selection dropdown's choices and value (selection_card.point_names / choice_of)."""
         self.selection.sync(choices, value, selected)
 
-    def show_bullseye(self, svg: str | None, caption: str = "", key: str = "") -> None:
-        """Show the landing bullseye (selection_card.bullseye_svg) in the Explore and Learn tabs, or hide it."""
-        self.selection.bullseye.show(svg, caption, key)
-        self.learn.bullseye.show(svg, caption, key)
+    def show_bullseye(self, svg: str | None, caption: str = "", key: str = "", where: str = "explore") -> None:
+        """Show a landing bullseye (selection_card.bullseye_svg) in the Explore or the Learn tab, or hide it."""
+        (self.selection if where == "explore" else self.learn).bullseye.show(svg, caption, key)

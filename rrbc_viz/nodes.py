@@ -171,6 +171,42 @@ RING_SEGMENTS = 48
 RING_MARKERS = 6.0
 
 
+def frame_magnification(true_pose, registered, axes_mm: float, limit: float) -> float:
+    """The 1-2-5 magnification (≤ limit, ≥ 1) that draws the registered frame's offset from the true one about
+    half an axis long: beside it, not across the cell."""
+    if true_pose is None:
+        return 1.0
+    d = float(np.linalg.norm(np.asarray(registered.translation, float) - np.asarray(true_pose.translation, float)))
+    if d <= 0:
+        return float(limit)
+    return float(np.clip(_nice_down(0.5 * axes_mm / d), 1.0, limit))
+
+
+def _nice_down(x: float) -> float:
+    e = 10.0 ** np.floor(np.log10(x))
+    for m in (5.0, 2.0, 1.0):
+        if m * e <= x:
+            return m * e
+    return e
+
+
+def registered_frame_pose(true_pose, registered, magnification: float) -> tuple[np.ndarray, np.ndarray]:
+    """(wxyz, position) at which the registered sensor frame is drawn: its translation and rotation error from the
+    true pose (when known) magnified `magnification` times (`frame_magnification`), so the two frames stand apart;
+    without a true pose, where it is. Robot frame, mm."""
+    if true_pose is None:
+        return _wxyz(registered.rotation), np.asarray(registered.translation, float)
+    r_true = vtf.SO3.from_matrix(np.asarray(true_pose.rotation, float))
+    r_reg = vtf.SO3.from_matrix(np.asarray(registered.rotation, float))
+    err = (r_true.inverse() @ r_reg).log()  # rotation error, radians, in the true frame
+    angle = float(np.linalg.norm(err))
+    k = magnification if angle * magnification < np.pi else np.pi / max(angle, 1e-300) * 0.99  # stay < 180°
+    rot = r_true @ vtf.SO3.exp(err * k)
+    t_true = np.asarray(true_pose.translation, float)
+    position = t_true + magnification * (np.asarray(registered.translation, float) - t_true)
+    return np.asarray(rot.wxyz, float), position
+
+
 def nice_up(x: float) -> float:
     """The 1-2-5 number at or above x (x > 0)."""
     e = 10.0 ** np.floor(np.log10(x))
@@ -207,6 +243,8 @@ class SceneNodes(HeatMapNodes):
         self.selected: tuple[str, str] | None = None  # (kind, id) of the point carrying the drag gizmo
         self.landing_lift = 0.0  # mm: the landing display floats this far above the targets
         self.see_through = False  # the work cell drawn see-through (ghost) instead of solid
+        self.true_pose = None  # the sensor's true pose (scene mode), for the magnified registered frame
+        self.frame_mag = 1.0  # the registered frame's error is drawn this many times larger
         self._sphere_v, self._sphere_f = _unit_sphere()
         self.groups: dict[str, viser.SceneNodeHandle] = {}
         self.gizmos: dict[tuple[str, str], viser.TransformControlsHandle] = {}
@@ -276,6 +314,7 @@ class SceneNodes(HeatMapNodes):
         axes = 0.12 * self.extent_mm
         self.nodes["/frames/robot"] = sc.add_frame("/frames/robot", axes_length=axes, axes_radius=axes * 0.03)
         self._label("/frames/robot/label", "robot base", (0.0, 0.0, axes * 0.2))
+        self.true_pose = session.sensor_to_robot
         if session.sensor_to_robot is not None:
             T = session.sensor_to_robot
             self.nodes["/frames/sensor_true"] = sc.add_frame(
@@ -296,6 +335,15 @@ class SceneNodes(HeatMapNodes):
             position=np.asarray(m.translation, float),
         )
         self._label("/frames/sensor_registered/label", "sensor (registered)", (0.0, 0.0, -axes * 0.2))
+        if session.sensor_to_robot is not None:  # the registered frame's error is drawn magnified: say so, always
+            self.nodes["/frames/sensor_registered/note"] = sc.add_label(
+                "/frames/sensor_registered/note",
+                "",
+                position=(0.0, 0.0, -axes * 0.45),
+                font_size_mode="screen",
+                font_screen_scale=0.75,
+                anchor="top-left",
+            )
 
         # registration points --------------------------------------------------------------------------
         n = len(ev.registration_ids)
@@ -505,8 +553,13 @@ class SceneNodes(HeatMapNodes):
         mag = self.display.magnification
         m = ev.registration.mapping
         reg_frame = self.nodes["/frames/sensor_registered"]
-        reg_frame.wxyz = _wxyz(m.rotation)
-        reg_frame.position = np.asarray(m.translation, float)
+        self.frame_mag = frame_magnification(self.true_pose, m, 0.12 * self.extent_mm, mag)
+        wxyz, position = registered_frame_pose(self.true_pose, m, self.frame_mag)
+        reg_frame.wxyz = wxyz
+        reg_frame.position = position
+        note = self.nodes.get("/frames/sensor_registered/note")
+        if note is not None:
+            self._assign(note, "text", f"registration error ×{self.frame_mag:g} (drawn beside the true pose)")
         reg = self.nodes.get("/registration/points")
         if reg is not None:  # registration points only move when moved from Python (no gizmo)
             reg.batched_positions = ev.registration_positions.astype(np.float32)

@@ -23,6 +23,7 @@ class LessonContext:
     kind: str  # "scene" or "measurements"
     magnification: float  # arrows and landing offsets are drawn this many times longer
     regions: dict = field(default_factory=dict)  # target id -> rrbc_core.scene.Region (scene mode)
+    frame_magnification: float = 1.0  # the registered sensor frame's error is drawn this many times larger
 
 
 @dataclass(frozen=True)
@@ -35,6 +36,7 @@ class Step:
     #: "targets", "robot", "sensor", "mesh") and "corrections" (arrow tips) or "landing" (the landing display)
     focus: tuple[str, ...] = ("targets", "fiducials")
     see_through: bool = False  # the work cell drawn see-through: arrows may point into surfaces
+    direction: tuple[float, float, float] | None = None  # the camera's viewing direction (None: camera.OBLIQUE)
 
 
 def _v(x) -> str:
@@ -75,7 +77,10 @@ def _step2(ev: Evaluation, ctx: LessonContext) -> str:
         + " A low FRE is no evidence of accuracy at the targets."
     )
     if ctx.kind == "scene":
-        s += " The registered sensor frame is drawn beside the true one."
+        s += (
+            f" The registered sensor frame (thin axes, white origin) is drawn beside the true one with its error "
+            f"magnified ×{ctx.frame_magnification:g}."
+        )
     return s
 
 
@@ -191,7 +196,9 @@ STEPS: tuple[Step, ...] = (
         "Register the sensor to the robot",
         ("mesh", "frames", "registration"),
         _step2,
-        focus=("registration", "robot", "sensor"),
+        focus=("sensor",),  # the two sensor frames, close up
+        direction=(0.7, -0.55, 0.15),  # from the work's side, level with the head: its mast is behind it
+        see_through=True,  # the frames' origins lie inside the sensor's casing
     ),
     Step("Identify the targets", ("mesh", "targets", "regions"), _step3, focus=("targets",)),
     Step("Choose fiducials around the targets", ("mesh", "targets", "fiducials", "hull", "regions"), _step4),

@@ -54,15 +54,12 @@ sys.path.insert(0, str(ROOT))
 # (robot frame, mm; targets H1..H8 on the fixture plate around (475, 0, 15)).
 SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ("app_default.png", []),
-    # Step 6 of the lesson: the fiducials' corrections drawn as arrows (x magnification), their numbers alongside.
-    (
-        "app_teaching.png",
-        [("tab", "Learn")]
-        + [("button", "Next")] * 6
-        + [("wait_text", "Step 6 of 9"), ("zoom", {"look_at": (490.0, 0.0, 40.0), "factor": 0.6})],
-    ),
-    # Heat map on, coloured by the rigid-only error (the RRBC errors all sit at the low end of the shared scale);
-    # "Layers" folded so the legend (mm) shows; a little closer so the rings read.
+    # The nine Learn steps, each as the app frames it (the camera moves itself; no zoom here).
+    *[
+        (f"learn_step{k}.png", [("tab", "Learn")] + [("button", "Next")] * k + [("wait_text", f"Step {k} of 9")])
+        for k in range(1, 10)
+    ],
+    # Heat map on, coloured by the rigid-only error; "Layers" folded so the legend (mm) shows; the close-up preset.
     (
         "app_heatmap.png",
         [
@@ -70,40 +67,39 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
             ("click", "Heat map of predicted error"),
             ("select", ("Colour by", "rigid error")),
             ("click", "Layers"),
-            ("zoom", {"look_at": (475.0, 0.0, 15.0), "factor": 0.5}),
+            ("button", "close-up"),
         ],
     ),
-    # H1 dragged 3.2 gizmo scales along -X, out of the fiducials' hull (magenta, "extrapolated" in the table);
-    # closer, so its correction arrow and landing points (rigid red, RRBC green, offsets x magnification) show.
-    # The work-cell mesh is hidden: H1's landing offsets point down, into the table top.
+    # H1 dragged 3.2 gizmo scales along -X, out of the fiducials' hull (magenta, "extrapolated" in the table), then
+    # the selected-point preset: its correction arrow and its landing bullseye above it (rigid vermillion, RRBC
+    # teal), and the bullseye in the panel.
     (
         "app_drag.png",
         [
-            ("tab", "View"),
-            ("click", "Work-cell mesh"),
-            ("tab", "Explore"),
+            ("button", "close-up"),
             ("drag", ("/targets/H1/gizmo", 0.7, -2.5)),
-            ("zoom", {"look_at": (450.0, -60.0, 0.0), "factor": 0.45}),
+            ("tab", "View"),
+            ("button", "selected point"),
+            ("tab", "Explore"),
         ],
     ),
     # The results table with gp (a std column beside the others), the method chosen in the panel.
     ("app_gp_table.png", [("select", ("Interpolation", "gp")), ("wait_text", "std")]),
     # Plan tab: F1 slid in under the plate (as a fiducial drag does), so H1's region leaves the hull (red halo;
     # the others blue, covered); regions coloured by coverage; Suggest's four ghost spheres (+1 … +4) with the
-    # predicted gain in the panel. Drag handles, correction arrows and landing points hidden (less clutter).
+    # predicted gain in the panel. Correction arrows and landing points hidden (less clutter).
     (
         "planning.png",
         [
             ("tab", "View"),
-            ("select", ("Drag handles on", "none")),
             ("click", "Correction arrows"),
             ("click", "Landing points (rigid vs RRBC)"),
+            ("button", "close-up"),
             ("tab", "Plan"),
             ("click", "Colour regions by coverage"),
             ("call", lambda app: app.handle_drag("fiducials", "F1", [400.0, -60.0, 0.0], "end")),
             ("button", "Suggest"),
             ("wait_text", "Suggested: 4 fiducials"),
-            ("zoom", {"look_at": (500.0, -20.0, 15.0), "factor": 0.45}),
         ],
     ),
 ]
