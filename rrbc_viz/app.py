@@ -58,11 +58,12 @@ from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
 from .nodes import LAYERS, Display, SceneNodes, gizmo_name
 from .planning_panel import PlanningPanel
+from .slice_nodes import SliceNode
 
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
 HEAT_INTERVAL_S = 0.3  # least time between heat-map recomputations while dragging
 HEAT_LIVE_MAX_S = 0.05  # a heat map slower than this to compute is refreshed only when a drag ends
-DEFAULT_LAYERS = {name: name not in ("labels", "heatmap") for name in LAYERS}
+DEFAULT_LAYERS = {name: name not in ("labels", "heatmap", "slice") for name in LAYERS}
 _KINDS = {
     "target": "targets",
     "targets": "targets",
@@ -127,6 +128,8 @@ class RunningApp(TabActions, ViewActions):
         self.camera = CameraDirector(server)
         self.camera_preset = OPENING
         self.nodes = SceneNodes(server, self._on_gizmo, self._on_point_click)
+        self.slice_node = SliceNode(server.scene)
+        self.error_slice = None  # the last ErrorSlice shown
         self.planning: PlanningPanel | None = None
         self.controls = Controls(server, self, plan_tab=self._build_plan_tab)
         self.mc = MonteCarloRunner(self._mc_result, self._mc_started)
@@ -178,6 +181,8 @@ class RunningApp(TabActions, ViewActions):
             self.camera_preset = OPENING
             with self.server.atomic():
                 self.nodes.build(self.session, ev, loaded.mesh, self.display, self.layers)
+                self.slice_node.clear()
+                self.error_slice = None
                 self.planning.build(self.session)
                 self.controls.sync_settings(self.session.settings, self.session.kind)
                 self.controls.sync_display(self.display, self.session.kind)
@@ -205,11 +210,13 @@ class RunningApp(TabActions, ViewActions):
         sizes = sizes[np.isfinite(sizes) & (sizes > 0)]
         mag = _nice(0.08 * extent / float(np.median(sizes))) if len(sizes) else 200.0
         heat = "rrbc" if self.session.kind == "scene" else "correction"
+        slice_value = heat
         return Display(
             magnification=float(np.clip(mag, 1, 2000)),
             marker_mm=marker,
             region_zoom=1.0,
             heat_value=heat,
+            slice_value=slice_value,
         )
 
     def _frame_camera(self, mesh, ev: Evaluation) -> None:
@@ -239,6 +246,7 @@ class RunningApp(TabActions, ViewActions):
         self.planning.refresh(self.session, due=plan)
         if heat:
             self._update_heat()
+            self._update_slice()
 
     def _update_heat(self) -> None:
         """Recompute the heat map now if its layer is on (else leave it stale until shown)."""
@@ -386,7 +394,8 @@ class RunningApp(TabActions, ViewActions):
         return ev
 
     def set_display(self, client=None, **changes) -> None:
-        """Display-only options (Display fields): magnification, marker_mm, region_zoom, heat_value."""
+        """Display-only options (Display fields): magnification, marker_mm, region_zoom, heat_value, slice_value,
+        slice_axis, slice_offset."""
         with self._lock:
             unknown = sorted(set(changes) - set(Display.__dataclass_fields__))
             if unknown:
@@ -397,6 +406,7 @@ class RunningApp(TabActions, ViewActions):
             heat_values = [v for _, v in HEAT_CHOICES[self.session.kind]]
             if new.heat_value not in heat_values:
                 raise InputError(f"heat_value must be one of {', '.join(heat_values)} here, got {new.heat_value!r}")
+            self._check_slice_display(new)
             if not (new.magnification > 0 and new.marker_mm > 0 and new.region_zoom > 0):
                 raise InputError("magnification, marker_mm and region_zoom must be > 0")
             self.display = new
@@ -407,6 +417,8 @@ class RunningApp(TabActions, ViewActions):
                 self.controls.sync_display(self.display, self.session.kind)
                 heat = any(k in changes for k in ("region_zoom", "heat_value"))
                 self._show(self.session.last, heat=heat)
+                if any(k.startswith("slice_") for k in changes):
+                    self._update_slice()
 
     def set_layer(self, layer: str, visible: bool) -> None:
         """Show or hide a layer (nodes.LAYERS) in the scene and on its checkbox."""
@@ -419,6 +431,8 @@ class RunningApp(TabActions, ViewActions):
                 self.controls.sync_layers({layer: bool(visible)})
                 if layer == "heatmap" and visible and (self._heat_stale or self.heat_map is None):
                     self._update_heat()
+                if layer == "slice" and visible:
+                    self._update_slice()
 
     # ------------------------------------------------------------------------------------------ for tests
     def gizmo(self, kind: str, pid: str) -> viser.TransformControlsHandle:

@@ -8,10 +8,20 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.session.evaluation import Evaluation
+from rrbc_core.session.slices import VALUES as SLICE_VALUES
+from rrbc_core.session.slices import default_plane
 
 from . import selection_card, teaching
 from .camera import OBLIQUE, PRESETS, CellGeometry, View, preset_view
+from .colors import legend_markdown
 from .nodes import LAYERS
+from .slice_nodes import SLICE_CHOICES
+
+SLICE_NOTE = (
+    "The plane is sampled on a grid; each point is measured without noise and corrected with the current "
+    "fiducials. White line: the fiducials' hull; clear: points the arm cannot reach. Rigid and RRBC share one "
+    "scale."
+)
 
 
 class ViewActions:
@@ -118,6 +128,46 @@ class ViewActions:
         with self._lock:
             self.nodes.set_see_through(on)
             self.controls.sync_see_through(on)
+
+    # ---------------------------------------------------------------------------------------------- slice
+    def slice_plane(self):
+        """The error slice's plane: normal to Display.slice_axis at slice_offset (default: the work's median),
+        spanning the point sets widened by 35 % on each side (slices.default_plane)."""
+        cell = self.cell_geometry()
+        pts = cell.points("registration", "fiducials", "targets")
+        return default_plane(pts, self.display.slice_axis, self.display.slice_offset)
+
+    def slice_range(self) -> tuple[float, float]:
+        """Offsets (mm) the slice can take along its axis: the point sets' extent, widened like the plane."""
+        pts = self.cell_geometry().points("registration", "fiducials", "targets")
+        k = "xyz".index(self.display.slice_axis)
+        lo, hi = float(pts[:, k].min()), float(pts[:, k].max())
+        pad = 0.35 * max(hi - lo, 10.0)
+        return lo - pad, hi + pad
+
+    def _check_slice_display(self, new) -> None:
+        if new.slice_axis not in ("x", "y", "z"):
+            raise InputError(f"slice_axis must be x, y or z, got {new.slice_axis!r}")
+        if new.slice_value not in SLICE_VALUES:
+            raise InputError(f"slice_value must be one of {', '.join(SLICE_VALUES)}, got {new.slice_value!r}")
+        if new.slice_offset is not None and not np.isfinite(new.slice_offset):
+            raise InputError("slice_offset must be a finite number of mm")
+
+    def _update_slice(self) -> None:
+        """Recompute and redraw the error slice if its layer is on (caller holds the lock)."""
+        if not self.layers.get("slice"):
+            return
+        self.error_slice = self.session.error_slice(self.slice_plane())
+        value = self.display.slice_value
+        values = self.error_slice.values[value]
+        if not np.any(np.isfinite(values)):
+            note = "Nothing to show for this value here (no truth, or not gp)."
+            self.controls.text["slice_legend"] = note
+        else:
+            lo, hi = self.slice_node.show(self.error_slice, value)
+            name = dict((v, k) for k, v in SLICE_CHOICES)[value]
+            self.controls.text["slice_legend"] = legend_markdown(name, lo, hi, note=SLICE_NOTE)
+        self.controls.sync_slice(self.display, self.slice_range(), self.session.kind, self.error_slice.plane.offset_mm)
 
     # ------------------------------------------------------------------------------------------ selection
     def select(self, kind: str | None, pid: str | None = None, client=None) -> None:

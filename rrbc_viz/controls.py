@@ -24,6 +24,7 @@ from .colors import legend_html
 from .diagnosis_panel import PROMPT
 from .nodes import LAYERS, Display
 from .selection_panel import Bullseye, SelectionPanel
+from .slice_nodes import SLICE_AXES, SLICE_CHOICES
 from .syncing import Syncing
 
 if TYPE_CHECKING:
@@ -42,6 +43,7 @@ LAYER_LABELS = {
     "landing": "Landing points (rigid vs RRBC)",
     "labels": "Labels",
     "heatmap": "Heat map of predicted error",
+    "slice": "Error slice (predicted error on a plane)",
 }
 HEAT_CHOICES = {
     "scene": (("RRBC error", "rrbc"), ("rigid error", "rigid")),
@@ -184,6 +186,25 @@ class ViewPanel:
             self.legend = gui.add_markdown(
                 "Turn on the heat-map layer to see predicted error over the targets' regions of variability."
             )
+        with gui.add_folder("Error slice"):
+            self.slice_value = gui.add_dropdown("Slice shows", tuple(k for k, _ in SLICE_CHOICES))
+            self.slice_axis = gui.add_dropdown("Plane", tuple(k for k, _ in SLICE_AXES))
+            self.slice_offset = gui.add_slider("Plane at (mm)", -1000.0, 1000.0, 1.0, 0.0)
+            self.slice_legend = gui.add_markdown("Turn on the error-slice layer to see predicted error on a plane.")
+
+        @self.slice_value.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if not self.syncing.on:
+                app.set_display(client=event.client, slice_value=dict(SLICE_CHOICES)[self.slice_value.value])
+
+        @self.slice_axis.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if not self.syncing.on:
+                app.set_display(
+                    client=event.client, slice_axis=dict(SLICE_AXES)[self.slice_axis.value], slice_offset=None
+                )
+
+        self.slice_offset.on_update(_forward(self.slice_offset, syncing, app.set_display, "slice_offset", float))
         for handle, name, cast in (
             (self.marker, "marker_mm", float),
             (self.region_zoom, "region_zoom", float),
@@ -324,6 +345,7 @@ _TEXT_AREAS = {
     "table": "explore",
     "info": "selection",
     "legend": "view",
+    "slice_legend": "view",
     "lesson": "learn",
     "mc_info": "montecarlo",
     "diagnosis": "diagnose",
@@ -414,6 +436,19 @@ class Controls:
     def sync_layers(self, layers: dict[str, bool]) -> None:
         """Show the layer visibilities on the checkboxes (the app applies them to the scene)."""
         self.view.sync_layers(layers)
+
+    def sync_slice(self, display: Display, offsets: tuple[float, float], kind: str, offset: float) -> None:
+        """The slice's controls: its value (the choices that apply to `kind`), axis, and `offset` (mm, the plane's
+        place) within `offsets`."""
+        v = self.view
+        with self.syncing.quiet():
+            scene = tuple(k for k, _ in SLICE_CHOICES)
+            v.slice_value.options = scene if kind == "scene" else scene[2:]
+            v.slice_value.value = next(k for k, x in SLICE_CHOICES if x == display.slice_value)
+            v.slice_axis.value = next(k for k, x in SLICE_AXES if x == display.slice_axis)
+            lo, hi = float(np.floor(offsets[0])), float(np.ceil(offsets[1]))
+            v.slice_offset.min, v.slice_offset.max = lo, hi
+            v.slice_offset.value = float(np.clip(round(offset), lo, hi))
 
     def sync_see_through(self, on: bool) -> None:
         with self.syncing.quiet():

@@ -20,6 +20,7 @@ Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's)
     /landing/anchor, /landing/rigid, /landing/rrbc   the landing bullseye of the selected target (LandingDisplay),
     /landing/lines, /landing/rings, /landing/scale   floating above it: stalk, offsets, scale rings, ring label
     /heatmap/points                    point cloud, float32: the samples, in their region (true size × region zoom)
+    /slice/image                       image: the error slice (slice_nodes), the plane coloured by predicted error
     /heatmap/rings                     point cloud, unlit: a flat ring of dots around each target, coloured by
                                        its region's mean value (regions are mm-sized in a metre-sized cell)
     (labels: every …/label node; the "labels" layer toggles them all)
@@ -55,6 +56,7 @@ LAYERS = (
     "landing",
     "labels",
     "heatmap",
+    "slice",
 )
 
 #: (kind, id, robot-frame position mm, phase, client=...) -> anything
@@ -82,6 +84,9 @@ class Display:
     marker_mm: float = 8.0  # radius of fiducial / target spheres
     region_zoom: float = 1.0  # regions and heat-map samples drawn this many times larger about their target
     heat_value: str = "rrbc"  # rrbc | rigid (scene); correction | std (measurements)
+    slice_value: str = "rrbc"  # the error slice's value: rrbc | rigid | correction | std
+    slice_axis: str = "z"  # the slice plane's normal: x | y | z (robot frame)
+    slice_offset: float | None = None  # mm along slice_axis; None: the work's median
 
 
 def _wxyz(rotation) -> np.ndarray:

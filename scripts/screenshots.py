@@ -83,6 +83,17 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
             ("tab", "Explore"),
         ],
     ),
+    # The error slice: a horizontal plane through the plate top coloured by the RRBC error, the fiducials' hull
+    # traced in white; error grows outside it. The work-area view.
+    (
+        "app_slice.png",
+        [
+            ("tab", "View"),
+            ("click", "Error slice (predicted error on a plane)"),
+            ("click", "Layers"),
+            ("wait_text", "The plane is sampled"),
+        ],
+    ),
     # The results table with gp (a std column beside the others), the method chosen in the panel.
     ("app_gp_table.png", [("select", ("Interpolation", "gp")), ("wait_text", "std")]),
     # Plan tab: F1 slid in under the plate (as a fiducial drag does), so H1's region leaves the hull (red halo;

@@ -13,6 +13,8 @@ from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.evaluation import Evaluation, seed_for
 from rrbc_core.session.results import HeatMap, MonteCarloPlots, _scaled
+from rrbc_core.session.slices import VALUES as SLICE_VALUES
+from rrbc_core.session.slices import ErrorSlice, SlicePlane
 
 
 class SessionViews:
@@ -63,6 +65,51 @@ class SessionViews:
         owner = tuple(owner)
         self._heat_cache[None] = (stacked_key, pos, owner, sensor, truth)
         return self._heat_values(ev, pos, owner, sensor, truth)
+
+    # ------------------------------------------------------------------------------------------- error slice
+    @thread_limited
+    def error_slice(self, plane: SlicePlane) -> ErrorSlice:
+        """Predicted error over a plane through the work volume (`slices`): every grid point measured noise-free
+        (scene mode: expected sensor reading with the scene's bias; cached per plane and bias size, so a drag only
+        re-corrects) and corrected with the current fiducials. Unreachable grid points and unknown values are NaN.
+        Values (n, n) mm: rigid and RRBC error against the truth, |ê|, and gp's std of ê."""
+        from rrbc_core.simulation.kinematics import tool_down
+
+        ev = self.last
+        grid = plane.grid().reshape(-1, 3)
+        key = (plane.key(), self.settings.bias_scale, self.kind)
+        cached = self._heat_cache.get(("slice",))
+        if cached is None or cached[0] != key:
+            if self.kind == "scene":
+                model = self.measurement_model()
+                rot = np.array([tool_down(self.scene.tool_yaw_deg)] * len(grid))
+                ok = model.reachable(model.points(grid, rot))
+                sensor = np.full_like(grid, np.nan)
+                truth = np.full_like(grid, np.nan)
+                if np.any(ok):
+                    r = self._measure_scene("slice", [str(i) for i in np.flatnonzero(ok)], grid[ok], noise=False)
+                    sensor[ok], truth[ok] = r.sensor, r.truth
+            else:
+                ok = np.ones(len(grid), bool)
+                sensor, truth = None, np.full_like(grid, np.nan)
+            cached = (key, ok, sensor, truth)
+            self._heat_cache[("slice",)] = cached
+        _, ok, sensor, truth = cached
+        if sensor is None:  # measured data: the grid point's sensor position under the current registration
+            sensor = ev.registration.mapping.apply_inverse(grid)
+        values = {name: np.full(len(grid), np.nan) for name in SLICE_VALUES}
+        inside = np.zeros(len(grid), bool)
+        if np.any(ok):
+            hm = self._heat_values(ev, grid[ok], ("slice",) * int(ok.sum()), sensor[ok], truth[ok])
+            values["rigid"][ok], values["rrbc"][ok] = hm.error_rigid, hm.error_rrbc
+            values["correction"][ok] = hm.correction_mm
+            if hm.std_mm is not None:
+                values["std"][ok] = hm.std_mm
+            inside[ok] = ~np.asarray(hm.extrapolated, bool)
+        n = plane.n
+        return ErrorSlice(
+            plane, grid.reshape(n, n, 3), {k: v.reshape(n, n) for k, v in values.items()}, inside.reshape(n, n)
+        )
 
     def _heat_values(self, ev: Evaluation, pos, owner, sensor, truth) -> HeatMap:
         """The heat map's values at samples pos (S,3) robot frame with their sensor readings and truth."""

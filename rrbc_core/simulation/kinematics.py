@@ -413,6 +413,23 @@ def inverse_path(dh: DHParameters, positions, rotations, seed_q) -> np.ndarray:
     return q
 
 
+def reachable(dh: DHParameters, positions, rotations, seed_q) -> np.ndarray:
+    """Which tool positions (P, 3) mm with rotations (P, 3, 3) or (3, 3) the arm reaches on the configuration branch
+    of `seed_q` (6,) rad: (P,) bool, the test `inverse_path` refuses with (never raises for unreachable points)."""
+    p = np.asarray(positions, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
+        raise InputError(f"positions must be a finite (P, 3) array in mm, got shape {p.shape}")
+    r = np.asarray(rotations, dtype=float)
+    if r.shape == (3, 3):
+        r = np.broadcast_to(r, (len(p), 3, 3))
+    if len(p) == 0:
+        return np.zeros(0, bool)
+    _, perr, oerr = _solve(dh, p, np.ascontiguousarray(r), np.tile(_vector6("seed_q", seed_q), (len(p), 1)))
+    ok = np.ones(len(p), bool)
+    ok[_unreachable(perr, oerr)] = False
+    return ok
+
+
 def perturbed(
     dh: DHParameters,
     rng: np.random.Generator,

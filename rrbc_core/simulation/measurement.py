@@ -71,6 +71,20 @@ class MeasurementModel:
             joint_seed=self.joint_seed,
         )
 
+    def reachable(self, pts: PointSet) -> np.ndarray:
+        """(P,) bool: the points every kinematic term of the error model can reach (all True without one). Points
+        outside are refused by `bias` and `read` (InputError); mask them out first when sampling a volume."""
+        from rrbc_core.simulation.kinematics import UR5_TOOL_DOWN_SEED, reachable
+
+        ok = np.ones(len(pts), bool)
+        for side in ("robot", "sensor"):
+            for term in self.error_model.terms(side):
+                if hasattr(term, "true_robot") and len(pts):
+                    seed = UR5_TOOL_DOWN_SEED if pts.joint_seed is None else pts.joint_seed
+                    rot = pts.tool_rotation if pts.tool_rotation is not None else np.eye(3)
+                    ok &= reachable(term.true_robot(), pts.robot, rot, seed)
+        return ok
+
     def bias(self, pts: PointSet) -> tuple[np.ndarray, np.ndarray]:
         """(β_s (P, 3) sensor frame, β_r (P, 3) robot frame), mm, unscaled. Draws nothing."""
         det = self.error_model.deterministic()

@@ -16,7 +16,7 @@ import pytest
 from rrbc_viz import teaching
 from rrbc_viz.app import serve
 
-from .helpers import dismiss_software_webgl_notification, drag, node_screen_position, wait_for
+from .helpers import decode_png, dismiss_software_webgl_notification, drag, node_screen_position, wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -184,3 +184,46 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
         )
 
     wait_for(lambda: np.linalg.norm(page_position() - kept) < 0.5, 5.0, message="H1's handle at the kept place")
+
+
+def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_app, page_for):
+    app = viser_app(lambda: serve())
+    page, _ = page_for(app.url)
+    app.set_layer("slice", True)
+    app.show_camera("close-up")
+    _wait_camera(page, app)
+    others = [name for name in app.layers if name != "slice" and app.layers[name]]
+
+    def slice_alone_shot():
+        """The view with every layer but the slice hidden: what changes is the slice."""
+        for name in others:
+            app.set_layer(name, False)
+        page.wait_for_timeout(600)
+        png = page.screenshot(animations="disabled")
+        for name in others:
+            app.set_layer(name, True)
+        page.wait_for_timeout(600)
+        return decode_png(png).astype(int)
+
+    before = slice_alone_shot()
+    # a real click on fiducial F5's sphere selects it: its gizmo appears, H1's goes
+    xy = node_screen_position(page, "/fiducials/F5/gizmo/sphere")
+    page.mouse.click(*xy)
+    wait_for(lambda: app.selected == ("fiducials", "F5"), 5.0, message="F5 selected by a click")
+    wait_for(lambda: page.evaluate(_JS_GIZMO_VISIBLE, "/fiducials/F5/gizmo"), 5.0, message="F5's gizmo shown")
+    assert page.evaluate(_JS_GIZMO_VISIBLE, "/targets/H1/gizmo") == 0
+    page.wait_for_timeout(300)
+    image0 = np.array(app.slice_node.handle.image)
+    f0 = np.array(app.gizmo("fiducials", "F5").position)
+    scale = app.nodes._gizmo_scale()
+    a = node_screen_position(page, "/fiducials/F5/gizmo", (0.7 * scale, 0.0, 0.0))
+    b = node_screen_position(page, "/fiducials/F5/gizmo", (2.5 * scale, 0.0, 0.0))
+    drag(page, a, b, steps=20)
+    wait_for(lambda: not np.allclose(app.gizmo("fiducials", "F5").position, f0), 5.0, message="F5 moved")
+    page.wait_for_timeout(800)  # the drag's end: the slice is recomputed and sent
+    assert not np.array_equal(np.array(app.slice_node.handle.image), image0)
+    after = slice_alone_shot()
+    # only the slice is drawn in both shots (same camera): pixels that changed are the slice's new colours
+    changed = np.abs(after - before).max(axis=2) > 10
+    changed[:, 860:] = False  # the panel, whose numbers changed too
+    assert changed.sum() > 2000, changed.sum()

@@ -13,6 +13,7 @@ from rrbc_core.simulation.kinematics import (
     inverse,
     inverse_path,
     perturbed,
+    reachable,
     tool_down,
 )
 
@@ -265,3 +266,16 @@ def test_dh_parameters_validation_and_immutability():
         DHParameters(np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(6), tool_mm=float("nan"))
     with pytest.raises(ValueError):
         UR5.a[0] = 1.0
+
+
+def test_reachable_says_which_points_inverse_path_would_refuse():
+    dh = UR5.with_tool(100.0)
+    rng = np.random.default_rng(5)
+    pts = rng.uniform([-1200, -1200, -300], [1200, 1200, 1300], (60, 3))
+    ok = reachable(dh, pts, tool_down(), UR5_TOOL_DOWN_SEED)
+    assert ok.any() and (~ok).any()
+    inverse_path(dh, pts[ok], tool_down(), UR5_TOOL_DOWN_SEED)  # the reachable ones all solve
+    for i in np.flatnonzero(~ok)[:5]:
+        with pytest.raises(InputError, match="not reachable"):
+            inverse_path(dh, pts[i : i + 1], tool_down(), UR5_TOOL_DOWN_SEED)
+    assert not reachable(dh, [[5000.0, 0.0, 0.0]], tool_down(), UR5_TOOL_DOWN_SEED)[0]

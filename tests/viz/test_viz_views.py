@@ -104,3 +104,25 @@ def test_lesson_steps_frame_their_focus_and_switch_the_see_through_cell(app):
     assert app.controls.learn.bullseye.html.visible  # step 9 shows the bullseye in the Learn tab
     app.lesson_stop()
     assert not app.nodes.see_through and app.nodes.nodes["/mesh/cell"].visible
+
+
+def test_the_error_slice_follows_drags_and_its_controls(app):
+    c = app.controls
+    assert app.slice_node.handle is None  # off by default
+    c.view.layers["slice"].value = True
+    sl = app.error_slice
+    assert sl is not None and sl.plane.axis == "z"
+    img0 = np.array(app.slice_node.handle.image)
+    assert img0.shape[2] == 4 and "RRBC error" in c.view.slice_legend.content
+    np.testing.assert_allclose(app.slice_node.handle.position[2], sl.plane.offset_mm)
+    app.handle_drag("fiducials", "F5", [475.0, -100.0, 45.0], "end")
+    assert not np.array_equal(np.array(app.slice_node.handle.image), img0)  # the field follows the drag
+    np.testing.assert_allclose(app.error_slice.values["rrbc"], app.session.error_slice(sl.plane).values["rrbc"])
+    c.view.slice_axis.value = "vertical, along x (y)"
+    assert app.error_slice.plane.axis == "y" and c.view.slice_offset.min < 0 < c.view.slice_offset.max
+    c.view.slice_offset.value = 50.0
+    assert app.error_slice.plane.offset_mm == 50.0
+    c.view.slice_value.value = "rigid error"
+    assert app.display.slice_value == "rigid" and "rigid error" in c.view.slice_legend.content
+    with pytest.raises(InputError):
+        app.set_display(slice_axis="w")
