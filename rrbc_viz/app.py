@@ -233,6 +233,7 @@ class RunningApp(TabActions, ViewActions):
     def _show(self, ev: Evaluation, heat: bool = False, plan: bool = True) -> None:
         """Push an Evaluation to the scene and the panel (caller holds the lock, inside server.atomic()). plan:
         recompute the Plan tab now (else it is marked stale until the next due refresh)."""
+        self.nodes.bias_scale = float(self.session.settings.bias_scale) if self.session.kind == "scene" else 1.0
         self.nodes.update(ev)
         c = self.controls
         c.text["scale"] = tables.scale_line(self.display.magnification)

@@ -33,6 +33,8 @@ if TYPE_CHECKING:
 
 LAYER_LABELS = {
     "mesh": "Work-cell mesh",
+    "arm": "Robot arm (reaching the selected target)",
+    "sensor": "Sensor cameras and their views",
     "frames": "Robot and sensor frames",
     "registration": "Registration points",
     "fiducials": "Fiducials",

@@ -8,6 +8,8 @@ times larger about their target. Both are display-only transforms.
 Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's):
 
     /mesh/cell, /mesh/ghost            the work-cell mesh, solid / see-through (one of them shown)
+    /arm/...                           the UR5 reaching the selected target, and where its real tool lands
+    /sensor/camera<i>/body, …/frustum  the sensor's cameras and their viewing frusta (robot_nodes)
     /frames/robot, /frames/sensor_true, /frames/sensor_registered   (+ …/label)
     /registration/points               batched spheres (+ /registration/labels/<id>)
     /fiducials/<id>/gizmo              transform controls, translation only (drag a fiducial)
@@ -37,15 +39,20 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
+from rrbc_core.errors import InputError
+from rrbc_core.session.arm import arm_pose
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
 from . import colors
 from .heatmap_nodes import HeatMapNodes
+from .robot_nodes import ArmNodes, SensorNodes
 
 #: The scene's layers, each a group node whose visibility the View tab and the lesson steps switch.
 LAYERS = (
     "mesh",
+    "arm",
+    "sensor",
     "frames",
     "registration",
     "fiducials",
@@ -147,8 +154,8 @@ RING_SEGMENTS = 36
 
 @dataclass(frozen=True)
 class LandingDisplay:
-    """The landing bullseye of one target, floating `lift` mm above it so no part geometry can hide it (robot
-    frame, mm; display only): `anchor` (3,) stands for the truth, `rigid` and `rrbc` (3,) for the landings, their
+    """The landing bullseye of one target, floating `lift` mm above it (and beside it, away from the robot's base)
+    so neither part geometry nor the arm hides it (robot frame, mm; display only): `anchor` (3,) stands for the truth, `rigid` and `rrbc` (3,) for the landings, their
     offsets from the truth drawn ×`scale`; a horizontal scale ring of real radius `ring_mm` (a 1-2-5 number at
     least as large as the larger offset) is drawn `ring_mm × scale` = RING_MARKERS marker radii wide, whatever the
     arrows' magnification. Without truth the offsets are taken from the rigid landing (rigid at the centre)."""
@@ -222,7 +229,8 @@ def nice_up(x: float) -> float:
 
 
 def landing_display(t, i: int, marker_mm: float) -> LandingDisplay:
-    """The landing bullseye of target i of `t` (evaluation.TargetResult)."""
+    """The landing bullseye of target i of `t` (evaluation.TargetResult). It floats beside the target, away from
+    the robot's base (the arm reaches the target from that side, its wrist straight above it) and above it."""
     known = bool(np.all(np.isfinite(t.truth[i])))
     ref = t.truth[i] if known else t.robot_rigid[i]
     off_rigid, off_rrbc = t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref
@@ -230,8 +238,10 @@ def landing_display(t, i: int, marker_mm: float) -> LandingDisplay:
     ring = nice_up(biggest) if biggest > 0 else 0.1
     radius = RING_MARKERS * marker_mm
     scale = radius / ring
-    lift = 2.0 * radius + 2.0 * marker_mm
-    anchor = t.positions[i] + np.array([0.0, 0.0, lift])
+    out = np.array([t.positions[i][0], t.positions[i][1], 0.0])
+    out = out / np.linalg.norm(out) if np.linalg.norm(out) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    lift = radius + 2.0 * marker_mm
+    anchor = t.positions[i] + 1.6 * radius * out + np.array([0.0, 0.0, lift])
     return LandingDisplay(
         str(t.ids[i]), t.positions[i], anchor, anchor + scale * off_rigid, anchor + scale * off_rrbc, lift, ring, scale
     )
@@ -250,6 +260,10 @@ class SceneNodes(HeatMapNodes):
         self.see_through = False  # the work cell drawn see-through (ghost) instead of solid
         self.true_pose = None  # the sensor's true pose (scene mode), for the magnified registered frame
         self.frame_mag = 1.0  # the registered frame's error is drawn this many times larger
+        self.arm = None  # ArmNodes (scenes with a UR5)
+        self.scene_model = None
+        self._arm_key = None
+        self.bias_scale = 1.0  # the session's bias size (the real arm's landing scales with it)
         self._sphere_v, self._sphere_f = _unit_sphere()
         self.groups: dict[str, viser.SceneNodeHandle] = {}
         self.gizmos: dict[tuple[str, str], viser.TransformControlsHandle] = {}
@@ -314,6 +328,19 @@ class SceneNodes(HeatMapNodes):
                 receive_shadow=False,
                 visible=self.see_through,
             )
+
+        # the arm and the sensor, as what they are (robot_nodes) ----------------------------------------------
+        scene = getattr(session, "scene", None) if session.kind == "scene" else None
+        self.arm = None
+        self.scene_model = scene
+        self._arm_key = None
+        if scene is not None and scene.robot_model == "ur5" and len(ev.targets.ids):
+            self.arm = ArmNodes(sc)
+            self.arm.build()
+        if scene is not None and scene.sensor_kind != "ground_truth":
+            T = scene.sensor_to_robot
+            look = scene.sensor_look_at if scene.sensor_look_at is not None else ev.targets.positions.mean(0)
+            SensorNodes(sc).build(scene.sensor_kind, T.rotation, T.translation, look)
 
         # frames ---------------------------------------------------------------------------------------
         axes = 0.12 * self.extent_mm
@@ -626,9 +653,27 @@ class SceneNodes(HeatMapNodes):
                 [[land.position, land.anchor], [land.anchor, land.rigid], [land.anchor, land.rrbc]], np.float32
             )
             self.nodes["/landing/rings"].points = land.rings().astype(np.float32)
+            self._update_arm(land.position, mag)
             scale = self.nodes["/landing/scale"]
             scale.position = land.anchor + np.array([0.71, -0.71, 0.0]) * land.ring_mm * land.scale
             self._assign(scale, "text", f"{land.target}: ring {land.ring_mm:g} mm")
+
+    def _update_arm(self, position, magnification: float) -> None:
+        """Pose the arm to reach `position` (the bullseye's target); hide it where it cannot reach."""
+        if self.arm is None:
+            return
+        bias = self.bias_scale
+        key = (tuple(np.round(position, 9)), bias, magnification)
+        if key == self._arm_key:
+            return
+        self._arm_key = key
+        try:
+            pose = arm_pose(self.scene_model, position, bias)
+        except InputError:
+            self.groups["arm"].visible = False
+            return
+        self.groups["arm"].visible = self.layers.get("arm", True)
+        self.arm.show(pose, magnification)
 
     def _assign(self, handle, attr: str, value) -> None:
         """Set handle.attr = value unless it is the value this object last set there (tuples/str compare

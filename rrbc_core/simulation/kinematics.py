@@ -138,6 +138,17 @@ def _frames(dh: DHParameters, q: np.ndarray) -> np.ndarray:
     return out
 
 
+def joint_frames(dh: DHParameters, q) -> np.ndarray:
+    """The arm's frames for joints q (6,) rad: (8, 4, 4) homogeneous transforms in the robot base frame, mm — the
+    base (identity), the six DH frames T_0^1 … T_0^6 (the flange is T_0^6) and the tool point's frame (T_0^6
+    moved `tool_mm` along its z). Joint i turns about the z axis of frame i−1."""
+    q = _as_joints(q).reshape(6)
+    f = _frames(dh, q)
+    tool = f[6].copy()
+    tool[:3, 3] += dh.tool_mm * tool[:3, 2]
+    return np.concatenate([f, tool[None]], axis=0)
+
+
 def _as_joints(q) -> np.ndarray:
     qa = np.asarray(q, dtype=float)
     if qa.ndim == 0 or qa.shape[-1] != 6:

@@ -132,7 +132,7 @@ def test_drag_target_recomputes_everything(app):
     land = app.nodes.landing
     t = fresh.targets
     assert land.target == "H1" and land.lift > 0
-    np.testing.assert_allclose(land.anchor, t.positions[0] + [0, 0, land.lift])
+    assert land.anchor[2] == pytest.approx(t.positions[0, 2] + land.lift)
     np.testing.assert_allclose(
         app.nodes.nodes["/landing/rrbc"].position, land.anchor + land.scale * (t.robot_rrbc[0] - t.truth[0]), atol=1e-6
     )

@@ -33,7 +33,9 @@ def test_the_landing_bullseye_floats_above_its_target_with_a_ring_holding_both_l
         land = landing_display(t, i, marker_mm=8.0)
         off_rigid = t.robot_rigid[i] - t.truth[i]
         off_rrbc = t.robot_rrbc[i] - t.truth[i]
-        np.testing.assert_allclose(land.anchor, t.positions[i] + [0, 0, land.lift])
+        assert land.anchor[2] == pytest.approx(t.positions[i, 2] + land.lift)
+        away = land.anchor[:2] - t.positions[i, :2]  # beside the target, away from the robot's base (the arm)
+        assert away @ t.positions[i, :2] > 0 and np.linalg.norm(away) > land.ring_mm * land.scale
         np.testing.assert_allclose(land.rigid - land.anchor, land.scale * off_rigid)
         np.testing.assert_allclose(land.rrbc - land.anchor, land.scale * off_rrbc)
         assert max(np.linalg.norm(off_rigid), np.linalg.norm(off_rrbc)) <= land.ring_mm
@@ -126,3 +128,34 @@ def test_the_error_slice_follows_drags_and_its_controls(app):
     assert app.display.slice_value == "rigid" and "rigid error" in c.view.slice_legend.content
     with pytest.raises(InputError):
         app.set_display(slice_axis="w")
+
+
+def test_the_arm_reaches_the_selected_target_and_sensors_are_drawn_as_what_they_are(app):
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_viz.robot_nodes import sensor_cameras
+
+    arm = app.nodes.arm
+    assert arm is not None and arm.pose is not None
+    t = app.session.last.targets
+    np.testing.assert_allclose(arm.pose.commanded, t.positions[0])
+    tip = np.asarray(arm.stylus.position) + 0.5 * arm.stylus.height * np.array([0, 0, -1.0])
+    np.testing.assert_allclose(tip, t.positions[0], atol=1e-6)  # the stylus ends at the target
+    app.select("targets", "H4")
+    np.testing.assert_allclose(app.nodes.arm.pose.commanded, t.positions[3])
+    # the default scene's stereo head: two cameras a baseline apart, looking along the sensor's +z
+    T = app.session.sensor_to_robot
+    cams = sensor_cameras("stereo", T.rotation, T.translation, [475.0, 0.0, 15.0])
+    assert len(cams) == 2
+    np.testing.assert_allclose(np.linalg.norm(cams[0][1] - cams[1][1]), 120.0)
+    assert app.server.scene.get_handle_by_name("/sensor/camera1/frustum") is not None
+    mocap = sensor_cameras("mocap", T.rotation, [475.0, 0.0, 2000.0], [475.0, 0.0, 15.0])
+    assert len(mocap) == 4 and all(np.linalg.norm(c[1][:2] - [475.0, 0.0]) > 100 for c in mocap)
+    import viser.transforms as vtf
+
+    for q, p, depth in mocap:  # each looks at the work (+z of an OpenCV camera), its frustum reaching most of the way
+        z = vtf.SO3(np.asarray(q)).as_matrix()[:, 2]
+        d = np.array([475.0, 0.0, 15.0]) - p
+        np.testing.assert_allclose(z, d / np.linalg.norm(d), atol=1e-9)
+        assert 0.5 * np.linalg.norm(d) < depth < np.linalg.norm(d)
+    assert sensor_cameras("ground_truth", T.rotation, T.translation, [0, 0, 0]) == []
+    assert (default_scene_path().parent / "peg_in_hole_cell.toml").exists()

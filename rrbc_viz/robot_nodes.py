@@ -1,0 +1,186 @@
+"""The arm and the sensors in the scene, drawn as what they are.
+
+The arm: the scene's UR5 posed by the nominal controller's inverse kinematics to reach the selected target
+(`rrbc_core.session.arm.arm_pose`), as clean generated links — a cylinder between successive DH frame origins, a
+joint housing about each joint axis, a thin stylus to the tool point — and, at its tool, where the real (biased)
+arm lands: a short line from the commanded place to the landing, drawn ×magnification like the arrows.
+Checked before writing this: no package made for shipping robot models offers a UR5 we may load at run time
+without a download (robot_descriptions clones repositories on first use; pybullet_data ships no UR5).
+
+The sensors: a stereo head as two cameras on a bar at the sensor's pose with their viewing frusta reaching the
+work; a motion-capture system as four cameras around the cell looking at what the sensor looks at (placement
+illustrative: the scene models the system as one sensor frame, drawn as such by the frames layer); a laser
+tracker as one instrument with its frustum; a reference artefact ("ground_truth") as nothing. Robot frame, mm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import viser
+import viser.transforms as vtf
+
+LINK_RGB = (150, 160, 175)
+JOINT_RGB = (70, 110, 160)
+TOOL_RGB = (60, 60, 60)
+SENSOR_RGB = (40, 40, 40)
+FRUSTUM_RGB = (90, 90, 90)
+STEREO_BASELINE_MM = 120.0
+CAMERA_FOV = np.deg2rad(50.0)
+
+
+def _z_to(direction) -> np.ndarray:
+    """wxyz of the rotation taking +z to `direction`."""
+    d = np.asarray(direction, float)
+    n = np.linalg.norm(d)
+    if n == 0:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    d = d / n
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(z, d)
+    s, c = np.linalg.norm(axis), float(z @ d)
+    if s < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0]) if c > 0 else np.array([0.0, 1.0, 0.0, 0.0])
+    return np.asarray(vtf.SO3.exp(axis / s * np.arctan2(s, c)).wxyz, float)
+
+
+def arm_segments(frames: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Link segments (start, end) between successive distinct frame origins of `frames` (8, 4, 4), the last one
+    (flange to tool point) excluded: it is the stylus."""
+    o = frames[:7, :3, 3]
+    return [(o[i], o[i + 1]) for i in range(6) if np.linalg.norm(o[i + 1] - o[i]) > 1e-6]
+
+
+class ArmNodes:
+    """Nodes of the arm (under /arm): links, joints, stylus, the commanded-versus-landed marks."""
+
+    def __init__(self, scene: viser.SceneApi):
+        self.scene = scene
+        self.links: list = []
+        self.joints: list = []
+        self.stylus = None
+        self.marks: dict = {}
+        self.pose = None
+
+    def build(self, radius_mm: float = 38.0) -> None:
+        sc = self.scene
+        self.radius = radius_mm
+        self.links = [
+            sc.add_cylinder(f"/arm/link{i}", radius=radius_mm, height=1.0, color=LINK_RGB, cast_shadow=False)
+            for i in range(6)
+        ]
+        self.joints = [
+            sc.add_cylinder(
+                f"/arm/joint{i}", radius=1.15 * radius_mm, height=2.4 * radius_mm, color=JOINT_RGB, cast_shadow=False
+            )
+            for i in range(6)
+        ]
+        self.stylus = sc.add_cylinder("/arm/stylus", radius=4.0, height=1.0, color=TOOL_RGB, cast_shadow=False)
+        self.marks["line"] = sc.add_line_segments(
+            "/arm/landing", np.zeros((1, 2, 3), np.float32), (30, 30, 30), thickness=2.0, thickness_units="screen"
+        )
+        self.marks["label"] = sc.add_label(
+            "/arm/label", "", font_size_mode="screen", font_screen_scale=0.75, anchor="bottom-left"
+        )
+
+    def show(self, pose, magnification: float) -> None:
+        """Pose the arm (session.arm.ArmPose) and draw where its real tool lands, offset ×magnification."""
+        self.pose = pose
+        f = pose.frames
+        segs = arm_segments(f)
+        for i, link in enumerate(self.links):
+            if i < len(segs):
+                a, b = segs[i]
+                link.position = 0.5 * (a + b)
+                link.wxyz = _z_to(b - a)
+                link.height = float(np.linalg.norm(b - a))
+                link.visible = True
+            else:
+                link.visible = False
+        for i, joint in enumerate(self.joints):  # joint i+1 turns about z of frame i
+            joint.position = f[i, :3, 3]
+            joint.wxyz = _z_to(f[i, :3, 2])
+        a, b = f[6, :3, 3], f[7, :3, 3]
+        self.stylus.position = 0.5 * (a + b)
+        self.stylus.wxyz = _z_to(b - a)
+        self.stylus.height = max(float(np.linalg.norm(b - a)), 1.0)
+        end = pose.commanded + magnification * (pose.landed - pose.commanded)
+        self.marks["line"].points = np.array([[pose.commanded, end]], np.float32)
+        off = float(np.linalg.norm(pose.landed - pose.commanded))
+        self.marks["label"].position = end
+        self.marks["label"].text = f"nominal model → real arm's tool: {off:.3f} mm (×{magnification:g})"
+
+
+def _look_wxyz(position, look_at, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """wxyz of a camera at `position` looking at `look_at` (OpenCV: +z forward, +y down)."""
+    z = np.asarray(look_at, float) - np.asarray(position, float)
+    z /= np.linalg.norm(z)
+    x = np.cross(z, -np.asarray(up, float))
+    if np.linalg.norm(x) < 1e-9:
+        x = np.array([1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.asarray(vtf.SO3.from_matrix(np.stack([x, y, z], axis=1)).wxyz, float)
+
+
+def sensor_cameras(kind: str, rotation, position, look_at) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The cameras drawn for a sensor: (wxyz, position, frustum depth mm) each (module docstring)."""
+    r = np.asarray(rotation, float)
+    p = np.asarray(position, float)
+    look = np.asarray(look_at, float)
+    depth = 0.85 * float(np.linalg.norm(look - p))
+    q = np.asarray(vtf.SO3.from_matrix(r).wxyz, float)
+    if kind == "stereo":
+        half = 0.5 * STEREO_BASELINE_MM * r[:, 0]
+        return [(q, p - half, depth), (q, p + half, depth)]
+    if kind == "laser_tracker":
+        return [(q, p, depth)]
+    if kind == "mocap":
+        out = []
+        radius = float(np.linalg.norm((p - look)[:2])) or 1000.0
+        for k in range(4):
+            a = np.pi / 4 + k * np.pi / 2
+            c = look + np.array([radius * np.cos(a), radius * np.sin(a), p[2] - look[2]])
+            out.append((_look_wxyz(c, look), c, 0.85 * float(np.linalg.norm(look - c))))
+        return out
+    return []
+
+
+class SensorNodes:
+    """Nodes of the sensor (under /sensor): a body and a viewing frustum per camera."""
+
+    def __init__(self, scene: viser.SceneApi):
+        self.scene = scene
+        self.cameras: list = []
+
+    def build(self, kind: str, rotation, position, look_at) -> None:
+        sc = self.scene
+        self.cameras = sensor_cameras(kind, rotation, position, look_at)
+        for i, (q, p, depth) in enumerate(self.cameras):
+            sc.add_box(
+                f"/sensor/camera{i}/body",
+                color=SENSOR_RGB,
+                dimensions=(70.0, 50.0, 60.0),
+                wxyz=q,
+                position=p,
+                cast_shadow=False,
+            )
+            sc.add_camera_frustum(
+                f"/sensor/camera{i}/frustum",
+                fov=float(CAMERA_FOV),
+                aspect=4 / 3,
+                scale=depth,
+                thickness=1.5,
+                thickness_units="screen",
+                color=FRUSTUM_RGB,
+                wxyz=q,
+                position=p,
+            )
+        if kind == "mocap":
+            sc.add_label(
+                "/sensor/note",
+                "motion-capture cameras (placement illustrative; modelled as one sensor frame)",
+                position=self.cameras[0][1] if self.cameras else np.zeros(3),
+                font_size_mode="screen",
+                font_screen_scale=0.7,
+                anchor="bottom-left",
+            )

@@ -1,0 +1,61 @@
+"""The arm the app draws (rrbc_core.session.arm): posed by the nominal controller to reach a place; the real arm's
+tool lands where the scene's kinematic error puts it, which agrees with the measurement model's truth."""
+
+import numpy as np
+import pytest
+
+from rrbc_core.errors import InputError
+from rrbc_core.io.measurements import read_measurements
+from rrbc_core.io.scene import default_scene_path
+from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.session.arm import arm_pose
+from rrbc_core.session.explorer import ExplorerSession
+from rrbc_core.simulation.kinematics import forward, tool_down
+from rrbc_core.simulation.measurement import MeasurementModel
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene(default_scene_path())
+
+
+def test_the_nominal_arm_reaches_the_commanded_place_and_its_frames_chain_up(scene):
+    p = np.array([400.0, -150.0, 15.0])
+    pose = arm_pose(scene, p)
+    np.testing.assert_allclose(pose.frames[-1, :3, 3], p, atol=1e-6)
+    np.testing.assert_allclose(pose.frames[0], np.eye(4))
+    assert pose.frames.shape == (8, 4, 4)
+    for f in pose.frames:  # proper rigid frames
+        np.testing.assert_allclose(f[:3, :3] @ f[:3, :3].T, np.eye(3), atol=1e-9)
+    np.testing.assert_allclose(pose.frames[-1, :3, 2], [0, 0, -1], atol=1e-6)  # the tool points down
+
+
+def test_the_real_arm_lands_where_the_measurement_models_truth_says(scene):
+    """The truth c of a physical point p is the command that really reaches p (simulation.measurement). Sending
+    the arm to c must therefore land it at p, up to the second-order change of the error over |c - p| ~ 1 mm."""
+    model = MeasurementModel(scene.sensor_to_robot, scene.error_model, scene.joint_seed)
+    rng = np.random.default_rng(11)
+    for p in rng.uniform([350, -200, 10], [600, 200, 120], (5, 3)):
+        pts = model.points(p[None], tool_down(scene.tool_yaw_deg))
+        c = model.read(pts).truth[0]
+        assert np.linalg.norm(c - p) > 0.2  # the arm's error is there to see
+        pose = arm_pose(scene, c)
+        np.testing.assert_allclose(pose.landed, p, atol=0.02)
+
+
+def test_bias_size_scales_the_landing_and_bad_input_is_refused(scene):
+    p = np.array([450.0, 50.0, 15.0])
+    full = arm_pose(scene, p, 1.0)
+    half = arm_pose(scene, p, 0.5)
+    none = arm_pose(scene, p, 0.0)
+    np.testing.assert_allclose(half.landed - p, 0.5 * (full.landed - p), atol=1e-9)
+    np.testing.assert_allclose(none.landed, p)
+    term = next(t for t in scene.error_model.terms("robot") if hasattr(t, "true_robot"))
+    real, _ = forward(term.true_robot(), full.joints)
+    np.testing.assert_allclose(full.landed, real)
+    with pytest.raises(InputError, match="reach"):
+        arm_pose(scene, [3000.0, 0.0, 0.0])
+    example = default_scene_path().parents[1] / "rrbc_core" / "data" / "example_measurements.csv"
+    measured = ExplorerSession.from_measurements(read_measurements(example))
+    with pytest.raises(InputError, match="no arm model"):
+        arm_pose(measured.scene, p)
