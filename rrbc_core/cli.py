@@ -164,6 +164,17 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
     v.add_argument("--port", type=_non_negative_int, default=8080, help="port (default 8080; 0 = any free port)")
     v.add_argument("--mesh", default=None, help="work-cell mesh for a measurement CSV (any format trimesh reads)")
+    v.add_argument(
+        "--per-client",
+        action="store_true",
+        help="one independent session per browser tab (a class: each student their own) instead of one "
+        "session shared by every tab (a teacher's demo)",
+    )
+    v.add_argument(
+        "--present",
+        action="store_true",
+        help="start in presentation mode: large text, collapsible panel, larger markers (for a projector)",
+    )
     v.set_defaults(run=_cmd_view)
     return p
 
@@ -467,12 +478,15 @@ def _cmd_view(args) -> str:
 
     if args.port > 65535:
         raise InputError(f"--port must be at most 65535, got {args.port}")
-    app = serve(args.scene, host=args.host, port=args.port, mesh=args.mesh)
+    app = serve(
+        args.scene, host=args.host, port=args.port, mesh=args.mesh, per_client=args.per_client, present=args.present
+    )
     try:
         signal.signal(signal.SIGTERM, signal.default_int_handler)  # stop cleanly on SIGTERM too
     except ValueError:  # not the main thread
         pass
-    print(f"rrbc view: serving {app.loaded.label} at {app.url} (Ctrl+C to stop)", flush=True)
+    mode = "one session per browser tab" if args.per_client else "one session shared by every tab"
+    print(f"rrbc view: serving {app.loaded.label} at {app.url} ({mode}; Ctrl+C to stop)", flush=True)
     try:
         while True:
             time.sleep(3600)

@@ -94,13 +94,17 @@ def _nice(x: float) -> float:
 
 
 class RunningApp(TabActions, ViewActions):
-    """A running app. `server` is the viser server, `session` the shared ExplorerSession (replaced when a file
-    is loaded), `port`/`url` where to point a browser. `stop()` frees the port."""
+    """A running app. `server` is where it draws (the viser server, shared by every tab; or one tab's
+    `stage.ClientStage` with `viser_server` the server behind it), `session` its ExplorerSession (replaced when a
+    file is loaded), `port`/`url` where to point a browser. `stop()` frees the port (only an app that owns its
+    server stops it: a per-tab app stops its own workers)."""
 
-    def __init__(self, server: viser.ViserServer, loaded: files.Loaded, host: str):
+    def __init__(self, server, loaded: files.Loaded, host: str, viser_server: viser.ViserServer | None = None):
         self.server = server
+        self.viser_server = server if viser_server is None else viser_server
+        self.owns_server = viser_server is None
         self.host = host
-        self.port = int(server.get_port())
+        self.port = int(self.viser_server.get_port())
         self.url = f"http://{host if host not in ('0.0.0.0', '::', '') else 'localhost'}:{self.port}"
         self._lock = threading.RLock()
         self._stopped = False
@@ -125,6 +129,7 @@ class RunningApp(TabActions, ViewActions):
         self._diagnosis_rows = None  # the rows it was computed from (MeasurementSet), None when nothing is shown
         self._diagnosis_text = ""  # its content without the stale marker
         self.selected: tuple[str, str] | None = None  # (kind, id) of the selected point (the one with a gizmo)
+        self.presentation = False  # presentation mode (set_presentation)
         self.camera = CameraDirector(server)
         self.camera_preset = OPENING
         self.nodes = SceneNodes(server, self._on_gizmo, self._on_point_click)
@@ -156,6 +161,8 @@ class RunningApp(TabActions, ViewActions):
         self._stopped = True
         self.mc.stop()
         self.planning.stop()
+        if not self.owns_server:
+            return
         with contextlib.redirect_stdout(io.StringIO()) if self.quiet else contextlib.nullcontext():
             self.server.stop()  # viser prints "(viser) Server stopped" on stdout
 
@@ -176,6 +183,10 @@ class RunningApp(TabActions, ViewActions):
             self.diagnosis_stale = False
             self._diagnosis_rows = None
             self.display = self._default_display(ev)
+            if self.presentation:
+                from .app_views import PRESENTATION_MARKERS
+
+                self.display = replace(self.display, marker_mm=self.display.marker_mm * PRESENTATION_MARKERS)
             self.selected = ("targets", ev.targets.ids[0]) if len(ev.targets.ids) else None
             self.nodes.selected = self.selected
             self.camera_preset = OPENING
@@ -471,11 +482,20 @@ def _check_host(host: str) -> None:
         raise InputError(f"cannot listen on host {host!r}: {exc.strerror or exc}") from None
 
 
-def serve(source=None, host: str = "127.0.0.1", port: int = 0, mesh=None, quiet: bool = True) -> RunningApp:
+def serve(
+    source=None,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    mesh=None,
+    quiet: bool = True,
+    per_client: bool = False,
+    present: bool = False,
+):
     """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
     .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
     raises InputError before any server starts. `quiet` hides viser's start-up banner and its "Server stopped"
-    line. Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.threads`, docs/threads.md): the
+    line. `per_client`: one independent session per browser tab (per_client.PerClientApp) instead of one shared
+    by all; `present`: start in presentation mode (large text, collapsible panel; View → Presentation mode). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.threads`, docs/threads.md): the
     server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
     apply_process_policy()
     if isinstance(source, ExplorerSession):
@@ -489,7 +509,15 @@ def serve(source=None, host: str = "127.0.0.1", port: int = 0, mesh=None, quiet:
         server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)
     try:
         server.scene.set_up_direction("+z")
-        app = RunningApp(server, loaded, host)
+        if per_client:
+            from .per_client import PerClientApp
+
+            server.gui.configure_theme(show_share_button=False)
+            app = PerClientApp(server, loaded, source, mesh, host, present)
+        else:
+            app = RunningApp(server, loaded, host)
+            if present:
+                app.set_presentation(True)
         app.quiet = quiet
         return app
     except BaseException:

@@ -24,6 +24,10 @@ SLICE_NOTE = (
 )
 
 
+PRESENTATION_LABEL_SCALE = 1.6  # labels' screen size in presentation mode
+PRESENTATION_MARKERS = 1.5  # markers' size in presentation mode
+
+
 class ViewActions:
     """Part of `RunningApp` (see there); split out to keep modules short."""
 
@@ -122,6 +126,22 @@ class ViewActions:
                 pass
 
         client.camera.on_update(on_camera)
+
+    def set_presentation(self, on: bool) -> None:
+        """Presentation mode (a projector at 1280x720): large panel text, a collapsible panel, larger markers and
+        labels; the camera reframes for the new panel."""
+        with self._lock:
+            on = bool(on)
+            if on == self.presentation:
+                return
+            self.presentation = on
+            with self.server.atomic():
+                self.controls.apply_theme(on)
+                self.controls.sync_presentation(on)
+                self.nodes.set_label_scale(PRESENTATION_LABEL_SCALE if on else 1.0)
+                marker = self.display.marker_mm * (PRESENTATION_MARKERS if on else 1 / PRESENTATION_MARKERS)
+                self.set_display(marker_mm=float(marker))
+                self.camera.show(self.current_view())
 
     def set_see_through(self, on: bool) -> None:
         """Draw the work cell see-through (View tab checkbox; lesson steps whose arrows point into surfaces)."""

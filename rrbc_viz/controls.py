@@ -52,6 +52,8 @@ HEAT_CHOICES = {
     "measurements": (("correction size", "correction"), ("correction std (gp)", "std")),
 }
 MAG_MAX = 2000
+#: Presentation mode's style sheet: larger text for a projector (the panel's sizes are rem-based).
+PRESENTATION_CSS = "<style>html { font-size: 20px !important; }</style>"
 
 
 def _band(label: str, color: str) -> dict:
@@ -168,6 +170,12 @@ class ViewPanel:
         self.app, self.syncing = app, syncing
         self.camera = gui.add_button_group("Camera", PRESETS)
         self.camera.on_click(lambda event: app.show_camera(self.camera.value, client=event.client))
+        self.presentation = gui.add_checkbox(
+            "Presentation mode", False, hint="Large text, a collapsible panel, larger markers: for a projector"
+        )
+        self.presentation.on_update(
+            lambda event: None if self.syncing.on else app.set_presentation(self.presentation.value)
+        )
         self.see_through = gui.add_checkbox("See-through cell", False, hint="Show what lies under the cell's surfaces")
         self.see_through.on_update(
             lambda event: None if self.syncing.on else app.set_see_through(self.see_through.value)
@@ -380,8 +388,10 @@ class Controls:
         self.app = app
         self.syncing = Syncing()
         gui = server.gui
-        gui.configure_theme(show_share_button=False, control_width="large", brand_color=(40, 120, 255))
+        self.gui = gui
+        self.apply_theme(presentation=False)
         gui.set_panel_label("RRBC explorer")
+        self.style = gui.add_html("")  # presentation mode's style sheet (empty otherwise)
         self.status = gui.add_markdown("")
         self.legend = gui.add_html(legend_html())
         tabs = gui.add_tab_group()
@@ -400,6 +410,14 @@ class Controls:
             plan_tab()  # the app builds the Plan tab's panel inside the tab, and keeps it
         with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
             self.file = FilePanel(gui, app)
+
+    def apply_theme(self, presentation: bool) -> None:
+        """The panel's theme. Presentation mode makes its text large (PRESENTATION_CSS: the panel's sizes are in
+        rem, so a larger root font scales them). The panel floats over the view in both modes and collapses with
+        its own minimise control (the view then takes the whole screen)."""
+        self.gui.configure_theme(show_share_button=False, control_width="large", brand_color=(40, 120, 255))
+        if hasattr(self, "style"):
+            self.style.content = PRESENTATION_CSS if presentation else ""
 
     # -------------------------------------------------------------------------------- what the app shows here
     @property
@@ -451,6 +469,10 @@ class Controls:
             lo, hi = float(np.floor(offsets[0])), float(np.ceil(offsets[1]))
             v.slice_offset.min, v.slice_offset.max = lo, hi
             v.slice_offset.value = float(np.clip(round(offset), lo, hi))
+
+    def sync_presentation(self, on: bool) -> None:
+        with self.syncing.quiet():
+            self.view.presentation.value = bool(on)
 
     def sync_see_through(self, on: bool) -> None:
         with self.syncing.quiet():

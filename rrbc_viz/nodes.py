@@ -258,6 +258,7 @@ class SceneNodes(HeatMapNodes):
         self.selected: tuple[str, str] | None = None  # (kind, id) of the point carrying the drag gizmo
         self.landing_lift = 0.0  # mm: the landing display floats this far above the targets
         self.see_through = False  # the work cell drawn see-through (ghost) instead of solid
+        self.label_scale = 1.0  # labels' screen size factor (presentation mode)
         self.true_pose = None  # the sensor's true pose (scene mode), for the magnified registered frame
         self.frame_mag = 1.0  # the registered frame's error is drawn this many times larger
         self.arm = None  # ArmNodes (scenes with a UR5)
@@ -524,7 +525,7 @@ class SceneNodes(HeatMapNodes):
             text,
             position=np.asarray(position, float),
             font_size_mode="screen",
-            font_screen_scale=0.75,
+            font_screen_scale=0.75 * self.label_scale,
             anchor="bottom-left",
             visible=self.layers.get("labels", True),
         )
@@ -697,6 +698,17 @@ class SceneNodes(HeatMapNodes):
         p = np.array(tc.position, float)
         tc.position = p + np.array([1e-4 * (1.0 + float(np.abs(p).max())), 0.0, 0.0])
         tc.position = p
+
+    def set_label_scale(self, factor: float) -> None:
+        """Labels' screen size × factor (presentation mode)."""
+        self.label_scale = float(factor)
+        for h in self.labels.values():
+            h.font_screen_scale = 0.75 * self.label_scale
+        for name in ("/landing/scale", "/frames/sensor_registered/note"):
+            if name in self.nodes:
+                self.nodes[name].font_screen_scale = 0.8 * self.label_scale
+        if self.arm is not None:
+            self.arm.marks["label"].font_screen_scale = 0.75 * self.label_scale
 
     def set_see_through(self, on: bool) -> None:
         """Draw the work cell solid or see-through (what lies under its surfaces shows)."""

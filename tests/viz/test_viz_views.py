@@ -159,3 +159,22 @@ def test_the_arm_reaches_the_selected_target_and_sensors_are_drawn_as_what_they_
         assert 0.5 * np.linalg.norm(d) < depth < np.linalg.norm(d)
     assert sensor_cameras("ground_truth", T.rotation, T.translation, [0, 0, 0]) == []
     assert (default_scene_path().parent / "peg_in_hole_cell.toml").exists()
+
+
+def test_presentation_mode_enlarges_text_markers_and_labels_and_goes_back(app):
+    from rrbc_viz.app_views import PRESENTATION_LABEL_SCALE, PRESENTATION_MARKERS
+    from rrbc_viz.controls import PRESENTATION_CSS
+
+    marker = app.display.marker_mm
+    label = app.nodes.labels["/targets/H1/gizmo/label"]
+    scale0 = label.font_screen_scale
+    app.controls.view.presentation.value = True
+    assert app.presentation and app.controls.style.content == PRESENTATION_CSS
+    assert app.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
+    assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(marker * PRESENTATION_MARKERS)
+    assert label.font_screen_scale == pytest.approx(scale0 * PRESENTATION_LABEL_SCALE)
+    app.set_presentation(True)  # idempotent
+    assert app.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
+    app.controls.view.presentation.value = False
+    assert not app.presentation and app.controls.style.content == ""
+    assert app.display.marker_mm == pytest.approx(marker) and label.font_screen_scale == pytest.approx(scale0)

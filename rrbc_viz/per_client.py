@@ -1,0 +1,83 @@
+"""`rrbc view --per-client`: one independent session per browser tab (a classroom: every student drags their own
+targets), next to the default shared session (a teacher's demo: every tab shows one state).
+
+Each tab that connects gets its own `RunningApp` drawing on that tab's client-scoped scene and panel
+(`stage.ClientStage`), with a fresh session loaded from the same source; it is stopped when the tab closes. A
+reload is a new tab (viser builds client state anew on every connection).
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+import traceback
+
+import viser
+
+from rrbc_core.session.explorer import ExplorerSession
+
+from . import files
+from .stage import ClientStage
+
+
+class PerClientApp:
+    """Tabs' apps by client id (`apps`), the server's `port`/`url`, `stop()`. `loaded` is the source as first
+    loaded (checked before the server started)."""
+
+    def __init__(self, server: viser.ViserServer, loaded: files.Loaded, source, mesh, host: str, present: bool):
+        self.server = server
+        self.loaded = loaded
+        self._source, self._mesh = source, mesh
+        self.host = host
+        self.present = present
+        self.port = int(server.get_port())
+        self.url = f"http://{host if host not in ('0.0.0.0', '::', '') else 'localhost'}:{self.port}"
+        self.apps: dict[int, object] = {}
+        self.quiet = True
+        self._lock = threading.Lock()
+        self._stopped = False
+        server.on_client_connect(self._connect)
+        server.on_client_disconnect(self._disconnect)
+
+    def _fresh(self) -> files.Loaded:
+        if isinstance(self._source, ExplorerSession):
+            s = copy.deepcopy(self._source)
+            return files.Loaded(s, self.loaded.mesh, self.loaded.label)
+        return files.load_source(self._source, self._mesh)
+
+    def _connect(self, client: viser.ClientHandle) -> None:
+        from .app import RunningApp
+
+        try:
+            app = RunningApp(ClientStage(client), self._fresh(), self.host, viser_server=self.server)
+            if self.present:
+                app.set_presentation(True)
+        except Exception:  # noqa: BLE001 - one tab failing must not stop the server
+            traceback.print_exc()
+            return
+        with self._lock:
+            if self._stopped or client.client_id not in self.server.get_clients():
+                app.stop()
+                return
+            self.apps[client.client_id] = app
+
+    def _disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            app = self.apps.pop(client.client_id, None)
+        if app is not None:
+            app.stop()
+
+    def stop(self) -> None:
+        import contextlib
+        import io
+
+        with self._lock:
+            if self._stopped:
+                return
+            self._stopped = True
+            apps = list(self.apps.values())
+            self.apps.clear()
+        for app in apps:
+            app.stop()
+        with contextlib.redirect_stdout(io.StringIO()) if self.quiet else contextlib.nullcontext():
+            self.server.stop()
