@@ -97,7 +97,9 @@ class ViewActions:
                 selected = [ev.targets.positions[i]]
                 land = getattr(self.nodes, "landing", None)
                 if land is not None and self.layers.get("landing") and land.target == pid:
+                    ring = land.ring_mm * land.scale
                     selected += [land.anchor, land.rigid, land.rrbc]
+                    selected += [land.anchor + d for d in ([ring, 0, 0], [-ring, 0, 0], [0, ring, 0], [0, -ring, 0])]
             else:
                 selected = [ev.fiducial_positions[ev.fiducial_ids.index(pid)]]
         return preset_view(name, self.cell_geometry(), selected=selected, marker_mm=self.display.marker_mm)

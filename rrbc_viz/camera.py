@@ -149,8 +149,10 @@ def preset_view(name: str, cell: CellGeometry, selected=None, marker_mm: float =
         if cell.sensor_position is not None and cell.sensor_kind in ("stereo", "mocap", "laser_tracker"):
             return View(_halo(work, 2 * marker_mm), OBLIQUE, position=cell.sensor_position)
         return View(_halo(work, 2 * marker_mm), TOP)  # no camera to look through: straight down on the work
-    if name == "work area":  # where the robot works: registration points, fiducials, targets, the robot's base
-        return View(_halo(cell.points("registration", "fiducials", "targets", "robot"), 2 * marker_mm), OBLIQUE)
+    if name == "work area":  # where the robot works: registration points, fiducials, targets (and the robot's base
+        # in a modelled cell; measured data carry no cell around the points)
+        names = ("registration", "fiducials", "targets") + (("robot",) if cell.sensor_kind is not None else ())
+        return View(_halo(cell.points(*names), 2 * marker_mm), OBLIQUE)
     if name == "close-up":  # the targets and fiducials from above (the fixture plate)
         return View(_halo(work, 2 * marker_mm), STEEP)
     if name == "selected point":

@@ -94,6 +94,18 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
             ("wait_text", "The plane is sampled"),
         ],
     ),
+    # The landing bullseye of target H5 (selected from the list): in the panel at true size and floating above H5
+    # in the scene, the view framed on it.
+    (
+        "app_bullseye.png",
+        [("select", ("Select", "target H5")), ("tab", "View"), ("button", "selected point"), ("tab", "Explore")],
+    ),
+    # Each shipped scene and a measurement file as they open (the work-area view), and presentation mode on a
+    # 1280x720 projector (SHOT_OPTIONS).
+    ("scene_breadboard.png", []),
+    ("scene_peg_in_hole.png", []),
+    ("measurements.png", []),
+    ("presentation_1280x720.png", [("tab", "Learn"), ("button", "Next"), ("wait_text", "Step 1 of 9")]),
     # The results table with gp (a std column beside the others), the method chosen in the panel.
     ("app_gp_table.png", [("select", ("Interpolation", "gp")), ("wait_text", "std")]),
     # Plan tab: F1 slid in under the plate (as a fiducial drag does), so H1's region leaves the hull (red halo;
@@ -114,6 +126,19 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
         ],
     ),
 ]
+
+#: Per-shot options: "serve" (keyword arguments of serve: a source, presentation mode) and "viewport" (the
+#: browser window, default helpers.VIEWPORT 1280x800).
+SCENES = ROOT / "scenes"
+SHOT_OPTIONS: dict[str, dict] = {
+    "scene_breadboard.png": {"serve": {"source": str(SCENES / "breadboard_vanwyk2018.toml")}},
+    "scene_peg_in_hole.png": {"serve": {"source": str(SCENES / "peg_in_hole_cell.toml")}},
+    "measurements.png": {
+        "serve": {"source": str(ROOT / "rrbc_core" / "data" / "example_measurements.csv")},
+        "mesh_node": "/registration/points",  # no work-cell mesh with this file: wait for the points instead
+    },
+    "presentation_1280x720.png": {"serve": {"present": True}, "viewport": {"width": 1280, "height": 720}},
+}
 
 APP_ENTRY = "rrbc_viz.app:serve"
 DEFAULT_MESH_NODE = "/mesh/cell"  # rrbc_viz/nodes.py
@@ -314,10 +339,12 @@ def take_shot(
     out: Path,
     max_kb: float = MAX_KB,
 ) -> Path:
-    app = serve(port=0)
+    opts = dict(SHOT_OPTIONS.get(name, {}))
+    mesh_node = opts.get("mesh_node", mesh_node)
+    app = serve(port=0, **opts.get("serve", {}))
     try:
         h.wait_for_port(int(app.port), timeout_s=30)
-        ctx = browser.new_context(viewport=dict(h.VIEWPORT))
+        ctx = browser.new_context(viewport=dict(opts.get("viewport", h.VIEWPORT)))
         try:
             page = ctx.new_page()
             page.set_default_timeout(RENDER_TIMEOUT_S * 1000)

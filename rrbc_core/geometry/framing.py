@@ -77,6 +77,45 @@ def project(points, pose: CameraPose) -> tuple[np.ndarray, np.ndarray]:
     return ndc, depth
 
 
+def _inside(p, position, f, r, u, tx, ty, window, min_distance, tol=1e-9) -> bool:
+    d = p - position
+    depth = d @ f
+    if np.any(depth < min_distance - tol):
+        return False
+    x, y = (d @ r) / (depth * tx), (d @ u) / (depth * ty)
+    x_lo, x_hi, y_lo, y_hi = window
+    return bool(
+        np.all(x >= x_lo - tol) and np.all(x <= x_hi + tol) and np.all(y >= y_lo - tol) and np.all(y <= y_hi + tol)
+    )
+
+
+def _centre(p, position, f, r, u, tx, ty, window, min_distance, rounds: int = 20) -> np.ndarray:
+    """Slide the camera sideways (same depth) so the points' extent in the image is centred in the window: the
+    tight programme leaves the slack direction's placement arbitrary (points pushed against one edge). Each
+    step moves by the extent's offset from the window's centre at the depth of the points' median, halved
+    until no point leaves the window."""
+    x_lo, x_hi, y_lo, y_hi = window
+    cx_w, cy_w = 0.5 * (x_lo + x_hi), 0.5 * (y_lo + y_hi)
+    for _ in range(rounds):
+        d = p - position
+        depth = d @ f
+        x, y = (d @ r) / (depth * tx), (d @ u) / (depth * ty)
+        off_x = 0.5 * (x.min() + x.max()) - cx_w
+        off_y = 0.5 * (y.min() + y.max()) - cy_w
+        if abs(off_x) < 1e-4 and abs(off_y) < 1e-4:
+            break
+        dm = float(np.median(depth))
+        move = off_x * tx * dm * r + off_y * ty * dm * u
+        for k in range(6):  # perspective: points at other depths shift more or less; shorten the step if needed
+            step = position + move / 2**k
+            if _inside(p, step, f, r, u, tx, ty, window, min_distance):
+                position = step
+                break
+        else:
+            break
+    return position
+
+
 def frame_points(
     points,
     direction,
@@ -112,7 +151,8 @@ def frame_points(
     Returns
     -------
     CameraPose
-        Its look-at point lies on the optical axis at the depth of the points' bounding-box centre.
+        Its look-at point lies on the optical axis at the depth of the points' bounding-box centre. Along the
+        direction the points do not fill, they are centred in the window (`_centre`).
     """
     p = as_points(points, "points to frame", empty=False)
     if not (0.0 < fov_y < np.pi) or not (aspect > 0) or not (0.0 <= panel_fraction <= 0.8) or not (0 <= margin < 0.5):
@@ -137,6 +177,7 @@ def frame_points(
     if res.status != 0:  # pragma: no cover - the programme is always feasible (stand far enough back)
         raise InputError(f"cannot frame these points: {res.message}")
     position = np.asarray(res.x, float)
+    position = _centre(p, position, f, r, u, tx, ty, (x_lo, x_hi, y_lo, y_hi), min_distance)
     centre = 0.5 * (p.min(0) + p.max(0))
     depth = max(float((centre - position) @ f), min_distance)
     return CameraPose(position, position + depth * f, u, float(fov_y), float(aspect))

@@ -36,6 +36,9 @@ def test_framed_points_lie_inside_the_free_window_and_the_framing_is_tight(seed)
         ]
     )
     assert edges.min() < 1e-5
+    # centred: the points' extent sits in the middle of the window in both directions (the slack one included)
+    assert abs(0.5 * (ndc[:, 0].min() + ndc[:, 0].max()) - 0.5 * (-1 + x_hi)) < 0.05
+    assert abs(0.5 * (ndc[:, 1].min() + ndc[:, 1].max())) < 0.05
     # stepping 1 % closer along the axis pushes some point out of the window
     f = pose.forward
     closer = CameraPose(pose.position + 0.01 * depth.max() * f, pose.look_at, pose.up, fov, aspect)
