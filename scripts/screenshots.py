@@ -76,7 +76,9 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     (
         "app_drag.png",
         [
+            ("tab", "View"),
             ("button", "close-up"),
+            ("tab", "Explore"),
             ("drag", ("/targets/H1/gizmo", 0.7, -2.5)),
             ("tab", "View"),
             ("button", "selected point"),

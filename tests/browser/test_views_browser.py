@@ -104,9 +104,13 @@ def _hidden_by_mesh(mesh, camera: np.ndarray, points: np.ndarray, slack_mm: floa
     return hidden
 
 
-def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_app, page_for):
-    app = viser_app(lambda: serve())
+@pytest.mark.parametrize("projector", [False, True], ids=["1280x800", "presentation-1280x720"])
+def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_app, page_for, projector):
+    """Also as a teacher runs it: presentation mode on a 1280x720 projector, nobody touching the camera."""
+    app = viser_app(lambda: serve(present=projector))
     page, _ = page_for(app.url, dismiss_notification=False)
+    if projector:
+        page.set_viewport_size({"width": 1280, "height": 720})
     # viser's own "software WebGL" notice (headless only; a user closes it once) would cover the top left
     dismiss_software_webgl_notification(page, timeout_s=10.0)
     mesh = app.loaded.mesh

@@ -447,13 +447,19 @@ def test_cli_view_help_and_bad_scene(tmp_path):
     assert len(lines) == 1 and "bad.toml" in lines[0]
 
 
-def test_cli_view_starts_and_prints_the_url():
+@pytest.mark.parametrize(
+    "flags, mode",
+    [([], "one session shared by every tab"), (["--per-client", "--present"], "one session per browser tab")],
+)
+def test_cli_view_starts_and_prints_the_url(flags, mode):
     import signal
 
-    proc = subprocess.Popen(RRBC + ["view", "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        RRBC + ["view", "--port", "0", *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     try:
         line = proc.stdout.readline()
-        assert "http://127.0.0.1:" in line
+        assert "http://127.0.0.1:" in line and mode in line
         url = line.split(" at ")[1].split()[0]
         with urllib.request.urlopen(url, timeout=10) as r:
             assert r.status == 200
