@@ -177,9 +177,10 @@ def _step9(ev: Evaluation, ctx: LessonContext) -> str:
             "add check rows to score it."
         )
     return (
-        f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (vermillion) versus with RRBC (teal), "
-        f"offsets ×{ctx.magnification:g} from the truth (dark centre of each bullseye floating above its target; "
-        f"the panel's bullseye shows them at true size). Over {sm['scored']} scored targets the RMS error is "
+        f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (vermillion) versus with RRBC (teal), offsets "
+        f"from the truth (the dark centre) on the bullseye beside the selected target, ring scale written beside it "
+        f"(select another target to move it; the panel's bullseye shows the same at true size). Over "
+        f"{sm['scored']} scored targets the RMS error is "
         f"**{_mm(sm['rmst_rigid_mm'])} rigid → {_mm(sm['rmst_rrbc_mm'])} with RRBC** "
         f"(max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])})."
     )
@@ -188,7 +189,7 @@ def _step9(ev: Evaluation, ctx: LessonContext) -> str:
 STEPS: tuple[Step, ...] = (
     Step(
         "Measure registration points",
-        ("mesh", "frames", "registration", "labels"),
+        ("mesh", "arm", "sensor", "frames", "registration", "labels"),
         _step1,
         focus=("registration", "robot"),
     ),
@@ -216,7 +217,7 @@ STEPS: tuple[Step, ...] = (
         focus=("fiducials", "corrections"),
         see_through=True,
     ),
-    Step("Measure the targets", ("mesh", "targets", "fiducials"), _step7),
+    Step("Measure the targets", ("mesh", "sensor", "targets", "fiducials"), _step7),
     Step(
         "Interpolate corrections to the targets",
         ("mesh", "fiducials", "targets", "corrections"),
@@ -224,7 +225,7 @@ STEPS: tuple[Step, ...] = (
         focus=("targets", "fiducials", "corrections"),
         see_through=True,
     ),
-    Step("Correct and map to the robot", ("mesh", "targets", "landing"), _step9, focus=("targets", "landing")),
+    Step("Correct and map to the robot", ("mesh", "arm", "targets", "landing"), _step9, focus=("targets", "landing")),
 )
 
 
