@@ -176,6 +176,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="start in presentation mode: large text, collapsible panel, larger markers (for a projector)",
     )
     v.set_defaults(run=_cmd_view)
+
+    from rrbc_core.cli_authoring import add_parsers
+
+    add_parsers(sub)
     return p
 
 

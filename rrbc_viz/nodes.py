@@ -335,7 +335,7 @@ class SceneNodes(HeatMapNodes):
         self.arm = None
         self.scene_model = scene
         self._arm_key = None
-        if scene is not None and scene.robot_model == "ur5" and len(ev.targets.ids):
+        if scene is not None and scene.robot_model in ("ur5", "ur10") and len(ev.targets.ids):
             self.arm = ArmNodes(sc)
             self.arm.build()
         if scene is not None and scene.sensor_kind != "ground_truth":

@@ -4,6 +4,7 @@ they read back exactly, the file replaced atomically (a failed write leaves the 
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 import secrets
@@ -42,41 +43,50 @@ def write_measurements(path: str | PathLike, mset: MeasurementSet, comments: Seq
         The set is invalid or the file cannot be written (one line).
     """
     validate(mset)
+    write_time = bool(np.any(np.isfinite(mset.time)))
+    header = ["id", "role", *SENSOR_COLUMNS, *ROBOT_COLUMNS] + (["time"] if write_time else []) + list(mset.extra)
+    fh = io.StringIO()
+    for comment in comments:
+        for text in str(comment).splitlines() or [""]:
+            fh.write(f"# {text}\n" if text else "#\n")
+    plain = csv.writer(fh, lineterminator="\n")
+    quoted = csv.writer(fh, lineterminator="\n", quoting=csv.QUOTE_ALL)
+    plain.writerow(header)
+    extra_values = list(mset.extra.values())
+    for i in range(len(mset.ids)):
+        row = [mset.ids[i], mset.roles[i]]
+        row += [_cell(v) for v in mset.sensor[i]]
+        row += [_cell(v) for v in mset.robot[i]]
+        if write_time:
+            row.append(_cell(mset.time[i]))
+        row += [str(values[i]) for values in extra_values]
+        # A row whose id starts with '#' would read as a comment unless its first cell is quoted; csv
+        # quotes '\n' (the line terminator) but not a lone '\r', which readers take as a line break.
+        needs_quotes = row[0].lstrip().startswith("#") or any("\r" in cell for cell in row)
+        (quoted if needs_quotes else plain).writerow(row)
+    atomic_write_text(path, fh.getvalue())
+
+
+def atomic_write_text(path: str | PathLike, text: str) -> None:
+    """Write `text` (UTF-8) to `path` atomically: a temporary file beside it, fsync'd, then ``os.replace``; an
+    existing file keeps its permissions, and a failure leaves it as it was. InputError (one line) if it cannot
+    be written."""
     dest = os.fspath(path)
     if isinstance(dest, bytes):
         dest = os.fsdecode(dest)
     directory = os.path.dirname(os.path.abspath(dest))
     base = os.path.basename(dest)
     tmp = os.path.join(directory, f".{base}.{secrets.token_hex(6)}.tmp")
-    write_time = bool(np.any(np.isfinite(mset.time)))
-    header = ["id", "role", *SENSOR_COLUMNS, *ROBOT_COLUMNS] + (["time"] if write_time else []) + list(mset.extra)
     try:
         mode = os.stat(dest).st_mode & 0o7777 if os.path.exists(dest) else None
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     except OSError as exc:
         raise _error(dest, None, None, f"cannot write the file: {exc.strerror or exc}") from None
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            for comment in comments:
-                for text in str(comment).splitlines() or [""]:
-                    fh.write(f"# {text}\n" if text else "#\n")
-            plain = csv.writer(fh, lineterminator="\n")
-            quoted = csv.writer(fh, lineterminator="\n", quoting=csv.QUOTE_ALL)
-            plain.writerow(header)
-            extra_values = list(mset.extra.values())
-            for i in range(len(mset.ids)):
-                row = [mset.ids[i], mset.roles[i]]
-                row += [_cell(v) for v in mset.sensor[i]]
-                row += [_cell(v) for v in mset.robot[i]]
-                if write_time:
-                    row.append(_cell(mset.time[i]))
-                row += [str(values[i]) for values in extra_values]
-                # A row whose id starts with '#' would read as a comment unless its first cell is quoted; csv
-                # quotes '\n' (the line terminator) but not a lone '\r', which readers take as a line break.
-                needs_quotes = row[0].lstrip().startswith("#") or any("\r" in cell for cell in row)
-                (quoted if needs_quotes else plain).writerow(row)
-            fh.flush()
-            os.fsync(fh.fileno())
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as out:
+            out.write(text)
+            out.flush()
+            os.fsync(out.fileno())
         if mode is not None:
             os.chmod(tmp, mode)
         os.replace(tmp, dest)

@@ -29,8 +29,9 @@ import numpy as np
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
 
-#: Robot models the scene format accepts (the kinematics module implements these).
-ROBOT_MODELS = ("ur5",)
+#: Robot models the scene format accepts: arms the kinematics module implements (kinematics.ROBOT_DH), and "none",
+#: a robot without kinematics (its bias is then given as a field, e.g. smooth_field; no kinematic term allowed).
+ROBOT_MODELS = ("ur5", "ur10", "none")
 #: Sensor kinds: labels only (they name what the error model stands for; the error model does the work).
 #: "ground_truth" is for scenes whose "sensor" is a reference artefact (the Van Wyk & Marvel breadboard).
 SENSOR_KINDS = ("stereo", "mocap", "laser_tracker", "ground_truth")

@@ -341,7 +341,7 @@ def load_scene(path: str | PathLike) -> Scene:
 
     # [error_model] -----------------------------------------------------------------------------------------
     em_table = c.table(doc.get("error_model", {}), "error_model")
-    error_model = _with_tool(_error_model(c, em_table), em_table, tool_mm)
+    error_model = _with_tool(_error_model(c, em_table), em_table, tool_mm, robot_model, c.source)
 
     # mesh (last: the most expensive check) -------------------------------------------------------------------
     if not mesh_path.is_file():
@@ -515,20 +515,27 @@ def _layouts(c: _Checker, doc: dict, pool: dict) -> tuple[dict, dict]:
     return layouts, points
 
 
-def _with_tool(model, table: dict, tool_mm: float):
-    """The scene's `robot.tool_mm` is the tool of every kinematic robot term that does not give its own `dh`:
-    the simulated arm then reaches the scene's points with its tool tip, as the scene describes."""
+def _with_tool(model, table: dict, tool_mm: float, robot_model: str = "ur5", source: str = "scene"):
+    """The scene's arm (`robot.model`) with its `robot.tool_mm` is the arm of every kinematic robot term that does
+    not give its own `dh`: the simulated arm then reaches the scene's points with its tool tip, as the scene
+    describes. A robot without kinematics ("none") cannot carry a kinematic term."""
     import dataclasses
 
     from rrbc_core.simulation.errormodels import ErrorModel
     from rrbc_core.simulation.errorterms import Kinematic
+    from rrbc_core.simulation.kinematics import ROBOT_DH
 
     rows = table.get("robot", []) if isinstance(table, dict) else []
     terms = []
     for k, term in enumerate(model.robot):
         own_dh = k < len(rows) and isinstance(rows[k], dict) and "dh" in rows[k]
+        if isinstance(term, Kinematic) and robot_model not in ROBOT_DH:
+            raise InputError(
+                f"{source}: error_model.robot[{k}]: a kinematic error term needs an arm model (robot.model "
+                f"{', '.join(ROBOT_DH)}), not {robot_model!r}; give a robot without kinematics a smooth_field bias"
+            )
         if isinstance(term, Kinematic) and not own_dh:
-            term = dataclasses.replace(term, dh=term.dh.with_tool(tool_mm))
+            term = dataclasses.replace(term, dh=ROBOT_DH[robot_model].with_tool(tool_mm))
         terms.append(term)
     return ErrorModel(robot=tuple(terms), sensor=model.sensor)
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, inverse, joint_frames, tool_down
+from rrbc_core.simulation.kinematics import ROBOT_DH, UR5_TOOL_DOWN_SEED, forward, inverse, joint_frames, tool_down
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,11 +41,12 @@ def arm_pose(scene, position, bias_scale: float = 1.0) -> ArmPose:
     """The scene's arm reaching `position` (3,) mm with its tool pointing down (module docstring).
 
     Raises InputError if the scene has no arm model or the place is out of reach."""
-    if getattr(scene, "robot_model", None) != "ur5":
-        raise InputError("this cell has no arm model to draw (scene robot model is not 'ur5')")
+    model = getattr(scene, "robot_model", None)
+    if model not in ROBOT_DH:
+        raise InputError(f"this cell has no arm model to draw (robot model {model!r}; arms: {', '.join(ROBOT_DH)})")
     p = np.asarray(position, float).reshape(3)
     term = _kinematic_term(scene.error_model)
-    nominal = term.dh if term is not None else UR5.with_tool(scene.tool_mm)
+    nominal = term.dh if term is not None else ROBOT_DH[model].with_tool(scene.tool_mm)
     seed = UR5_TOOL_DOWN_SEED if scene.joint_seed is None else scene.joint_seed
     q = inverse(nominal, p, tool_down(scene.tool_yaw_deg), seed)
     landed = p

@@ -100,6 +100,17 @@ UR5 = DHParameters(
 )
 """Nominal UR5 (CB3) DH parameters (UR manual; docs/theory.md §5.1), no tool."""
 
+UR10 = DHParameters(
+    a=np.array([0.0, -612.0, -572.3, 0.0, 0.0, 0.0]),
+    d=np.array([127.3, 0.0, 0.0, 163.941, 115.7, 92.2]),
+    alpha=np.array([np.pi / 2, 0.0, 0.0, np.pi / 2, -np.pi / 2, 0.0]),
+    theta_offset=np.zeros(6),
+)
+"""Nominal UR10 (CB3) DH parameters (UR's published table), no tool."""
+
+#: Arm models by the name a scene gives (`robot.model`); "none" (a robot without kinematics) has no entry.
+ROBOT_DH = {"ur5": UR5, "ur10": UR10}
+
 UR5_TOOL_DOWN_SEED = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
 """A UR5 configuration (rad) with the tool pointing straight down (−z of the base), elbow up, about 0.5 m in
 front of the base; use it as the IK seed for probing a plate in front of the robot (see `tool_down`)."""

@@ -563,3 +563,22 @@ def test_default_scene_path_missing(monkeypatch, tmp_path):
     monkeypatch.setattr(scene_mod, "__file__", str(tmp_path / "pkg" / "scene.py"))
     with pytest.raises(InputError, match="default scene is missing"):
         default_scene_path()
+
+
+def test_robot_models_ur10_and_none(tmp_path):
+    """robot.model picks the arm of the scene's kinematic error terms (UR10's DH for "ur10"); "none" is a robot
+    without kinematics and refuses a kinematic term."""
+    from rrbc_core.simulation.kinematics import UR10
+
+    text = (SCENES / "demo_workcell.toml").read_text(encoding="utf-8")
+    mesh = (SCENES / "meshes" / "demo_workcell.glb").resolve()
+    text = text.replace('mesh = "meshes/demo_workcell.glb"', f'mesh = "{mesh}"')
+    ur10 = tmp_path / "ur10.toml"
+    ur10.write_text(text.replace('model = "ur5"', 'model = "ur10"'), encoding="utf-8")
+    scene = load_scene(ur10)
+    term = next(t for t in scene.error_model.terms("robot") if t.kind == "kinematic")
+    assert term.dh.same_as(UR10.with_tool(scene.tool_mm))
+    none = tmp_path / "none.toml"
+    none.write_text(text.replace('model = "ur5"', 'model = "none"'), encoding="utf-8")
+    with pytest.raises(InputError, match="kinematic error term needs an arm model"):
+        load_scene(none)

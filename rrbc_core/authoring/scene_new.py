@@ -1,0 +1,313 @@
+"""`rrbc scene new`: a complete, documented scene from a cell mesh and a list of targets (docs/scene-new.md).
+
+Frames and units: the mesh and the targets are in the robot base frame, mm; the robot's base is at the origin.
+What is chosen, in order (each choice is written as a comment into the scene):
+
+1. Checks: the mesh loads and is in mm; every target lies outside the solids and within the arm's reach (tool
+   pointing down; not checked for a robot without kinematics).
+2. The sensor: `--sensor X,Y,Z` or the first of eight places around the targets (1.2 m above them, 0.9 m out)
+   that sees the most targets; it looks at the targets' centre.
+3. Candidate fiducial locations: points on the mesh's upward-facing surfaces around the targets (their box
+   widened by `margin`), ~`spacing` apart, reachable, seen by the sensor, outside solids and clear of the targets.
+4. Registration points: up to 6 well-spread points in free space over the work (80 and 280 mm above the
+   targets' top), reachable, seen and outside solids.
+5. A default error model for the robot and sensor type (stated in the file).
+6. The initial fiducials: the planner (`analysis.planning.plan`) picks `fiducials` of the candidates.
+
+The file is written atomically (a temporary file in the output directory, loaded back with `load_scene` as a
+check, then renamed): a refusal or a failure leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rrbc_core.authoring import cell_geometry as cg
+from rrbc_core.authoring.targets_file import read_targets
+from rrbc_core.errors import InputError
+
+ROBOTS = ("ur5", "ur10", "none")
+SENSOR_HEIGHT_MM = 1200.0
+SENSOR_OUT_MM = 900.0
+MAX_CANDIDATES = 250
+MIN_CANDIDATES = 4
+
+
+@dataclass(frozen=True)
+class NewSceneOptions:
+    """Choices of `rrbc scene new` (module docstring). Lengths in mm."""
+
+    robot: str = "ur5"
+    sensor: tuple | None = None
+    sensor_kind: str = "stereo"
+    tool_mm: float = 100.0
+    fiducials: int = 6
+    spacing_mm: float = 40.0
+    margin_mm: float = 150.0
+    seed: int = 0
+    name: str | None = None
+
+    def __post_init__(self):
+        if self.robot not in ROBOTS:
+            raise InputError(f"--robot must be one of {', '.join(ROBOTS)}, got {self.robot!r}")
+        if self.sensor is not None:
+            s = np.asarray(self.sensor, float).reshape(-1)
+            if s.shape != (3,) or not np.all(np.isfinite(s)) or np.abs(s).max() > 1e6:
+                raise InputError("--sensor must be three finite numbers X,Y,Z in mm (robot frame)")
+        if not (1 <= int(self.fiducials) <= 50):
+            raise InputError(f"--fiducials must be from 1 to 50, got {self.fiducials}")
+
+
+@dataclass(frozen=True, eq=False)
+class NewScene:
+    """What was written: the scene file, the TOML text, and counts and choices for the summary line."""
+
+    path: Path
+    text: str
+    summary: dict = field(default_factory=dict)
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(f"{float(x):.3f}".rstrip("0").rstrip(".") for x in np.asarray(v).reshape(-1)) + "]"
+
+
+def _quote(s: str) -> str:
+    return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _choose_sensor(mesh, targets: np.ndarray, given) -> tuple[np.ndarray, str]:
+    centre = 0.5 * (targets.min(0) + targets.max(0))
+    if given is not None:
+        return np.asarray(given, float), "given with --sensor"
+    best, best_n = None, -1
+    for k in range(8):
+        a = -np.pi / 4 + k * np.pi / 4
+        p = centre + np.array([SENSOR_OUT_MM * np.cos(a), SENSOR_OUT_MM * np.sin(a), SENSOR_HEIGHT_MM])
+        if cg.inside(mesh, p[None])[0]:
+            continue
+        n = int(cg.seen(mesh, p, targets).sum())
+        if n > best_n:
+            best, best_n = p, n
+    if best is None:
+        raise InputError("found no place for the sensor outside the mesh's solids; give one with --sensor X,Y,Z")
+    return (
+        best,
+        f"chosen: of eight places {SENSOR_HEIGHT_MM:.0f} mm above and {SENSOR_OUT_MM:.0f} mm out from the targets, the one seeing the most ({best_n} of {len(targets)})",
+    )
+
+
+def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None = None) -> NewScene:
+    """Write a complete scene for the cell (module docstring); returns what was written. InputError for bad
+    input, with nothing written."""
+    from rrbc_core.analysis.planning import plan
+    from rrbc_core.io.scene_toml import load_scene
+
+    opt = options or NewSceneOptions()
+    out = Path(out_path)
+    if not out.name.endswith(".toml"):
+        raise InputError(f"--out {out}: the scene file must end in .toml")
+    if not out.parent.is_dir():
+        raise InputError(f"--out {out}: directory {out.parent} does not exist")
+    if out.exists() and not out.is_file():
+        raise InputError(f"--out {out}: exists and is not a regular file")
+    tl = read_targets(targets_path)
+    mesh = cg.load_cell_mesh(mesh_path)
+    t = tl.positions
+    bad = np.flatnonzero(cg.inside(mesh, t))
+    if len(bad):
+        names = ", ".join(f"{tl.ids[i]} at {_fmt(t[i])}" for i in bad[:5])
+        raise InputError(f"{tl.source}: target(s) inside a solid of the mesh: {names}; targets sit on surfaces")
+    bad = np.flatnonzero(~cg.reach(opt.robot, opt.tool_mm, t))
+    if len(bad):
+        names = ", ".join(f"{tl.ids[i]} at {_fmt(t[i])}" for i in bad[:5])
+        raise InputError(
+            f"{tl.source}: target(s) outside the {opt.robot.upper()}'s reach from its base at the origin (tool "
+            f"{opt.tool_mm:g} mm pointing down): {names}; give targets in the robot's base frame, mm"
+        )
+    sensor, sensor_why = _choose_sensor(mesh, t, opt.sensor)
+    look = 0.5 * (t.min(0) + t.max(0))
+    hidden = [tl.ids[i] for i in np.flatnonzero(~cg.seen(mesh, sensor, t))]
+
+    # candidates on surfaces around the targets
+    lo = t.min(0) - [opt.margin_mm, opt.margin_mm, 200.0]
+    hi = t.max(0) + [opt.margin_mm, opt.margin_mm, 200.0]
+    cand = cg.surface_samples(mesh, lo, hi, opt.spacing_mm, opt.seed)
+    if len(cand):
+        d = np.linalg.norm(cand[:, None, :2] - t[None, :, :2], axis=2).min(axis=1)
+        keep = d > 15.0
+        cand = cand[keep]
+    if len(cand):
+        cand = cand[cg.reach(opt.robot, opt.tool_mm, cand)]
+    if len(cand):
+        cand = cand[cg.seen(mesh, sensor, cand) & ~cg.inside(mesh, cand)]
+    if len(cand) > MAX_CANDIDATES:
+        cand = cand[np.sort(cg.spread(cand, MAX_CANDIDATES))]
+    if len(cand) < MIN_CANDIDATES:
+        raise InputError(
+            f"{mesh_path}: found only {len(cand)} usable fiducial locations on upward-facing surfaces within "
+            f"{opt.margin_mm:g} mm of the targets (reachable, seen by the sensor at {_fmt(sensor)}, outside solids); "
+            "move the sensor (--sensor) or check the mesh and the targets' frame"
+        )
+
+    # registration points in free space over the work
+    top = float(t[:, 2].max())
+    xs = np.linspace(lo[0], hi[0], 3)
+    ys = np.linspace(lo[1], hi[1], 3)
+    grid = np.array([[x, y, top + h] for h in (80.0, 280.0) for x in xs for y in ys])
+    ok = cg.reach(opt.robot, opt.tool_mm, grid) & cg.seen(mesh, sensor, grid) & ~cg.inside(mesh, grid)
+    grid = grid[ok]
+    if len(grid) < 4:
+        raise InputError(
+            f"{mesh_path}: only {len(grid)} places for registration points over the work are reachable, seen and "
+            "free (at least 4 needed); move the sensor (--sensor) or the targets"
+        )
+    reg = grid[cg.spread(grid, 6)]
+
+    # write a scene without fiducials, plan the first fiducials from the candidates, write the scene
+    fd, tmp = tempfile.mkstemp(prefix=".rrbc-scene-", suffix=".toml", dir=str(out.parent))
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        mesh_rel = os.path.relpath(Path(mesh_path).resolve(), out.parent.resolve())
+        parts = dict(
+            opt=opt,
+            tl=tl,
+            mesh_rel=mesh_rel,
+            sensor=sensor,
+            look=look,
+            sensor_why=sensor_why,
+            hidden=hidden,
+            reg=reg,
+            cand=cand,
+            name=opt.name or out.stem,
+        )
+        tmp_path.write_text(_toml(**parts, fiducials=np.zeros((0, 3)), plan_note=""), encoding="utf-8")
+        scene = load_scene(tmp_path)
+        result = plan(scene, add=int(opt.fiducials), seed=opt.seed)
+        fids = np.asarray(result.suggested, float).reshape(-1, 3)
+        chosen = set(result.suggested_ids)
+        rest = np.array([p for i, p in zip(scene.candidates.ids, scene.candidates.positions) if i not in chosen])
+        parts["cand"] = rest.reshape(-1, 3)
+        pr = result.predicted_after
+        note = (
+            f"planned by `rrbc plan` (seed {opt.seed}) from {len(cand)} candidates: predicted RMST over the targets' "
+            f"regions rigid {pr.rigid_mm:.3f} mm, RRBC {pr.rrbc_mm:.3f} mm (first-order prediction)"
+        )
+        text = _toml(**parts, fiducials=fids, plan_note=note)
+        tmp_path.write_text(text, encoding="utf-8")
+        load_scene(tmp_path)  # the file we hand over loads
+        os.replace(tmp_path, out)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+    summary = {
+        "scene": str(out),
+        "targets": len(tl.ids),
+        "registration": len(reg),
+        "fiducials": len(fids),
+        "candidates": len(parts["cand"]),
+        "sensor": [float(v) for v in sensor],
+        "hidden_targets": hidden,
+        "predicted_rmst_mm": {"rigid": float(pr.rigid_mm), "rrbc": float(pr.rrbc_mm)},
+    }
+    return NewScene(out, text, summary)
+
+
+def _error_model_toml(robot: str, kind: str, seed: int) -> str:
+    lines = []
+    if robot in ("ur5", "ur10"):
+        lines += [
+            f"# Robot: the {robot.upper()}'s kinematic (DH-parameter) error — joint offsets 0.1°, link lengths 0.2 mm, "
+            "twists 0.05°, one",
+            "# random robot drawn with this seed — and repeatability noise 0.03 mm (1σ per axis).",
+            "[[error_model.robot]]",
+            'type = "kinematic"',
+            f"seed = {int(seed)}",
+        ]
+    else:
+        lines += [
+            "# Robot without kinematics: its bias is a smooth random field, 0.5 mm RMS, correlation length 300 mm,",
+            "# plus repeatability noise 0.03 mm (1σ per axis).",
+            "[[error_model.robot]]",
+            'type = "smooth_field"',
+            "rms_mm = 0.5",
+            "length_mm = 300.0",
+            f"seed = {int(seed)}",
+        ]
+    lines += ["", "[[error_model.robot]]", 'type = "isotropic_noise"', "sigma_mm = 0.03", ""]
+    if kind == "stereo":
+        lines += [
+            "# Sensor (stereo): noise 0.02 mm across the line of sight, 0.06 mm along it (1σ).",
+            "[[error_model.sensor]]",
+            'type = "anisotropic_noise"',
+            "sigma_perp_mm = 0.02",
+            "sigma_along_mm = 0.06",
+        ]
+    else:
+        lines += [
+            f"# Sensor ({kind}): isotropic noise 0.05 mm (1σ per axis).",
+            "[[error_model.sensor]]",
+            'type = "isotropic_noise"',
+            "sigma_mm = 0.05",
+        ]
+    return "\n".join(lines)
+
+
+def _toml(opt, tl, mesh_rel, sensor, look, sensor_why, hidden, reg, cand, name, fiducials, plan_note) -> str:
+    out = [
+        f"# Written by `rrbc scene new` from {Path(tl.source).name} and {Path(mesh_rel).name}. Robot base frame, mm;",
+        "# the robot's base is at the origin. Format: scenes/README.md; how each part was chosen: docs/scene-new.md.",
+        "",
+        "[scene]",
+        f"name = {_quote(name)}",
+        f"description = {_quote(f'{len(tl.ids)} targets from {Path(tl.source).name}; generated by rrbc scene new')}",
+        'units = "mm"',
+        f"mesh = {_quote(mesh_rel)}",
+        f"seed = {int(opt.seed)}",
+        "",
+        "[robot]",
+        f'model = "{opt.robot}"',
+        f"tool_mm = {float(opt.tool_mm):g}",
+        "",
+        f"# Sensor: {sensor_why}.",
+    ]
+    if hidden:
+        out.append(f"# Hidden from it by the mesh: {', '.join(hidden)} (move it with --sensor).")
+    out += [
+        "[sensor]",
+        f'kind = "{opt.sensor_kind}"',
+        f"position = {_fmt(sensor)}",
+        f"look_at = {_fmt(look)}                 # the targets' centre",
+        "",
+        "# Registration points: well-spread points in free space 80 and 280 mm above the targets' top, reachable,",
+        "# seen by the sensor, outside solids.",
+    ]
+    for i, p in enumerate(reg):
+        out += ["[[registration]]", f'id = "R{i + 1}"', f"position = {_fmt(p)}", ""]
+    if len(fiducials):
+        out.append(f"# Fiducials: {plan_note}.")
+    for i, p in enumerate(fiducials):
+        out += ["[[fiducial]]", f'id = "F{i + 1}"', f"position = {_fmt(p)}", ""]
+    out.append(
+        f"# Candidate fiducial locations: on upward-facing surfaces within {opt.margin_mm:g} mm of the targets, "
+        f"~{opt.spacing_mm:g} mm apart,"
+    )
+    out.append("# reachable, seen by the sensor, outside solids, clear of the targets.")
+    for i, p in enumerate(cand):
+        out += ["[[candidate]]", f'id = "C{i + 1:03d}"', f"position = {_fmt(p)}", ""]
+    out.append("# Targets: from the targets file; region of variability: a cube of region_mm (default 4 mm).")
+    for pid, p, r in zip(tl.ids, tl.positions, tl.region_mm):
+        out += [
+            "[[target]]",
+            f"id = {_quote(pid)}",
+            f"position = {_fmt(p)}",
+            f'region = {{ kind = "box", size = {_fmt([r, r, r])} }}',
+            "",
+        ]
+    out += [_error_model_toml(opt.robot, opt.sensor_kind, opt.seed), ""]
+    return "\n".join(out)

@@ -1,0 +1,96 @@
+"""The `rrbc` subcommands that bring a user's cell and data in: `rrbc scene new` (a scene from a mesh and a
+target list) and `rrbc convert` (measurement file <-> 3D Slicer markups). A thin layer like `cli.py`, which adds
+these parsers (`add_parsers`); same exit codes and one-line errors (docs/cli.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from rrbc_core.errors import InputError
+
+
+def _xyz(text: str):
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z in mm, got {text!r}")
+    try:
+        return tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three numbers X,Y,Z in mm, got {text!r}") from None
+
+
+def add_parsers(sub) -> None:
+    s = sub.add_parser("scene", help="make scenes", description="Make scenes for your own cell.")
+    ss = s.add_subparsers(dest="scene_command", required=True, parser_class=type(s))
+    n = ss.add_parser(
+        "new",
+        help="a complete scene from a cell mesh and a target list",
+        description="Write a complete, documented scene (robot, sensor, registration points, candidate and planned "
+        "fiducials, error model) from a cell mesh and a targets CSV, both in the robot's base frame, mm "
+        "(docs/scene-new.md).",
+    )
+    n.add_argument("--mesh", required=True, help="the cell's mesh (STL, OBJ, PLY, GLB, 3MF; mm, robot frame)")
+    n.add_argument("--targets", required=True, help="targets CSV: id,x,y,z[,region_mm] (mm, robot frame)")
+    n.add_argument("--robot", default="ur5", choices=("ur5", "ur10", "none"), help="the arm (default ur5)")
+    n.add_argument("--sensor", type=_xyz, default=None, help="sensor position X,Y,Z in mm (default: chosen)")
+    n.add_argument("--fiducials", type=int, default=6, help="fiducials the planner places at first (default 6)")
+    n.add_argument("--seed", type=int, default=0, help="seed of the surface sampling, error model and planner")
+    n.add_argument("--out", required=True, help="the scene file to write (.toml)")
+    n.add_argument("--json", action="store_true", help="print one JSON object")
+    n.set_defaults(run=_cmd_scene_new)
+
+    c = sub.add_parser(
+        "convert",
+        help="measurement file <-> 3D Slicer markups",
+        description="Convert a measurement file to two 3D Slicer markups files (sensor and robot point lists, "
+        "labels = ids) or back (docs/formats/slicer-markups.md).",
+    )
+    c.add_argument("inputs", nargs="+", help="a measurement CSV (--to slicer) or SENSOR.mrk.json ROBOT.mrk.json")
+    c.add_argument("--to", required=True, choices=("slicer", "csv"), help="what to write")
+    c.add_argument("--out", required=True, help="a directory (--to slicer) or a CSV file (--to csv)")
+    c.set_defaults(run=_cmd_convert)
+
+
+def _cmd_scene_new(args) -> str:
+    from rrbc_core.authoring.scene_new import NewSceneOptions, new_scene
+
+    opts = NewSceneOptions(robot=args.robot, sensor=args.sensor, fiducials=args.fiducials, seed=args.seed)
+    result = new_scene(args.mesh, args.targets, args.out, opts)
+    s = result.summary
+    if args.json:
+        return json.dumps(s) + "\n"
+    lines = [
+        f"wrote {s['scene']}: {s['targets']} targets, {s['registration']} registration points, {s['fiducials']} "
+        f"fiducials planned from {s['candidates'] + s['fiducials']} candidate locations on the mesh",
+        f"sensor at ({', '.join(f'{v:.0f}' for v in s['sensor'])}) mm"
+        + (f"; hidden from it: {', '.join(s['hidden_targets'])}" if s["hidden_targets"] else "; sees every target"),
+        f"predicted RMST over the targets' regions: rigid {s['predicted_rmst_mm']['rigid']:.3f} mm, RRBC "
+        f"{s['predicted_rmst_mm']['rrbc']:.3f} mm",
+        f"next: rrbc plan {s['scene']} --add 4   |   rrbc simulate {s['scene']} --out data.csv   |   rrbc view {s['scene']}",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _cmd_convert(args) -> str:
+    from rrbc_core.io.measurements import read_measurements
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.io.slicer_markups import read_markups, write_markups
+
+    if args.to == "slicer":
+        if len(args.inputs) != 1:
+            raise InputError("convert --to slicer takes one measurement CSV")
+        src = Path(args.inputs[0])
+        mset = read_measurements(src)
+        stem = src.name[:-4] if src.name.lower().endswith(".csv") else src.name
+        paths = write_markups(mset, args.out, stem)
+        return "".join(f"wrote {p}\n" for p in paths)
+    if len(args.inputs) != 2:
+        raise InputError("convert --to csv takes two markups files: SENSOR.mrk.json ROBOT.mrk.json")
+    out = Path(args.out)
+    if out.is_dir() or not out.parent.is_dir():
+        raise InputError(f"--out {out}: must be a file in an existing directory")
+    mset = read_markups(*args.inputs)
+    write_measurements(out, mset, comments=[f"converted from {args.inputs[0]} and {args.inputs[1]} by rrbc convert"])
+    return f"wrote {out} ({len(mset.ids)} rows)\n"

@@ -1,0 +1,121 @@
+"""`rrbc scene new` on generated cells (a seeded random bench with a fixture block, targets on the fixture's top),
+through the real commands: scene new -> plan --add 4 -> simulate --out -> correct. Markers sit on surfaces and
+outside solids; bad input is refused in one line with nothing written."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from rrbc_core.io.scene_toml import load_scene
+from tests.paths import RRBC
+from tests.support.cells import random_cell
+
+
+def _run(*args, cwd=None):
+    return subprocess.run([*RRBC, *map(str, args)], capture_output=True, text=True, timeout=300, cwd=cwd)
+
+
+def _on_surface_and_outside(mesh, info, points):
+    """Distance of each point to the mesh surface (mm), and whether it is strictly inside the bench or fixture box."""
+    import trimesh
+
+    d = np.abs(trimesh.proximity.signed_distance(mesh, points))
+    fx, fy, fw, fd, fh = info["fixture"]
+    in_fixture = (np.abs(points[:, 0] - fx) < fw / 2 - 0.5) & (np.abs(points[:, 1] - fy) < fd / 2 - 0.5)
+    in_fixture &= (points[:, 2] > 0.5) & (points[:, 2] < fh - 0.5)
+    return d, in_fixture | (points[:, 2] < -0.5)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
+    mesh_path, targets_path, info = random_cell(tmp_path, seed)
+    out = tmp_path / "cell.toml"
+    r = _run("scene", "new", "--mesh", mesh_path, "--targets", targets_path, "--out", out, "--json", "--seed", seed)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["targets"] == 6 and summary["fiducials"] == 6 and summary["registration"] >= 4
+    assert summary["hidden_targets"] == []
+    scene = load_scene(out)  # what plan, simulate and view read
+    assert scene.robot_model == "ur5" and len(scene.candidates.ids) >= 20
+    np.testing.assert_allclose(scene.target_positions, info["targets"], atol=1e-3)
+    markers = np.vstack([scene.fiducials.positions, scene.candidates.positions])
+    d, inside = _on_surface_and_outside(info["mesh"], info, markers)
+    assert d.max() < 0.01 and not inside.any()  # every marker on a surface, none in a solid
+    assert np.linalg.norm(markers[:, None, :2] - info["targets"][None, :, :2], axis=2).min() > 15.0
+    # plan 4 more: the suggestions are candidates, so on surfaces and outside solids too
+    r = _run("plan", out, "--add", 4, "--json")
+    assert r.returncode == 0, r.stderr
+    plan = json.loads(r.stdout)
+    sugg = np.array(plan["suggested"], float)
+    assert len(sugg) == 4
+    d, inside = _on_surface_and_outside(info["mesh"], info, sugg)
+    assert d.max() < 0.01 and not inside.any()
+    # simulate and correct: RRBC helps on the generated cell as the planner predicted it would
+    data = tmp_path / "data.csv"
+    r = _run("simulate", out, "--out", data)
+    assert r.returncode == 0, r.stderr
+    r = _run("correct", data, "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert res["summary"]["rmst_rrbc_mm"] < res["summary"]["rmst_rigid_mm"]
+
+
+def test_other_robots_and_a_given_sensor(tmp_path):
+    mesh_path, targets_path, info = random_cell(tmp_path, 3)
+    for robot in ("ur10", "none"):
+        out = tmp_path / f"{robot}.toml"
+        r = _run(
+            "scene", "new", "--mesh", mesh_path, "--targets", targets_path, "--robot", robot,
+            "--sensor", "900,-700,1300", "--out", out, "--json",
+        )  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        scene = load_scene(out)
+        assert scene.robot_model == robot
+        np.testing.assert_allclose(scene.sensor_position, [900, -700, 1300])
+        kinds = [t.kind for t in scene.error_model.terms("robot")]
+        assert ("kinematic" in kinds) == (robot == "ur10") and ("smooth_field" in kinds) == (robot == "none")
+
+
+def _bad_cases(tmp_path):
+    import trimesh
+
+    mesh_path, targets_path, info = random_cell(tmp_path, 4)
+    cases = {}
+    (tmp_path / "garbage.stl").write_bytes(b"\x00\x01not a mesh" * 10)
+    cases["garbage.stl"] = (tmp_path / "garbage.stl", targets_path, "cannot read it as a mesh")
+    (tmp_path / "empty.obj").write_text("# nothing\n")
+    cases["empty"] = (tmp_path / "empty.obj", targets_path, "")
+    metres = info["mesh"].copy()
+    metres.apply_scale(0.001)
+    metres.export(tmp_path / "metres.stl")
+    cases["metres mesh"] = (tmp_path / "metres.stl", targets_path, "metres")
+    far = tmp_path / "far.csv"
+    fx, fy, fw, fd, fh = info["fixture"]
+    far.write_text(f"id,x,y,z\nT1,3000,0,{fh}\nT2,{fx},{fy},{fh}\n")
+    cases["out of reach"] = (mesh_path, far, "reach")
+    inner = tmp_path / "inner.csv"
+    inner.write_text(f"id,x,y,z\nT1,{fx},{fy},{fh / 2}\n")
+    cases["inside a solid"] = (mesh_path, inner, "inside a solid")
+    m_t = tmp_path / "m.csv"
+    m_t.write_text("id,x,y,z\nT1,0.4,0.1,0.02\nT2,0.45,0.1,0.02\n")
+    cases["metres targets"] = (mesh_path, m_t, "metres")
+    cols = tmp_path / "cols.csv"
+    cols.write_text("name,x,y\nT1,1,2\n")
+    cases["columns"] = (mesh_path, cols, "missing column")
+    del trimesh
+    return cases
+
+
+def test_bad_input_is_refused_in_one_line_with_nothing_written(tmp_path):
+    for label, (mesh, targets, words) in _bad_cases(tmp_path).items():
+        out = tmp_path / "out" / "x.toml"
+        out.parent.mkdir(exist_ok=True)
+        r = _run("scene", "new", "--mesh", mesh, "--targets", targets, "--out", out)
+        assert r.returncode == 2, (label, r.stderr)
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and words in lines[0], (label, r.stderr)
+        assert r.stdout == "" and list(out.parent.iterdir()) == [], label  # nothing, not even a temporary file
