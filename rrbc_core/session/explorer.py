@@ -36,13 +36,14 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
+from rrbc_core.session.authoring import SessionAuthoring
 from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate, seed_for
 from rrbc_core.session.planning_view import SessionPlanning
 from rrbc_core.session.views import SessionViews
 from rrbc_core.simulation.measurement import MeasurementModel
 
 
-class ExplorerSession(SessionPlanning, SessionViews):
+class ExplorerSession(SessionPlanning, SessionViews, SessionAuthoring):
     """The interactive session behind the browser app: a layout of points, the settings, and everything shown.
 
     Make one with `from_scene(scene)` (points measured through the scene's measurement model wherever they are
@@ -82,6 +83,14 @@ class ExplorerSession(SessionPlanning, SessionViews):
         self.suggestion = None  # the last planning.PlanResult from suggest_fiducials (None: none pending)
         self._suggestion_key = None  # planning key of the layout the suggestion was made for
         self.accepted: tuple = ()  # ids of fiducials added by accept_suggestions, in order
+        # candidate fiducial locations (scene mode; authoring edits them) and the edit history (authoring)
+        cands = getattr(scene, "candidates", None)
+        self.candidates = Group(
+            tuple(cands.ids) if cands is not None else (),
+            np.array(cands.positions, float).reshape(-1, 3) if cands is not None else np.zeros((0, 3)),
+        )
+        self._undo: list = []
+        self._redo: list = []
 
     # ------------------------------------------------------------------------------------------------ sources
     @classmethod

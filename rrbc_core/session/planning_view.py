@@ -44,6 +44,11 @@ class SessionPlanning:
             self.layout["registration"].positions.tobytes(),
             float(s.noise_scale),
             float(s.bias_scale),
+            self.layout["targets"].ids,
+            self.candidates.ids,
+            self.candidates.positions.tobytes(),
+            np.asarray(self.sensor_to_robot.translation).tobytes() if self.sensor_to_robot is not None else b"",
+            np.asarray(self.sensor_to_robot.rotation).tobytes() if self.sensor_to_robot is not None else b"",
         )
 
     def planning_fiducials(self) -> tuple[tuple, np.ndarray]:
@@ -90,6 +95,10 @@ class SessionPlanning:
                 fiducials=NamedPoints(ids, pos, np.full(len(ids), sc.tool_yaw_deg)),
                 registration=NamedPoints(reg.ids, reg.positions, np.full(len(reg.ids), sc.tool_yaw_deg)),
                 targets=targets,
+                candidates=NamedPoints(
+                    self.candidates.ids, self.candidates.positions, np.full(len(self.candidates.ids), sc.tool_yaw_deg)
+                ),
+                sensor_to_robot=self.sensor_to_robot,
                 error_model=_scaled(sc.error_model, s.noise_scale, s.bias_scale),
             )
 
@@ -185,7 +194,7 @@ class SessionPlanning:
         return ev
 
     def _new_fiducials(self, which) -> tuple[list, np.ndarray]:
-        cands = self.scene.candidates
+        cands = self.candidates  # the session's (authoring may have added or deleted some)
         if which is None:
             if self.suggestion is None:
                 raise InputError("no suggestion to accept: press Suggest first")
@@ -201,7 +210,7 @@ class SessionPlanning:
                 unknown = [x for x in ids if x not in cands.ids]
                 if unknown:
                     raise InputError(f"not a candidate location of this scene: {', '.join(unknown[:5])}")
-                pos = np.array([cands.position(x) for x in ids], float).reshape(-1, 3)
+                pos = np.array([cands.positions[cands.index(x)] for x in ids], float).reshape(-1, 3)
             else:
                 try:
                     pos = np.asarray(which, float).reshape(-1, 3)
