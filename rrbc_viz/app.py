@@ -50,6 +50,7 @@ from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
 from . import diagnosis_panel, files, tables, teaching
+from .app_authoring import AuthoringActions
 from .app_tabs import TabActions
 from .app_views import ViewActions
 from .camera import OPENING, CameraDirector, preset_view
@@ -93,7 +94,7 @@ def _nice(x: float) -> float:
     return e
 
 
-class RunningApp(TabActions, ViewActions):
+class RunningApp(TabActions, ViewActions, AuthoringActions):
     """A running app. `server` is where it draws (the viser server, shared by every tab; or one tab's
     `stage.ClientStage` with `viser_server` the server behind it), `session` its ExplorerSession (replaced when a
     file is loaded), `port`/`url` where to point a browser. `stop()` frees the port (only an app that owns its
@@ -142,6 +143,7 @@ class RunningApp(TabActions, ViewActions):
         self.mc_seed: int | None = None  # the noise seed of the last run requested (None: the session's)
         self._install(loaded, first=True)
         server.on_client_connect(self._frame_new_client)
+        server.scene.on_click()(self._on_scene_click)
 
     @property
     def lock(self) -> threading.RLock:
@@ -198,6 +200,7 @@ class RunningApp(TabActions, ViewActions):
                 self.controls.sync_settings(self.session.settings, self.session.kind)
                 self.controls.sync_display(self.display, self.session.kind)
                 self.controls.sync_layers(self.layers)
+                self.controls.sync_authoring(self.session.can_undo, self.session.can_redo)
                 self.controls.text["source"] = (
                     f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}."
                 )

@@ -19,6 +19,7 @@ import viser
 from rrbc_core import interpolation, registration
 from rrbc_core.session.evaluation import Settings
 
+from .authoring_panel import AuthoringPanel
 from .camera import PRESETS
 from .colors import legend_html
 from .diagnosis_panel import PROMPT
@@ -410,6 +411,7 @@ class Controls:
             plan_tab()  # the app builds the Plan tab's panel inside the tab, and keeps it
         with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
             self.file = FilePanel(gui, app)
+            self.authoring = AuthoringPanel(gui, app)
 
     def apply_theme(self, presentation: bool) -> None:
         """The panel's theme. Presentation mode makes its text large (PRESENTATION_CSS: the panel's sizes are in
@@ -469,6 +471,12 @@ class Controls:
             lo, hi = float(np.floor(offsets[0])), float(np.ceil(offsets[1]))
             v.slice_offset.min, v.slice_offset.max = lo, hi
             v.slice_offset.value = float(np.clip(round(offset), lo, hi))
+
+    def sync_authoring(self, can_undo: bool, can_redo: bool) -> None:
+        """The Edit folder's undo/redo buttons (and its scene-only controls, for the current source)."""
+        s = self.app.session
+        pose = s.sensor_to_robot if s.kind == "scene" else None
+        self.authoring.sync(can_undo, can_redo, s.kind == "scene", None if pose is None else pose.translation)
 
     def sync_presentation(self, on: bool) -> None:
         with self.syncing.quiet():

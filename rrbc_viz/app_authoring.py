@@ -1,0 +1,183 @@
+"""Authoring a cell in the app: a click on the cell adds the chosen kind of point where the click's ray meets the
+mesh; delete the selected point; undo/redo; move the sensor; upload a mesh; download the scene, the measurement
+plan and Slicer markups. The session does the editing (`rrbc_core.session.authoring`); here the click becomes a
+point and the scene is redrawn. Part of `RunningApp` (`app.py`).
+
+Frames and units: robot frame, mm. A registration point goes `REGISTRATION_LIFT_MM` above the clicked surface
+(registration points are held in free space); the others sit on it.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import tempfile
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+from rrbc_core.errors import InputError
+from rrbc_core.simulation.visibility import cast_from
+
+from . import files
+
+CLICK_MODES = (
+    ("nothing (select)", None),
+    ("registration point", "registration"),
+    ("fiducial", "fiducials"),
+    ("target", "targets"),
+    ("candidate", "candidates"),
+)
+REGISTRATION_LIFT_MM = 100.0
+
+
+def surface_hit(mesh, origin, direction) -> np.ndarray | None:
+    """Where the ray from `origin` along `direction` (robot frame) first meets the mesh, or None."""
+    d = np.asarray(direction, float).reshape(3)
+    n = np.linalg.norm(d)
+    if mesh is None or not n > 0:
+        return None
+    d = d / n
+    t, _ = cast_from(mesh, np.asarray(origin, float).reshape(3), d[None])
+    return None if not np.isfinite(t[0]) else np.asarray(origin, float) + float(t[0]) * d
+
+
+class AuthoringActions:
+    """Part of `RunningApp` (see there); split out to keep modules short."""
+
+    click_mode: str | None = None
+    target_region_mm: float = 4.0
+
+    def set_click_mode(self, kind: str | None, region_mm: float | None = None) -> None:
+        """What a click on the cell adds: None (clicks select), "registration", "fiducials", "targets",
+        "candidates"; `region_mm`: the cube edge of an added target's region."""
+        if kind not in {k for _, k in CLICK_MODES}:
+            raise InputError(f"unknown click mode {kind!r}")
+        self.click_mode = kind
+        if region_mm is not None:
+            self.target_region_mm = float(region_mm)
+
+    def _on_scene_click(self, event) -> None:
+        if self.click_mode is None:
+            return
+        try:
+            self.add_at_ray(event.ray_origin, event.ray_direction, client=event.client)
+        except Exception:  # noqa: BLE001 - keep serving
+            traceback.print_exc()
+            self._message("internal error while adding a point (see the server log)", event.client)
+
+    def add_at_ray(self, origin, direction, kind: str | None = None, client=None):
+        """Add a point of `kind` (default: the click mode) where the ray meets the cell; returns the Evaluation
+        or None (a message says why)."""
+        kind = kind or self.click_mode
+        with self._lock:
+            hit = surface_hit(self.loaded.mesh, origin, direction)
+            if hit is None:
+                self._message("the click did not meet the cell's mesh: click on a surface", client, title="Not added")
+                return None
+            if kind == "registration":
+                hit = hit + [0.0, 0.0, REGISTRATION_LIFT_MM]
+            return self._author(lambda s: s.add_point(kind, hit, region_mm=self.target_region_mm), client)
+
+    def delete_selected(self, client=None):
+        """Delete the selected point."""
+        with self._lock:
+            if self.selected is None:
+                self._message("select a point first (click it)", client, title="Nothing deleted")
+                return None
+            kind, pid = self.selected
+            self.selected = None
+            return self._author(lambda s: s.remove_point(kind, pid), client)
+
+    def undo(self, client=None):
+        return self._author(lambda s: s.undo(), client)
+
+    def redo(self, client=None):
+        return self._author(lambda s: s.redo(), client)
+
+    def move_sensor(self, position, client=None):
+        return self._author(lambda s: s.move_sensor(position), client)
+
+    def _author(self, change, client):
+        """Apply a structural edit to the session and redraw the scene (points were added or removed)."""
+        with self._lock:
+            try:
+                ev = change(self.session)
+            except InputError as exc:
+                self._message(str(exc), client, title="Not done")
+                return None
+            if self.selected is not None:
+                kind, pid = self.selected
+                ids = ev.targets.ids if kind == "targets" else ev.fiducial_ids if kind == "fiducials" else ()
+                if pid not in ids:
+                    self.selected = None
+            self._redraw(ev)
+        self.request_monte_carlo()
+        return ev
+
+    def _redraw(self, ev) -> None:
+        """Rebuild the scene's nodes for the session as it is now (caller holds the lock)."""
+        with self.server.atomic():
+            self.nodes.selected = self.selected
+            self.nodes.build(self.session, ev, self.loaded.mesh, self.display, self.layers)
+            self.slice_node.clear()
+            self.planning.build(self.session)
+            self._show(ev, heat=True)
+            self.controls.sync_authoring(self.session.can_undo, self.session.can_redo)
+
+    def upload_mesh(self, name: str, content: bytes, client=None) -> bool:
+        """Use an uploaded mesh (any format trimesh reads; robot frame, mm) as the cell's mesh: it is drawn, clicks
+        land on it, and a saved scene refers to it (kept in a temporary directory of this server; save the mesh
+        beside the downloaded scene)."""
+        from rrbc_core.authoring.cell_geometry import load_cell_mesh
+
+        suffix = Path(str(name)).suffix.lower()
+        if suffix not in (".stl", ".obj", ".ply", ".glb", ".gltf", ".3mf", ".off"):
+            self._message(f"{name}: not a mesh file (STL, OBJ, PLY, GLB, 3MF)", client, title="Upload refused")
+            return False
+        with self._lock:
+            d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
+            path = d / ("cell" + suffix)
+            path.write_bytes(content)
+            try:
+                mesh = load_cell_mesh(path)
+            except InputError as exc:
+                self._message(str(exc).replace(str(path), str(name)), client, title="Upload refused")
+                return False
+            self.loaded = files.Loaded(self.loaded.session, mesh, self.loaded.label)
+            self.uploaded_mesh = path
+            self._redraw(self.session.last)
+        self._message(f"{name}: the cell's mesh now ({len(mesh.faces)} triangles)", client, error=False)
+        return True
+
+    def export_authoring(self, what: str) -> list[tuple[str, bytes]]:
+        """Files of "scene" (the session as a scene TOML), "plan" (the measurement plan CSV) or "slicer" (two
+        markups files of the current data)."""
+        from rrbc_core.io.slicer_markups import to_markups
+
+        with self._lock:
+            slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", self.session.name).strip("-.") or "rrbc"
+            if what == "scene":
+                mesh = getattr(self, "uploaded_mesh", None)
+                text = self.session.scene_toml(mesh=mesh.name if mesh is not None else None)
+                return [(f"{slug}.toml", text.encode("utf-8"))]
+            if what == "plan":
+                return [(f"{slug}-measurement-plan.csv", self.session.measurement_plan().encode("utf-8"))]
+            if what == "slicer":
+                sensor, robot = to_markups(self.session.export_measurements())
+                return [
+                    (f"{slug}_sensor.mrk.json", (json.dumps(sensor, indent=1) + "\n").encode("utf-8")),
+                    (f"{slug}_robot.mrk.json", (json.dumps(robot, indent=1) + "\n").encode("utf-8")),
+                ]
+        raise InputError(f"unknown export '{what}': scene, plan or slicer")
+
+    def download_authoring(self, what: str, client=None) -> list[tuple[str, bytes]] | None:
+        try:
+            out = self.export_authoring(what)
+        except (InputError, ValueError) as exc:
+            self._message(str(exc), client, title="Export failed")
+            return None
+        for name, content in out:
+            (client or self.server).send_file_download(name, content)
+        return out

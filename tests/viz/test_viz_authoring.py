@@ -1,0 +1,102 @@
+"""Authoring a cell in the app without a browser: a scene click adds the chosen point where its ray meets the
+mesh; delete, undo and redo through the panel's buttons; move the sensor; an uploaded mesh becomes the cell's;
+the downloads (scene, measurement plan, Slicer markups) hold the session, and the scene reloads to the same
+numbers."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import viser
+
+from rrbc_core.errors import InputError
+from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.session.explorer import ExplorerSession
+from tests.viz.helpers import _press
+
+
+def _scene_click(app, origin, direction):
+    """A scene-level click as viser delivers it (SceneClickEvent to the on_click callback)."""
+    event = viser.SceneClickEvent(
+        client=None,
+        client_id=0,
+        ray_origin=tuple(origin),
+        ray_direction=tuple(direction),
+        screen_pos=(0.5, 0.5),
+        modifier=None,
+    )
+    app._on_scene_click(event)
+
+
+def test_clicks_add_points_where_the_ray_meets_the_mesh_and_edits_undo(app):
+    panel = app.controls.authoring
+    n_f = len(app.session.last.fiducial_ids)
+    _scene_click(app, [500, 0, 800], [0, 0, -1])  # select mode: nothing is added
+    assert len(app.session.last.fiducial_ids) == n_f
+    panel.mode.value = "fiducial"
+    _scene_click(app, [500, 0, 800], [0, 0, -1])  # straight down onto the fixture plate (top at z = 15)
+    ev = app.session.last
+    assert len(ev.fiducial_ids) == n_f + 1
+    np.testing.assert_allclose(ev.fiducial_positions[-1], [500, 0, 15], atol=1e-3)
+    assert ("fiducials", ev.fiducial_ids[-1]) in app.nodes.gizmos  # drawn
+    panel.mode.value = "registration point"
+    _scene_click(app, [300, 300, 900], [0, 0, -1])  # onto the table (z = 0): the point goes 100 mm above it
+    np.testing.assert_allclose(app.session.last.registration_positions[-1], [300, 300, 100], atol=1e-3)
+    panel.mode.value = "target"
+    panel.region.value = 6.0
+    _scene_click(app, [450, 20, 800], [0, 0, -1])
+    pid = app.session.last.targets.ids[-1]
+    np.testing.assert_allclose(app.session.regions[pid].size, [6, 6, 6])
+    _scene_click(app, [5000, 0, 800], [0, 0, -1])  # misses the mesh
+    assert "did not meet the cell" in app.last_message
+    assert not panel.undo.disabled and panel.redo.disabled
+    app.select("targets", pid)
+    _press(panel.delete)
+    assert pid not in app.session.last.targets.ids and app.selected is None
+    _press(panel.undo)
+    assert pid in app.session.last.targets.ids and not panel.redo.disabled
+    _press(panel.redo)
+    assert pid not in app.session.last.targets.ids
+    panel.sensor.value = (1000.0, -500.0, 1300.0)
+    _press(panel.move_sensor)
+    np.testing.assert_allclose(app.session.sensor_to_robot.translation, [1000, -500, 1300])
+
+
+def test_downloads_hold_the_session_and_the_scene_reloads_to_the_same_numbers(app, tmp_path):
+    app.set_click_mode("fiducials")
+    app.add_at_ray([520, -60, 800], [0, 0, -1])
+    app.handle_drag("targets", "H3", [430.0, 40.0, 15.0], "end")
+    ((name, content),) = app.export_authoring("scene")
+    assert name.endswith(".toml")
+    path = tmp_path / name
+    path.write_bytes(content)
+    again = ExplorerSession.from_scene(load_scene(path)).last
+    ev = app.session.last
+    assert again.fiducial_ids == ev.fiducial_ids
+    np.testing.assert_allclose(again.targets.error_rrbc, ev.targets.error_rrbc, rtol=1e-9)
+    ((plan_name, plan),) = app.export_authoring("plan")
+    assert plan_name.endswith(".csv") and b"planned_x" in plan
+    docs = app.export_authoring("slicer")
+    assert [n.rsplit("_", 1)[1] for n, _ in docs] == ["sensor.mrk.json", "robot.mrk.json"]
+    assert json.loads(docs[0][1])["markups"][0]["controlPoints"][0]["label"]
+
+
+def test_an_uploaded_mesh_becomes_the_cells(app, tmp_path):
+    import trimesh
+
+    box = trimesh.creation.box(extents=(600, 600, 20))
+    box.apply_translation((450, 0, 40))  # a slab over the plate: clicks now land on its top (z = 50)
+    stl = tmp_path / "slab.stl"
+    box.export(stl)
+    assert app.upload_mesh("slab.stl", stl.read_bytes())
+    app.set_click_mode("fiducials")
+    app.add_at_ray([450, 0, 800], [0, 0, -1])
+    np.testing.assert_allclose(app.session.last.fiducial_positions[-1], [450, 0, 50], atol=1e-3)
+    assert not app.upload_mesh("notes.txt", b"hello")
+    assert not app.upload_mesh("bad.stl", b"\x00" * 10)
+    ((_, content),) = app.export_authoring("scene")
+    assert b'mesh = "cell.stl"' in content  # saved beside the scene by the user
+    with pytest.raises(InputError, match="unknown export"):
+        app.export_authoring("zip")
