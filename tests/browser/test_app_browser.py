@@ -30,6 +30,7 @@ from .helpers import (
     mesh_node_names,
     node_exists,
     node_screen_position,
+    text_field,
     wait_for,
     wait_until_rendered,
 )
@@ -76,11 +77,6 @@ def server_position(app, kind: str, pid: str) -> np.ndarray:
 
 def open_tab(page, name: str) -> None:
     page.get_by_role("tab", name=name).click()
-
-
-def text_field(page, label: str):
-    """The input of a viser text field labelled `label` (its <label for> does not point at the input)."""
-    return page.locator(f"xpath=//*[normalize-space(text())='{label}']/ancestor::*[.//input][1]//input").first
 
 
 def drag_axis(page, node: str, scale: float, from_local: float, to_local: float, steps: int = 20) -> None:

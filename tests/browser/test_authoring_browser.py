@@ -1,0 +1,81 @@
+"""Authoring a cell in headless Chromium, as a user does it: upload a mesh from the File tab, place a fiducial by
+clicking on the mesh in the 3-D view, save the scene (a real download), load the saved scene back and see the same
+numbers in the page."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rrbc_viz.app import serve
+
+from .helpers import text_field, wait_for
+
+pytestmark = pytest.mark.browser
+
+_JS_PROJECT = """(p) => { const m = window.__viserMutable; const obj = m.nodeRefFromName['/mesh'];
+  obj.updateWorldMatrix(true, false); m.camera.updateMatrixWorld(); const V = m.camera.position.constructor;
+  const q = obj.localToWorld(new V(p[0], p[1], p[2])).project(m.camera); const r = m.canvas.getBoundingClientRect();
+  return [r.left + (q.x + 1) / 2 * r.width, r.top + (1 - q.y) / 2 * r.height]; }"""
+
+_JS_TABLE_ROWS = """() => Array.from(document.querySelectorAll('table tr'))
+  .map((tr) => Array.from(tr.cells).map((c) => c.innerText.trim()))"""
+
+
+def _rows(page):
+    return {r[0]: r[1:] for r in page.evaluate(_JS_TABLE_ROWS) if r and r[0].startswith("H")}
+
+
+def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_app, page_for, tmp_path):
+    import trimesh
+
+    slab = trimesh.creation.box(extents=(700, 700, 20))
+    slab.apply_translation((450, 0, 40))  # over the fixture plate: its top is at z = 50
+    mesh_file = tmp_path / "slab.stl"
+    slab.export(mesh_file)
+    app = viser_app(lambda: serve())
+    page, _ = page_for(app.url)
+    page.get_by_role("tab", name="File").click()
+    with page.expect_file_chooser() as chooser:
+        page.get_by_text("Upload cell mesh").click()
+    chooser.value.set_files(str(mesh_file))
+    wait_for(lambda: getattr(app, "uploaded_mesh", None) is not None, 30, message="the mesh uploaded", page=page)
+    page.get_by_label("Click on the cell adds").click()
+    page.get_by_role("option", name="fiducial", exact=True).click()
+    wait_for(lambda: app.click_mode == "fiducials", 10, message="click mode on the server", page=page)
+    app.show_camera("close-up")
+    page.wait_for_timeout(1500)
+    n = len(app.session.last.fiducial_ids)
+    spot = np.array([560.0, 120.0, 50.0])
+    x, y = page.evaluate(_JS_PROJECT, spot.tolist())
+    page.mouse.click(x, y)
+    wait_for(
+        lambda: len(app.session.last.fiducial_ids) == n + 1, 15, message="a fiducial added by the click", page=page
+    )
+    added = app.session.last.fiducial_positions[-1]
+    assert abs(added[2] - 50.0) < 1e-3 and np.linalg.norm(added[:2] - spot[:2]) < 5.0  # on the slab, where clicked
+    page.get_by_role("tab", name="Explore").click()
+    wait_for(lambda: len(_rows(page)) == 8, 15, message="the table", page=page)
+    before = _rows(page)
+    # save: a real download, kept beside the mesh under the name the scene refers to
+    page.get_by_role("tab", name="File").click()
+    page.get_by_text("Save scene (TOML)").click()
+    link = page.locator('a[download$=".toml"]').first  # viser offers the file in a notification: the user clicks it
+    link.wait_for(state="visible", timeout=20_000)
+    with page.expect_download() as dl:
+        link.click()
+    saved = tmp_path / dl.value.suggested_filename
+    dl.value.save_as(saved)
+    (tmp_path / "cell.stl").write_bytes(mesh_file.read_bytes())
+    # reload it through the File tab, as a user would
+    text_field(page, "Scene or data file").fill(str(saved))
+    page.get_by_role("button", name="Load file").click()
+    wait_for(
+        lambda: app.loaded.label.endswith(saved.name) or saved.name in app.loaded.label,
+        20,
+        message="the saved scene loaded",
+        page=page,
+    )
+    assert len(app.session.last.fiducial_ids) == n + 1
+    page.get_by_role("tab", name="Explore").click()
+    wait_for(lambda: _rows(page) == before, 20, message="the same numbers after reloading", page=page)
