@@ -86,13 +86,15 @@ class TabActions:
         with self._lock:
             session = self.session
             k = int(panel.k.value) if k is None else k
-            if session.kind != "scene":
-                self._message(
-                    "planning needs a scene (an error model and candidate locations); measured data have none",
-                    client,
-                    title="Cannot plan",
-                )
-                return None
+            if session.kind != "scene":  # measured data: coverage first, then spread (no error model needed)
+                try:
+                    plan = session.coverage_plan(k)
+                except InputError as exc:
+                    self._message(str(exc), client, title="Cannot plan")
+                    return None
+                with self.server.atomic():
+                    panel.show_coverage_suggestion(plan)
+                return plan
             if not panel.begin():
                 self._message("a suggestion is already being computed", client, title="Planning")
                 return None

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import viser
 
+from rrbc_core.analysis.planning_coverage import DEFAULT_REGION_MM
 from rrbc_core.errors import InputError
 
 from . import colors
@@ -116,6 +117,12 @@ def render_state(state: PlanningState, excluded: int = 0, settings=None) -> str:
     ]
     note = method_note(settings)
     return "\n\n".join(lines + ([note] if note else []))
+
+
+PROMPT_MEASURED = (
+    "Measured data: **Suggest** proposes places to measure more fiducials so that every target's region lies "
+    "inside their hull (coverage first, then spread; no error model needed)."
+)
 
 
 def render_coverage(state: PlanningState) -> str:
@@ -273,11 +280,13 @@ class PlanningPanel:
                         cast_shadow=False,
                         receive_shadow=False,
                     )
-        for h in (self.k, self.suggest_button, self.colour, self.accept_button, self.clear_button):
+        for h in (self.colour, self.accept_button, self.clear_button):
             h.disabled = not scene_mode
-            h.visible = scene_mode  # measured data: no candidates and no error model, so nothing to suggest
+            h.visible = scene_mode  # measured data: suggestions are places to measure, not fiducials to add
+        self.k.disabled = self.suggest_button.disabled = False
+        self.k.visible = self.suggest_button.visible = True
         self.accept_button.disabled = self.clear_button.disabled = True
-        self.suggestion_md.content = PROMPT_SUGGEST if scene_mode else ""
+        self.suggestion_md.content = PROMPT_SUGGEST if scene_mode else PROMPT_MEASURED
 
     def _assign(self, handle, attr: str, value) -> None:
         key = (id(handle), attr)
@@ -300,12 +309,24 @@ class PlanningPanel:
         """Recompute (or take from the session's cache) and show the planning state (caller holds the app lock,
         inside atomic()). due=False marks it stale instead (a drag update between throttled refreshes)."""
         if session.kind != "scene":
-            self.info.content = (
-                "Planning needs a scene (an error model to predict with and candidate locations "
-                "to choose from); measured data have none. Load a scene in the File tab."
-            )
-            self.coverage_md.content = ""
             self.state = None
+            if not due:
+                return
+            try:
+                plan = session.coverage_plan(0)
+            except InputError as exc:
+                self.info.content = f"Cannot plan: {exc}"
+                self.coverage_md.content = ""
+                return
+            full = int(np.sum(plan.coverage >= 1.0))
+            self.info.content = (
+                f"Measured data (no error model, so no predicted RMST): coverage of each target's region (taken as a "
+                f"{DEFAULT_REGION_MM:g} mm cube: measured targets carry none) by the fiducials' hull: **{full} of "
+                f"{len(plan.target_ids)} targets** fully inside."
+            )
+            self.coverage_md.content = "| target | coverage |\n|---|---:|\n" + "\n".join(
+                f"| {pid} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |" for pid, c in zip(plan.target_ids, plan.coverage)
+            )
             return
         if not due:
             self.stale = True
@@ -416,7 +437,7 @@ class PlanningPanel:
     def end(self, session: ExplorerSession) -> None:
         with self._busy_lock:
             self._busy = False
-        self.suggest_button.disabled = session.kind != "scene"
+        self.suggest_button.disabled = False
 
     def progress(self, *args) -> None:
         """The planner's progress callback: shows its last label (at most 5 times a second)."""
@@ -463,6 +484,44 @@ class PlanningPanel:
         has = len(self.ghosts) > 0
         self.accept_button.disabled = not has
         self.clear_button.disabled = not has
+
+    def show_coverage_suggestion(self, plan) -> None:
+        """Measured data: ghost spheres at the places to measure more fiducials, and what coverage they give."""
+        self.remove_ghosts()
+        r = self.view.marker_mm()
+        for i, (cid, p) in enumerate(zip(plan.suggested_ids, plan.suggested)):
+            name = f"/plan/ghosts/{i}"
+            self.ghosts.append(
+                self.server.scene.add_icosphere(
+                    name,
+                    radius=GHOST_MARKERS * r,
+                    color=colors.GHOST,
+                    subdivisions=2,
+                    opacity=colors.GHOST_OPACITY,
+                    position=np.asarray(p, float),
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
+            )
+            self.ghost_labels.append(
+                self.server.scene.add_label(
+                    f"{name}/label",
+                    f"+{i + 1} {cid}",
+                    position=(0.0, 0.0, 2.0 * r),
+                    font_size_mode="screen",
+                    font_screen_scale=0.75,
+                    anchor="bottom-left",
+                )  # fmt: skip
+            )
+        rows = "\n".join(f"| +{i + 1} | {', '.join(f'{v:.0f}' for v in p)} |" for i, p in enumerate(plan.suggested))
+        full = int(np.sum(plan.coverage_after >= 1.0))
+        self.suggestion_md.content = (
+            f"**Measure {len(plan.suggested)} more fiducials here** (coverage first, then spread; from "
+            f"{plan.candidate_source}):\n\n| # | x, y, z (mm) |\n|---|---|\n{rows}\n\n"
+            f"Coverage after: {full} of {len(plan.target_ids)} targets fully inside "
+            f"(mean {np.mean(plan.coverage):.0%} → {np.mean(plan.coverage_after):.0%}). Measure them in both frames "
+            "and add the rows to your file (role fiducial)."
+        )
 
     def remove_ghosts(self, prompt: bool = False) -> None:
         for h in self.ghost_labels + self.ghosts:

@@ -38,12 +38,12 @@ from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.authoring import SessionAuthoring
 from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate, seed_for
-from rrbc_core.session.planning_view import SessionPlanning
+from rrbc_core.session.planning_view import SessionCoveragePlanning, SessionPlanning
 from rrbc_core.session.views import SessionViews
 from rrbc_core.simulation.measurement import MeasurementModel
 
 
-class ExplorerSession(SessionPlanning, SessionViews, SessionAuthoring):
+class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, SessionAuthoring):
     """The interactive session behind the browser app: a layout of points, the settings, and everything shown.
 
     Make one with `from_scene(scene)` (points measured through the scene's measurement model wherever they are

@@ -222,3 +222,54 @@ class SessionPlanning:
         if not np.all(np.isfinite(pos)):
             raise InputError("a fiducial position must be 3 finite numbers (mm)")
         return ids, pos
+
+
+class SessionCoveragePlanning:
+    """Part of `ExplorerSession`: planning for measured data (no error model), coverage first, then spread
+    (analysis.planning_coverage)."""
+
+    def coverage_plan(self, k: int = 0, seed: int = 0):
+        """Coverage of each target's region (a DEFAULT_REGION_MM cube: measured targets carry none) by the included
+        fiducials, and `k` suggested places to measure more fiducials (0: coverage only). Candidates: the cell
+        mesh's upward surfaces around the targets seen from the sensor (when the data came with a mesh), else a
+        grid in free space around them. Returns a planning_coverage.CoveragePlan."""
+        from rrbc_core.analysis import planning_coverage as pc
+        from rrbc_core.analysis.planning import coverage
+
+        if self.kind != "measurements":
+            raise InputError("coverage planning is for measured data; a scene plans with its error model (Suggest)")
+        ev = self.last
+        tg = self.layout["targets"]
+        regions = pc.cube_regions(tg.positions)
+        fids = ev.fiducial_positions[ev.included]
+        cov = (
+            coverage(fids, regions, samples_per_region=pc.COVERAGE_SAMPLES, seed=seed)
+            if len(fids) >= 4
+            else np.zeros(len(regions))
+        )
+        if not k:
+            return pc.CoveragePlan(tg.ids, cov, (), np.zeros((0, 3)), cov, "", 0)
+        cands, source = self._coverage_candidates(tg.positions, ev, seed)
+        idx, after = pc.suggest_by_coverage(fids, regions, cands, k, seed)
+        return pc.CoveragePlan(
+            tg.ids, cov, tuple(f"M{i + 1}" for i in range(len(idx))), cands[idx], after, source, len(cands)
+        )
+
+    def _coverage_candidates(self, targets, ev, seed: int):
+        from rrbc_core.analysis import planning_coverage as pc
+        from rrbc_core.authoring import cell_geometry as cg
+
+        if self.mesh_path:
+            mesh = cg.load_cell_mesh(self.mesh_path)
+            lo = targets.min(0) - [150.0, 150.0, 200.0]
+            hi = targets.max(0) + [150.0, 150.0, 200.0]
+            pts = cg.surface_samples(mesh, lo, hi, 40.0, seed)
+            if len(pts):
+                sensor = np.asarray(ev.registration.mapping.translation, float)  # the sensor's origin, robot frame
+                pts = pts[cg.seen(mesh, sensor, pts) & ~cg.inside(mesh, pts)]
+            if len(pts) > pc.MAX_CANDIDATES:
+                pts = pts[np.sort(cg.spread(pts, pc.MAX_CANDIDATES))]
+            if len(pts):
+                return pts, f"{len(pts)} places on the cell mesh's upward surfaces seen from the sensor"
+        g = pc.grid_candidates(targets)
+        return g, f"{len(g)} grid points around the targets (no mesh: free space, check that markers fit there)"

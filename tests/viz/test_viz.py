@@ -362,7 +362,9 @@ def test_measured_data_hide_the_controls_that_do_not_apply(app, measured):
         e, mc, plan = a.controls.explore, a.controls.montecarlo, a.planning
         assert e.noise.visible is scene and e.bias.visible is scene and e.new_seed.visible is scene
         assert mc.mc_run.visible is scene and mc.mc_trials.visible is scene and mc.mc_hist.visible is scene
-        assert plan.suggest_button.visible is scene and plan.k.visible is scene
+        # measured data: Suggest proposes places to measure (coverage, no error model); nothing to accept or colour
+        assert plan.suggest_button.visible and plan.k.visible
+        assert plan.accept_button.visible is scene and plan.colour.visible is scene
 
 
 def test_exports_come_from_the_session(app):

@@ -100,3 +100,20 @@ def test_an_uploaded_mesh_becomes_the_cells(app, tmp_path):
     assert b'mesh = "cell.stl"' in content  # saved beside the scene by the user
     with pytest.raises(InputError, match="unknown export"):
         app.export_authoring("zip")
+
+
+def test_the_plan_tab_suggests_where_to_measure_for_measured_data():
+    from rrbc_viz.app import serve
+    from tests.paths import EXAMPLE_CSV
+
+    app = serve(str(EXAMPLE_CSV))
+    try:
+        assert "coverage of each target's region" in app.planning.info.content
+        assert app.planning.suggest_button.visible and not app.planning.suggest_button.disabled
+        plan = app.suggest_fiducials(3)
+        assert plan is not None and len(app.planning.ghosts) == 3
+        np.testing.assert_allclose(app.planning.ghosts[0].position, plan.suggested[0])
+        assert "Measure 3 more fiducials here" in app.planning.suggestion_md.content
+        assert not app.planning.accept_button.visible  # nothing to accept: they are places to measure
+    finally:
+        app.stop()

@@ -168,15 +168,14 @@ def test_clear_and_refusals_are_visible(app):
     assert "press Suggest again" in panel.suggestion_md.content
 
 
-def test_measured_data_get_a_message_not_a_plan():
+def test_measured_data_get_coverage_planning_and_a_scene_brings_the_full_plan_back():
     app = serve(EXAMPLE_CSV, port=0)
     try:
         panel = app.planning
-        assert "Planning needs a scene" in panel.info.content
-        assert panel.suggest_button.disabled and panel.accept_button.disabled and panel.colour.disabled
-        assert app.suggest_fiducials(2) is None and "needs a scene" in app.last_message
-        assert not panel.ghosts
-        # loading a scene brings planning back
+        assert "no error model" in panel.info.content and "Predicted RMST" not in panel.info.content
+        assert panel.accept_button.disabled and panel.colour.disabled and not panel.suggest_button.disabled
+        assert app.suggest_fiducials(2) is not None and len(panel.ghosts) == 2
+        # loading a scene brings planning with an error model back
         assert app.load(ROOT / "scenes" / "peg_in_hole_cell.toml")
         assert not panel.suggest_button.disabled and "Predicted RMST" in panel.info.content
         assert set(panel.halos) == set(app.session.layout["targets"].ids)
