@@ -57,7 +57,7 @@ from .camera import OPENING, CameraDirector, preset_view
 from .colors import legend_markdown
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
-from .nodes import LAYERS, Display, SceneNodes, gizmo_name
+from .nodes import LAYERS, Display, SceneNodes, gizmo_name, nice_down
 from .planning_panel import PlanningPanel
 from .slice_nodes import SliceNode
 
@@ -83,15 +83,6 @@ def _all_points(ev: Evaluation) -> np.ndarray:
             ev.targets.positions.reshape(-1, 3),
         ]
     )
-
-
-def _nice(x: float) -> float:
-    """The 1-2-5 number nearest below x (x > 0)."""
-    e = 10.0 ** np.floor(np.log10(x))
-    for m in (5.0, 2.0, 1.0):
-        if m * e <= x:
-            return m * e
-    return e
 
 
 class RunningApp(TabActions, ViewActions, AuthoringActions):
@@ -222,7 +213,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions):
         marker = float(np.clip(np.round(0.012 * extent * 2) / 2, 0.5, 50.0))
         sizes = np.linalg.norm(ev.corrections[ev.included].reshape(-1, 3), axis=1)
         sizes = sizes[np.isfinite(sizes) & (sizes > 0)]
-        mag = _nice(0.08 * extent / float(np.median(sizes))) if len(sizes) else 200.0
+        mag = nice_down(0.08 * extent / float(np.median(sizes))) if len(sizes) else 200.0
         heat = "rrbc" if self.session.kind == "scene" else "correction"
         slice_value = heat
         return Display(

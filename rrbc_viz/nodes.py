@@ -191,10 +191,11 @@ def frame_magnification(true_pose, registered, axes_mm: float, limit: float) -> 
     d = float(np.linalg.norm(np.asarray(registered.translation, float) - np.asarray(true_pose.translation, float)))
     if d <= 0:
         return float(limit)
-    return float(np.clip(_nice_down(0.5 * axes_mm / d), 1.0, limit))
+    return float(np.clip(nice_down(0.5 * axes_mm / d), 1.0, limit))
 
 
-def _nice_down(x: float) -> float:
+def nice_down(x: float) -> float:
+    """The 1-2-5 number at or below x (x > 0)."""
     e = 10.0 ** np.floor(np.log10(x))
     for m in (5.0, 2.0, 1.0):
         if m * e <= x:

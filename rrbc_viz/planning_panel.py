@@ -452,11 +452,11 @@ class PlanningPanel:
             f"Planning: choosing {int(self.k.value)} of the scene's candidate locations… {extra}"
         ).rstrip()
 
-    def show_suggestion(self, session: ExplorerSession, result) -> None:
-        """Ghost spheres +1 … +K at the suggested places and the suggestion's text (caller holds the lock)."""
+    def _add_ghosts(self, ids, positions) -> None:
+        """Ghost spheres +1 … +K (labelled with their ids) at `positions` (K, 3), robot frame, mm."""
         self.remove_ghosts()
         r = self.view.marker_mm()
-        for i, (cid, p) in enumerate(zip(result.suggested_ids, np.asarray(result.suggested, float).reshape(-1, 3))):
+        for i, (cid, p) in enumerate(zip(ids, np.asarray(positions, float).reshape(-1, 3))):
             name = f"/plan/ghosts/{i}"
             self.ghosts.append(
                 self.server.scene.add_icosphere(
@@ -480,6 +480,10 @@ class PlanningPanel:
                     anchor="bottom-left",
                 )
             )
+
+    def show_suggestion(self, session: ExplorerSession, result) -> None:
+        """Ghost spheres +1 … +K at the suggested places and the suggestion's text (caller holds the lock)."""
+        self._add_ghosts(result.suggested_ids, result.suggested)
         self.suggestion_md.content = render_suggestion(result, session.suggestion_current)
         has = len(self.ghosts) > 0
         self.accept_button.disabled = not has
@@ -487,32 +491,7 @@ class PlanningPanel:
 
     def show_coverage_suggestion(self, plan) -> None:
         """Measured data: ghost spheres at the places to measure more fiducials, and what coverage they give."""
-        self.remove_ghosts()
-        r = self.view.marker_mm()
-        for i, (cid, p) in enumerate(zip(plan.suggested_ids, plan.suggested)):
-            name = f"/plan/ghosts/{i}"
-            self.ghosts.append(
-                self.server.scene.add_icosphere(
-                    name,
-                    radius=GHOST_MARKERS * r,
-                    color=colors.GHOST,
-                    subdivisions=2,
-                    opacity=colors.GHOST_OPACITY,
-                    position=np.asarray(p, float),
-                    cast_shadow=False,
-                    receive_shadow=False,
-                )
-            )
-            self.ghost_labels.append(
-                self.server.scene.add_label(
-                    f"{name}/label",
-                    f"+{i + 1} {cid}",
-                    position=(0.0, 0.0, 2.0 * r),
-                    font_size_mode="screen",
-                    font_screen_scale=0.75,
-                    anchor="bottom-left",
-                )  # fmt: skip
-            )
+        self._add_ghosts(plan.suggested_ids, plan.suggested)
         rows = "\n".join(f"| +{i + 1} | {', '.join(f'{v:.0f}' for v in p)} |" for i, p in enumerate(plan.suggested))
         full = int(np.sum(plan.coverage_after >= 1.0))
         self.suggestion_md.content = (

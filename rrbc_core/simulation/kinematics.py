@@ -403,13 +403,8 @@ def inverse(dh: DHParameters, position, rotation, seed_q) -> np.ndarray:
     return q[0]
 
 
-def inverse_path(dh: DHParameters, positions, rotations, seed_q) -> np.ndarray:
-    """Joint angles (P, 6) rad for tool positions (P, 3) mm and rotations (P, 3, 3) or one (3, 3) for all.
-
-    Every point is solved from the same nominal `seed_q` (6,) rad, not from the previous point, so all points
-    use one consistent configuration branch whatever their order. Raises InputError naming the unreachable
-    point indices (0-based).
-    """
+def _path_poses(positions, rotations) -> tuple[np.ndarray, np.ndarray]:
+    """Checked tool positions (P, 3) mm and rotations (P, 3, 3) (one (3, 3) is used for all)."""
     p = np.asarray(positions, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
         raise InputError(f"positions must be a finite (P, 3) array in mm, got shape {p.shape}")
@@ -419,6 +414,17 @@ def inverse_path(dh: DHParameters, positions, rotations, seed_q) -> np.ndarray:
     if r.shape != (len(p), 3, 3):
         raise InputError(f"rotations must be (3, 3) or ({len(p)}, 3, 3) for {len(p)} positions, got shape {r.shape}")
     _check_rotations(r, "rotations")
+    return p, r
+
+
+def inverse_path(dh: DHParameters, positions, rotations, seed_q) -> np.ndarray:
+    """Joint angles (P, 6) rad for tool positions (P, 3) mm and rotations (P, 3, 3) or one (3, 3) for all.
+
+    Every point is solved from the same nominal `seed_q` (6,) rad, not from the previous point, so all points
+    use one consistent configuration branch whatever their order. Raises InputError naming the unreachable
+    point indices (0-based).
+    """
+    p, r = _path_poses(positions, rotations)
     seed = _vector6("seed_q", seed_q)
     if len(p) == 0:
         return np.zeros((0, 6))
@@ -438,12 +444,7 @@ def inverse_path(dh: DHParameters, positions, rotations, seed_q) -> np.ndarray:
 def reachable(dh: DHParameters, positions, rotations, seed_q) -> np.ndarray:
     """Which tool positions (P, 3) mm with rotations (P, 3, 3) or (3, 3) the arm reaches on the configuration branch
     of `seed_q` (6,) rad: (P,) bool, the test `inverse_path` refuses with (never raises for unreachable points)."""
-    p = np.asarray(positions, dtype=float)
-    if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
-        raise InputError(f"positions must be a finite (P, 3) array in mm, got shape {p.shape}")
-    r = np.asarray(rotations, dtype=float)
-    if r.shape == (3, 3):
-        r = np.broadcast_to(r, (len(p), 3, 3))
+    p, r = _path_poses(positions, rotations)
     if len(p) == 0:
         return np.zeros(0, bool)
     _, perr, oerr = _solve(dh, p, np.ascontiguousarray(r), np.tile(_vector6("seed_q", seed_q), (len(p), 1)))

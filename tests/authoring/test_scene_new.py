@@ -62,6 +62,14 @@ def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert res["summary"]["rmst_rrbc_mm"] < res["summary"]["rmst_rigid_mm"]
+    # and the app opens it as it is
+    from rrbc_viz.app import serve
+
+    app = serve(str(out))
+    try:
+        assert app.session.last.targets.ids == scene.target_ids and app.nodes.arm is not None
+    finally:
+        app.stop()
 
 
 def test_other_robots_and_a_given_sensor(tmp_path):
