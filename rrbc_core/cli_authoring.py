@@ -132,6 +132,11 @@ def _cmd_calibrate(args) -> str:
     for m in METHODS:
         lines.append(f"{m:<11} {mm(result['rmst_mm'][m]):>16}   {mm(result['cv_rmst_mm'][m]):>12}")
     lines.append(f"recommended (chosen without the checks): {result['recommended']}")
+    k = result["kinematic_error"]
+    lines.append(
+        f"kinematic error: {'yes' if k['claimed'] else 'not claimed'} (χ² {k['chi2']:.1f} on {k['dof']} degrees of "
+        f"freedom, p = {k['p_value']:.2g}; rule: {k['rule']})"
+    )
     ident = [p for p in result["parameters"] if p["identifiable"]]
     lines.append(
         "identified errors: "

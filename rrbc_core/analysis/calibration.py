@@ -66,6 +66,15 @@ class Calibration:
     combinations: tuple
     sigma_mm: float
     residuals: np.ndarray
+    chi2: float = float("nan")
+    chi2_dof: int = 0
+
+    @property
+    def kinematic_p_value(self) -> float:
+        """P-value of "no kinematic error" (χ² of the identified arm errors against their uncertainty)."""
+        from scipy.stats import chi2
+
+        return float(chi2.sf(self.chi2, self.chi2_dof)) if self.chi2_dof else 1.0
 
     def sensor_to_robot(self, s) -> np.ndarray:
         return np.asarray(s, float).reshape(-1, 3) @ self.rotation.T + self.translation
@@ -144,6 +153,14 @@ def calibrate(q_rad, sensor, nominal: DHParameters, rotation0=None, translation0
     cov_z = sigma2 * np.linalg.pinv(jr.T @ jr)
     cov = (basis @ cov_z @ basis.T) / np.outer(sc, sc)
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    # is there a kinematic error at all? H0: the arm's identified combinations are zero (δ = 0 up to what the
+    # transform absorbs). χ² = δᵀ Cov(δ)⁺ δ with its rank as the degrees of freedom, δ in the scaled units.
+    cov_dh = (basis @ cov_z @ basis.T)[:N_DH, :N_DH]
+    d_scaled = x0[:N_DH] * sc[:N_DH]
+    w, v = np.linalg.eigh(cov_dh)
+    keep = w > w.max() * 1e-9
+    chi2 = float(np.sum((v[:, keep].T @ d_scaled) ** 2 / w[keep]))
+    chi2_dof = int(keep.sum())
     null = np.eye(len(x0)) - basis @ basis.T
     alone = np.linalg.norm(null, axis=0) < 1e-3  # a unit change of this parameter lies in the identified space
     delta = x0[:N_DH]
@@ -157,6 +174,8 @@ def calibrate(q_rad, sensor, nominal: DHParameters, rotation0=None, translation0
         translation=x0[N_DH + 3 :].copy(),
         rank=rank,
         combinations=tuple(_describe(basis[:, k]) for k in range(rank)),
-        sigma_mm=float(np.sqrt(sigma2 / 1.0)),
+        sigma_mm=float(np.sqrt(sigma2)),
         residuals=res,
+        chi2=chi2,
+        chi2_dof=chi2_dof,
     )
