@@ -10,7 +10,6 @@ Frames and units: robot frame, mm. A registration point goes `REGISTRATION_LIFT_
 from __future__ import annotations
 
 import json
-import re
 import tempfile
 import traceback
 from pathlib import Path
@@ -157,7 +156,7 @@ class AuthoringActions:
         from rrbc_core.io.slicer_markups import to_markups
 
         with self._lock:
-            slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", self.session.name).strip("-.") or "rrbc"
+            slug = files.slug(self.session.name)
             if what == "scene":
                 mesh = getattr(self, "uploaded_mesh", None)
                 text = self.session.scene_toml(mesh=mesh.name if mesh is not None else None)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import copy
 import json
-import re
 import traceback
 
 import numpy as np
@@ -247,7 +246,7 @@ class TabActions:
         """(file name, content) of "csv" (session.export_measurements() as a measurement file) or "json"
         (session.export_json())."""
         with self._lock:
-            slug = re.sub(r"[^A-Za-z0-9_.-]+", "-", self.session.name).strip("-.") or "rrbc"
+            slug = files.slug(self.session.name)
             if what == "csv":
                 s = self.session.settings
                 text = files.measurements_csv(

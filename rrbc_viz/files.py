@@ -116,3 +116,10 @@ def measurements_csv(mset: MeasurementSet, comments=()) -> str:
         path = Path(tmp) / "export.csv"
         write_measurements(path, mset, comments=comments)
         return path.read_text(encoding="utf-8")
+
+
+def slug(name: str) -> str:
+    """A file-name stem from a session's name (letters, digits, _ . - kept; "rrbc" if nothing is left)."""
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", str(name)).strip("-.") or "rrbc"

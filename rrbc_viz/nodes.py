@@ -229,12 +229,18 @@ def nice_up(x: float) -> float:
     return 10.0 * e
 
 
+def landing_offsets(t, i: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Target i's rigid and RRBC landing offsets (3,) each, robot frame, mm, from the truth (known=True) or from
+    the rigid landing (known=False); `t` an evaluation.TargetResult."""
+    known = bool(np.all(np.isfinite(t.truth[i])))
+    ref = t.truth[i] if known else t.robot_rigid[i]
+    return t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref, known
+
+
 def landing_display(t, i: int, marker_mm: float) -> LandingDisplay:
     """The landing bullseye of target i of `t` (evaluation.TargetResult). It floats beside the target, away from
     the robot's base (the arm reaches the target from that side, its wrist straight above it) and above it."""
-    known = bool(np.all(np.isfinite(t.truth[i])))
-    ref = t.truth[i] if known else t.robot_rigid[i]
-    off_rigid, off_rrbc = t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref
+    off_rigid, off_rrbc, _ = landing_offsets(t, i)
     biggest = float(max(np.linalg.norm(off_rigid), np.linalg.norm(off_rrbc)))
     ring = nice_up(biggest) if biggest > 0 else 0.1
     radius = RING_MARKERS * marker_mm
@@ -489,9 +495,7 @@ class SceneNodes(HeatMapNodes):
             precision="float32",
             visible=False,
         )
-        if len(
-            ev.targets.ids
-        ):  # unlit points (flat shading): the ring shows the legend's colours, whatever the lighting
+        if len(ev.targets.ids):  # unlit (flat shading): the ring shows the legend's colours, whatever the light
             self.nodes["/heatmap/rings"] = sc.add_point_cloud(
                 "/heatmap/rings",
                 np.zeros((1, 3), np.float32),

@@ -14,7 +14,7 @@ import numpy as np
 from rrbc_core.session.evaluation import Evaluation
 
 from . import colors
-from .nodes import nice_up
+from .nodes import landing_offsets, nice_up
 
 SIZE_PX = 220  # the bullseye's drawing, square
 BAR_PX = 34  # the z bar at its right
@@ -46,15 +46,6 @@ def choice_of(selected: tuple[str, str] | None) -> str:
         return "none"
     kind, pid = selected
     return f"{'target' if kind == 'targets' else 'fiducial'} {pid}"
-
-
-def landing_offsets(ev: Evaluation, i: int) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Target i's rigid and RRBC landing offsets (3,) each, robot frame, mm, from the truth (known=True) or
-    from the rigid landing (known=False)."""
-    t = ev.targets
-    known = bool(np.all(np.isfinite(t.truth[i])))
-    ref = t.truth[i] if known else t.robot_rigid[i]
-    return t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref, known
 
 
 def info_card(ev: Evaluation, selected: tuple[str, str] | None) -> str:
@@ -94,7 +85,7 @@ def bullseye_svg(ev: Evaluation, pid: str) -> tuple[str, str, str]:
     """The landing bullseye of target `pid` (module docstring): (inline SVG, markdown caption, HTML key)."""
     t = ev.targets
     i = t.ids.index(pid)
-    rigid, rrbc, known = landing_offsets(ev, i)
+    rigid, rrbc, known = landing_offsets(t, i)
     biggest = float(max(np.linalg.norm(rigid), np.linalg.norm(rrbc), 1e-6))
     ring = nice_up(biggest)
     c = SIZE_PX / 2

@@ -36,19 +36,11 @@ KINEMATIC_ALPHA = 1e-3
 KINEMATIC_MARGIN = 0.8
 
 
-def _idw(src, values, dst, k: int = 4, p: float = 2.0) -> np.ndarray:
-    """IDW of `values` (S, 3) at `src` (S, 3) to `dst` (D, 3): weights 1/d^p over the k nearest."""
-    src, values, dst = (np.asarray(a, float).reshape(-1, 3) for a in (src, values, dst))
-    d = np.linalg.norm(dst[:, None] - src[None], axis=2)
-    k = min(k, len(src))
-    idx = np.argsort(d, axis=1)[:, :k]
-    dd = np.take_along_axis(d, idx, axis=1)
-    w = 1.0 / np.maximum(dd, 1e-9) ** p
-    exact = dd[:, 0] < 1e-9
-    w[exact] = 0.0
-    w[exact, 0] = 1.0
-    w /= w.sum(axis=1, keepdims=True)
-    return np.einsum("dk,dkc->dc", w, values[idx])
+def _idw(src, values, dst) -> np.ndarray:
+    """IDW (interpolation.IDW: k = 4, p = 2, the defaults of `rrbc correct`) of `values` at `src` to `dst`."""
+    from rrbc_core.interpolation.idw import IDW
+
+    return IDW().fit(src, values).predict(dst).values
 
 
 def _kabsch(sensor, robot) -> tuple[np.ndarray, np.ndarray]:

@@ -121,3 +121,34 @@ def surface_samples(mesh, lo, hi, spacing_mm: float, seed: int, up_min: float = 
     first = np.ones(len(c), bool)
     first[1:] = np.any(c[1:] != c[:-1], axis=1)
     return pts[order[first]]
+
+
+def marker_candidates(
+    mesh,
+    targets,
+    sensor,
+    robot: str = "none",
+    tool_mm: float = 0.0,
+    margin_mm: float = 150.0,
+    spacing_mm: float = 40.0,
+    seed: int = 0,
+    max_count: int = 250,
+    clear_mm: float = 15.0,
+) -> np.ndarray:
+    """Places (C, 3) where a marker can go around `targets` (T, 3): on upward-facing surfaces within the targets'
+    box widened by `margin_mm` sideways and 200 mm up and down (`surface_samples`, ~`spacing_mm` apart), more than
+    `clear_mm` (in x-y) from every target, reachable (`reach`), seen from `sensor` and outside solids; at most
+    `max_count`, spread out."""
+    t = np.asarray(targets, float).reshape(-1, 3)
+    lo = t.min(0) - [margin_mm, margin_mm, 200.0]
+    hi = t.max(0) + [margin_mm, margin_mm, 200.0]
+    cand = surface_samples(mesh, lo, hi, spacing_mm, seed)
+    if len(cand) and clear_mm > 0:
+        cand = cand[np.linalg.norm(cand[:, None, :2] - t[None, :, :2], axis=2).min(axis=1) > clear_mm]
+    if len(cand):
+        cand = cand[reach(robot, tool_mm, cand)]
+    if len(cand):
+        cand = cand[seen(mesh, sensor, cand) & ~inside(mesh, cand)]
+    if len(cand) > max_count:
+        cand = cand[np.sort(spread(cand, max_count))]
+    return cand

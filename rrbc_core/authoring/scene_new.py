@@ -130,19 +130,9 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
     hidden = [tl.ids[i] for i in np.flatnonzero(~cg.seen(mesh, sensor, t))]
 
     # candidates on surfaces around the targets
-    lo = t.min(0) - [opt.margin_mm, opt.margin_mm, 200.0]
-    hi = t.max(0) + [opt.margin_mm, opt.margin_mm, 200.0]
-    cand = cg.surface_samples(mesh, lo, hi, opt.spacing_mm, opt.seed)
-    if len(cand):
-        d = np.linalg.norm(cand[:, None, :2] - t[None, :, :2], axis=2).min(axis=1)
-        keep = d > 15.0
-        cand = cand[keep]
-    if len(cand):
-        cand = cand[cg.reach(opt.robot, opt.tool_mm, cand)]
-    if len(cand):
-        cand = cand[cg.seen(mesh, sensor, cand) & ~cg.inside(mesh, cand)]
-    if len(cand) > MAX_CANDIDATES:
-        cand = cand[np.sort(cg.spread(cand, MAX_CANDIDATES))]
+    cand = cg.marker_candidates(
+        mesh, t, sensor, opt.robot, opt.tool_mm, opt.margin_mm, opt.spacing_mm, opt.seed, MAX_CANDIDATES
+    )
     if len(cand) < MIN_CANDIDATES:
         raise InputError(
             f"{mesh_path}: found only {len(cand)} usable fiducial locations on upward-facing surfaces within "
@@ -152,6 +142,7 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
 
     # registration points in free space over the work
     top = float(t[:, 2].max())
+    lo, hi = t.min(0) - opt.margin_mm, t.max(0) + opt.margin_mm
     xs = np.linspace(lo[0], hi[0], 3)
     ys = np.linspace(lo[1], hi[1], 3)
     grid = np.array([[x, y, top + h] for h in (80.0, 280.0) for x in xs for y in ys])

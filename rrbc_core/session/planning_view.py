@@ -261,14 +261,8 @@ class SessionCoveragePlanning:
 
         if self.mesh_path:
             mesh = cg.load_cell_mesh(self.mesh_path)
-            lo = targets.min(0) - [150.0, 150.0, 200.0]
-            hi = targets.max(0) + [150.0, 150.0, 200.0]
-            pts = cg.surface_samples(mesh, lo, hi, 40.0, seed)
-            if len(pts):
-                sensor = np.asarray(ev.registration.mapping.translation, float)  # the sensor's origin, robot frame
-                pts = pts[cg.seen(mesh, sensor, pts) & ~cg.inside(mesh, pts)]
-            if len(pts) > pc.MAX_CANDIDATES:
-                pts = pts[np.sort(cg.spread(pts, pc.MAX_CANDIDATES))]
+            sensor = np.asarray(ev.registration.mapping.translation, float)  # the sensor's origin, robot frame
+            pts = cg.marker_candidates(mesh, targets, sensor, seed=seed, max_count=pc.MAX_CANDIDATES, clear_mm=0.0)
             if len(pts):
                 return pts, f"{len(pts)} places on the cell mesh's upward surfaces seen from the sensor"
         g = pc.grid_candidates(targets)

@@ -107,3 +107,45 @@ def run(scenarios=SCENARIOS, fiducials=FIDUCIALS, noises=NOISES, seeds=SEEDS, pr
                     if progress:
                         progress(len(rows))
     return rows
+
+
+MIXED_SEEDS = tuple(range(20, 32))
+KIND_NAMES = ("kinematic", "sensor field", "both")
+
+
+def mixed_case(seed: int) -> tuple[str, dict]:
+    """The seeded mixed case `seed`: (kind, joint_measurements keywords): kind = seed % 3 (kinematic errors only,
+    a sensor field only, both), sizes drawn from the seed (DH ×0.5–2, field 0.1–0.5 mm RMS)."""
+    rng = np.random.default_rng(seed)
+    kind = seed % 3
+    kw = {
+        0: {"dh_size": rng.uniform(0.5, 2)},
+        1: {"dh_size": 0.0, "field_mm": rng.uniform(0.1, 0.5)},
+        2: {"dh_size": rng.uniform(0.5, 2), "field_mm": rng.uniform(0.1, 0.5)},
+    }[kind]
+    return KIND_NAMES[kind], kw
+
+
+def mixed_cases(seeds=MIXED_SEEDS) -> list[dict]:
+    """Per seeded mixed case: its kind, the best method on the checks, the recommendation, the kinematic verdict
+    (claimed, p-value) and the ratio of VEC's best cross-validated RMST to RRBC's."""
+    from rrbc_core.analysis.vec_compare import compare
+
+    out = []
+    for seed in seeds:
+        kind, kw = mixed_case(seed)
+        r = compare(joint_measurements(seed, **kw), "ur5", TOOL_MM)
+        cv = r["cv_rmst_mm"]
+        out.append(
+            {
+                "seed": seed,
+                "kind": kind,
+                "best": min(r["rmst_mm"], key=r["rmst_mm"].get),
+                "recommended": r["recommended"],
+                "claimed": r["kinematic_error"]["claimed"],
+                "p_value": r["kinematic_error"]["p_value"],
+                "cv_ratio": min(cv["vec"], cv["vec_rrbc"]) / cv["rrbc"],
+                "rmst_vec": r["rmst_mm"]["vec"],
+            }
+        )
+    return out

@@ -12,6 +12,7 @@ import pytest
 
 from rrbc_core.analysis.vec_compare import compare
 from rrbc_core.io.measurements import read_measurements
+from rrbc_core.studies import vec_study
 from tests.paths import RRBC
 from tests.support.joint_data import joint_file
 
@@ -52,23 +53,12 @@ def test_a_sensor_field_with_a_perfect_robot_gets_rrbc(tmp_path):
 def test_the_recommendation_matches_the_best_method_on_the_checks_in_nine_of_ten_cases(tmp_path):
     """Twelve seeded cells: kinematic errors only, a sensor field only, or both, of random sizes. The
     recommendation uses cross-validation over the fiducials only; the checks decide which method was best."""
-    hits = 0
-    claims = []
-    for seed in range(20, 32):
-        rng = np.random.default_rng(seed)
-        kind = seed % 3
-        kw = {
-            0: {"dh_size": rng.uniform(0.5, 2)},
-            1: {"dh_size": 0.0, "field_mm": rng.uniform(0.1, 0.5)},
-            2: {"dh_size": rng.uniform(0.5, 2), "field_mm": rng.uniform(0.1, 0.5)},
-        }[kind]
-        out = compare(read_measurements(joint_file(tmp_path / f"c{seed}.csv", seed, **kw)), "ur5", 100.0)
-        best = min(out["rmst_mm"], key=out["rmst_mm"].get)
-        hits += out["recommended"] == best
-        claims.append((kind, out["kinematic_error"]["claimed"]))
+    cases = vec_study.mixed_cases()
+    hits = sum(c["recommended"] == c["best"] for c in cases)
+    claims = [(c["kind"], c["claimed"]) for c in cases]
     assert hits / 12 >= 0.9, hits
     # a kinematic error is claimed exactly where one was planted (never for a field alone)
-    assert all(claimed == (kind != 1) for kind, claimed in claims), claims
+    assert all(claimed == (kind != "sensor field") for kind, claimed in claims), claims
 
 
 def test_bad_joint_input_is_refused_in_one_line(tmp_path):
