@@ -99,6 +99,24 @@ def _jacobian(x, theta0, q, s) -> np.ndarray:
     return out
 
 
+def position_jacobian(dh: DHParameters, q_rad) -> np.ndarray:
+    """∂FK/∂θ (N, 3, 25): how the tool point (robot frame, mm) of `dh` at joints q (N, 6) rad moves per unit of each
+    parameter in `PARAM_NAMES`, angles scaled by `ANGLE_SCALE_MM` (so every column is in mm per mm-equivalent).
+    Central differences."""
+    q = np.asarray(q_rad, float).reshape(-1, 6)
+    theta0 = dh_vector(dh)
+    sc = _scales()[:N_DH]
+    out = np.empty((len(q), 3, N_DH))
+    for k in range(N_DH):
+        h = 1e-7 if ANGULAR[k] else 1e-4
+        e = np.zeros(N_DH)
+        e[k] = h
+        plus, _ = forward(dh_from(theta0 + e), q)
+        minus, _ = forward(dh_from(theta0 - e), q)
+        out[:, :, k] = (np.asarray(plus) - np.asarray(minus)).reshape(-1, 3) / (2 * h) / sc[k]
+    return out
+
+
 def _scales() -> np.ndarray:
     """Per parameter, mm per unit (angles × ANGLE_SCALE_MM): the columns are compared in mm."""
     sc = np.ones(N_DH + 6)

@@ -37,6 +37,10 @@ class _Data:
     row_point: np.ndarray  # (R,) index of each paired row's point
     row_sensor: np.ndarray
     row_robot: np.ndarray
+    rows: np.ndarray  # (R,) the paired rows' indices in the file
+    row_time: np.ndarray  # (R,) NaN when absent
+    in_registration: np.ndarray  # (N,) bool: the point has a registration (or both) row
+    in_fiducials: np.ndarray  # (N,) bool: the point has a fiducial (or both) row
 
 
 def _paired(mset) -> _Data:
@@ -73,7 +77,12 @@ def _paired(mset) -> _Data:
         tm /= count
         if np.ptp(tm) > 0:
             time = tm
-    return _Data(list(order), s, r, count, time, row_point, rs, rr)
+    roles = np.array([mset.roles[i] for i in rows])
+    in_reg = np.zeros(n, bool)
+    in_fid = np.zeros(n, bool)
+    in_reg[row_point[np.isin(roles, ("registration", "both"))]] = True
+    in_fid[row_point[np.isin(roles, ("fiducial", "both"))]] = True
+    return _Data(list(order), s, r, count, time, row_point, rs, rr, np.asarray(rows, int), t, in_reg, in_fid)
 
 
 # ------------------------------------------------------------------------------------------ linear model
@@ -179,8 +188,9 @@ def _usable_drift(base: np.ndarray, dcol: np.ndarray):
 
 
 # ----------------------------------------------------------------------------------------------- outliers
-def _outliers(d: _Data, use_time: bool, alpha: float, white: np.ndarray):
-    """Generalised ESD on deleted (mean-shift) studentised residuals of a rigid + linear (+ drift) model.
+def _outliers(d: _Data, use_time: bool, alpha: float, white: np.ndarray, extra: np.ndarray | None = None):
+    """Generalised ESD on deleted (mean-shift) studentised residuals of a rigid + linear (+ drift) (+ `extra`:
+    fields (k, N, 3) per point, e.g. the arm's kinematic columns) model.
 
     Returns (outlier indices in order found, Bonferroni-adjusted p of the last accepted, statistics)."""
     n = len(d.ids)
@@ -195,6 +205,8 @@ def _outliers(d: _Data, use_time: bool, alpha: float, white: np.ndarray):
         x = np.hstack([g.rigid(), g.linear()])
         if use_time:
             x = np.hstack([x, _usable_drift(x, g.drift())[0]])
+        if extra is not None:
+            x = np.hstack([x, g._cols(extra[:, idx])])
         q = _orth(x)
         y = g.vec(d.robot[idx] - p)
         res = y - q @ (q.T @ y)
@@ -308,7 +320,7 @@ def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
     SVD with the reflection fix — the same fit as `registration.kabsch` on the N−1 points (to rounding), in O(N)
     memory and time. Points are centred on the full set's weighted centroid first, so the downdates do not
     cancel large numbers."""
-    w = np.asarray(weights, float)
+    w = np.asarray(weights, float)  # a point of weight 0 is not in the fit: its "left-out" fit is the full one
     c_s = (w @ sensor) / w.sum()
     c_r = (w @ robot) / w.sum()
     s, r = sensor - c_s, robot - c_r
@@ -330,20 +342,29 @@ def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
     return rot, t
 
 
-def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0):
+def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0, registration=None, fiducials=None, evaluate=None):
     """Leave-one-out prediction error at each point: rigid only, and rigid + IDW correction from its k nearest
-    others (sensor frame), with the registration of the others. Returns the two RMS values (mm)."""
+    fiducials (sensor frame), each with point i left out of the registration and the fiducials. `registration`,
+    `fiducials` (N,) bool say which points play those roles (default: all, as `rrbc correct` on a file whose rows
+    are all `both`); `evaluate` (N,) bool which points the RMS is taken over (default all). Returns the two RMS
+    values (mm)."""
     n = len(sensor)
-    kk = min(k, n - 1)
-    dist, nb = cKDTree(sensor).query(sensor, k=kk + 1)
-    dist, nb = dist.reshape(n, -1), nb.reshape(n, -1)
-    # drop each point itself (it is its own nearest unless another point coincides with it)
+    reg = np.ones(n, bool) if registration is None else np.asarray(registration, bool)
+    fid = np.ones(n, bool) if fiducials is None else np.asarray(fiducials, bool)
+    ev = np.ones(n, bool) if evaluate is None else np.asarray(evaluate, bool)
+    f_idx = np.flatnonzero(fid)
+    kk = min(k, len(f_idx) - 1)
+    if kk < 1 or reg.sum() < 4 or not ev.any():
+        return float("nan"), float("nan")
+    dist, loc = cKDTree(sensor[f_idx]).query(sensor, k=kk + 1)
+    dist, nb = dist.reshape(n, -1), f_idx[loc.reshape(n, -1)]
+    # drop each point itself when it is a fiducial (its own nearest unless another coincides), else the farthest
     self_col = nb == np.arange(n)[:, None]
     drop = np.where(self_col.any(axis=1), np.argmax(self_col, axis=1), kk)
     keep = np.ones_like(nb, bool)
     keep[np.arange(n), drop] = False
     nb, dj = nb[keep].reshape(n, kk), dist[keep].reshape(n, kk)
-    rot, t = _loo_rotations(sensor, robot, weights)
+    rot, t = _loo_rotations(sensor, robot, np.asarray(weights, float) * reg)
     e_rigid = robot - (np.einsum("nij,nj->ni", rot, sensor) + t)
     corr = robot[nb] - (np.einsum("nij,nkj->nki", rot, sensor[nb]) + t[:, None, :])  # (N, k, 3)
     on = dj <= 1e-12
@@ -351,20 +372,26 @@ def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0):
         w = np.where(on.any(axis=1, keepdims=True), on.astype(float), 1.0 / dj**power)
     c = np.einsum("nk,nkc->nc", w, corr) / w.sum(axis=1, keepdims=True)
     e_rrbc = e_rigid - c
-    rms = lambda e: float(np.sqrt(np.mean(np.sum(e**2, axis=1))))  # noqa: E731
+    rms = lambda e: float(np.sqrt(np.mean(np.sum(e[ev] ** 2, axis=1))))  # noqa: E731
     return rms(e_rigid), rms(e_rrbc)
 
 
-def _noise_cov(d: _Data, inl: np.ndarray, use_time: bool):
+def _noise_cov(
+    d: _Data, inl: np.ndarray, use_time: bool, extra: np.ndarray | None = None, row_systematic: np.ndarray | None = None
+):
     """Noise covariance (3x3, robot frame, per single measurement) and its degrees of freedom.
 
-    From repeated measurements (pure error) when present, else from the residuals of a rigid + linear (+ drift)
-    fit, corrected per axis for what the fit absorbs: E[Σ r rᵀ] = B^½ Σ B^½ approximately, B = Σ (I − H)_ii."""
+    From repeated measurements (pure error) when present — the rows' deviations from their point's mean, less
+    `row_systematic` (R, 3) mm, what the accepted systematic effects (drift, the arm) predict for each row — else
+    from the residuals of a rigid + linear (+ drift) (+ `extra` fields (k, N, 3)) fit, corrected per axis for
+    what the fit absorbs: E[Σ r rᵀ] = B^½ Σ B^½ approximately, B = Σ (I − H)_ii."""
     s, r, w = d.sensor[inl], d.robot[inl], d.count[inl]
     reg = least_squares(s, r, weights=w)
     rot = reg.mapping.rotation
     if np.any(d.count > 1):
         dev = d.row_robot - d.row_sensor @ rot.T  # the translation cancels within an id
+        if row_systematic is not None:
+            dev = dev - row_systematic
         mean_dev = np.zeros((len(d.ids), 3))
         np.add.at(mean_dev, d.row_point, dev)
         mean_dev /= d.count[:, None]
@@ -376,6 +403,8 @@ def _noise_cov(d: _Data, inl: np.ndarray, use_time: bool):
     x = np.hstack([g.rigid(), g.linear()])
     if use_time:
         x = np.hstack([x, _usable_drift(x, g.drift())[0]])
+    if extra is not None:
+        x = np.hstack([x, g._cols(extra[:, inl])])
     q = _orth(x)
     y = g.vec(r - p)
     rr = (y - q @ (q.T @ y)).reshape(len(inl), 3)

@@ -1,0 +1,163 @@
+"""The smooth field as a model, not only a test (`rrbc diagnose`, docs/theory.md §6.4): once Moran's I has found a
+field, everything else is judged on what remains beside it.
+
+Model. The residuals after the accepted low-order terms, r_a (N,) per robot axis a (mm), are a zero-mean Gaussian
+process plus noise: r_a ~ N(0, v_a K + σ² I), K_ij = exp(−|p_i − p_j|² / 2ℓ²) at the mapped points p (mm), with
+one length ℓ, one field variance v_a = λ_a σ² per axis and one isotropic noise variance σ². `fit_field` finds them
+by maximum likelihood (ℓ on a grid, λ_a by coordinate search, σ² profiled out), with K's eigendecomposition
+K = U diag(D) Uᵀ so that every quantity below is a diagonal operation in that basis.
+
+Uses:
+- `gls_whiten`: the generalised least-squares whitening (v_a K + σ² I)^−½ of design columns and data, so that the
+  nested F-tests of scale, affine, drift and kinematic terms can be repeated with the field as part of the error:
+  a field's own linear part is not a separate effect;
+- `krige_outliers`: a point the first outlier pass flagged is kept as an outlier only if its residual is far
+  from what the field predicts there from the other points (χ² with 3 dof of the standardised prediction error);
+- `noise_beside_field`: the noise covariance from the smoother's residuals e_a = (I − S_a) r_a, S_a = λ_a K
+  (λ_a K + I)⁻¹, with the field's expected leakage removed, and a parametric bootstrap of the sphericity
+  statistic under the fitted null (the same field, isotropic noise): anisotropy is claimed only beyond what the
+  field's own unevenness over the axes produces.
+
+At most `MAX_POINTS` points enter the model (a seeded subsample beyond): the work is O(MAX_POINTS³) at most.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+MAX_POINTS = 500
+_LAMBDAS = np.concatenate([[0.0], np.geomspace(1e-3, 1e5, 49)])
+_NOISE_BOOTSTRAP = 999
+
+
+@dataclass(frozen=True, eq=False)
+class FieldModel:
+    """A fitted field: `points` (M, 3) mm, `length_mm`, `lam` (3,) field-to-noise variance ratios per axis,
+    `sigma2` the noise variance (mm²), `u`, `d` the eigendecomposition of K at the points, `z` (M, 3) the residuals
+    in that basis (Uᵀ r), `index` (M,) which of the caller's points were used."""
+
+    points: np.ndarray
+    length_mm: float
+    lam: np.ndarray
+    sigma2: float
+    u: np.ndarray
+    d: np.ndarray
+    z: np.ndarray
+    index: np.ndarray
+
+    @property
+    def field_variance(self) -> np.ndarray:
+        """v_a (3,), mm² per axis."""
+        return self.lam * self.sigma2
+
+
+def _subsample(n: int, seed: int = 0) -> np.ndarray:
+    if n <= MAX_POINTS:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, MAX_POINTS, replace=False))
+
+
+def _nll(z2: np.ndarray, d: np.ndarray, lam: np.ndarray) -> tuple[float, float]:
+    """Profile negative log likelihood (up to constants) and σ̂² for ratios lam (3,)."""
+    m = len(d)
+    den = lam[None, :] * d[:, None] + 1.0  # (M, 3)
+    s2 = float(np.sum(z2 / den)) / (3 * m)
+    if s2 <= 0:
+        return np.inf, 0.0
+    return 3 * m * np.log(s2) + float(np.sum(np.log(den))), s2
+
+
+def fit_field(points: np.ndarray, residuals: np.ndarray) -> FieldModel:
+    """Maximum-likelihood field at points (N, 3) mm for residuals (N, 3) mm (module docstring)."""
+    idx = _subsample(len(points))
+    p, r = np.asarray(points, float)[idx], np.asarray(residuals, float)[idx]
+    eye = np.eye(len(p), dtype=bool)
+    d2 = np.sum((p[:, None] - p[None]) ** 2, axis=-1)
+    nn = float(np.sqrt(np.median(np.min(np.where(eye, np.inf, d2), axis=1))))
+    ext = float(np.sqrt(d2.max())) or 1.0
+    best = None
+    for ell in np.geomspace(max(nn, 1e-6) * 0.5, max(ext, nn) * 3.0, 18):
+        d, u = np.linalg.eigh(np.exp(-d2 / (2 * ell**2)))
+        d = np.clip(d, 0.0, None)
+        z = u.T @ r
+        z2 = z**2
+        lam = np.ones(3)
+        for _ in range(3):  # coordinate search over the three ratios
+            for a in range(3):
+                trial = np.repeat(lam[None], len(_LAMBDAS), axis=0)
+                trial[:, a] = _LAMBDAS
+                lam[a] = _LAMBDAS[int(np.argmin([_nll(z2, d, t)[0] for t in trial]))]
+        nll, s2 = _nll(z2, d, lam)
+        if best is None or nll < best[0]:
+            best = (nll, ell, lam.copy(), s2, u, d, z)
+    _, ell, lam, s2, u, d, z = best
+    return FieldModel(p, float(ell), lam, float(s2), u, d, z, idx)
+
+
+def gls_whiten(model: FieldModel, cols: np.ndarray) -> np.ndarray:
+    """Whiten (3N, k) point-major columns (or a (3N,) vector) by (v_a K + σ² I)^−½ per axis, on the model's
+    points: returns (3M, k) (or (3M,)), M = len(model.index)."""
+    vec = cols.ndim == 1
+    c = cols.reshape(-1, 3, 1) if vec else cols.reshape(-1, 3, cols.shape[1])
+    c = c[model.index]
+    out = np.empty_like(c)
+    for a in range(3):
+        scale = 1.0 / np.sqrt(model.lam[a] * model.d + 1.0)
+        out[:, a, :] = model.u @ (scale[:, None] * (model.u.T @ c[:, a, :]))
+    out = out.reshape(-1, out.shape[-1])
+    return out[:, 0] if vec else out
+
+
+def krige_outliers(
+    model: FieldModel, candidates: np.ndarray, residuals: np.ndarray, n_tested: int, alpha: float
+) -> np.ndarray:
+    """Which candidate points (C, 3) mm with residuals (C, 3) mm are outliers beside the field: the error of the
+    field's prediction from the model's points, standardised by its variance, χ²(3), Bonferroni over n_tested.
+    Returns a boolean (C,)."""
+    cand = np.asarray(candidates, float).reshape(-1, 3)
+    if len(cand) == 0:
+        return np.zeros(0, bool)
+    d2 = np.sum((cand[:, None] - model.points[None]) ** 2, axis=-1)
+    kt = np.exp(-d2 / (2 * model.length_mm**2)) @ model.u  # (C, M) in the eigenbasis
+    z2 = np.zeros(len(cand))
+    for a in range(3):
+        lam = model.lam[a]
+        den = lam * model.d + 1.0
+        mean = lam * (kt / den) @ model.z[:, a]
+        var = model.sigma2 * (1.0 + lam - lam * lam * np.sum(kt**2 / den, axis=1))
+        z2 += (np.asarray(residuals, float)[:, a] - mean) ** 2 / np.maximum(var, 1e-300)
+    p = np.minimum(1.0, stats.chi2.sf(z2, 3) * n_tested)
+    return p < alpha
+
+
+def _beside(z: np.ndarray, d: np.ndarray, lam: np.ndarray, sigma2: float):
+    """Noise covariance estimates (..., 3, 3) from eigenbasis residuals z (..., M, 3) (module docstring)."""
+    inv = 1.0 / (lam[None, :] * d[:, None] + 1.0)  # (M, 3)
+    e = z * inv
+    raw = np.einsum("...ma,...mb->...ab", e, e)
+    leak = lam * sigma2 * np.sum(d[:, None] * inv**2, axis=0)  # (3,)
+    den = np.einsum("ma,mb->ab", inv, inv)
+    return (raw - np.diag(leak)) / den, float(np.mean(np.diag(den)))
+
+
+def _spher_stat(cov: np.ndarray) -> np.ndarray:
+    ev = np.linalg.eigvalsh(cov)
+    ev = np.clip(ev, 1e-12 * np.maximum(ev[..., -1:], 1e-300), None)
+    return 3 * np.log(np.mean(ev, axis=-1)) - np.sum(np.log(ev), axis=-1)
+
+
+def noise_beside_field(model: FieldModel, rng: np.random.Generator) -> tuple[np.ndarray, float, float]:
+    """(noise covariance (3, 3) mm², its effective degrees of freedom, bootstrap p-value of sphericity) with the
+    field's leakage removed (module docstring)."""
+    cov, nu = _beside(model.z, model.d, model.lam, model.sigma2)
+    stat = float(_spher_stat(cov))
+    sd = np.sqrt(model.sigma2 * (model.lam[None, :] * model.d[:, None] + 1.0))  # (M, 3)
+    exceed = 0
+    for start in range(0, _NOISE_BOOTSTRAP, 100):
+        b = min(100, _NOISE_BOOTSTRAP - start)
+        zb = rng.standard_normal((b,) + sd.shape) * sd
+        exceed += int(np.sum(_spher_stat(_beside(zb, model.d, model.lam, model.sigma2)[0]) >= stat))
+    return cov, nu, (1 + exceed) / (_NOISE_BOOTSTRAP + 1)
