@@ -83,6 +83,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--alpha", type=_positive_float, default=0.01, help="family-wise false-alarm rate over all tests (default 0.01)"
     )
     g.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
+    g.add_argument(
+        "--robot", default="ur5", choices=("ur5", "ur10"), help="with joint columns: the arm's model (default ur5)"
+    )
+    g.add_argument(
+        "--tool",
+        type=_tool_mm,
+        default=0.0,
+        help="with joint columns: tool length along the flange axis, mm (default 0)",
+    )
     g.add_argument("--json", action="store_true", help="print one JSON object")
     g.set_defaults(run=_cmd_diagnose)
 
@@ -265,6 +274,16 @@ def _cmd_correct(args) -> str:
     return _table(result)
 
 
+def _tool_mm(text: str) -> float:
+    try:
+        v = float(text) if text.strip().isascii() else float("nan")
+    except ValueError:
+        v = float("nan")
+    if not (0.0 <= v <= 2000.0):
+        raise argparse.ArgumentTypeError(f"expected a tool length from 0 to 2000 mm, got {text[:20]!r}")
+    return v
+
+
 def _diagnosis_table(dg) -> str:
     sig = ", ".join(f"{v:.4g}" for v in dg.noise_sigma_mm)
     lines = [
@@ -277,6 +296,9 @@ def _diagnosis_table(dg) -> str:
         lines.append(f"{e.name} (p {e.p_value:.2g}): {e.evidence}")
     verdict = "recommended" if dg.rrbc_recommended else "not recommended"
     lines.append(f"RRBC {verdict}: expected RMST change {100 * dg.expected_rmst_change:+.1f} % (leave-one-out)")
+    if dg.expected_change_without_outliers is not None:
+        lines.append(f"  with the outliers removed from the file: {100 * dg.expected_change_without_outliers:+.1f} %")
+    lines.append(f"  predicts: {dg.assumes}")
     lines += [f"limit: {text}" for text in dg.limits]
     return "\n".join(lines) + "\n"
 
@@ -288,7 +310,7 @@ def _cmd_diagnose(args) -> str:
     if not args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
     mset = read_measurements(args.measurements)
-    dg = diagnose(mset, alpha=args.alpha, seed=args.seed)
+    dg = diagnose(mset, alpha=args.alpha, seed=args.seed, robot=args.robot, tool_mm=args.tool)
     if args.json:
         return json.dumps(dg.to_json(), allow_nan=False) + "\n"
     return _diagnosis_table(dg)

@@ -49,6 +49,7 @@ from rrbc_core.analysis.diagnosis_stats import (
     _outliers,
     _paired,
     _sphericity,
+    _usable,
     _usable_drift,
     _whitener,
 )
@@ -252,28 +253,37 @@ def _systematic(d, inl, white, use_time, arm, a_each, rng) -> _Pass:
     delta = None
     rejudged = []
     if arm is not None:
-        kcols = g._cols(arm.fields[:, inl])
         x_acc = x_of(blocks)
-        p_k, q_k, nu_k, f_k, rss_a, rss_k, _ = _ftest(y, x_acc, np.hstack([x_acc, kcols]))
+        # the arm's directions beside rigid (+ drift) — kfull = (its columns) @ k_map — and, for the test, beside
+        # everything accepted
+        base = np.hstack([blocks[k] for k in ("rigid", "drift") if k in blocks])
+        kfull, _, k_map = _usable(base, g._cols(arm.fields[:, inl]))
+        ktest = _usable(x_acc, kfull)[0]
+        p_k, q_k, nu_k, f_k, rss_a, rss_k, _ = _ftest(y, x_acc, np.hstack([x_acc, ktest]))
         tests["kinematic"] = p_k
         if p_k < a_each:
-            blocks["kinematic"] = kcols
+            # a smooth field of position alone could explain what the arm's columns fit: judge the arm beside it
+            q_b = _orth(base)
+            fb = fit_field(p, _mm_cols(g, (y - q_b @ (q_b.T @ y))[:, None]).reshape(n, 3))
+            xw0 = gls_whiten(fb, _mm_cols(g, x_acc))
+            xw1 = np.hstack([xw0, gls_whiten(fb, _mm_cols(g, ktest))])
+            p_kf = _ftest(gls_whiten(fb, _mm_cols(g, y[:, None])[:, 0]), xw0, xw1)[0]
+            tests["kinematic_beside_field"] = p_kf
+        if p_k < a_each and p_kf < a_each:
+            blocks["kinematic"] = kfull
             rejudged += _rejudge(y, blocks, found, a_each, "the arm", tests)
-            delta = _fit(y, x_of(blocks))[0][-kcols.shape[1] :]
+            delta = k_map @ _fit(y, x_of(blocks))[0][-kfull.shape[1] :]
+            rms_k = float(np.sqrt(np.mean(np.sum(np.einsum("knc,k->nc", arm.fields[:, inl], delta) ** 2, axis=1))))
             found["kinematic"] = Effect(
                 "kinematic",
-                {
-                    "robot": arm.robot,
-                    "tool_mm": arm.tool_mm,
-                    "combinations": int(q_k),
-                    "rms_mm": float(np.sqrt(max(0.0, rss_a - rss_k) / wsum)),
-                },
+                {"robot": arm.robot, "tool_mm": arm.tool_mm, "combinations": int(q_k), "rms_mm": rms_k},
                 p_k,
                 f"the residuals follow the arm's joint configuration: {q_k} combinations of its kinematic (DH) "
                 f"parameters, identifiable at these poses beside the accepted terms, reduce the residual sum of "
-                f"squares from {rss_a:.3g} to {rss_k:.3g} (F({q_k}, {nu_k}) = {f_k:.3g}, p {_fmt_p(p_k)}); "
-                f"`rrbc calibrate` identifies them and compares model-based correction with RRBC.",
-                magnitude_mm=float(np.sqrt(max(0.0, rss_a - rss_k) / wsum)),
+                f"squares from {rss_a:.3g} to {rss_k:.3g} (F({q_k}, {nu_k}) = {f_k:.3g}, p {_fmt_p(p_k)}), and "
+                f"more than a smooth field of position alone explains (p {_fmt_p(p_kf)}); `rrbc calibrate` "
+                "identifies them and compares model-based correction with RRBC.",
+                magnitude_mm=rms_k,
             )
     # smooth field: Moran's I of the residuals after the accepted model, parametric bootstrap under white noise
     x_acc = x_of(blocks)
@@ -316,7 +326,7 @@ def _systematic(d, inl, white, use_time, arm, a_each, rng) -> _Pass:
                 if k == "drift":
                     rate = ck / g.tscale
                 if k == "kinematic":
-                    delta = ck
+                    delta = k_map @ ck
             res_nl = y_mm - contrib
         for k in [k for k in blocks if k not in mm_blocks]:
             del blocks[k]
@@ -367,7 +377,7 @@ def _rejudge(y, blocks: dict, found: dict, a_each: float, beside: str, tests: di
         if name not in blocks:
             continue
         others = np.hstack([v for k, v in blocks.items() if k != name])
-        p_b = _ftest(y, others, np.hstack(list(blocks.values())))[0]
+        p_b = _ftest(y, others, np.hstack([others, _usable(others, blocks[name])[0]]))[0]
         tests[f"{name}_beside_{beside.split()[-1]}"] = p_b
         if p_b >= a_each:
             del blocks[name]

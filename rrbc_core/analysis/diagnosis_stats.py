@@ -151,7 +151,16 @@ def _rank(x: np.ndarray) -> int:
 
 
 def _fit(y: np.ndarray, x: np.ndarray):
-    coef, *_ = np.linalg.lstsq(x, y, rcond=1e-10)
+    """Least squares of y on the columns x along the directions `_rank` counts (normalised columns, singular
+    values above 1e-8 of the largest): the fit and the F-tests' degrees of freedom agree even for nearly dependent
+    columns (the arm's Jacobian beside the rigid terms). Returns (coef, residual, RSS, rank)."""
+    coef = np.zeros(x.shape[1])
+    norms = np.linalg.norm(x, axis=0)
+    ok = norms > 0
+    if ok.any():
+        u, sv, vt = np.linalg.svd(x[:, ok] / norms[ok], full_matrices=False)
+        keep = sv > 1e-8 * sv[0]
+        coef[ok] = (vt[keep].T @ ((u[:, keep].T @ y) / sv[keep])) / norms[ok]
     res = y - x @ coef
     return coef, res, float(res @ res), _rank(x)
 
@@ -170,6 +179,23 @@ def _ftest(y, x0, x1):
 def _orth(x: np.ndarray) -> np.ndarray:
     u, sv, _ = np.linalg.svd(x, full_matrices=False)
     return u[:, sv > 1e-8 * (sv[0] if len(sv) else 1.0)]
+
+
+def _usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1):
+    """The directions of the span of `cols` that keep at least `kept` of their energy beside the span of `base`.
+    A direction almost inside the base is, beside it, mostly the data's own noise carried by the columns (they are
+    built from measured positions): fitting it fits that noise. Returns (columns (3N, j) = cols @ m, fraction
+    kept per direction of cols' span, m (k, j))."""
+    if cols.shape[1] == 0:
+        return cols, np.zeros(0), np.zeros((0, 0))
+    u, sv, vt = np.linalg.svd(cols, full_matrices=False)
+    keep = sv > 1e-8 * sv[0]
+    qc, to_q = u[:, keep], vt[keep].T / sv[keep]  # qc = cols @ to_q, orthonormal
+    qb = _orth(base)
+    beside = qc - qb @ (qb.T @ qc)
+    frac, vec = np.linalg.eigh(beside.T @ beside)
+    m = to_q @ vec[:, frac >= kept]
+    return cols @ m, frac, m
 
 
 _DRIFT_KEPT = 0.1  # drift directions keeping less than this fraction of their energy beside the model: not testable
