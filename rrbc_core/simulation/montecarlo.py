@@ -200,8 +200,21 @@ def measurement_set(cell: WorkCell, measured: Measured, trial: int = 0) -> Measu
         time=cell.time,
         lines=tuple(0 for _ in cell.ids),
         source=f"<simulated {cell.name}>",
-        extra={"target": tuple(cell.check_target)},
+        extra={"target": tuple(cell.check_target), **joint_columns(cell)},
     )
+
+
+def joint_columns(cell: WorkCell) -> dict:
+    """The columns q1..q6 (degrees, as text) of a cell whose robot error model has a kinematic term: the joints at
+    which the (true) arm reaches each point — what the robot measured a registration or fiducial row at, and the
+    configuration it will use for a check or target row. {} when the error model has no kinematic term."""
+    from rrbc_core.simulation.errorterms import Kinematic
+
+    arm = [t for t in cell.error_model.robot if isinstance(t, Kinematic)]
+    if not arm:
+        return {}
+    q = np.degrees(arm[0].joints(cell.point_set()))
+    return {f"q{j + 1}": tuple(f"{v:.6f}" for v in q[:, j]) for j in range(6)}
 
 
 @dataclass(frozen=True, eq=False)

@@ -120,3 +120,24 @@ def test_icp_alternative_registration_row():
     icp = rows["icp"]
     assert icp["trials"] == 2
     assert icp["rmst_rrbc_mm"] < 0.5 * icp["tre_rms_mm"]
+
+
+def test_out_carries_the_arms_joint_angles_and_diagnose_tests_the_arm(tmp_path, capsys):
+    """A scene whose robot error is kinematic writes q1..q6 (degrees): the configuration each point is reached in;
+    FK of the scene's nominal arm at those joints is the robot's reported position (the file's robot columns)."""
+    from rrbc_core.cli import main
+    from rrbc_core.io.joints import joint_angles
+    from rrbc_core.io.measurements import read_measurements
+    from rrbc_core.simulation.kinematics import UR5, forward
+
+    out = tmp_path / "m.csv"
+    assert main(["simulate", str(ROOT / "scenes" / "demo_workcell.toml"), "--trials", "2", "--out", str(out)]) == 0
+    capsys.readouterr()
+    m = read_measurements(out)
+    q = joint_angles(m)
+    rows = [i for i, r in enumerate(m.roles) if r in ("registration", "fiducial")]
+    reported, _ = forward(UR5.with_tool(100.0), q[rows])
+    # the robot columns hold the reading: the nominal FK at these joints plus the scene's 0.03 mm repeatability noise
+    assert abs(float(((m.robot[rows] - reported) ** 2).mean()) ** 0.5 - 0.03) < 0.012
+    assert main(["diagnose", str(out), "--tool", "100", "--json"]) == 0
+    assert "kinematic" in json.loads(capsys.readouterr().out)["tests"]
