@@ -118,6 +118,16 @@ def test_a_smooth_field_alone_reports_no_noise_effect_and_no_outliers(seed):
     assert diagnose(m).names == ["smooth_field"]
 
 
+def _with_outliers(rng, m, n, most, lo_mm, hi_mm):
+    """1..most of the first n points displaced by lo..hi mm in random directions: (new set, their indices)."""
+    robot = np.array(m.robot)
+    idx = rng.choice(n, int(rng.integers(1, most + 1)), replace=False)
+    for i in idx:
+        v = rng.normal(size=3)
+        robot[i] += v / np.linalg.norm(v) * rng.uniform(lo_mm, hi_mm)
+    return MeasurementSet(m.ids, m.roles, m.sensor, robot, m.time, m.lines), idx
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_smooth_field_with_outliers_names_both_and_only_the_planted_ids(seed):
     rng = np.random.default_rng(9500 + seed)
@@ -125,12 +135,8 @@ def test_smooth_field_with_outliers_names_both_and_only_the_planted_ids(seed):
     _, info = synth(seed, n=n, sigma=sigma, planar=False)
     field = SmoothField(rms_mm=sigma * rng.uniform(5, 10), length_mm=0.3 * info["ext"], seed=seed)
     m, _ = synth(seed, n=n, sigma=sigma, terms=[field], planar=False)
-    robot = np.array(m.robot)
-    idx = rng.choice(n, int(rng.integers(1, 4)), replace=False)
-    for i in idx:
-        v = rng.normal(size=3)
-        robot[i] += v / np.linalg.norm(v) * sigma * rng.uniform(30, 60)
-    dg = diagnose(MeasurementSet(m.ids, m.roles, m.sensor, robot, m.time, m.lines))
+    m, idx = _with_outliers(rng, m, n, 3, sigma * 30, sigma * 60)
+    dg = diagnose(m)
     assert sorted(dg.names) == ["outliers", "smooth_field"], dg.tests
     assert sorted(dg.effects[dg.names.index("outliers")].parameters["ids"]) == sorted(f"P{i}" for i in idx)
 
@@ -143,12 +149,8 @@ def test_scale_with_outliers_names_both(seed):
     spread = float(np.sum((info["robot"] - info["robot"].mean(0)) ** 2))
     ppm = float(rng.choice([-1, 1]) * rng.uniform(20, 40)) * sigma / np.sqrt(spread) * 1e6
     m, _ = synth(seed, n=n, sigma=sigma, terms=[Scale(ppm)])
-    robot = np.array(m.robot)
-    idx = rng.choice(n, int(rng.integers(1, 3)), replace=False)
-    for i in idx:
-        v = rng.normal(size=3)
-        robot[i] += v / np.linalg.norm(v) * sigma * rng.uniform(15, 30)
-    dg = diagnose(MeasurementSet(m.ids, m.roles, m.sensor, robot, m.time, m.lines))
+    m, idx = _with_outliers(rng, m, n, 2, sigma * 15, sigma * 30)
+    dg = diagnose(m)
     assert sorted(dg.names) == ["outliers", "scale"], dg.tests
     assert sorted(dg.effects[dg.names.index("outliers")].parameters["ids"]) == sorted(f"P{i}" for i in idx)
 
