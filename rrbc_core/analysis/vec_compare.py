@@ -51,7 +51,7 @@ def _kabsch(sensor, robot) -> tuple[np.ndarray, np.ndarray]:
 
 
 @dataclass(frozen=True, eq=False)
-class _Fit:
+class MethodsFit:
     rot: np.ndarray
     t: np.ndarray
     cal: Calibration
@@ -75,15 +75,17 @@ def _vec_command(cal: Calibration, nominal, s, q_row) -> np.ndarray:
     return np.asarray(b, float)
 
 
-def _fit(rows_reg, rows_fid, s, b, q, nominal) -> _Fit:
+def fit_methods(rows_reg, rows_fid, s, b, q, nominal) -> MethodsFit:
+    """The rigid registration (rows_reg), the calibration (rows_reg and rows_fid) and VEC's commands at the fiducials,
+    from sensor readings s (R, 3), robot readings b (R, 3) and joints q (R, 6) rad; `predict_methods` uses it."""
     rot, t = _kabsch(s[rows_reg], b[rows_reg])
     rows = np.concatenate([rows_reg, rows_fid])
     cal = calibrate(q[rows], s[rows], nominal, rot, t)  # started from the rigid registration (sensor -> robot)
     vec_fid = np.array([_vec_command(cal, nominal, s[i], q[i]) for i in rows_fid]).reshape(-1, 3)
-    return _Fit(rot, t, cal, s[rows_fid], b[rows_fid], vec_fid)
+    return MethodsFit(rot, t, cal, s[rows_fid], b[rows_fid], vec_fid)
 
 
-def _predict(f: _Fit, nominal, s_rows, q_rows) -> dict:
+def predict_methods(f: MethodsFit, nominal, s_rows, q_rows) -> dict:
     """The four commands (D, 3) for rows with sensor readings s_rows and joints q_rows."""
     rigid = s_rows @ f.rot.T + f.t
     fid_rigid = f.fid_sensor @ f.rot.T + f.t
@@ -120,18 +122,18 @@ def compare(mset: MeasurementSet, robot: str = "ur5", tool_mm: float = 0.0) -> d
             f"{mset.source}: {len(np.union1d(rows_reg, rows_fid))} registration and fiducial rows: too few poses to "
             "identify the arm (at least 8; more, in varied configurations, identify more)"
         )
-    fit = _fit(rows_reg, rows_fid, s, b, q, nominal)
+    fit = fit_methods(rows_reg, rows_fid, s, b, q, nominal)
     rmst = dict.fromkeys(METHODS)
     if len(rows_chk):
-        pred = _predict(fit, nominal, s[rows_chk], q[rows_chk])
+        pred = predict_methods(fit, nominal, s[rows_chk], q[rows_chk])
         rmst = {m: _rms(pred[m], b[rows_chk]) for m in METHODS}
     # cross-validation over the fiducials (no check rows used)
     folds = np.array_split(np.arange(len(rows_fid)), min(CV_FOLDS, len(rows_fid))) if len(rows_fid) >= 2 else []
     errs = {m: [] for m in METHODS}
     for held in folds:
         keep = np.setdiff1d(np.arange(len(rows_fid)), held)
-        f = _fit(np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, nominal)
-        pred = _predict(f, nominal, s[rows_fid[held]], q[rows_fid[held]])
+        f = fit_methods(np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, nominal)
+        pred = predict_methods(f, nominal, s[rows_fid[held]], q[rows_fid[held]])
         for m in METHODS:
             errs[m].append(np.sum((pred[m] - b[rows_fid[held]]) ** 2, axis=1))
     cv = {m: float(np.sqrt(np.mean(np.concatenate(errs[m])))) if folds else None for m in METHODS}
@@ -144,7 +146,7 @@ def compare(mset: MeasurementSet, robot: str = "ur5", tool_mm: float = 0.0) -> d
     claimed = bool(folds and cal.kinematic_p_value < KINEMATIC_ALPHA and best_vec < KINEMATIC_MARGIN * cv["rrbc"])
     targets = []
     if len(rows_tgt):
-        pred = _predict(fit, nominal, s[rows_tgt], q[rows_tgt])
+        pred = predict_methods(fit, nominal, s[rows_tgt], q[rows_tgt])
         for k, i in enumerate(rows_tgt):
             targets.append({"id": mset.ids[i], **{m: pred[m][k].tolist() for m in METHODS}})
     return {

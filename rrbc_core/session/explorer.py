@@ -39,11 +39,12 @@ from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.authoring import SessionAuthoring
 from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate, seed_for
 from rrbc_core.session.planning_view import SessionCoveragePlanning, SessionPlanning
+from rrbc_core.session.vec_view import SessionVec
 from rrbc_core.session.views import SessionViews
 from rrbc_core.simulation.measurement import MeasurementModel
 
 
-class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, SessionAuthoring):
+class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, SessionAuthoring, SessionVec):
     """The interactive session behind the browser app: a layout of points, the settings, and everything shown.
 
     Make one with `from_scene(scene)` (points measured through the scene's measurement model wherever they are
@@ -91,6 +92,8 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         )
         self._undo: list = []
         self._redo: list = []
+        self.target_tools: dict = {}  # target id -> (tilt, azimuth) degrees of its tool (vec_view); absent: tool down
+        self.varied_registration = False  # registration points measured with the tool leaned (vec_view)
 
     # ------------------------------------------------------------------------------------------------ sources
     @classmethod
@@ -156,12 +159,11 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         each point drawn from a generator seeded by (seed, kind, id) (noise=False: the expected readings, bias
         only)."""
         from rrbc_core.simulation.errormodels import PointSet
-        from rrbc_core.simulation.kinematics import tool_down
 
         model = self.measurement_model()
         positions = np.asarray(positions, float).reshape(-1, 3)
         n = len(positions)
-        pts = model.points(positions, np.array([tool_down(self.scene.tool_yaw_deg)] * n).reshape(n, 3, 3))
+        pts = model.points(positions, self.tool_rotations(kind, ids))
         noise_s, noise_r = np.zeros((1, n, 3)), np.zeros((1, n, 3))
         rnd = model.error_model.random_terms()
         if noise and (rnd.robot or rnd.sensor):
@@ -192,13 +194,13 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         for i, pid in enumerate(g.ids):
             key = (kind, pid)
             cached = self._readings.get(key)
-            if cached is None or cached[0] != (key_settings, tuple(g.positions[i])):
+            if cached is None or cached[0] != (key_settings, tuple(g.positions[i]), self.tool_of(kind, pid)):
                 missing.append(i)
         if missing:
             fresh = self._measure_scene(kind, [g.ids[i] for i in missing], g.positions[missing])
             for j, i in enumerate(missing):
                 self._readings[(kind, g.ids[i])] = (
-                    (key_settings, tuple(g.positions[i])),
+                    (key_settings, tuple(g.positions[i]), self.tool_of(kind, g.ids[i])),
                     fresh.sensor[j],
                     fresh.robot[j],
                     fresh.truth[j],
