@@ -52,6 +52,7 @@ from rrbc_core.session.explorer import ExplorerSession
 from . import diagnosis_panel, files, tables, teaching
 from .app_authoring import AuthoringActions
 from .app_tabs import TabActions
+from .app_vec import VecActions
 from .app_views import ViewActions
 from .camera import OPENING, CameraDirector, preset_view
 from .colors import legend_markdown
@@ -85,7 +86,7 @@ def _all_points(ev: Evaluation) -> np.ndarray:
     )
 
 
-class RunningApp(TabActions, ViewActions, AuthoringActions):
+class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
     """A running app. `server` is where it draws (the viser server, shared by every tab; or one tab's
     `stage.ClientStage` with `viser_server` the server behind it), `session` its ExplorerSession (replaced when a
     file is loaded), `port`/`url` where to point a browser. `stop()` frees the port (only an app that owns its
@@ -249,6 +250,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions):
         self._show_selection(ev)
         self._heat_stale = True
         self._check_diagnosis()
+        self._show_vec()
         self.planning.refresh(self.session, due=plan)
         if heat:
             self._update_heat()

@@ -30,7 +30,8 @@ class TabActions:
         with self._lock:
             rows = self._diagnosis_input()
             try:
-                result = diagnose(rows)
+                arm = self.session.arm_term()
+                result = diagnose(rows, tool_mm=arm.dh.tool_mm if arm is not None else 0.0)
             except InputError as exc:
                 result, text = None, diagnosis_panel.render_error(str(exc))
             except Exception as exc:  # noqa: BLE001 - keep serving

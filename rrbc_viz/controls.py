@@ -27,6 +27,7 @@ from .nodes import LAYERS, Display
 from .selection_panel import Bullseye, SelectionPanel
 from .slice_nodes import SLICE_AXES, SLICE_CHOICES
 from .syncing import Syncing
+from .vec_panel import VecPanel
 
 if TYPE_CHECKING:
     from .actions import AppActions
@@ -360,6 +361,7 @@ _TEXT_AREAS = {
     "lesson": "learn",
     "mc_info": "montecarlo",
     "diagnosis": "diagnose",
+    "vec_table": "vec",
 }
 
 
@@ -407,6 +409,8 @@ class Controls:
             self.montecarlo = MonteCarloPanel(gui, app, self.syncing)
         with tabs.add_tab("Diagnose", icon=viser.Icon.STETHOSCOPE):
             self.diagnose = DiagnosePanel(gui, app)
+        with tabs.add_tab("Arm (VEC)", icon=viser.Icon.ROBOT):
+            self.vec = VecPanel(gui, app, self.syncing)
         with tabs.add_tab("Plan", icon=viser.Icon.MAP_PIN):
             plan_tab()  # the app builds the Plan tab's panel inside the tab, and keeps it
         with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
@@ -424,7 +428,8 @@ class Controls:
     # -------------------------------------------------------------------------------- what the app shows here
     @property
     def text(self) -> _TextAreas:
-        """The text areas by name (status, source, scale, summary, table, legend, lesson, mc_info, diagnosis):
+        """The text areas by name (status, source, scale, summary, table, legend, lesson, mc_info, diagnosis,
+        vec_table):
         ``controls.text["summary"] = markdown`` shows it, ``controls.text["summary"]`` reads it."""
         return _TextAreas(self)
 

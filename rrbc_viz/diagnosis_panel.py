@@ -15,7 +15,8 @@ from rrbc_core.io.measurements import MeasurementSet
 ROLES = ("registration", "fiducial", "both")
 PROMPT = (
     "Tests the current registration points and fiducials (never the targets) for what a rigid fit with "
-    "isotropic noise misses: outliers, scale, affine terms, drift, a smooth field, anisotropic noise. "
+    "isotropic noise misses: outliers, scale, affine terms, drift, the arm's kinematic error (scenes with a "
+    "kinematic arm: the joint angles go along), a smooth field, anisotropic noise. "
     "Press **Diagnose current data**."
 )
 STALE = "**(data changed since — press again)**"
@@ -24,6 +25,7 @@ LABELS = {
     "scale": "Uniform scale",
     "affine": "Affine (beyond scale)",
     "drift": "Drift",
+    "kinematic": "Arm kinematic (DH) error",
     "smooth_field": "Smooth field",
     "anisotropic_noise": "Anisotropic noise",
 }
@@ -74,6 +76,11 @@ def parameters(e: Effect) -> str:
         return f"rate {_vec(rate, 'mm/s')} (|·| {np.linalg.norm(rate):.3g} mm/s)"
     if e.name == "smooth_field":
         return f"RMS {p['rms_mm']:.3f} mm, length scale {p['length_scale_mm']:.0f} mm"
+    if e.name == "kinematic":
+        return (
+            f"RMS {p['rms_mm']:.3f} mm from {p['combinations']} combinations of the {str(p['robot']).upper()}'s "
+            f"DH parameters (tool {p['tool_mm']:g} mm)"
+        )
     if e.name == "anisotropic_noise":
         return f"{p['ratio']:.2f}× larger along the sensor axis {_vec(p['axis'], '', lambda x: f'{x:.3f}')}"
     return ", ".join(f"{k} {v}" for k, v in p.items())

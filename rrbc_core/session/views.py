@@ -211,6 +211,22 @@ class SessionViews:
             ids.append(pid), roles.append("check" if known else "target")
             sensor.append(t.sensor[i]), robot.append(t.truth[i] if known else np.full(3, np.nan))
         n = len(ids)
+        extra = {}
+        if self.has_arm:  # the configurations the arm reached each point in (q1..q6, degrees: rrbc calibrate)
+            kinds = {"registration": set(ev.registration_ids), "fiducials": set(ev.fiducial_ids)}
+            pos = {("registration", p): x for p, x in zip(ev.registration_ids, ev.registration_positions)}
+            pos |= {("fiducials", p): x for p, x in zip(ev.fiducial_ids, ev.fiducial_positions)}
+            pos |= {("targets", p): x for p, x in zip(t.ids, t.positions)}
+            q = []
+            for pid, role in zip(ids, roles):
+                kind = (
+                    "targets"
+                    if role in ("check", "target")
+                    else ("registration" if pid in kinds["registration"] else "fiducials")
+                )
+                q.append(self.joints(kind, [pid], pos[(kind, pid)][None])[0])
+            deg = np.degrees(np.array(q).reshape(n, 6))
+            extra = {f"q{j + 1}": tuple(f"{v:.6f}" for v in deg[:, j]) for j in range(6)}
         return MeasurementSet(
             ids=tuple(ids),
             roles=tuple(roles),
@@ -219,6 +235,7 @@ class SessionViews:
             time=np.full(n, np.nan),
             lines=tuple(0 for _ in ids),
             source=f"<{self.name}>",
+            extra=extra,
         )
 
     @thread_limited

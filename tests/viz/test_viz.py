@@ -489,6 +489,7 @@ def _rows_without_targets(app: RunningApp):
         time=m.time[keep],
         lines=tuple(0 for _ in keep),
         source=m.source,
+        extra={k: tuple(v[i] for i in keep) for k, v in m.extra.items()},  # the arm's joint angles
     )
 
 
@@ -501,7 +502,8 @@ def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
     assert "check" in m.roles  # the export holds the targets' truth: the diagnosis must not see it
     rows = _rows_without_targets(app)
     assert set(rows.roles) <= {"registration", "fiducial", "both"}
-    direct = diagnose(rows)
+    direct = diagnose(rows, tool_mm=app.session.arm_term().dh.tool_mm)  # the default scene's arm, 100 mm tool
+    assert "q1" in rows.extra
     _press(app.controls.diagnose.diagnose)
     text = panel.content
     assert app.diagnosis is not None and not app.diagnosis_stale
@@ -517,6 +519,7 @@ def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
         "scale": "Uniform scale",
         "outliers": "Outliers",
         "drift": "Drift",
+        "kinematic": "Arm kinematic",
         "anisotropic_noise": "Anisotropic noise",
     }
     at = [text.index(f"**{labels[e.name]}") for e in direct.effects]
@@ -544,7 +547,7 @@ def test_diagnose_button_shows_the_verdict_of_the_current_data(app):
     _press(app.controls.diagnose.diagnose)
     text2 = panel.content
     assert text2 != text and "data changed since" not in text2
-    direct2 = diagnose(_rows_without_targets(app))
+    direct2 = diagnose(_rows_without_targets(app), tool_mm=app.session.arm_term().dh.tool_mm)
     assert app.diagnosis.to_json() == direct2.to_json()
     if not direct2.effects:
         assert "consistent with rigid + isotropic noise" in text2

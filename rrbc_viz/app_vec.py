@@ -1,0 +1,74 @@
+"""The Arm (VEC) tab's actions: VEC on or off, the registration points' tool orientations, a target's leaned tool.
+Part of `RunningApp`; every number comes from `rrbc_core.session.vec_view`."""
+
+from __future__ import annotations
+
+import traceback
+
+from rrbc_core.errors import InputError
+
+from . import vec_panel
+
+
+class VecActions:
+    """Part of `RunningApp` (see there); split out to keep modules short."""
+
+    vec_on: bool = False
+    vec_target: str = ""
+    vec_view = None  # the last VecView shown (None: off, no arm, or refused)
+
+    def set_vec(self, on: bool, client=None) -> None:
+        """Compare with VEC (calibrate the arm on the current data) or stop."""
+        with self._lock:
+            self.vec_on = bool(on) and self.session.has_arm
+            if on and not self.session.has_arm:
+                self._message(vec_panel.NO_ARM, client, title="No arm to calibrate")
+            with self.server.atomic():
+                self._show_vec(client)
+
+    def set_varied_registration(self, varied: bool, client=None):
+        """Measure the registration points with leaned tools (True) or tool down."""
+        with self._lock:
+            return self._apply(lambda s: s.set_varied_registration(varied), client)
+
+    def set_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0, client=None):
+        """Reach target `pid` with its tool leaned tilt_deg towards azimuth_deg (degrees)."""
+        with self._lock:
+            self.vec_target = pid
+            return self._apply(lambda s: s.set_target_tool(pid, tilt_deg, azimuth_deg), client)
+
+    def sync_vec_target(self, pid: str) -> None:
+        """The tab's target choice changed: show that target's tool on the sliders."""
+        with self._lock:
+            self.vec_target = pid
+            with self.server.atomic():
+                self._sync_vec_panel()
+
+    def _sync_vec_panel(self) -> None:
+        s = self.session
+        targets = tuple(s.layout["targets"].ids)
+        if self.vec_target not in targets:
+            self.vec_target = targets[0] if targets else ""
+        tool = s.tool_of("targets", self.vec_target) if self.vec_target else (0.0, 0.0)
+        self.controls.vec.sync(
+            targets, self.vec_target, tool, self.vec_on, getattr(s, "varied_registration", False), s.has_arm
+        )
+
+    def _show_vec(self, client=None) -> None:
+        """Refresh the tab (caller holds the lock, inside server.atomic()): VEC is computed only when on."""
+        self.vec_on = self.vec_on and self.session.has_arm
+        self._sync_vec_panel()
+        if not self.session.has_arm:
+            self.vec_view, text = None, vec_panel.NO_ARM
+        elif not self.vec_on:
+            self.vec_view, text = None, "Tick **Compare with VEC** to calibrate the arm on the current data."
+        else:
+            try:
+                self.vec_view = self.session.vec_view()
+                text = vec_panel.render(self.vec_view, self.vec_target)
+            except InputError as exc:
+                self.vec_view, text = None, f"VEC not computed: {exc}"
+            except Exception as exc:  # noqa: BLE001 - keep serving
+                traceback.print_exc()
+                self.vec_view, text = None, f"VEC failed (internal error: {type(exc).__name__}: {exc})"
+        self.controls.text["vec_table"] = text

@@ -1,0 +1,54 @@
+"""The Arm (VEC) tab in the running app (issue 15, item 4): VEC's errors beside rigid and RRBC, registration points in
+varied orientations, a target's leaned tool — every number the tab shows equals the session's `vec_view`."""
+
+import numpy as np
+
+from rrbc_core.session.vec_view import TILT_MAX_DEG
+
+
+def _row(text: str, pid: str) -> list[str]:
+    line = next(ln for ln in text.splitlines() if ln.startswith(f"| {pid} ") or ln.startswith(f"| **{pid}** "))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_vec_tab_shows_the_sessions_vec_and_follows_a_leaned_tool(app):
+    panel = app.controls.vec
+    assert "Compare with VEC" in app.controls.text["vec_table"]  # off until asked: nothing computed
+    app.set_vec(True)
+    assert app.vec_view is not None
+    pid = app.session.layout["targets"].ids[0]
+    view = app.session.vec_view()
+    row = _row(app.controls.text["vec_table"], pid)
+    assert row[1] == "down" and [float(x) for x in row[2:]] == [
+        round(float(view.error_rigid[0]), 3),
+        round(float(view.error_rrbc[0]), 3),
+        round(float(view.error_vec[0]), 3),
+    ]
+    app.set_varied_registration(True)
+    assert panel.varied.value and app.session.varied_registration
+    before = app.session.vec_view()
+    truth_before = app.session.last.targets.truth[0].copy()
+    app.set_target_tool(pid, 40.0, 0.0)
+    after = app.session.vec_view()
+    row = _row(app.controls.text["vec_table"], pid)
+    assert row[1] == "40°, 0°" and float(row[3]) == round(float(after.error_rrbc[0]), 3)
+    assert after.error_rrbc[0] > before.error_rrbc[0] and after.error_vec[0] < after.error_rrbc[0]
+    assert panel.tilt.value == 40.0 and panel.target.value == pid
+    # the scene's target table and landing use the same evaluation: the leaned target's truth moved
+    assert np.linalg.norm(app.session.last.targets.truth[0] - truth_before) > 0.1
+
+
+def test_a_tilt_out_of_range_is_refused_with_a_message_and_changes_nothing(app):
+    app.set_vec(True)
+    pid = app.session.layout["targets"].ids[0]
+    truth = app.session.last.targets.truth.copy()
+    assert app.set_target_tool(pid, TILT_MAX_DEG + 5, 0.0) is None
+    assert "tilt" in app.last_message
+    assert np.array_equal(app.session.last.targets.truth, truth) and app.session.target_tools == {}
+
+
+def test_measured_data_have_no_arm_and_say_so(measured):
+    measured.set_vec(True)
+    assert not measured.vec_on and measured.vec_view is None
+    assert "no kinematic arm error" in measured.controls.text["vec_table"]
+    assert measured.controls.vec.tilt.disabled
