@@ -240,6 +240,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         """Push an Evaluation to the scene and the panel (caller holds the lock, inside server.atomic()). plan:
         recompute the Plan tab now (else it is marked stale until the next due refresh)."""
         self.nodes.bias_scale = float(self.session.settings.bias_scale) if self.session.kind == "scene" else 1.0
+        self._show_vec()  # the Arm tab, and VEC's landings for the bullseye
         self.nodes.update(ev)
         c = self.controls
         c.text["scale"] = tables.scale_line(self.display.magnification)
@@ -250,7 +251,6 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         self._show_selection(ev)
         self._heat_stale = True
         self._check_diagnosis()
-        self._show_vec()
         self.planning.refresh(self.session, due=plan)
         if heat:
             self._update_heat()

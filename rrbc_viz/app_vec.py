@@ -25,6 +25,8 @@ class VecActions:
                 self._message(vec_panel.NO_ARM, client, title="No arm to calibrate")
             with self.server.atomic():
                 self._show_vec(client)
+                self.nodes.update(self.session.last)  # the bullseyes show (or drop) VEC's landing
+                self._show_selection(self.session.last)
 
     def set_varied_registration(self, varied: bool, client=None):
         """Measure the registration points with leaned tools (True) or tool down."""
@@ -72,3 +74,5 @@ class VecActions:
                 traceback.print_exc()
                 self.vec_view, text = None, f"VEC failed (internal error: {type(exc).__name__}: {exc})"
         self.controls.text["vec_table"] = text
+        v = self.vec_view
+        self.nodes.vec_landings = None if v is None else {pid: v.robot_vec[i] for i, pid in enumerate(v.ids)}

@@ -227,7 +227,8 @@ class ViewActions:
         target = land.target if land is not None else None  # the target whose bullseye the scene shows
         explore = sel[1] if sel is not None and sel[0] == "targets" else None
         last_step = self.lesson_index == len(teaching.STEPS) - 1
-        c.show_bullseye(*(selection_card.bullseye_svg(ev, explore) if explore else (None,)), where="explore")
+        vec = (self.nodes.vec_landings or {}).get(explore) if explore else None
+        c.show_bullseye(*(selection_card.bullseye_svg(ev, explore, vec) if explore else (None,)), where="explore")
         c.show_bullseye(*(selection_card.bullseye_svg(ev, target) if target and last_step else (None,)), where="learn")
 
     # --------------------------------------------------------------------------------------------- lesson

@@ -20,6 +20,7 @@ CORRECTION_FIDUCIAL: Rgb = (255, 110, 0)
 CORRECTION_TARGET: Rgb = (0, 175, 255)
 LAND_RIGID: Rgb = (213, 94, 0)
 LAND_RRBC: Rgb = (0, 150, 170)
+LAND_VEC: Rgb = (120, 70, 20)
 LAND_ANCHOR: Rgb = (40, 40, 40)
 LAND_STALK: Rgb = (110, 110, 110)
 LAND_RING: Rgb = (60, 60, 60)
@@ -42,6 +43,7 @@ DATA_COLORS: dict[str, Rgb] = {
     "correction at a target": CORRECTION_TARGET,
     "rigid landing": LAND_RIGID,
     "RRBC landing": LAND_RRBC,
+    "VEC landing (Arm tab)": LAND_VEC,
     "truth (bullseye centre)": LAND_ANCHOR,
 }
 FRAME_ORIGIN: Rgb = (236, 236, 0)

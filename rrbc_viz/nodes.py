@@ -168,6 +168,7 @@ class LandingDisplay:
     lift: float
     ring_mm: float
     scale: float
+    vec: np.ndarray | None = None  # VEC's landing (Arm tab on), drawn like the others
 
     def rings(self) -> np.ndarray:
         """(2 * RING_SEGMENTS, 2, 3) segments: the scale ring and a dashed half-size ring (every other segment)."""
@@ -237,11 +238,15 @@ def landing_offsets(t, i: int) -> tuple[np.ndarray, np.ndarray, bool]:
     return t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref, known
 
 
-def landing_display(t, i: int, marker_mm: float) -> LandingDisplay:
-    """The landing bullseye of target i of `t` (evaluation.TargetResult). It floats beside the target, away from
-    the robot's base (the arm reaches the target from that side, its wrist straight above it) and above it."""
-    off_rigid, off_rrbc, _ = landing_offsets(t, i)
+def landing_display(t, i: int, marker_mm: float, vec=None) -> LandingDisplay:
+    """The landing bullseye of target i of `t` (evaluation.TargetResult), with VEC's landing `vec` (3,) robot frame
+    mm when given. It floats beside the target, away from the robot's base (the arm reaches the target from that
+    side, its wrist straight above it) and above it."""
+    off_rigid, off_rrbc, known = landing_offsets(t, i)
+    off_vec = None if vec is None else np.asarray(vec, float) - (t.truth[i] if known else t.robot_rigid[i])
     biggest = float(max(np.linalg.norm(off_rigid), np.linalg.norm(off_rrbc)))
+    if off_vec is not None:
+        biggest = max(biggest, float(np.linalg.norm(off_vec)))
     ring = nice_up(biggest) if biggest > 0 else 0.1
     radius = RING_MARKERS * marker_mm
     scale = radius / ring
@@ -250,7 +255,15 @@ def landing_display(t, i: int, marker_mm: float) -> LandingDisplay:
     lift = radius + 2.0 * marker_mm
     anchor = t.positions[i] + 1.6 * radius * out + np.array([0.0, 0.0, lift])
     return LandingDisplay(
-        str(t.ids[i]), t.positions[i], anchor, anchor + scale * off_rigid, anchor + scale * off_rrbc, lift, ring, scale
+        str(t.ids[i]),
+        t.positions[i],
+        anchor,
+        anchor + scale * off_rigid,
+        anchor + scale * off_rrbc,
+        lift,
+        ring,
+        scale,
+        None if off_vec is None else anchor + scale * off_vec,
     )
 
 
@@ -272,6 +285,7 @@ class SceneNodes(HeatMapNodes):
         self.scene_model = None
         self._arm_key = None
         self.bias_scale = 1.0  # the session's bias size (the real arm's landing scales with it)
+        self.vec_landings: dict | None = None  # target id -> VEC's landing (3,), robot frame mm (Arm tab on)
         self._sphere_v, self._sphere_f = _unit_sphere()
         self.groups: dict[str, viser.SceneNodeHandle] = {}
         self.gizmos: dict[tuple[str, str], viser.TransformControlsHandle] = {}
@@ -461,6 +475,7 @@ class SceneNodes(HeatMapNodes):
                 ("anchor", colors.LAND_ANCHOR, 0.45),
                 ("rigid", colors.LAND_RIGID, 0.6),
                 ("rrbc", colors.LAND_RRBC, 0.6),
+                ("vec", colors.LAND_VEC, 0.6),
             ):
                 self.nodes[f"/landing/{key}"] = sc.add_icosphere(
                     f"/landing/{key}",
@@ -650,11 +665,15 @@ class SceneNodes(HeatMapNodes):
         if len(t.ids):
             sel = self.selected
             i = t.ids.index(sel[1]) if sel is not None and sel[0] == "targets" else 0
-            land = landing_display(t, i, self.display.marker_mm)
+            land = landing_display(t, i, self.display.marker_mm, (self.vec_landings or {}).get(t.ids[i]))
             self.landing = land
             self.nodes["/landing/anchor"].position = land.anchor
             self.nodes["/landing/rigid"].position = land.rigid
             self.nodes["/landing/rrbc"].position = land.rrbc
+            vec_node = self.nodes["/landing/vec"]
+            if land.vec is not None:
+                vec_node.position = land.vec
+            self._assign(vec_node, "visible", land.vec is not None)  # (the landing layer's frame hides it too)
             self.nodes["/landing/lines"].points = np.array(
                 [[land.position, land.anchor], [land.anchor, land.rigid], [land.anchor, land.rrbc]], np.float32
             )
@@ -763,7 +782,7 @@ class SceneNodes(HeatMapNodes):
         reg = self.nodes.get("/registration/points")
         if reg is not None:
             reg.batched_scales = np.full(len(reg.batched_positions), 0.8 * r, np.float32)
-        for key, f in (("anchor", 0.45), ("rigid", 0.6), ("rrbc", 0.6)):
+        for key, f in (("anchor", 0.45), ("rigid", 0.6), ("rrbc", 0.6), ("vec", 0.6)):
             h = self.nodes.get(f"/landing/{key}")
             if h is not None:
                 h.radius = f * r

@@ -81,12 +81,16 @@ def info_card(ev: Evaluation, selected: tuple[str, str] | None) -> str:
     return "\n".join(lines)
 
 
-def bullseye_svg(ev: Evaluation, pid: str) -> tuple[str, str, str]:
-    """The landing bullseye of target `pid` (module docstring): (inline SVG, markdown caption, HTML key)."""
+def bullseye_svg(ev: Evaluation, pid: str, vec=None) -> tuple[str, str, str]:
+    """The landing bullseye of target `pid` (module docstring), with VEC's landing `vec` (3,) robot frame mm when
+    given (Arm tab on): (inline SVG, markdown caption, HTML key)."""
     t = ev.targets
     i = t.ids.index(pid)
     rigid, rrbc, known = landing_offsets(t, i)
+    off_vec = None if vec is None or not known else np.asarray(vec, float) - t.truth[i]
     biggest = float(max(np.linalg.norm(rigid), np.linalg.norm(rrbc), 1e-6))
+    if off_vec is not None:
+        biggest = max(biggest, float(np.linalg.norm(off_vec)))
     ring = nice_up(biggest)
     c = SIZE_PX / 2
     px = 0.42 * SIZE_PX / ring  # px per mm: the outer ring fills ~84 % of the square
@@ -114,6 +118,8 @@ def bullseye_svg(ev: Evaluation, pid: str) -> tuple[str, str, str]:
     parts.append(f'<text x="{c + 4}" y="12" font-size="10" fill="#777">y</text>')
     dots = [("rigid", rigid, colors.LAND_RIGID)] if known else []
     dots.append(("rrbc", rrbc, colors.LAND_RRBC))
+    if off_vec is not None:
+        dots.append(("vec", off_vec, colors.LAND_VEC))
     parts.append(f'<circle cx="{c}" cy="{c}" r="4" fill="{colors.hex_color(colors.LAND_ANCHOR)}" data-kind="truth"/>')
     for name, off, col in dots:
         x, y = xy(off)
@@ -137,8 +143,9 @@ def bullseye_svg(ev: Evaluation, pid: str) -> tuple[str, str, str]:
     if known:
         caption = (
             f"**{pid}**: where the robot lands, seen from above (offsets from the truth, true size, mm): rigid "
-            f"{float(np.linalg.norm(rigid)):.3f} mm, RRBC {float(np.linalg.norm(rrbc)):.3f} mm. "
-            "The bar at the right: z."
+            f"{float(np.linalg.norm(rigid)):.3f} mm, RRBC {float(np.linalg.norm(rrbc)):.3f} mm"
+            + (f", VEC {float(np.linalg.norm(off_vec)):.3f} mm" if off_vec is not None else "")
+            + ". The bar at the right: z."
         )
     else:
         caption = (
@@ -147,6 +154,12 @@ def bullseye_svg(ev: Evaluation, pid: str) -> tuple[str, str, str]:
         )
     legend = (
         f'<span style="color:{colors.hex_color(colors.LAND_RIGID)}">● rigid</span> &nbsp; '
-        f'<span style="color:{colors.hex_color(colors.LAND_RRBC)}">● RRBC</span> &nbsp; ● truth'
+        f'<span style="color:{colors.hex_color(colors.LAND_RRBC)}">● RRBC</span> &nbsp; '
+        + (
+            f'<span style="color:{colors.hex_color(colors.LAND_VEC)}">● VEC</span> &nbsp; '
+            if off_vec is not None
+            else ""
+        )
+        + "● truth"
     )
     return "".join(parts), caption, legend

@@ -52,3 +52,32 @@ def test_measured_data_have_no_arm_and_say_so(measured):
     assert not measured.vec_on and measured.vec_view is None
     assert "no kinematic arm error" in measured.controls.text["vec_table"]
     assert measured.controls.vec.tilt.disabled
+
+
+def test_the_bullseye_shows_vecs_landing_while_the_comparison_is_on(app):
+    node = app.nodes.nodes["/landing/vec"]
+    assert not node.visible and app.nodes.landing.vec is None
+    app.set_vec(True)
+    land = app.nodes.landing
+    i = app.session.last.targets.ids.index(land.target)
+    view = app.vec_view
+    # drawn like the other landings: its offset from the truth, times the bullseye's scale
+    expected = land.anchor + land.scale * (view.robot_vec[i] - app.session.last.targets.truth[i])
+    assert node.visible and np.allclose(node.position, expected) and np.allclose(land.vec, expected)
+    app.set_vec(False)
+    assert not node.visible
+
+
+def test_the_panel_bullseye_draws_vec_at_true_size(app):
+    import re
+
+    from rrbc_viz.selection_card import bullseye_svg
+
+    app.set_vec(True)
+    ev, view = app.session.last, app.vec_view
+    pid = ev.targets.ids[0]
+    svg, caption, key = bullseye_svg(ev, pid, view.robot_vec[0])
+    dx = float(re.search(r'data-kind="vec" data-dx-mm="([^"]+)"', svg).group(1))
+    assert dx == float(f"{view.robot_vec[0][0] - ev.targets.truth[0][0]:.6g}")
+    assert f"VEC {view.error_vec[0]:.3f} mm" in caption and "VEC" in key
+    assert 'data-kind="vec"' not in bullseye_svg(ev, pid)[0]
