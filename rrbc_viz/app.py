@@ -241,6 +241,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         recompute the Plan tab now (else it is marked stale until the next due refresh)."""
         self.nodes.bias_scale = float(self.session.settings.bias_scale) if self.session.kind == "scene" else 1.0
         self._show_vec()  # the Arm tab, and VEC's landings for the bullseye
+        self.nodes.target_tools = dict(getattr(self.session, "target_tools", {}))
         self.nodes.update(ev)
         c = self.controls
         c.text["scale"] = tables.scale_line(self.display.magnification)

@@ -43,6 +43,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session.arm import arm_pose
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
+from rrbc_core.session.vec_view import tool_rotation
 
 from . import colors
 from .heatmap_nodes import HeatMapNodes
@@ -286,6 +287,7 @@ class SceneNodes(HeatMapNodes):
         self._arm_key = None
         self.bias_scale = 1.0  # the session's bias size (the real arm's landing scales with it)
         self.vec_landings: dict | None = None  # target id -> VEC's landing (3,), robot frame mm (Arm tab on)
+        self.target_tools: dict = {}  # target id -> (tilt, azimuth) degrees of its leaned tool (the arm is drawn so)
         self._sphere_v, self._sphere_f = _unit_sphere()
         self.groups: dict[str, viser.SceneNodeHandle] = {}
         self.gizmos: dict[tuple[str, str], viser.TransformControlsHandle] = {}
@@ -678,22 +680,26 @@ class SceneNodes(HeatMapNodes):
                 [[land.position, land.anchor], [land.anchor, land.rigid], [land.anchor, land.rrbc]], np.float32
             )
             self.nodes["/landing/rings"].points = land.rings().astype(np.float32)
-            self._update_arm(land.position, mag)
+            self._update_arm(land.position, mag, self.target_tools.get(land.target))
             scale = self.nodes["/landing/scale"]
             scale.position = land.anchor + np.array([0.71, -0.71, 0.0]) * land.ring_mm * land.scale
             self._assign(scale, "text", f"{land.target}: ring {land.ring_mm:g} mm")
 
-    def _update_arm(self, position, magnification: float) -> None:
-        """Pose the arm to reach `position` (the bullseye's target); hide it where it cannot reach."""
+    def _update_arm(self, position, magnification: float, tool=None) -> None:
+        """Pose the arm to reach `position` (the bullseye's target) with the tool down or leaned (tool: (tilt,
+        azimuth) degrees); hide it where it cannot reach."""
         if self.arm is None:
             return
         bias = self.bias_scale
-        key = (tuple(np.round(position, 9)), bias, magnification)
+        key = (tuple(np.round(position, 9)), bias, magnification, tool)
         if key == self._arm_key:
             return
         self._arm_key = key
+        rot = None
+        if tool is not None:
+            rot = tool_rotation(float(getattr(self.scene_model, "tool_yaw_deg", 0.0) or 0.0), *tool)
         try:
-            pose = arm_pose(self.scene_model, position, bias)
+            pose = arm_pose(self.scene_model, position, bias, rot)
         except InputError:
             self.groups["arm"].visible = False
             return

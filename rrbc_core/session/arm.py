@@ -15,7 +15,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.kinematics import ROBOT_DH, UR5_TOOL_DOWN_SEED, forward, inverse, joint_frames, tool_down
+from rrbc_core.simulation.kinematics import (
+    ROBOT_DH,
+    UR5_TOOL_DOWN_SEED,
+    forward,
+    inverse,
+    inverse_path,
+    joint_frames,
+    tool_down,
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,8 +45,9 @@ def _kinematic_term(error_model):
     return None
 
 
-def arm_pose(scene, position, bias_scale: float = 1.0) -> ArmPose:
-    """The scene's arm reaching `position` (3,) mm with its tool pointing down (module docstring).
+def arm_pose(scene, position, bias_scale: float = 1.0, tool_rotation=None) -> ArmPose:
+    """The scene's arm reaching `position` (3,) mm with its tool pointing down (module docstring), or with the tool
+    rotation `tool_rotation` (3, 3) robot frame (a target reached with a leaned tool, `vec_view.tool_rotation`).
 
     Raises InputError if the scene has no arm model or the place is out of reach."""
     model = getattr(scene, "robot_model", None)
@@ -48,7 +57,8 @@ def arm_pose(scene, position, bias_scale: float = 1.0) -> ArmPose:
     term = _kinematic_term(scene.error_model)
     nominal = term.dh if term is not None else ROBOT_DH[model].with_tool(scene.tool_mm)
     seed = UR5_TOOL_DOWN_SEED if scene.joint_seed is None else scene.joint_seed
-    q = inverse(nominal, p, tool_down(scene.tool_yaw_deg), seed)
+    rot = tool_down(scene.tool_yaw_deg) if tool_rotation is None else np.asarray(tool_rotation, float)
+    q = inverse_path(nominal, p[None], rot, seed)[0] if tool_rotation is not None else inverse(nominal, p, rot, seed)
     landed = p
     if term is not None:
         real, _ = forward(term.true_robot(), q)
