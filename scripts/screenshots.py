@@ -110,6 +110,23 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ("presentation_1280x720.png", [("tab", "Learn"), ("button", "Next"), ("wait_text", "Step 1 of 9")]),
     # The results table with gp (a std column beside the others), the method chosen in the panel.
     ("app_gp_table.png", [("select", ("Interpolation", "gp")), ("wait_text", "std")]),
+    # Arm (VEC) tab: VEC compared with rigid and RRBC, the registration points measured in varied orientations and
+    # H1 reached with its tool leaned 40° (the arm drawn so): RRBC's error at H1 grows, VEC's does not; the
+    # selected-point view shows H1's bullseye with VEC's landing (brown).
+    (
+        "app_vec.png",
+        [
+            ("tab", "Arm (VEC)"),
+            ("click", "Compare with VEC"),
+            ("wait_text", "VEC identified"),
+            ("call", lambda app: app.set_varied_registration(True)),
+            ("call", lambda app: app.set_target_tool("H1", 40.0, 0.0)),
+            ("wait_text", "40°, 0°"),
+            ("tab", "View"),
+            ("button", "selected point"),
+            ("tab", "Arm (VEC)"),
+        ],
+    ),
     # Plan tab: F1 slid in under the plate (as a fiducial drag does), so H1's region leaves the hull (red halo;
     # the others blue, covered); regions coloured by coverage; Suggest's four ghost spheres (+1 … +4) with the
     # predicted gain in the panel. Correction arrows and landing points hidden (less clutter).
