@@ -109,7 +109,9 @@ class Diagnosis:
         """What `expected_rmst_change` is a prediction of."""
         text = (
             "rrbc correct on this file as given (its registration rows fit the transform, its fiducial rows carry "
-            "the corrections: each point left out in turn), scored at points like the paired ones"
+            "the corrections: each point left out in turn), scored at points like the paired ones, whose readings "
+            "carry the robot's noise; where the scored rows hold noise-free truth (simulated check rows), the "
+            "fiducials' robot noise that RRBC passes on weighs more, and RRBC does worse than predicted"
         )
         if self.expected_change_without_outliers is not None:
             text += (
