@@ -108,14 +108,14 @@ class Diagnosis:
     def assumes(self) -> str:
         """What `expected_rmst_change` is a prediction of."""
         text = (
-            "rrbc correct on this file as given (its registration rows fit the transform, its fiducial rows carry "
-            "the corrections: each point left out in turn), scored at points like the paired ones, whose readings "
-            "carry the robot's noise; where the scored rows hold noise-free truth (simulated check rows), the "
-            "fiducials' robot noise that RRBC passes on weighs more, and RRBC does worse than predicted"
+            "rrbc correct on this file as given, each paired point left out in turn and predicted by a rigid fit and "
+            "RRBC (IDW k = 4, p = 2) from all the others (as on a file whose rows are all `both`), scored at the "
+            "inliers with their own readings as the truth; where the scored rows hold noise-free truth (simulated "
+            "check rows), the fiducials' noise that RRBC passes on weighs more, and RRBC does worse than predicted"
         )
         if self.expected_change_without_outliers is not None:
             text += (
-                "; the outliers stay in the registration and the fiducials but are not scored; "
+                "; the outliers stay in the fits but are not scored; "
                 "expected_rmst_change_without_outliers is the same with them removed from the file"
             )
         return text
@@ -601,17 +601,15 @@ def diagnose(
             "arm explains is reported as kinematic"
         )
 
-    # bias, and RRBC by leave-one-out on the file as given (rrbc correct's roles), scored at the inliers
+    # bias, and RRBC by leave-one-out on the file as given (outliers kept in the fits), scored at the inliers
     bias = float(np.sqrt(max(0.0, float(np.mean(np.sum(resid**2, axis=1))) - noise_pp)))
-    reg_mask = d.in_registration if d.in_registration.sum() >= 4 else np.ones(n_all, bool)
-    fid_mask = d.in_fiducials if d.in_fiducials.sum() >= 2 else np.ones(n_all, bool)
     good = np.ones(n_all, bool)
     good[out_idx] = False
-    loo_rigid, loo_rrbc = _loo(d.sensor, d.robot, d.count, registration=reg_mask, fiducials=fid_mask, evaluate=good)
+    loo_rigid, loo_rrbc = _loo(d.sensor, d.robot, d.count, evaluate=good)
     change = loo_rrbc / loo_rigid - 1.0 if loo_rigid > 0 else 0.0
     without = None
     if out_idx:
-        r2, f2 = _loo(d.sensor[inl], d.robot[inl], w, registration=reg_mask[inl], fiducials=fid_mask[inl])
+        r2, f2 = _loo(d.sensor[inl], d.robot[inl], w)
         without = f2 / r2 - 1.0 if r2 > 0 else 0.0
 
     ordered = sorted(effects.values(), key=lambda e: -e.magnitude_mm)

@@ -39,8 +39,6 @@ class _Data:
     row_robot: np.ndarray
     rows: np.ndarray  # (R,) the paired rows' indices in the file
     row_time: np.ndarray  # (R,) NaN when absent
-    in_registration: np.ndarray  # (N,) bool: the point has a registration (or both) row
-    in_fiducials: np.ndarray  # (N,) bool: the point has a fiducial (or both) row
 
 
 def _paired(mset) -> _Data:
@@ -77,12 +75,7 @@ def _paired(mset) -> _Data:
         tm /= count
         if np.ptp(tm) > 0:
             time = tm
-    roles = np.array([mset.roles[i] for i in rows])
-    in_reg = np.zeros(n, bool)
-    in_fid = np.zeros(n, bool)
-    in_reg[row_point[np.isin(roles, ("registration", "both"))]] = True
-    in_fid[row_point[np.isin(roles, ("fiducial", "both"))]] = True
-    return _Data(list(order), s, r, count, time, row_point, rs, rr, np.asarray(rows, int), t, in_reg, in_fid)
+    return _Data(list(order), s, r, count, time, row_point, rs, rr, np.asarray(rows, int), t)
 
 
 # ------------------------------------------------------------------------------------------ linear model
@@ -346,7 +339,7 @@ def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
     SVD with the reflection fix — the same fit as `registration.kabsch` on the N−1 points (to rounding), in O(N)
     memory and time. Points are centred on the full set's weighted centroid first, so the downdates do not
     cancel large numbers."""
-    w = np.asarray(weights, float)  # a point of weight 0 is not in the fit: its "left-out" fit is the full one
+    w = np.asarray(weights, float)
     c_s = (w @ sensor) / w.sum()
     c_r = (w @ robot) / w.sum()
     s, r = sensor - c_s, robot - c_r
@@ -368,29 +361,23 @@ def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
     return rot, t
 
 
-def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0, registration=None, fiducials=None, evaluate=None):
+def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
     """Leave-one-out prediction error at each point: rigid only, and rigid + IDW correction from its k nearest
-    fiducials (sensor frame), each with point i left out of the registration and the fiducials. `registration`,
-    `fiducials` (N,) bool say which points play those roles (default: all, as `rrbc correct` on a file whose rows
-    are all `both`); `evaluate` (N,) bool which points the RMS is taken over (default all). Returns the two RMS
+    others (sensor frame), with the registration of the others; the RMS is taken over the points `evaluate` (N,)
+    bool (default all: a point left out of the RMS still takes part in the others' fits). Returns the two RMS
     values (mm)."""
     n = len(sensor)
-    reg = np.ones(n, bool) if registration is None else np.asarray(registration, bool)
-    fid = np.ones(n, bool) if fiducials is None else np.asarray(fiducials, bool)
     ev = np.ones(n, bool) if evaluate is None else np.asarray(evaluate, bool)
-    f_idx = np.flatnonzero(fid)
-    kk = min(k, len(f_idx) - 1)
-    if kk < 1 or reg.sum() < 4 or not ev.any():
-        return float("nan"), float("nan")
-    dist, loc = cKDTree(sensor[f_idx]).query(sensor, k=kk + 1)
-    dist, nb = dist.reshape(n, -1), f_idx[loc.reshape(n, -1)]
-    # drop each point itself when it is a fiducial (its own nearest unless another coincides), else the farthest
+    kk = min(k, n - 1)
+    dist, nb = cKDTree(sensor).query(sensor, k=kk + 1)
+    dist, nb = dist.reshape(n, -1), nb.reshape(n, -1)
+    # drop each point itself (it is its own nearest unless another point coincides with it)
     self_col = nb == np.arange(n)[:, None]
     drop = np.where(self_col.any(axis=1), np.argmax(self_col, axis=1), kk)
     keep = np.ones_like(nb, bool)
     keep[np.arange(n), drop] = False
     nb, dj = nb[keep].reshape(n, kk), dist[keep].reshape(n, kk)
-    rot, t = _loo_rotations(sensor, robot, np.asarray(weights, float) * reg)
+    rot, t = _loo_rotations(sensor, robot, weights)
     e_rigid = robot - (np.einsum("nij,nj->ni", rot, sensor) + t)
     corr = robot[nb] - (np.einsum("nij,nkj->nki", rot, sensor[nb]) + t[:, None, :])  # (N, k, 3)
     on = dj <= 1e-12
