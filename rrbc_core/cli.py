@@ -174,6 +174,12 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--port", type=_non_negative_int, default=8080, help="port (default 8080; 0 = any free port)")
     v.add_argument("--mesh", default=None, help="work-cell mesh for a measurement CSV (any format trimesh reads)")
     v.add_argument(
+        "--no-token",
+        action="store_true",
+        help="accept connections without the per-run token (trusted setups only; pages from other sites are "
+        "still refused)",
+    )
+    v.add_argument(
         "--per-client",
         action="store_true",
         help="one independent session per browser tab (a class: each student their own) instead of one "
@@ -505,7 +511,13 @@ def _cmd_view(args) -> str:
     if args.port > 65535:
         raise InputError(f"--port must be at most 65535, got {args.port}")
     app = serve(
-        args.scene, host=args.host, port=args.port, mesh=args.mesh, per_client=args.per_client, present=args.present
+        args.scene,
+        host=args.host,
+        port=args.port,
+        mesh=args.mesh,
+        per_client=args.per_client,
+        present=args.present,
+        token=not args.no_token,
     )
     try:
         signal.signal(signal.SIGTERM, signal.default_int_handler)  # stop cleanly on SIGTERM too

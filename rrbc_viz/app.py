@@ -50,6 +50,7 @@ from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
 from . import diagnosis_panel, files, tables, teaching
+from .access import AccessGuard, new_token, page_url
 from .app_authoring import AuthoringActions
 from .app_tabs import TabActions
 from .app_vec import VecActions
@@ -487,6 +488,7 @@ def serve(
     quiet: bool = True,
     per_client: bool = False,
     present: bool = False,
+    token: str | bool | None = True,
 ):
     """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
     .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
@@ -505,6 +507,7 @@ def serve(
     with contextlib.redirect_stdout(out) if quiet else contextlib.nullcontext():
         server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)
     try:
+        guard = AccessGuard(server, new_token() if token is True else (token or None))
         server.scene.set_up_direction("+z")
         if per_client:
             from .per_client import PerClientApp
@@ -516,6 +519,8 @@ def serve(
             if present:
                 app.set_presentation(True)
         app.quiet = quiet
+        app.guard = guard
+        app.url = page_url(app.url, guard.token)
         return app
     except BaseException:
         server.stop()

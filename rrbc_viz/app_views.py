@@ -115,6 +115,9 @@ class ViewActions:
 
     def _frame_new_client(self, client) -> None:
         """A tab connected: once it reports its camera (window size), frame the current view for it."""
+        guard = getattr(self, "guard", None)
+        if guard is not None and guard.is_refused(client.client_id):
+            return  # refused at the handshake (access.AccessGuard)
         done = {"flag": False}
 
         def on_camera(_camera) -> None:

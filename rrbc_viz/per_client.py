@@ -48,6 +48,10 @@ class PerClientApp:
     def _connect(self, client: viser.ClientHandle) -> None:
         from .app import RunningApp
 
+        guard = getattr(self, "guard", None)
+        if guard is not None and guard.is_refused(client.client_id):
+            return  # refused at the handshake (access.AccessGuard): build nothing for it
+
         try:
             app = RunningApp(ClientStage(client), self._fresh(), self.host, viser_server=self.server)
             if self.present:

@@ -179,4 +179,3 @@ def test_with_outliers_in_the_file_the_prediction_is_for_the_file_as_given():
         assert dg.expected_change_without_outliers < dg.expected_rmst_change
         assert "as given" in dg.assumes
     assert agree >= 8
-

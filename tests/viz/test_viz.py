@@ -64,7 +64,8 @@ def _assert_arrows_match(app: RunningApp, ev) -> None:
 
 # ------------------------------------------------------------------------------------------------- start-up
 def test_serve_builds_the_scene_and_panel(app):
-    assert app.port > 0 and app.url == f"http://127.0.0.1:{app.port}"
+    base = f"http://127.0.0.1:{app.port}"
+    assert app.port > 0 and app.url.startswith(base + "/?websocket=") and app.guard.token in app.url
     with urllib.request.urlopen(app.url, timeout=10) as r:
         assert r.status == 200
     ev = app.session.evaluate()
