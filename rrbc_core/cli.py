@@ -174,6 +174,14 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--port", type=_non_negative_int, default=8080, help="port (default 8080; 0 = any free port)")
     v.add_argument("--mesh", default=None, help="work-cell mesh for a measurement CSV (any format trimesh reads)")
     v.add_argument(
+        "--data",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="a folder whose scenes, measurement files and meshes the File tab offers (repeatable; scenes/ and the "
+        "given file's folder always are)",
+    )
+    v.add_argument(
         "--no-token",
         action="store_true",
         help="accept connections without the per-run token (trusted setups only; pages from other sites are "
@@ -518,6 +526,7 @@ def _cmd_view(args) -> str:
         per_client=args.per_client,
         present=args.present,
         token=not args.no_token,
+        data_dirs=args.data,
     )
     try:
         signal.signal(signal.SIGTERM, signal.default_int_handler)  # stop cleanly on SIGTERM too

@@ -93,8 +93,16 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
     file is loaded), `port`/`url` where to point a browser. `stop()` frees the port (only an app that owns its
     server stops it: a per-tab app stops its own workers)."""
 
-    def __init__(self, server, loaded: files.Loaded, host: str, viser_server: viser.ViserServer | None = None):
+    def __init__(
+        self,
+        server,
+        loaded: files.Loaded,
+        host: str,
+        viser_server: viser.ViserServer | None = None,
+        library: files.Library | None = None,
+    ):
         self.server = server
+        self.library = library or files.Library.of()  # the folders the File tab may open files from
         self.viser_server = server if viser_server is None else viser_server
         self.owns_server = viser_server is None
         self.host = host
@@ -135,6 +143,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         self.mc_draw = 0  # "Run again" presses so far (each draws new noise)
         self.mc_seed: int | None = None  # the noise seed of the last run requested (None: the session's)
         self._install(loaded, first=True)
+        self.rescan_files()
         server.on_client_connect(self._frame_new_client)
         server.scene.on_click()(self._on_scene_click)
 
@@ -489,6 +498,7 @@ def serve(
     per_client: bool = False,
     present: bool = False,
     token: str | bool | None = True,
+    data_dirs=(),
 ):
     """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
     .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
@@ -503,6 +513,7 @@ def serve(
     else:
         loaded = files.load_source(source, mesh)
     _check_host(host)
+    library = files.Library.of(data_dirs, source)
     out = io.StringIO() if quiet else None
     with contextlib.redirect_stdout(out) if quiet else contextlib.nullcontext():
         server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)
@@ -513,9 +524,9 @@ def serve(
             from .per_client import PerClientApp
 
             server.gui.configure_theme(show_share_button=False)
-            app = PerClientApp(server, loaded, source, mesh, host, present)
+            app = PerClientApp(server, loaded, source, mesh, host, present, library)
         else:
-            app = RunningApp(server, loaded, host)
+            app = RunningApp(server, loaded, host, library=library)
             if present:
                 app.set_presentation(True)
         app.quiet = quiet

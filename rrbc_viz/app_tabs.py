@@ -231,6 +231,23 @@ class TabActions:
         self._install(loaded)
         return True
 
+    def load_offered(self, label: str, mesh_label: str | None = None, client=None) -> bool:
+        """Open one of the files the File tab offers (`files.Library`), by its label; anything else is refused."""
+        try:
+            path = self.library.pick(label)
+            mesh = None if mesh_label is None else self.library.pick(mesh_label, meshes=True)
+        except InputError as exc:
+            self._message(str(exc), client, title="File not loaded")
+            return False
+        return self.load(path, mesh=mesh, client=client)
+
+    def rescan_files(self) -> None:
+        """List the offered folders' files again in the File tab."""
+        with self._lock:
+            self.controls.file.offer(
+                [name for name, _ in self.library.sources()], [name for name, _ in self.library.meshes()]
+            )
+
     def load_upload(self, name: str, content: bytes, client=None) -> bool:
         try:
             loaded = files.load_upload(name, content)

@@ -321,23 +321,34 @@ class DiagnosePanel:
         self.diagnose.on_click(lambda event: app.run_diagnosis(client=event.client))
 
 
+NO_MESH = "(no mesh)"
+
+
 class FilePanel:
-    """File tab: open a file on the server or upload one; download the data or the results."""
+    """File tab: open one of the files offered (scenes/ and the folders named on the command line: no free-text
+    server path), or upload one; download the data or the results."""
 
     def __init__(self, gui, app: AppActions):
-        self.path = gui.add_text("Scene or data file", "", hint="A scene .toml or a measurement .csv on the server")
-        self.mesh_path = gui.add_text("Mesh (for .csv, optional)", "")
+        self.path = gui.add_dropdown(
+            "Scene or data file", ("",), initial_value="", hint="Files in scenes/ and in the folders given by --data"
+        )
+        self.mesh_path = gui.add_dropdown("Mesh (for .csv, optional)", (NO_MESH,), initial_value=NO_MESH)
         self.load = gui.add_button("Load file", icon=viser.Icon.FILE)
+        self.rescan = gui.add_button("Rescan folders", icon=viser.Icon.REFRESH)
         self.upload = gui.add_upload_button("Upload CSV or TOML", icon=viser.Icon.UPLOAD)
-        gui.add_markdown("An uploaded scene cannot bring its mesh along: open scenes with meshes by path.")
+        gui.add_markdown(
+            "Only files in the bundled scenes/ and in folders named with `rrbc view --data DIR` can be opened here; "
+            "anything else: upload it. An uploaded scene cannot bring its mesh along."
+        )
         self.download_csv = gui.add_button("Download data (CSV)", icon=viser.Icon.DOWNLOAD)
         self.download_json = gui.add_button("Download results (JSON)", icon=viser.Icon.DOWNLOAD)
 
         @self.load.on_click
         def _(event: viser.GuiEvent) -> None:
-            path = self.path.value.strip()
-            mesh = self.mesh_path.value.strip() or None
-            app.load(path or None, mesh=mesh, client=event.client)
+            mesh = self.mesh_path.value
+            app.load_offered(self.path.value, None if mesh == NO_MESH else mesh, client=event.client)
+
+        self.rescan.on_click(lambda event: app.rescan_files())
 
         @self.upload.on_upload
         def _(event: viser.GuiEvent) -> None:
@@ -346,6 +357,15 @@ class FilePanel:
 
         self.download_csv.on_click(lambda event: app.download("csv", client=event.client))
         self.download_json.on_click(lambda event: app.download("json", client=event.client))
+
+    def offer(self, sources: list[str], meshes: list[str]) -> None:
+        """The files the tab offers (labels)."""
+        self.path.options = tuple(sources) or ("",)
+        if self.path.value not in self.path.options:
+            self.path.value = self.path.options[0]
+        self.mesh_path.options = (NO_MESH, *meshes)
+        if self.mesh_path.value not in self.mesh_path.options:
+            self.mesh_path.value = NO_MESH
 
 
 #: The text areas the app writes, and the panel that owns each.

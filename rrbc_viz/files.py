@@ -38,6 +38,63 @@ def _is_scene(name: str, text_start: str = "") -> bool:
     return text_start.lstrip().startswith("[")
 
 
+MESH_SUFFIXES = (".glb", ".gltf", ".stl", ".obj", ".ply", ".off")
+MAX_OFFERED = 500  # files listed from the offered folders, at most
+
+
+@dataclass(frozen=True)
+class Library:
+    """The folders the app may open files from (issue 16): the bundled scenes/ and the folders named on the command
+    line. The File tab lists their scene (.toml) and measurement (.csv) files, and mesh files in them and one
+    level down; nothing else on the server can be opened from a page (there is no free-text path). `roots`:
+    resolved directories."""
+
+    roots: tuple[Path, ...]
+
+    @classmethod
+    def of(cls, folders=(), source=None) -> Library:
+        """scenes/ (the default scene's folder), the given folders (InputError if one is not a directory) and the
+        folder of a source file given on the command line."""
+        roots = [Path(default_scene_path()).resolve().parent]
+        for f in folders:
+            p = Path(f)
+            if not p.is_dir():
+                raise InputError(f"--data {f}: not a directory")
+            roots.append(p.resolve())
+        if source is not None and not isinstance(source, ExplorerSession):
+            roots.append(Path(os.fspath(source)).resolve().parent)
+        return cls(tuple(dict.fromkeys(roots)))
+
+    def _scan(self, suffixes, depth: int) -> list[tuple[str, Path]]:
+        out: list[tuple[str, Path]] = []
+        for root in self.roots:
+            found = [root.glob("*")] + ([root.glob("*/*")] if depth > 1 else [])
+            for it in found:
+                for p in sorted(it):
+                    if len(out) >= MAX_OFFERED:
+                        return out
+                    if p.suffix.lower() in suffixes and p.is_file() and not p.is_symlink():
+                        rp = p.resolve()
+                        if rp.is_relative_to(root):  # never a link out of the folder
+                            out.append((f"{root.name}/{rp.relative_to(root).as_posix()}", rp))
+        return out
+
+    def sources(self) -> list[tuple[str, Path]]:
+        """(label, path) of the scene and measurement files offered."""
+        return self._scan(SCENE_SUFFIXES + (".csv",), 1)
+
+    def meshes(self) -> list[tuple[str, Path]]:
+        """(label, path) of the mesh files offered (the folders and one level down)."""
+        return self._scan(MESH_SUFFIXES, 2)
+
+    def pick(self, label: str, meshes: bool = False) -> Path:
+        """The path behind a label the File tab offered; InputError for anything else."""
+        for name, path in self.meshes() if meshes else self.sources():
+            if name == label:
+                return path
+        raise InputError(f"{str(label)[:80]!r} is not one of the files offered (folders: scenes/ and --data)")
+
+
 def load_mesh(path) -> object:
     """A mesh file (any format trimesh reads) as one trimesh.Trimesh, robot frame, mm."""
     import trimesh

@@ -24,12 +24,15 @@ class PerClientApp:
     """Tabs' apps by client id (`apps`), the server's `port`/`url`, `stop()`. `loaded` is the source as first
     loaded (checked before the server started)."""
 
-    def __init__(self, server: viser.ViserServer, loaded: files.Loaded, source, mesh, host: str, present: bool):
+    def __init__(
+        self, server: viser.ViserServer, loaded: files.Loaded, source, mesh, host: str, present: bool, library=None
+    ):
         self.server = server
         self.loaded = loaded
         self._source, self._mesh = source, mesh
         self.host = host
         self.present = present
+        self.library = library
         self.port = int(server.get_port())
         self.url = f"http://{host if host not in ('0.0.0.0', '::', '') else 'localhost'}:{self.port}"
         self.apps: dict[int, object] = {}
@@ -53,7 +56,9 @@ class PerClientApp:
             return  # refused at the handshake (access.AccessGuard): build nothing for it
 
         try:
-            app = RunningApp(ClientStage(client), self._fresh(), self.host, viser_server=self.server)
+            app = RunningApp(
+                ClientStage(client), self._fresh(), self.host, viser_server=self.server, library=self.library
+            )
             if self.present:
                 app.set_presentation(True)
         except Exception:  # noqa: BLE001 - one tab failing must not stop the server

@@ -30,7 +30,6 @@ from .helpers import (
     mesh_node_names,
     node_exists,
     node_screen_position,
-    text_field,
     wait_for,
     wait_until_rendered,
 )
@@ -206,7 +205,7 @@ def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for
 
 
 def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(viser_app, page_for, tmp_path):
-    app = viser_app(lambda: serve())
+    app = viser_app(lambda: serve(data_dirs=[tmp_path]))
     page, requests = page_for(app.url)
     wait_until_rendered(page, H1_GIZMO, timeout_s=60)
     scale = app.nodes._gizmo_scale()
@@ -231,7 +230,8 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
     assert "H1" in note.inner_text()
     assert np.allclose(server_position(app, "targets", "H2"), [400.0, -50.0, 15.0])  # the others stay
 
-    # 3) a bad scene and a bad measurement file, typed into the File tab's path field and loaded with its button
+    # 3) a bad scene and a bad measurement file in a folder given with --data, picked in the File tab (after a
+    # rescan: they were written after the server started) and loaded with its button
     bad_scene = tmp_path / "broken_scene.toml"
     bad_scene.write_text("[scene\nname = 'missing bracket'\n", encoding="utf-8")
     lines = EXAMPLE_CSV.read_text(encoding="utf-8").splitlines()
@@ -243,13 +243,13 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
     bad_csv.write_text("\n".join(lines) + "\n", encoding="utf-8")
     name0 = app.session.name
     open_tab(page, "File")
-    path_box = text_field(page, "Scene or data file")
+    page.get_by_role("button", name="Rescan folders").click()
+    label = f"{tmp_path.name}/"
+    wait_for(lambda: label + bad_csv.name in app.controls.file.path.options, 10, message="the rescan", page=page)
     for bad, says in ((bad_scene, "TOML syntax error"), (bad_csv, "'12.x' is not a number")):
-        path_box.fill(str(bad))
-        path_box.press("Enter")
-        wait_for(
-            lambda bad=bad: app.controls.file.path.value == str(bad), 10, message="the path on the server", page=page
-        )
+        page.get_by_label("Scene or data file").click()
+        page.get_by_role("option", name=label + bad.name, exact=True).click()
+        wait_for(lambda bad=bad: app.controls.file.path.value == label + bad.name, 10, message="the pick", page=page)
         page.get_by_role("button", name="Load file").click()
         # a red notification and the status line at the top of the panel say what is wrong
         note = page.locator(".mantine-Notification-root", has_text=bad.name).filter(has_text="File not loaded")

@@ -95,3 +95,40 @@ def test_page_url_carries_the_websocket_address_with_the_token():
         "http://127.0.0.1:8080/?websocket=ws%3A%2F%2F127.0.0.1%3A8080%2Frrbc-tok"
     )
     assert page_url("http://127.0.0.1:8080", None) == "http://127.0.0.1:8080"
+
+
+# ------------------------------------------------------------------------- files: no free-text server path
+def test_the_file_tab_offers_only_the_offered_folders_and_opens_by_label(tmp_path):
+    import os
+
+    from tests.paths import EXAMPLE_CSV
+
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "mine.csv").write_bytes(EXAMPLE_CSV.read_bytes())
+    (data / "notes.txt").write_text("not offered", encoding="utf-8")
+    outside = tmp_path / "secret.csv"
+    outside.write_bytes(EXAMPLE_CSV.read_bytes())
+    os.symlink(outside, data / "link.csv")  # a link out of the folder is not offered
+    a = serve(port=0, data_dirs=[data])
+    try:
+        offered = a.controls.file.path.options
+        assert "scenes/demo_workcell.toml" in offered and "data/mine.csv" in offered
+        assert not any("secret" in o or "link" in o or "notes" in o for o in offered)
+        assert "scenes/meshes/demo_workcell.glb" in a.controls.file.mesh_path.options
+        assert a.load_offered("data/mine.csv") is True and a.session.kind == "measurements"
+        assert a.load_offered(str(outside)) is False and "not one of the files offered" in a.last_message
+        assert a.load_offered("data/../secret.csv") is False
+        # a file added later shows after a rescan
+        (data / "later.csv").write_bytes(EXAMPLE_CSV.read_bytes())
+        a.rescan_files()
+        assert "data/later.csv" in a.controls.file.path.options
+    finally:
+        a.stop()
+
+
+def test_a_data_folder_that_is_not_a_directory_is_refused_before_serving(tmp_path):
+    from rrbc_core.errors import InputError
+
+    with pytest.raises(InputError, match="not a directory"):
+        serve(port=0, data_dirs=[tmp_path / "missing"])

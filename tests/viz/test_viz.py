@@ -391,9 +391,11 @@ def test_bad_files_leave_the_server_and_session(app, tmp_path):
     assert "bad.toml" in app.controls.status.content
     bad_csv = tmp_path / "bad.csv"
     bad_csv.write_text("id,role,sensor_x\nA,fiducial,1\n", encoding="utf-8")
-    app.controls.file.path.value = str(bad_csv)
-    app.controls.file.load.value = True  # the Load button
+    assert app.load(bad_csv) is False
     assert app.session is session and "bad.csv" in app.last_message
+    # the File tab opens only what it offers: a label it did not list is refused, nothing is read
+    assert app.load_offered(str(bad_csv)) is False and "not one of the files offered" in app.last_message
+    assert app.load_offered("/etc/passwd") is False and app.session is session
     assert app.load_upload("junk.csv", b"\xff\xfe not text") is False
     assert app.load_upload("broken.toml", b"[scene\n") is False
     assert app.session is session and "broken.toml" in app.last_message
