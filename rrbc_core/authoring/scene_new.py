@@ -21,6 +21,7 @@ check, then renamed): a refusal or a failure leaves nothing behind.
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -97,6 +98,30 @@ def _choose_sensor(mesh, targets: np.ndarray, given) -> tuple[np.ndarray, str]:
     )
 
 
+def _mesh_beside(mesh_path: Path, folder: Path) -> str:
+    """The scene's relative mesh path. A scene opens only meshes in its own folder or below (scene_toml), so a mesh
+    elsewhere is copied beside the scene (atomically); an existing different file of that name is refused."""
+    src, folder = mesh_path.resolve(), folder.resolve()
+    if src.is_relative_to(folder):
+        return src.relative_to(folder).as_posix()
+    dst = folder / src.name
+    if dst.exists():
+        if dst.is_file() and dst.read_bytes() == src.read_bytes():
+            return dst.name
+        raise InputError(
+            f"{mesh_path}: the scene's folder already holds another {src.name}; put the mesh beside --out, or rename it"
+        )
+    fd, tmp = tempfile.mkstemp(prefix=".rrbc-mesh-", dir=str(folder))
+    os.close(fd)
+    try:
+        shutil.copyfile(src, tmp)
+        os.replace(tmp, dst)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return dst.name
+
+
 def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None = None) -> NewScene:
     """Write a complete scene for the cell (module docstring); returns what was written. InputError for bad
     input, with nothing written."""
@@ -160,7 +185,7 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
     os.close(fd)
     tmp_path = Path(tmp)
     try:
-        mesh_rel = os.path.relpath(Path(mesh_path).resolve(), out.parent.resolve())
+        mesh_rel = _mesh_beside(Path(mesh_path), out.parent)
         parts = dict(
             opt=opt,
             tl=tl,

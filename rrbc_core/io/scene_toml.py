@@ -230,7 +230,18 @@ def load_scene(path: str | PathLike) -> Scene:
     if units != "mm":
         raise c.error("scene.units", f'only "mm" is supported (all coordinates in millimetres), got {_fmt(units)}')
     mesh_rel = c.string(sc["mesh"], "scene.mesh")
-    mesh_path = (toml_path.parent / mesh_rel).resolve()
+    try:
+        mesh_path = (toml_path.parent / mesh_rel).resolve(strict=False)
+    except (RuntimeError, OSError) as exc:  # a symlink loop
+        raise c.error("scene.mesh", f"cannot resolve {mesh_rel[:80]!r}: {exc.__class__.__name__}") from None
+    folder = toml_path.parent.resolve()
+    if not mesh_path.is_relative_to(folder):
+        # a scene opens only files in its own folder (or below): a scene from elsewhere cannot make the app read
+        # /etc/shadow or a user's files (issue 16)
+        raise c.error(
+            "scene.mesh",
+            f"{mesh_rel[:80]!r} leaves the scene's folder: put the mesh in the scene's folder or a folder below it",
+        )
     seed = c.integer(sc.get("seed", 0), "scene.seed", minimum=0)
 
     # [robot] -----------------------------------------------------------------------------------------------

@@ -165,7 +165,7 @@ class SessionAuthoring:
     def scene_spec(self, mesh: str | None = None):
         """The session as a scene file's content (`io.scene_write.SceneSpec`): the scene it came from with its
         points, targets' regions, candidates and sensor as they are now. `mesh`: the path to write for the mesh
-        (default: the scene's mesh, absolute)."""
+        (default: the scene's mesh file name: a scene opens only meshes in its own folder, so keep the mesh beside it)."""
         from rrbc_core.io.scene_write import SceneSpec, region_table
 
         if self.kind != "scene":
@@ -180,7 +180,7 @@ class SessionAuthoring:
         return SceneSpec(
             name=sc.name,
             description=sc.description,
-            mesh=str(Path(sc.mesh_path).resolve()) if mesh is None else mesh,
+            mesh=Path(sc.mesh_path).name if mesh is None else mesh,
             seed=int(s.seed),
             robot_model=sc.robot_model,
             tool_mm=float(sc.tool_mm),

@@ -340,11 +340,10 @@ def test_cli_bad_scene_exits_2(capsys, tmp_path):
     rc, out, err = _run(capsys, "plan", tmp_path / "missing.toml")
     assert rc == 2 and out == "" and len(err.strip().splitlines()) == 1
     bad = tmp_path / "bad.toml"
-    bad.write_text(
-        (ROOT / "scenes" / "demo_workcell.toml")
-        .read_text()
-        .replace('units = "mm"', 'units = "inch"')
-        .replace('mesh = "meshes/', f'mesh = "{ROOT}/scenes/meshes/')
+    bad.write_text((ROOT / "scenes" / "demo_workcell.toml").read_text().replace('units = "mm"', 'units = "inch"'))
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "demo_workcell.glb").write_bytes(
+        (ROOT / "scenes" / "meshes" / "demo_workcell.glb").read_bytes()
     )
     rc, out, err = _run(capsys, "plan", bad, "--json")
     assert rc == 2 and out == "" and len(err.strip().splitlines()) == 1 and "units" in err

@@ -127,3 +127,23 @@ def test_bad_input_is_refused_in_one_line_with_nothing_written(tmp_path):
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and words in lines[0], (label, r.stderr)
         assert r.stdout == "" and list(out.parent.iterdir()) == [], label  # nothing, not even a temporary file
+
+
+def test_a_mesh_in_another_folder_is_copied_beside_the_scene(tmp_path):
+    """A scene opens only meshes in its own folder or below (issue 16): scene new copies a mesh from elsewhere."""
+    src = tmp_path / "cad"
+    src.mkdir()
+    mesh_path, targets_path, _ = random_cell(src, 3)
+    out_dir = tmp_path / "cells"
+    out_dir.mkdir()
+    out = out_dir / "cell.toml"
+    r = _run("scene", "new", "--mesh", mesh_path, "--targets", targets_path, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert (out_dir / mesh_path.name).read_bytes() == mesh_path.read_bytes()
+    assert load_scene(out).mesh_path == (out_dir / mesh_path.name).resolve()
+    # another file of that name already there: refused, nothing written
+    (out_dir / mesh_path.name).write_bytes(b"solid other\nendsolid other\n")
+    out2 = out_dir / "cell2.toml"
+    r = _run("scene", "new", "--mesh", mesh_path, "--targets", targets_path, "--out", out2)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "already holds" in r.stderr
+    assert not out2.exists()

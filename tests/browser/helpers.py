@@ -362,11 +362,6 @@ def wait_until_rendered(
     return wait_for(rendered, timeout_s, interval_s=0.1, message="a rendered, settled canvas")
 
 
-def text_field(page: Any, label: str) -> Any:
-    """The input of a viser text field labelled `label` (its <label for> does not point at the input)."""
-    return page.locator(f"xpath=//*[normalize-space(text())='{label}']/ancestor::*[.//input][1]//input").first
-
-
 def dismiss_software_webgl_notification(page: Any, timeout_s: float = 1.0) -> bool:
     """Close viser's 'Software WebGL rendering detected' notification (always shown under SwiftShader) if it is
     shown within ``timeout_s``. Returns whether one was closed; never fails."""

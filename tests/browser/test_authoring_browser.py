@@ -9,7 +9,7 @@ import pytest
 
 from rrbc_viz.app import serve
 
-from .helpers import text_field, wait_for
+from .helpers import wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -33,7 +33,7 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     slab.apply_translation((450, 0, 40))  # over the fixture plate: its top is at z = 50
     mesh_file = tmp_path / "slab.stl"
     slab.export(mesh_file)
-    app = viser_app(lambda: serve())
+    app = viser_app(lambda: serve(data_dirs=[tmp_path]))
     page, _ = page_for(app.url)
     page.get_by_role("tab", name="File").click()
     with page.expect_file_chooser() as chooser:
@@ -67,8 +67,13 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     saved = tmp_path / dl.value.suggested_filename
     dl.value.save_as(saved)
     (tmp_path / "cell.stl").write_bytes(mesh_file.read_bytes())
-    # reload it through the File tab, as a user would
-    text_field(page, "Scene or data file").fill(str(saved))
+    # reload it through the File tab, as a user would: the folder was given with --data; rescan, pick, load
+    page.get_by_role("button", name="Rescan folders").click()
+    label = f"{tmp_path.name}/{saved.name}"
+    wait_for(lambda: label in app.controls.file.path.options, 10, message="the rescan", page=page)
+    page.get_by_label("Scene or data file").click()
+    page.get_by_role("option", name=label, exact=True).click()
+    wait_for(lambda: app.controls.file.path.value == label, 10, message="the pick", page=page)
     page.get_by_role("button", name="Load file").click()
     wait_for(
         lambda: app.loaded.label.endswith(saved.name) or saved.name in app.loaded.label,

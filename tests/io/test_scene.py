@@ -571,8 +571,8 @@ def test_robot_models_ur10_and_none(tmp_path):
     from rrbc_core.simulation.kinematics import UR10
 
     text = (SCENES / "demo_workcell.toml").read_text(encoding="utf-8")
-    mesh = (SCENES / "meshes" / "demo_workcell.glb").resolve()
-    text = text.replace('mesh = "meshes/demo_workcell.glb"', f'mesh = "{mesh}"')
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "demo_workcell.glb").write_bytes((SCENES / "meshes" / "demo_workcell.glb").read_bytes())
     ur10 = tmp_path / "ur10.toml"
     ur10.write_text(text.replace('model = "ur5"', 'model = "ur10"'), encoding="utf-8")
     scene = load_scene(ur10)
@@ -582,3 +582,41 @@ def test_robot_models_ur10_and_none(tmp_path):
     none.write_text(text.replace('model = "ur5"', 'model = "none"'), encoding="utf-8")
     with pytest.raises(InputError, match="kinematic error term needs an arm model"):
         load_scene(none)
+
+
+# ------------------------------------------------------------------- the mesh stays in the scene's folder (issue 16)
+@pytest.mark.parametrize("mesh", ["../m.stl", "/etc/passwd", "sub/../../m.stl", "link.stl"])
+def test_a_mesh_outside_the_scenes_folder_is_refused_before_it_is_read(tmp_path, mesh):
+    import os
+
+    import trimesh
+
+    outside = tmp_path / "m.stl"
+    trimesh.creation.box(extents=[100, 100, 10]).export(outside)
+    folder = tmp_path / "scene"
+    folder.mkdir()
+    os.symlink(outside, folder / "link.stl")  # a link inside that points out
+    path = folder / "scene.toml"
+    path.write_text(MINIMAL.replace('mesh = "m.stl"', f'mesh = "{mesh}"'), encoding="utf-8")
+    with pytest.raises(InputError, match="leaves the scene's folder"):
+        load_scene(path)
+
+
+def test_a_mesh_symlink_loop_is_one_clear_error(tmp_path):
+    import os
+
+    os.symlink(tmp_path / "loop.stl", tmp_path / "loop.stl")
+    path = tmp_path / "scene.toml"
+    path.write_text(MINIMAL.replace('mesh = "m.stl"', 'mesh = "loop.stl"'), encoding="utf-8")
+    with pytest.raises(InputError, match="scene.mesh"):
+        load_scene(path)
+
+
+def test_a_mesh_in_a_folder_below_the_scene_loads(tmp_path):
+    import trimesh
+
+    (tmp_path / "meshes").mkdir()
+    trimesh.creation.box(extents=[100, 100, 10]).export(tmp_path / "meshes" / "m.stl")
+    path = tmp_path / "scene.toml"
+    path.write_text(MINIMAL.replace('mesh = "m.stl"', 'mesh = "meshes/m.stl"'), encoding="utf-8")
+    assert load_scene(path).mesh_path == (tmp_path / "meshes" / "m.stl").resolve()

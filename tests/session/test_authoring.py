@@ -4,6 +4,7 @@ the scene (it reloads to the same numbers) and the measurement plan (filled, it 
 from __future__ import annotations
 
 import io
+import shutil
 
 import numpy as np
 import pytest
@@ -67,6 +68,7 @@ def test_a_saved_scene_reloads_to_the_same_numbers(session, tmp_path):
     ev = session.last
     path = tmp_path / "saved.toml"
     path.write_text(session.scene_toml(), encoding="utf-8")
+    shutil.copy(session.scene.mesh_path, tmp_path)  # the scene names its mesh; it opens only meshes beside it
     again = ExplorerSession.from_scene(load_scene(path))
     ev2 = again.last
     assert ev2.fiducial_ids == ev.fiducial_ids and ev2.targets.ids == ev.targets.ids
