@@ -13,7 +13,7 @@ import os
 import sys
 import time
 
-from rrbc_core.errors import InputError
+from rrbc_core.errors import InputError, one_line
 
 
 class _UsageError(Exception):
@@ -552,7 +552,7 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         out = args.run(args)
     except (_UsageError, InputError) as exc:
-        msg = " ".join(str(exc).split())
+        msg = one_line(str(exc))
         print(f"rrbc: error: {msg}" if not msg.startswith("rrbc") else msg, file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -561,7 +561,7 @@ def main(argv=None) -> int:
         if os.environ.get("RRBC_DEBUG"):
             raise
         print(
-            f"rrbc: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} (set RRBC_DEBUG=1 for details)",
+            f"rrbc: internal error: {type(exc).__name__}: {one_line(str(exc))} (set RRBC_DEBUG=1 for details)",
             file=sys.stderr,
         )
         return 1

@@ -7,3 +7,22 @@ Every check on user-supplied data (files, command-line values, point sets handed
 
 class InputError(ValueError):
     """Bad input: the message says what is wrong and, where it can, where and how to fix it."""
+
+
+MESSAGE_LIMIT = 400  # characters of a message shown to a user (stderr line, app notification)
+
+
+def one_line(text: str, limit: int = MESSAGE_LIMIT) -> str:
+    """`text` as one safe line for a terminal or a page: whitespace runs collapsed, control characters (NUL, ANSI
+    escapes, DEL, C1) shown as \\xNN instead of acting, at most `limit` characters (then "…")."""
+    out = []
+    for ch in " ".join(str(text).split()):
+        o = ord(ch)
+        out.append(f"\\x{o:02x}" if o < 0x20 or 0x7F <= o < 0xA0 else ch)
+    s = "".join(out)
+    return s if len(s) <= limit else s[: limit - 1] + "…"
+
+
+def excerpt(text: str, limit: int = 40) -> str:
+    """A short, safe quotation of file content for a message (`one_line`, at most `limit` characters)."""
+    return one_line(text, limit)

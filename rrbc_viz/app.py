@@ -44,7 +44,7 @@ import numpy as np
 import viser
 
 from rrbc_core.analysis.diagnosis import Diagnosis
-from rrbc_core.errors import InputError
+from rrbc_core.errors import InputError, one_line
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
@@ -286,7 +286,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
 
     def _message(self, text: str, client=None, error: bool = True, title: str | None = None) -> None:
         """Show a message: a notification to `client` (every tab if None) and the status line."""
-        line = " ".join(str(text).split())
+        line = one_line(str(text))
         self.messages.append(line)
         self.controls.text["status"] = ("⚠ " if error else "✓ ") + line
         targets = [client] if client is not None else list(self.server.get_clients().values())

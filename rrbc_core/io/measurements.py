@@ -36,7 +36,7 @@ from os import PathLike
 
 import numpy as np
 
-from rrbc_core.errors import InputError
+from rrbc_core.errors import InputError, excerpt
 from rrbc_core.geometry.points import COINCIDENT_MM, COLLINEAR_RATIO, check_registration_points, spread_ratios
 
 __all__ = [
@@ -420,10 +420,10 @@ def _check_header(header: list[str], line: int, source: str) -> int:
             hint = ""
             near = [h for h in header if h.lower() == name.lower()]
             if near:
-                hint = f" (found {near[0]!r}: column names are case-sensitive)"
+                hint = f" (found {excerpt(near[0])!r}: column names are case-sensitive)"
             elif name in ROBOT_COLUMNS:
                 hint = " (needed for roles registration, fiducial, both, check)"
-            shown = ", ".join(header[:_MAX_LISTED]) + (", ..." if len(header) > _MAX_LISTED else "")
+            shown = excerpt(", ".join(h[:20] for h in header[:_MAX_LISTED]), 80)
             raise _error(source, line, name, f"required column missing{hint}; the header is: {shown}")
     return len(header)
 
