@@ -36,12 +36,9 @@ def _try(port: int, path: str, origin: str | None, host: str | None = None):
 
 
 @pytest.fixture
-def tokened():
-    a = serve(port=0)
-    try:
-        yield a
-    finally:
-        a.stop()
+def tokened(app):
+    """The default app (conftest's `app`: serve(port=0) carries a fresh token)."""
+    return app
 
 
 def test_a_foreign_page_is_refused_even_with_the_token(tokened):
