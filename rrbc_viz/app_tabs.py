@@ -14,6 +14,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session.evaluation import Evaluation
 
 from . import diagnosis_panel, files
+from .syncing import clamped
 
 
 class TabActions:
@@ -85,7 +86,7 @@ class TabActions:
         panel = self.planning
         with self._lock:
             session = self.session
-            k = int(panel.k.value) if k is None else k
+            k = int(clamped(panel.k)) if k is None else k
             if session.kind != "scene":  # measured data: coverage first, then spread (no error model needed)
                 try:
                     plan = session.coverage_plan(k)

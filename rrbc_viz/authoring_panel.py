@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import viser
 
 from .app_authoring import CLICK_MODES, REGISTRATION_LIFT_MM
+from .syncing import clamped
 
 if TYPE_CHECKING:
     from .actions import AppActions
@@ -34,7 +35,7 @@ class AuthoringPanel:
             self.slicer = gui.add_button("Slicer markups (2 files)", icon=viser.Icon.DOWNLOAD)
 
         def on_mode(event: viser.GuiEvent) -> None:
-            app.set_click_mode(dict(CLICK_MODES)[self.mode.value], float(self.region.value))
+            app.set_click_mode(dict(CLICK_MODES)[self.mode.value], clamped(self.region))
 
         self.mode.on_update(on_mode)
         self.region.on_update(on_mode)

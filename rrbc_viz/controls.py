@@ -26,7 +26,7 @@ from .diagnosis_panel import PROMPT
 from .nodes import LAYERS, Display
 from .selection_panel import Bullseye, SelectionPanel
 from .slice_nodes import SLICE_AXES, SLICE_CHOICES
-from .syncing import Syncing
+from .syncing import Syncing, clamped
 from .vec_panel import VecPanel
 
 if TYPE_CHECKING:
@@ -77,7 +77,8 @@ def _forward(handle, syncing: Syncing, send, name: str, cast):
 
     def on_update(event: viser.GuiEvent) -> None:
         if not syncing.on:
-            send(client=event.client, **{name: cast(handle.value)})
+            value = cast(clamped(handle)) if hasattr(handle, "min") else cast(handle.value)
+            send(client=event.client, **{name: value})
 
     return on_update
 
@@ -466,7 +467,7 @@ class Controls:
     @property
     def monte_carlo_trials(self) -> int:
         """The trials the user asked for."""
-        return int(self.montecarlo.mc_trials.value)
+        return int(clamped(self.montecarlo.mc_trials))
 
     # -------------------------------------------------------------------------------------------- syncing
     def quiet(self):

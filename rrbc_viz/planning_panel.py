@@ -38,6 +38,7 @@ from rrbc_core.errors import InputError
 
 from . import colors
 from .nodes import gizmo_name
+from .syncing import clamped
 from .worker import CoalescingWorker
 
 if TYPE_CHECKING:
@@ -431,7 +432,7 @@ class PlanningPanel:
                 return False
             self._busy = True
         self.suggest_button.disabled = True
-        self.suggestion_md.content = f"Planning: choosing {int(self.k.value)} of the scene's candidate locations…"
+        self.suggestion_md.content = f"Planning: choosing {int(clamped(self.k))} of the scene's candidate locations…"
         return True
 
     def end(self, session: ExplorerSession) -> None:
@@ -449,7 +450,7 @@ class PlanningPanel:
         nums = [a for a in args if isinstance(a, (int, float)) and not isinstance(a, bool)]
         extra = label or (" / ".join(f"{x:g}" for x in nums[:2]) if nums else "")
         self.suggestion_md.content = (
-            f"Planning: choosing {int(self.k.value)} of the scene's candidate locations… {extra}"
+            f"Planning: choosing {int(clamped(self.k))} of the scene's candidate locations… {extra}"
         ).rstrip()
 
     def _add_ghosts(self, ids, positions) -> None:

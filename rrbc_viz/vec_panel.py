@@ -12,6 +12,8 @@ import viser
 
 from rrbc_core.session.vec_view import TILT_MAX_DEG, VARIED_TILT_DEG, VecView
 
+from .syncing import clamped
+
 if TYPE_CHECKING:
     from .actions import AppActions
     from .syncing import Syncing
@@ -87,9 +89,7 @@ class VecPanel:
 
         def on_tool(event: viser.GuiEvent) -> None:
             if not syncing.on and self.target.value:
-                app.set_target_tool(
-                    self.target.value, float(self.tilt.value), float(self.azimuth.value), client=event.client
-                )
+                app.set_target_tool(self.target.value, clamped(self.tilt), clamped(self.azimuth), client=event.client)
 
         self.tilt.on_update(on_tool)
         self.azimuth.on_update(on_tool)

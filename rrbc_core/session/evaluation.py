@@ -16,6 +16,12 @@ from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.errors import InputError
 from rrbc_core.methods import MethodOptions
 
+#: Bounds of what a user controls (issue 16: a value sent by a client cannot push the session into overflow).
+SCALE_MAX = 100.0  # noise and bias sizes (the app's sliders go to 3)
+SMOOTHING_MAX = 1e6
+NEIGHBORS_MAX = 1000
+POWER_MAX = 50.0
+
 
 @dataclass(frozen=True)
 class Settings:
@@ -32,12 +38,15 @@ class Settings:
     excluded: frozenset = frozenset()
 
     def __post_init__(self):
-        for name in ("noise_scale", "bias_scale", "smoothing"):
+        for name, top in (("noise_scale", SCALE_MAX), ("bias_scale", SCALE_MAX), ("smoothing", SMOOTHING_MAX)):
             v = getattr(self, name)
-            if not np.isfinite(v) or v < 0:
-                raise InputError(f"{name} must be a finite number >= 0, got {v}")
-        if int(self.neighbors) < 1 or not self.power > 0:
-            raise InputError("neighbors must be >= 1 and power > 0")
+            if not np.isfinite(v) or not 0 <= v <= top:
+                raise InputError(f"{name} must be a number from 0 to {top:g}, got {v}")
+        if not 1 <= int(self.neighbors) <= NEIGHBORS_MAX or not 0 < self.power <= POWER_MAX:
+            raise InputError(
+                f"neighbors must be 1 to {NEIGHBORS_MAX} and power in (0, {POWER_MAX:g}], got {self.neighbors}, "
+                f"{self.power}"
+            )
         object.__setattr__(self, "excluded", frozenset(self.excluded))
         self.method  # noqa: B018 - validates the names and the chosen method's options
 

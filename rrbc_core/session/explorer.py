@@ -237,7 +237,7 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         self.layout = {**self.layout, kind: Group(g.ids, positions)}
         try:
             return self.evaluate()
-        except InputError:  # e.g. out of the arm's reach: keep the last good layout
+        except Exception:  # out of the arm's reach, or anything else: keep the last good layout
             self.layout, self._readings = old_layout, old_readings
             raise
 
@@ -259,7 +259,7 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         self.settings = new
         try:
             return self.evaluate()
-        except InputError:
+        except Exception:  # any failure of an update: the last good settings stay (issue 16)
             self.settings = old
             raise
 

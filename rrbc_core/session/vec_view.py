@@ -96,8 +96,10 @@ class SessionVec:
         self.varied_registration = bool(varied)
         try:
             return self.evaluate()
-        except InputError as e:
+        except Exception as e:
             self.varied_registration = old
+            if not isinstance(e, InputError):
+                raise
             raise InputError(
                 f"the arm cannot reach every registration point leaned {VARIED_TILT_DEG:g}°: {e}"
             ) from None
@@ -133,8 +135,10 @@ class SessionVec:
             self.target_tools[pid] = (tilt, az)
         try:
             return self.evaluate()
-        except InputError as e:
+        except Exception as e:
             self.target_tools = old
+            if not isinstance(e, InputError):
+                raise
             raise InputError(f"target {pid}: the arm cannot reach it with the tool leaned {tilt:g}°: {e}") from None
 
     @thread_limited

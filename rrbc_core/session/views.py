@@ -16,6 +16,8 @@ from rrbc_core.session.results import HeatMap, MonteCarloPlots, _scaled
 from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import ErrorSlice, SlicePlane
 
+SESSION_TRIALS_MAX = 5000  # the app's background Monte Carlo (issue 16: bounded, whatever a client sends)
+
 
 class SessionViews:
     """Part of `ExplorerSession` (see there); split out to keep modules short."""
@@ -147,6 +149,11 @@ class SessionViews:
 
         if self.kind != "scene":
             raise InputError("Monte Carlo needs a scene (an error model); measured data have none")
+        if not (1 <= int(trials) <= SESSION_TRIALS_MAX and 1 <= int(checks_per_target) <= 100):
+            raise InputError(
+                f"the app's Monte Carlo takes 1 to {SESSION_TRIALS_MAX} trials and 1 to 100 check points per target, "
+                f"got {trials} and {checks_per_target} (larger studies: rrbc simulate)"
+            )
         from rrbc_core.simulation.kinematics import tool_down
 
         s = self.settings
