@@ -66,7 +66,9 @@ STANDARD_COLUMNS = REQUIRED_COLUMNS + ("time",)
 
 # A plain decimal number (what `repr(float)` and spreadsheets write); stricter than float(), which would also
 # take '1_000', 'nan', 'infinity' and non-ASCII digits.
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)  # ASCII digits only
+COORDINATE_LIMIT_MM = 1e9  # |coordinate| at most this (a km-scale cell is 1e6 mm): larger is a unit or format slip
+TIME_LIMIT_S = 1e12  # |time| at most this (30 000 years of seconds; Unix times are ~1.7e9)
 _MAX_LISTED = 8
 
 
@@ -292,19 +294,23 @@ def _records(text: str, source: str) -> Iterator[tuple[int, list[str]]]:
             yield feed.record_start, cells
 
 
-def _number(cell: str, source: str, line: int, column: str) -> float:
+def _number(cell: str, source: str, line: int, column: str, limit: float = COORDINATE_LIMIT_MM) -> float:
     if _NUMBER.fullmatch(cell):
         value = float(cell)
-        if math.isfinite(value):
+        if math.isfinite(value) and abs(value) <= limit:
             return value
-        raise _error(source, line, column, f"{cell!r} is out of range (not a finite number)")
+        if not math.isfinite(value):
+            raise _error(source, line, column, f"{excerpt(cell)!r} is out of range (not a finite number)")
+        raise _error(source, line, column, f"{excerpt(cell)!r} is out of range (at most {limit:g} in size)")
     try:
         value = float(cell)
     except ValueError:
         value = None
     if value is not None and not math.isfinite(value):
-        raise _error(source, line, column, f"{cell!r} is not a finite number (NaN and infinity are not allowed)")
-    raise _error(source, line, column, f"{cell!r} is not a number")
+        raise _error(
+            source, line, column, f"{excerpt(cell)!r} is not a finite number (NaN and infinity are not allowed)"
+        )
+    raise _error(source, line, column, f"{excerpt(cell)!r} is not a number")
 
 
 def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
@@ -380,7 +386,7 @@ def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
         if has_time:
             cell = cells[position["time"]]
             if cell != "":
-                t = _number(cell, source, line, "time")
+                t = _number(cell, source, line, "time", TIME_LIMIT_S)
         _check_row(source, line, ident, role, s, b, t)
         _check_same_role(source, line, ident, role, seen)
         ids.append(ident)

@@ -169,19 +169,29 @@ _TOML_POS = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
 _TOML_EOF = re.compile(r"\s*\(at end of document\)\s*$")
 
 
+SCENE_FILE_LIMIT = 16 * 1024 * 1024  # bytes: a scene file larger than this is refused (shipped scenes: < 20 kB)
+
+
 def _read_toml(path, source: str, c: _Checker) -> dict:
     try:
+        if os.path.exists(path) and not os.path.isfile(path):
+            raise c.error("", "not a regular file (a scene is a .toml file)")
         with open(path, "rb") as fh:
-            data = fh.read()
+            data = fh.read(SCENE_FILE_LIMIT + 1)
     except OSError as exc:
         raise c.error("", f"cannot read the scene file: {exc.strerror or exc.__class__.__name__}") from None
+    if len(data) > SCENE_FILE_LIMIT:
+        raise c.error("", f"larger than {SCENE_FILE_LIMIT // (1024 * 1024)} MiB: not a scene file")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
         raise c.error(f"line {line}", "not UTF-8 text; save the scene file as UTF-8") from None
+    text = text.removeprefix("\ufeff")  # a byte-order mark (some editors write one) is not part of the TOML
     try:
         return tomllib.loads(text)
+    except RecursionError:
+        raise c.error("", "TOML nested too deeply to read") from None
     except tomllib.TOMLDecodeError as exc:
         msg = str(exc)
         m = _TOML_POS.search(msg)

@@ -642,3 +642,38 @@ def test_writer_keeps_mode_of_existing_file(tmp_path):
 
 def test_roles_constant():
     assert ROLES == ("registration", "fiducial", "both", "target", "check")
+
+
+# ----------------------------------------------------------------------------- bounds (issue 16, item 4)
+_HEAD = "id,role,sensor_x,sensor_y,sensor_z,robot_x,robot_y,robot_z,time\n"
+
+
+@pytest.mark.parametrize(
+    "cell, column, says",
+    [
+        ("\u0661\u0662", "sensor_x", "is not a number"),  # Arabic-Indic digits: the docs say ASCII only
+        ("\uff11", "sensor_x", "is not a number"),  # a full-width digit
+        ("1e200", "sensor_x", "out of range"),
+        ("-2e9", "robot_z", "out of range"),
+        ("1e300", "time", "out of range"),
+    ],
+)
+def test_non_ascii_digits_and_huge_values_are_refused_naming_line_and_field(cell, column, says):
+    cells = {"sensor_x": "1", "robot_z": "3", "time": "0"}
+    cells[column] = cell
+    text = _HEAD + f"A,fiducial,{cells['sensor_x']},2,3,1,2,{cells['robot_z']},{cells['time']}\n"
+    with pytest.raises(meas.InputError) as e:
+        meas.parse_measurements(text, "f.csv")
+    msg = str(e.value)
+    assert "line 2" in msg and column in msg and says in msg
+
+
+def test_the_bounds_themselves_are_accepted():
+    rows = [
+        "A,both,0,0,0,0,0,0,1e12",
+        "B,both,100,0,0,100,0,0,1",
+        "C,both,0,100,0,0,100,0,2",
+        "T,target,1e9,-1e9,3,,,,3",
+    ]
+    m = meas.parse_measurements(_HEAD + "\n".join(rows) + "\n", "f.csv")
+    assert m.sensor[3, 0] == 1e9 and m.sensor[3, 1] == -1e9 and m.time[0] == 1e12

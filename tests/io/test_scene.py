@@ -620,3 +620,25 @@ def test_a_mesh_in_a_folder_below_the_scene_loads(tmp_path):
     path = tmp_path / "scene.toml"
     path.write_text(MINIMAL.replace('mesh = "m.stl"', 'mesh = "meshes/m.stl"'), encoding="utf-8")
     assert load_scene(path).mesh_path == (tmp_path / "meshes" / "m.stl").resolve()
+
+
+def test_a_byte_order_mark_is_accepted(tmp_path):
+    path = _write(tmp_path, "\ufeff" + MINIMAL)
+    assert load_scene(path).fiducials.ids == ("F1", "F2")
+
+
+@pytest.mark.parametrize(
+    "content, says",
+    [("a = " + "[" * 5000 + "]" * 5000 + "\n", "nested too deeply"), (None, "not a regular file")],
+)
+def test_deep_nesting_and_special_files_are_one_clear_error(tmp_path, content, says):
+    if content is None:
+        import os
+
+        path = tmp_path / "fifo.toml"
+        os.mkfifo(path)  # reading it would block forever
+    else:
+        path = tmp_path / "deep.toml"
+        path.write_text(content, encoding="utf-8")
+    with pytest.raises(InputError, match=says):
+        load_scene(path)
