@@ -361,6 +361,10 @@ def _cmd_simulate(args) -> str:
     from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.simulation.montecarlo import INTERPOLATION_NAMES, STRATEGY_NAMES, simulate, simulated_data
 
+    if args.out is not None:
+        from rrbc_core.io.measurements_write import output_path
+
+        output_path(args.out)  # an empty, special or unwritable --out is refused before the run, not after
     scene = load_scene(args.scene)
     if args.layout:
         scene.with_layout(args.layout)  # an unknown layout is refused before any work
@@ -376,7 +380,7 @@ def _cmd_simulate(args) -> str:
         )
     finally:
         bar.close()
-    if args.out:
+    if args.out is not None:
         mset = simulated_data(scene, seed=args.seed, layout=args.layout)
         write_measurements(
             args.out,
@@ -469,6 +473,8 @@ def _cmd_reproduce(args) -> str:
     if args.out is not None:
         from pathlib import Path
 
+        if not str(args.out).strip():
+            raise InputError("--out: an empty path; give a folder for the report")
         out = Path(args.out)
         if out.exists() and not out.is_dir():
             raise InputError(f"--out {out}: exists and is not a directory")

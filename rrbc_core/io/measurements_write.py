@@ -13,6 +13,7 @@ from os import PathLike
 
 import numpy as np
 
+from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import ROBOT_COLUMNS, SENSOR_COLUMNS, MeasurementSet, _error, validate
 
 
@@ -67,13 +68,32 @@ def write_measurements(path: str | PathLike, mset: MeasurementSet, comments: Seq
     atomic_write_text(path, fh.getvalue())
 
 
-def atomic_write_text(path: str | PathLike, text: str) -> None:
-    """Write `text` (UTF-8) to `path` atomically: a temporary file beside it, fsync'd, then ``os.replace``; an
-    existing file keeps its permissions, and a failure leaves it as it was. InputError (one line) if it cannot
-    be written."""
+def output_path(path: str | PathLike) -> str:
+    """Where `path` is written (issue 16): an empty path, a directory or a special file (a device, a FIFO) is
+    refused (InputError, one line); a symbolic link is written through (its target is replaced, the link stays);
+    the folder must exist. Call it before long work, so a bad `--out` is said at once, not after the run."""
     dest = os.fspath(path)
     if isinstance(dest, bytes):
         dest = os.fsdecode(dest)
+    if not str(dest).strip():
+        raise InputError("an empty output path: give a file name")
+    if os.path.islink(dest):
+        dest = os.path.realpath(dest)
+    if os.path.exists(dest) and not os.path.isfile(dest):
+        raise _error(dest, None, None, "not a regular file (a directory, device or FIFO): refusing to replace it")
+    directory = os.path.dirname(os.path.abspath(dest))
+    if not os.path.isdir(directory):
+        raise _error(dest, None, None, f"cannot write the file: no such folder {directory}")
+    if not os.access(directory, os.W_OK):
+        raise _error(dest, None, None, f"cannot write the file: the folder {directory} is not writable")
+    return dest
+
+
+def atomic_write_text(path: str | PathLike, text: str) -> None:
+    """Write `text` (UTF-8) to `path` atomically: a temporary file beside it, fsync'd, then ``os.replace``; an
+    existing file keeps its permissions, and a failure leaves it as it was; a link is written through and special
+    files are refused (`output_path`). InputError (one line) if it cannot be written."""
+    dest = output_path(path)
     directory = os.path.dirname(os.path.abspath(dest))
     base = os.path.basename(dest)
     tmp = os.path.join(directory, f".{base}.{secrets.token_hex(6)}.tmp")

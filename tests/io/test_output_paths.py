@@ -1,0 +1,50 @@
+"""`--out` and every file the project writes (issue 16): special files are never replaced, links are written
+through, an empty or impossible path is refused at once (before a run), one line, exit 2."""
+
+import os
+
+import pytest
+
+from rrbc_core.errors import InputError
+from rrbc_core.io.measurements_write import atomic_write_text, output_path
+from tests.paths import SCENES
+
+
+def test_a_fifo_a_directory_and_an_empty_path_are_refused(tmp_path):
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    for bad in (fifo, tmp_path, ""):
+        with pytest.raises(InputError):
+            atomic_write_text(bad, "x")
+    assert fifo.is_fifo()  # still a FIFO, not replaced by a regular file
+
+
+def test_a_character_device_is_never_replaced():
+    with pytest.raises(InputError, match="not a regular file"):
+        output_path("/dev/null")
+    assert not os.path.isfile("/dev/null")
+
+
+def test_a_symlink_is_written_through(tmp_path):
+    target = tmp_path / "real.csv"
+    target.write_text("old", encoding="utf-8")
+    link = tmp_path / "link.csv"
+    os.symlink(target, link)
+    atomic_write_text(link, "new")
+    assert link.is_symlink() and target.read_text(encoding="utf-8") == "new"
+
+
+def test_simulate_refuses_a_bad_out_before_the_run(tmp_path, monkeypatch, capsys):
+    import rrbc_core.simulation.montecarlo as mc
+    from rrbc_core.cli import main
+
+    def no_run(*a, **k):
+        raise AssertionError("the simulation ran before --out was checked")
+
+    monkeypatch.setattr(mc, "simulate", no_run)
+    scene = str(SCENES / "demo_workcell.toml")
+    assert main(["simulate", scene, "--out", str(tmp_path / "no" / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "no such folder" in err
+    assert main(["simulate", scene, "--out", ""]) == 2 and "empty" in capsys.readouterr().err
+    assert main(["simulate", scene, "--out", "/dev/null"]) == 2 and "not a regular file" in capsys.readouterr().err
