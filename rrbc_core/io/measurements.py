@@ -68,6 +68,7 @@ STANDARD_COLUMNS = REQUIRED_COLUMNS + ("time",)
 # take '1_000', 'nan', 'infinity' and non-ASCII digits.
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)  # ASCII digits only
 COORDINATE_LIMIT_MM = 1e9  # |coordinate| at most this (a km-scale cell is 1e6 mm): larger is a unit or format slip
+FILE_LIMIT_BYTES = 512 * 2**20  # a measurement file is read only up to this size (about 5 million rows)
 TIME_LIMIT_S = 1e12  # |time| at most this (30 000 years of seconds; Unix times are ~1.7e9)
 _MAX_LISTED = 8
 
@@ -228,12 +229,18 @@ def read_measurements(path: str | PathLike) -> MeasurementSet:
     source = os.fspath(path)
     if isinstance(source, bytes):
         source = os.fsdecode(source)
+    if os.path.exists(source) and not os.path.isfile(source):
+        raise _error(source, None, None, "not a regular file (a device, FIFO or directory): only files are read")
     try:
         with open(path, "rb") as fh:
-            data = fh.read()
+            data = fh.read(FILE_LIMIT_BYTES + 1)
     except OSError as exc:
         reason = exc.strerror or exc.__class__.__name__
         raise _error(source, None, None, f"cannot read the file: {reason}") from None
+    if len(data) > FILE_LIMIT_BYTES:
+        raise _error(
+            source, None, None, f"larger than {FILE_LIMIT_BYTES // 2**20} MiB, the limit of a measurement file"
+        )
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:

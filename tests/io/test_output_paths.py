@@ -48,3 +48,15 @@ def test_simulate_refuses_a_bad_out_before_the_run(tmp_path, monkeypatch, capsys
     assert len(err.strip().splitlines()) == 1 and "no such folder" in err
     assert main(["simulate", scene, "--out", ""]) == 2 and "empty" in capsys.readouterr().err
     assert main(["simulate", scene, "--out", "/dev/null"]) == 2 and "not a regular file" in capsys.readouterr().err
+
+
+def test_only_regular_files_are_read_and_up_to_the_stated_size(tmp_path, monkeypatch):
+    import rrbc_core.io.measurements as meas
+
+    with pytest.raises(InputError, match="not a regular file"):
+        meas.read_measurements("/dev/zero")  # would read gigabytes
+    big = tmp_path / "big.csv"
+    big.write_bytes(b"id,role\n" + b"x" * 2000)
+    monkeypatch.setattr(meas, "FILE_LIMIT_BYTES", 1000)
+    with pytest.raises(InputError, match="larger than"):
+        meas.read_measurements(big)
