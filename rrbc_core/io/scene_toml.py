@@ -134,12 +134,14 @@ class _Checker:
             raise self.error(key, f"must be a number >= 0, got {_fmt(v)}")
         return x
 
-    def integer(self, v, key: str, minimum=None) -> int:
+    def integer(self, v, key: str, minimum=None, maximum=None) -> int:
         if isinstance(v, bool) or not (isinstance(v, int) or (isinstance(v, float) and v.is_integer())):
             raise self.error(key, f"must be an integer, got {_fmt(v)}")
         i = int(v)
         if minimum is not None and i < minimum:
             raise self.error(key, f"must be an integer >= {minimum}, got {_fmt(v)}")
+        if maximum is not None and i > maximum:
+            raise self.error(key, f"must be at most {maximum}, got {_fmt(v)}")
         return i
 
     def vector(self, v, key: str, n: int = 3, *, positive=False, what=None) -> np.ndarray:
@@ -169,6 +171,7 @@ _TOML_POS = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
 _TOML_EOF = re.compile(r"\s*\(at end of document\)\s*$")
 
 
+MAX_CHECK_POINTS_PER_TARGET = 10_000  # a scene's simulated check points per target (issue 16: bounded work)
 SCENE_FILE_LIMIT = 16 * 1024 * 1024  # bytes: a scene file larger than this is refused (shipped scenes: < 20 kB)
 
 
@@ -352,6 +355,7 @@ def load_scene(path: str | PathLike) -> Scene:
         sim.get("check_points_per_target", DEFAULT_CHECK_POINTS_PER_TARGET),
         "simulation.check_points_per_target",
         minimum=1,
+        maximum=MAX_CHECK_POINTS_PER_TARGET,
     )
     interval = c.number(
         sim.get("measurement_interval_s", DEFAULT_MEASUREMENT_INTERVAL_S),

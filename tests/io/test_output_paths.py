@@ -60,3 +60,26 @@ def test_only_regular_files_are_read_and_up_to_the_stated_size(tmp_path, monkeyp
     monkeypatch.setattr(meas, "FILE_LIMIT_BYTES", 1000)
     with pytest.raises(InputError, match="larger than"):
         meas.read_measurements(big)
+
+
+def test_super_linear_work_has_stated_limits():
+    import numpy as np
+
+    from rrbc_core.interpolation.gp import GP, MAX_FIDUCIALS
+
+    pts = np.random.default_rng(0).uniform(0, 1000, (MAX_FIDUCIALS + 1, 3))
+    with pytest.raises(InputError, match="at most 1000 fiducials"):
+        GP().fit(pts, np.zeros_like(pts))
+
+
+def test_check_points_per_target_is_bounded(tmp_path):
+    from rrbc_core.io.scene_toml import MAX_CHECK_POINTS_PER_TARGET, load_scene
+
+    text = (SCENES / "demo_workcell.toml").read_text(encoding="utf-8")
+    text = text.replace("check_points_per_target = 20", "check_points_per_target = 1000000000")
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "demo_workcell.glb").write_bytes((SCENES / "meshes" / "demo_workcell.glb").read_bytes())
+    path = tmp_path / "s.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(InputError, match=f"at most {MAX_CHECK_POINTS_PER_TARGET}"):
+        load_scene(path)
