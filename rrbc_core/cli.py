@@ -13,7 +13,7 @@ import os
 import sys
 import time
 
-from rrbc_core.errors import InputError, one_line
+from rrbc_core.errors import InputError, one_line, printable
 
 
 class _UsageError(Exception):
@@ -572,7 +572,7 @@ def main(argv=None) -> int:
         )
         return 1
     try:
-        sys.stdout.write(out)
+        sys.stdout.write(printable(out))
         sys.stdout.flush()
     except BrokenPipeError:
         return 0

@@ -26,3 +26,11 @@ def one_line(text: str, limit: int = MESSAGE_LIMIT) -> str:
 def excerpt(text: str, limit: int = 40) -> str:
     """A short, safe quotation of file content for a message (`one_line`, at most `limit` characters)."""
     return one_line(text, limit)
+
+
+def printable(text: str) -> str:
+    """Output text for a terminal: control characters other than newline and tab (NUL, ANSI escapes, DEL, C1)
+    shown as \\xNN, so an id or a name from a file cannot drive the terminal."""
+    return "".join(
+        ch if ch in "\n\t" or not (ord(ch) < 0x20 or 0x7F <= ord(ch) < 0xA0) else f"\\x{ord(ch):02x}" for ch in text
+    )

@@ -22,3 +22,39 @@ def test_a_file_full_of_escapes_and_nuls_gives_one_short_safe_line(tmp_path):
     err = r.stderr.decode("utf-8")
     assert r.returncode == 2 and len(err.strip().splitlines()) == 1
     assert "\x1b" not in err and "\x00" not in err and len(err) < MESSAGE_LIMIT + 40
+
+
+def test_printable_output_keeps_lines_and_tabs_and_escapes_the_rest():
+    from rrbc_core.errors import printable
+
+    assert printable("a\x1b[31mb\nc\td\x00") == "a\\x1b[31mb\nc\td\\x00"
+
+
+def test_an_id_with_ansi_escapes_is_printed_escaped_in_tables(tmp_path):
+    rows = [
+        "id,role,sensor_x,sensor_y,sensor_z,robot_x,robot_y,robot_z",
+        "R1,both,0,0,0,0,0,0",
+        "R2,both,100,0,0,100,0,0",
+        "R3,both,0,100,0,0,100,0",
+        "R4,both,0,0,100,0,0,100",
+        "\x1b[2JT1,target,50,50,50,,,",
+    ]
+    path = tmp_path / "m.csv"
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    r = subprocess.run([*RRBC, "correct", str(path)], capture_output=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert b"\x1b" not in r.stdout and b"\\x1b[2JT1" in r.stdout
+
+
+def test_huge_scene_and_error_model_numbers_are_one_line(tmp_path):
+    from tests.paths import SCENES
+
+    text = (SCENES / "demo_workcell.toml").read_text(encoding="utf-8")
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "demo_workcell.glb").write_bytes((SCENES / "meshes" / "demo_workcell.glb").read_bytes())
+    for old, new in (("sigma_mm = 0.03", "sigma_mm = 1e300"), ("[1100.0, -450.0, 1250.0]", "[1e300, -450.0, 1250.0]")):
+        path = tmp_path / "s.toml"
+        path.write_text(text.replace(old, new, 1), encoding="utf-8")
+        r = subprocess.run([*RRBC, "plan", str(path)], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert "at most" in r.stderr

@@ -126,8 +126,8 @@ class _Checker:
         if not _is_number(v):
             raise self.error(key, f"must be a number, got {_fmt(v)}")
         x = float(v)
-        if not math.isfinite(x):
-            raise self.error(key, f"must be a finite number, got {_fmt(v)}")
+        if not math.isfinite(x) or abs(x) > VALUE_LIMIT:
+            raise self.error(key, f"must be a finite number at most {VALUE_LIMIT:g} in size, got {_fmt(v)}")
         if positive and not x > 0:
             raise self.error(key, f"must be a positive number, got {_fmt(v)}")
         if nonneg and not x >= 0:
@@ -149,9 +149,11 @@ class _Checker:
         ok = isinstance(v, list) and len(v) == n and all(_is_number(e) for e in v)
         if ok:
             a = np.array([float(e) for e in v])
-            ok = bool(np.all(np.isfinite(a))) and (not positive or bool(np.all(a > 0)))
+            ok = bool(np.all(np.isfinite(a)) and np.all(np.abs(a) <= VALUE_LIMIT)) and (
+                not positive or bool(np.all(a > 0))
+            )
         if not ok:
-            raise self.error(key, f"must be {desc}, got {_fmt(v)}")
+            raise self.error(key, f"must be {desc}, got {_fmt(v)} (each at most {VALUE_LIMIT:g} in size)")
         return a
 
     def array_of_tables(self, v, key: str) -> list:
@@ -171,6 +173,7 @@ _TOML_POS = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
 _TOML_EOF = re.compile(r"\s*\(at end of document\)\s*$")
 
 
+VALUE_LIMIT = 1e9  # every number in a scene is at most this in size (mm, degrees, s): larger is a slip
 MAX_CHECK_POINTS_PER_TARGET = 10_000  # a scene's simulated check points per target (issue 16: bounded work)
 SCENE_FILE_LIMIT = 16 * 1024 * 1024  # bytes: a scene file larger than this is refused (shipped scenes: < 20 kB)
 
