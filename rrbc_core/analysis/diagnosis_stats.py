@@ -19,6 +19,8 @@ _PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points
 
 _BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
 
+MAX_POINTS = 200_000  # distinct paired points diagnose accepts (issue 16: a stated limit, not minutes or gigabytes)
+
 
 _KNN = 6  # neighbours in Moran's I weights
 
@@ -55,6 +57,11 @@ def _paired(mset) -> _Data:
         row_point.append(order.setdefault(mset.ids[i], len(order)))
     row_point = np.asarray(row_point, int)
     n = len(order)
+    if n > MAX_POINTS:
+        raise InputError(
+            f"{mset.source}: diagnose takes at most {MAX_POINTS:,} distinct points (its work grows faster than the "
+            f"data), got {n:,}: diagnose a sample of the file"
+        )
     if n < 5:
         raise InputError(
             f"{mset.source}: diagnose needs at least 5 distinct points with sensor and robot values, got {n}"

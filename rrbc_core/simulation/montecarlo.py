@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 
 STRATEGY_NAMES = tuple(registration.STRATEGIES)  # the registries' names, in their order
 INTERPOLATION_NAMES = tuple(interpolation.METHODS)
+MAX_TRIALS = 100_000  # Monte Carlo trials `simulate` runs at most (issue 16: a stated limit)
 
 
 @dataclass(frozen=True, eq=False)
@@ -374,8 +375,10 @@ def monte_carlo(
     registration + RRBC. Trials run in chunks of `chunk` (memory bound); `progress(n, label)` is called as
     work completes. Seeded: the same seed gives the same numbers.
     """
-    if trials < 1:
-        raise InputError(f"trials must be >= 1, got {trials}")
+    if not 1 <= trials <= MAX_TRIALS:
+        raise InputError(
+            f"trials must be 1 to {MAX_TRIALS:,} (per-trial errors are kept for every check point), got {trials:,}"
+        )
     for name in strategies:
         if name not in STRATEGY_NAMES:
             raise InputError(f"unknown registration strategy '{name}': choose from {', '.join(STRATEGY_NAMES)}")

@@ -83,3 +83,18 @@ def test_check_points_per_target_is_bounded(tmp_path):
     path.write_text(text, encoding="utf-8")
     with pytest.raises(InputError, match=f"at most {MAX_CHECK_POINTS_PER_TARGET}"):
         load_scene(path)
+
+
+def test_diagnose_states_its_limit(monkeypatch):
+    import numpy as np
+
+    import rrbc_core.analysis.diagnosis_stats as ds
+    from rrbc_core.analysis.diagnosis import diagnose
+    from rrbc_core.io.measurements import MeasurementSet
+
+    monkeypatch.setattr(ds, "MAX_POINTS", 10)
+    n = 11
+    p = np.random.default_rng(0).uniform(0, 100, (n, 3))
+    m = MeasurementSet(tuple(f"P{i}" for i in range(n)), ("both",) * n, p, p, np.zeros(n), (0,) * n)
+    with pytest.raises(InputError, match="at most 10 distinct points"):
+        diagnose(m)
