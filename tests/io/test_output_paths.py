@@ -98,3 +98,12 @@ def test_diagnose_states_its_limit(monkeypatch):
     m = MeasurementSet(tuple(f"P{i}" for i in range(n)), ("both",) * n, p, p, np.zeros(n), (0,) * n)
     with pytest.raises(InputError, match="at most 10 distinct points"):
         diagnose(m)
+
+
+def test_simulate_states_its_trials_limit():
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_core.io.scene_toml import load_scene
+    from rrbc_core.simulation.montecarlo import MAX_TRIALS, simulate
+
+    with pytest.raises(InputError, match="trials must be 1 to"):
+        simulate(load_scene(default_scene_path()), MAX_TRIALS + 1)
