@@ -230,7 +230,7 @@ def read_measurements(path: str | PathLike) -> MeasurementSet:
     if isinstance(source, bytes):
         source = os.fsdecode(source)
     if os.path.exists(source) and not os.path.isfile(source):
-        raise _error(source, None, None, "not a regular file (a device, FIFO or directory): only files are read")
+        raise _error(source, None, None, "cannot read the file: not a regular file (a device, FIFO or directory)")
     try:
         with open(path, "rb") as fh:
             data = fh.read(FILE_LIMIT_BYTES + 1)

@@ -2,6 +2,7 @@
 page or script would connect. A refused connection is closed with 1008 before the server sends it anything."""
 
 import asyncio
+import concurrent.futures
 
 import pytest
 import websockets
@@ -32,7 +33,9 @@ def _try(port: int, path: str, origin: str | None, host: str | None = None):
             except websockets.exceptions.ConnectionClosed as e:
                 return "closed", e.rcvd.code if e.rcvd else None
 
-    return asyncio.run(go())
+    # in a thread of its own: another test's event loop (Playwright's sync API) may be running in this one
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, go()).result(timeout=30)
 
 
 @pytest.fixture

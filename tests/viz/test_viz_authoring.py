@@ -6,6 +6,7 @@ numbers."""
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -72,6 +73,7 @@ def test_downloads_hold_the_session_and_the_scene_reloads_to_the_same_numbers(ap
     assert name.endswith(".toml")
     path = tmp_path / name
     path.write_bytes(content)
+    shutil.copy(app.session.scene.mesh_path, tmp_path)  # the scene names its mesh; it opens only meshes beside it
     again = ExplorerSession.from_scene(load_scene(path)).last
     ev = app.session.last
     assert again.fiducial_ids == ev.fiducial_ids
