@@ -371,6 +371,32 @@ def load_scene(path: str | PathLike) -> Scene:
     em_table = c.table(doc.get("error_model", {}), "error_model")
     error_model = _with_tool(_error_model(c, em_table), em_table, tool_mm, robot_model, c.source)
 
+    # every point within the arm's reach, said here by file, field and id (issue 16: the kinematic term's own
+    # message could only give point indices, later, with no file)
+    arm = [t for t in error_model.terms("robot") if hasattr(t, "true_robot")]
+    if arm:
+        from rrbc_core.simulation.kinematics import reachable, tool_down
+
+        groups = (
+            ("registration", registration.ids, registration.positions),
+            ("fiducial", fiducials.ids, fiducials.positions),
+            ("target", [t.id for t in targets], [t.position for t in targets]),
+        )
+        for kind, ids, positions in groups:
+            pos = np.asarray(positions, float).reshape(-1, 3)
+            if not len(pos):
+                continue
+            ok = reachable(arm[0].true_robot(), pos, tool_down(tool_yaw), np.radians(joint_seed_deg))
+            if not ok.all():
+                i = int(np.flatnonzero(~ok)[0])
+                where = ", ".join(f"{v:.1f}" for v in pos[i])
+                more = f" (and {int((~ok).sum()) - 1} more {kind} points)" if (~ok).sum() > 1 else ""
+                raise c.error(
+                    f"{kind}[{i}].position",
+                    f"{ids[i]} at ({where}) mm is out of the arm's reach with its tool pointing down{more}; move it "
+                    "closer to the robot, or change robot.joint_seed_deg",
+                )
+
     # mesh (last: the most expensive check) -------------------------------------------------------------------
     if not mesh_path.is_file():
         raise c.error("scene.mesh", f"mesh file not found: {mesh_path}")

@@ -642,3 +642,15 @@ def test_deep_nesting_and_special_files_are_one_clear_error(tmp_path, content, s
         path.write_text(content, encoding="utf-8")
     with pytest.raises(InputError, match=says):
         load_scene(path)
+
+
+def test_an_unreachable_target_is_named_with_its_file_and_id(tmp_path):
+    text = (SCENES / "demo_workcell.toml").read_text(encoding="utf-8")
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "demo_workcell.glb").write_bytes((SCENES / "meshes" / "demo_workcell.glb").read_bytes())
+    path = tmp_path / "far.toml"
+    path.write_text(text.replace("position = [400.0, -150.0, 15.0]", "position = [4000.0, -150.0, 15.0]", 1))
+    with pytest.raises(InputError) as e:
+        load_scene(path)
+    msg = str(e.value)
+    assert msg.startswith(str(path)) and "target[0].position" in msg and "H1" in msg and "reach" in msg
