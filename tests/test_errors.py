@@ -58,3 +58,14 @@ def test_huge_scene_and_error_model_numbers_are_one_line(tmp_path):
         r = subprocess.run([*RRBC, "plan", str(path)], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert "at most" in r.stderr
+
+
+def test_a_huge_time_in_diagnose_is_one_line(tmp_path):
+    rows = ["id,role,sensor_x,sensor_y,sensor_z,robot_x,robot_y,robot_z,time"]
+    for i, (x, y, z) in enumerate([(0, 0, 0), (100, 0, 0), (0, 100, 0), (0, 0, 100), (50, 50, 50), (80, 20, 10)]):
+        rows.append(f"P{i},both,{x},{y},{z},{x},{y},{z},{1e300 if i == 3 else i}")
+    path = tmp_path / "t.csv"
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    r = subprocess.run([*RRBC, "diagnose", str(path)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "line 5" in r.stderr and "time" in r.stderr and "out of range" in r.stderr
