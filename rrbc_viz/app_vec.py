@@ -16,6 +16,7 @@ class VecActions:
     vec_on: bool = False
     vec_target: str = ""
     vec_view = None  # the last VecView shown (None: off, no arm, or refused)
+    _vec_panel_state = None  # what the tab's widgets last showed
 
     def set_vec(self, on: bool, client=None) -> None:
         """Compare with VEC (calibrate the arm on the current data) or stop."""
@@ -23,6 +24,7 @@ class VecActions:
             self.vec_on = bool(on) and self.session.has_arm
             if on and not self.session.has_arm:
                 self._message(vec_panel.NO_ARM, client, title="No arm to calibrate")
+            self._vec_panel_state = None  # the box the user ticked may have to be unticked again
             with self.server.atomic():
                 self._show_vec(client)
                 self.nodes.update(self.session.last)  # the bullseyes show (or drop) VEC's landing
@@ -52,9 +54,10 @@ class VecActions:
         if self.vec_target not in targets:
             self.vec_target = targets[0] if targets else ""
         tool = s.tool_of("targets", self.vec_target) if self.vec_target else (0.0, 0.0)
-        self.controls.vec.sync(
-            targets, self.vec_target, tool, self.vec_on, getattr(s, "varied_registration", False), s.has_arm
-        )
+        state = (targets, self.vec_target, tool, self.vec_on, getattr(s, "varied_registration", False), s.has_arm)
+        if state != self._vec_panel_state:  # a drag re-shows every frame: send the widgets only what changed
+            self._vec_panel_state = state
+            self.controls.vec.sync(*state)
 
     def _show_vec(self, client=None) -> None:
         """Refresh the tab (caller holds the lock, inside server.atomic()): VEC is computed only when on."""

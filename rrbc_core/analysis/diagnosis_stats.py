@@ -8,7 +8,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
-from scipy.linalg import eigh as _geigh
 from scipy.spatial import cKDTree
 
 from rrbc_core.errors import InputError
@@ -206,11 +205,9 @@ def _usable_drift(base: np.ndarray, dcol: np.ndarray):
 
     In raster order time is (nearly) linear in the coordinates, so some drift directions equal a rotation or linear
     term up to the noise in the mapped points; fitting them would fit noise patterns (false drift and anisotropy).
-    Returns (columns, fraction of drift energy kept per direction)."""
-    qx = _orth(base)
-    kept = dcol - qx @ (qx.T @ dcol)
-    frac, vec = _geigh(kept.T @ kept, dcol.T @ dcol)
-    return dcol @ vec[:, frac >= _DRIFT_KEPT], frac
+    Returns (columns, fraction of drift energy kept per direction): `_usable` with the drift's threshold."""
+    cols, frac, _ = _usable(base, dcol, _DRIFT_KEPT)
+    return cols, frac
 
 
 # ----------------------------------------------------------------------------------------------- outliers

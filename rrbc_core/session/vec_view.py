@@ -94,15 +94,19 @@ class SessionVec:
             raise InputError("tool orientation matters only for a scene with a kinematic arm error")
         old = self.varied_registration
         self.varied_registration = bool(varied)
+        return self._evaluate_or_restore(
+            "varied_registration", old, f"the arm cannot reach every registration point leaned {VARIED_TILT_DEG:g}°"
+        )
+
+    def _evaluate_or_restore(self, attr: str, old, refused: str):
+        """Re-evaluate after `attr` changed; on any failure put `old` back (InputError says `refused: why`)."""
         try:
             return self.evaluate()
         except Exception as e:
-            self.varied_registration = old
+            setattr(self, attr, old)
             if not isinstance(e, InputError):
                 raise
-            raise InputError(
-                f"the arm cannot reach every registration point leaned {VARIED_TILT_DEG:g}°: {e}"
-            ) from None
+            raise InputError(f"{refused}: {e}") from None
 
     def tool_rotations(self, kind: str, ids) -> np.ndarray:
         yaw = float(getattr(self.scene, "tool_yaw_deg", 0.0) or 0.0)
@@ -133,13 +137,9 @@ class SessionVec:
             self.target_tools.pop(pid, None)
         else:
             self.target_tools[pid] = (tilt, az)
-        try:
-            return self.evaluate()
-        except Exception as e:
-            self.target_tools = old
-            if not isinstance(e, InputError):
-                raise
-            raise InputError(f"target {pid}: the arm cannot reach it with the tool leaned {tilt:g}°: {e}") from None
+        return self._evaluate_or_restore(
+            "target_tools", old, f"target {pid}: the arm cannot reach it with the tool leaned {tilt:g}°"
+        )
 
     @thread_limited
     def vec_view(self) -> VecView | None:

@@ -81,3 +81,8 @@ def test_the_panel_bullseye_draws_vec_at_true_size(app):
     assert dx == float(f"{view.robot_vec[0][0] - ev.targets.truth[0][0]:.6g}")
     assert f"VEC {view.error_vec[0]:.3f} mm" in caption and "VEC" in key
     assert 'data-kind="vec"' not in bullseye_svg(ev, pid)[0]
+
+
+def test_a_refused_comparison_unticks_the_box(measured):
+    measured.controls.vec.show.value = True  # the user ticks it; there is no arm
+    assert not measured.vec_on and measured.controls.vec.show.value is False
