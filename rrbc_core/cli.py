@@ -309,10 +309,18 @@ def _diagnosis_table(dg) -> str:
     for e in dg.effects:
         lines.append(f"{e.name} (p {e.p_value:.2g}): {e.evidence}")
     verdict = "recommended" if dg.rrbc_recommended else "not recommended"
-    lines.append(f"RRBC {verdict}: expected RMST change {100 * dg.expected_rmst_change:+.1f} % (leave-one-out)")
+    if dg.checks_rms_mm is not None:
+        rig, rr = dg.checks_rms_mm
+        lines.append(
+            f"RRBC {verdict}: RMST change {100 * dg.expected_rmst_change:+.1f} % at the file's check rows "
+            f"(rigid {rig:.4g} mm, RRBC {rr:.4g} mm, as rrbc correct scores them); leave-one-out "
+            f"{100 * (dg.loo_rms_rrbc_mm / dg.loo_rms_rigid_mm - 1 if dg.loo_rms_rigid_mm > 0 else 0):+.1f} %"
+        )
+    else:
+        lines.append(f"RRBC {verdict}: expected RMST change {100 * dg.expected_rmst_change:+.1f} % (leave-one-out)")
     if dg.expected_change_without_outliers is not None:
         lines.append(f"  with the outliers removed from the file: {100 * dg.expected_change_without_outliers:+.1f} %")
-    lines.append(f"  predicts: {dg.assumes}")
+    lines.append(f"  {'measured' if dg.checks_rms_mm is not None else 'predicts'}: {dg.assumes}")
     lines += [f"limit: {text}" for text in dg.limits]
     return "\n".join(lines) + "\n"
 

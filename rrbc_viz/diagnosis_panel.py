@@ -112,10 +112,16 @@ def render(d: Diagnosis, source: str, stale: bool = False) -> str:
         f"Bias RMS: **{d.bias_rms_mm:.3f} mm**."
     )
     change = 100.0 * d.expected_rmst_change
+    if d.checks_rms_mm is not None:
+        basis = (
+            f"at the check points, as `rrbc correct` scores them: RMS {d.checks_rms_mm[0]:.3f} mm rigid → "
+            f"{d.checks_rms_mm[1]:.3f} mm RRBC"
+        )
+    else:
+        basis = f"leave-one-out RMS {d.loo_rms_rigid_mm:.3f} mm rigid → {d.loo_rms_rrbc_mm:.3f} mm RRBC"
     lines.append(
         f"RRBC **{'recommended' if d.rrbc_recommended else 'not recommended'}**: expected RMST change "
-        f"**{change:+.1f} %** (leave-one-out RMS {d.loo_rms_rigid_mm:.3f} mm rigid → "
-        f"{d.loo_rms_rrbc_mm:.3f} mm RRBC)."
+        f"**{change:+.1f} %** ({basis})."
     )
     if d.limits:
         lines.append("Limits:\n" + "\n".join(f"- {s}" for s in d.limits))

@@ -40,7 +40,6 @@ from rrbc_core.analysis.diagnosis_stats import (
     _fit,
     _ftest,
     _Geometry,
-    _loo,
     _moran,
     _moran_bootstrap,
     _moran_weights,
@@ -53,6 +52,7 @@ from rrbc_core.analysis.diagnosis_stats import (
     _usable_drift,
     _whitener,
 )
+from rrbc_core.analysis.diagnosis_verdict import rrbc_verdict
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.registration.strategies import least_squares
@@ -84,8 +84,9 @@ class Effect:
 class Diagnosis:
     """The verdict of `diagnose`: ``effects`` (`Effect`: name, parameters, p-value, evidence), largest first;
     ``noise_sigma_mm`` per robot axis and where it came from (``noise_source``: repeats or fit); ``bias_rms_mm``;
-    RRBC's leave-one-out verdict on the file as given (``rrbc_recommended``, ``expected_rmst_change``, the two
-    RMS values, and with outliers ``expected_change_without_outliers``; ``assumes`` says what is predicted); the
+    RRBC's verdict on the file as given (``rrbc_recommended``, ``expected_rmst_change``, the two RMS values and
+    their ``basis`` — the file's check rows scored as `rrbc correct` scores them, else leave-one-out — and with
+    outliers ``expected_change_without_outliers``; ``assumes`` says what it is); the
     p-value of every test run (``tests``) and what these data cannot show (``limits``). `to_json()` is the JSON of
     `rrbc diagnose --json`.
     """
@@ -103,15 +104,28 @@ class Diagnosis:
     tests: dict = field(default_factory=dict)  # test name -> p-value (all tests run)
     limits: tuple[str, ...] = ()
     expected_change_without_outliers: float | None = None
+    basis: str = "leave-one-out"  # or "checks": rrbc correct's own figure on the file's check rows
+    checks_rms_mm: tuple[float, float] | None = None  # rrbc correct's check RMST (rigid, RRBC), None without checks
 
     @property
     def assumes(self) -> str:
-        """What `expected_rmst_change` is a prediction of."""
+        """What `expected_rmst_change` is: `rrbc correct`'s own figure on the file's check rows, or a prediction."""
+        if self.basis == "checks":
+            text = (
+                "rrbc correct on this file as given: its check rows scored by the same pipeline (registration rows, "
+                "fiducial rows, IDW k = 4, p = 2) against the robot values the file gives them, whether those are "
+                "noisy readings or noise-free truth; not a prediction for other points"
+            )
+            if self.expected_change_without_outliers is not None:
+                text += (
+                    "; expected_rmst_change_without_outliers is the same with the outliers' rows removed from the file"
+                )
+            return text
         text = (
-            "rrbc correct on this file as given, each paired point left out in turn and predicted by a rigid fit and "
+            "no check rows, so a prediction of rrbc correct on this file as given: each paired point left out in turn and predicted by a rigid fit and "
             "RRBC (IDW k = 4, p = 2) from all the others (as on a file whose rows are all `both`), scored at the "
-            "inliers with their own readings as the truth; where the scored rows hold noise-free truth (simulated "
-            "check rows), the fiducials' noise that RRBC passes on weighs more, and RRBC does worse than predicted"
+            "inliers with their own readings as the truth; for points measured like these; against noise-free truth "
+            "RRBC does worse than this (the readings' own noise dilutes the difference)"
         )
         if self.expected_change_without_outliers is not None:
             text += (
@@ -133,8 +147,11 @@ class Diagnosis:
             "rrbc": {
                 "recommended": bool(self.rrbc_recommended),
                 "expected_rmst_change": float(self.expected_rmst_change),
+                "basis": self.basis,
                 "loo_rms_rigid_mm": float(self.loo_rms_rigid_mm),
                 "loo_rms_rrbc_mm": float(self.loo_rms_rrbc_mm),
+                "checks_rms_rigid_mm": None if self.checks_rms_mm is None else float(self.checks_rms_mm[0]),
+                "checks_rms_rrbc_mm": None if self.checks_rms_mm is None else float(self.checks_rms_mm[1]),
                 "expected_rmst_change_without_outliers": (
                     None
                     if self.expected_change_without_outliers is None
@@ -467,7 +484,7 @@ def diagnose(
     -------
     Diagnosis
         The effects found (outliers, scale, affine, drift, kinematic, smooth_field, anisotropic_noise) with their
-        parameters and p-values, the noise per axis (mm), the bias RMS (mm), the leave-one-out verdict on RRBC and
+        parameters and p-values, the noise per axis (mm), the bias RMS (mm), the verdict on RRBC and
         the limits of what these data can show; `to_json()` is the JSON of `rrbc diagnose --json`.
 
     Raises
@@ -601,16 +618,9 @@ def diagnose(
             "arm explains is reported as kinematic"
         )
 
-    # bias, and RRBC by leave-one-out on the file as given (outliers kept in the fits), scored at the inliers
+    # bias, and RRBC on the file as given: rrbc correct's own figure on its check rows, else leave-one-out
     bias = float(np.sqrt(max(0.0, float(np.mean(np.sum(resid**2, axis=1))) - noise_pp)))
-    good = np.ones(n_all, bool)
-    good[out_idx] = False
-    loo_rigid, loo_rrbc = _loo(d.sensor, d.robot, d.count, evaluate=good)
-    change = loo_rrbc / loo_rigid - 1.0 if loo_rigid > 0 else 0.0
-    without = None
-    if out_idx:
-        r2, f2 = _loo(d.sensor[inl], d.robot[inl], w)
-        without = f2 / r2 - 1.0 if r2 > 0 else 0.0
+    verdict = rrbc_verdict(mset, d.sensor, d.robot, d.count, tuple(d.ids[i] for i in out_idx), tuple(d.ids))
 
     ordered = sorted(effects.values(), key=lambda e: -e.magnitude_mm)
     return Diagnosis(
@@ -618,13 +628,15 @@ def diagnose(
         tuple(float(v) for v in sigma),
         noise_source,
         bias,
-        bool(loo_rrbc < loo_rigid),
-        float(change),
-        loo_rigid,
-        loo_rrbc,
+        verdict.recommended,
+        float(verdict.change),
+        verdict.loo_rigid_mm,
+        verdict.loo_rrbc_mm,
         n,
         float(alpha),
         tests,
         tuple(limits),
-        expected_change_without_outliers=without,
+        expected_change_without_outliers=verdict.without_outliers,
+        basis=verdict.basis,
+        checks_rms_mm=(verdict.rms_rigid_mm, verdict.rms_rrbc_mm) if verdict.basis == "checks" else None,
     )
