@@ -22,6 +22,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))  # run from a checkout without installing
 
+import big_inputs  # noqa: E402
 import interactive  # noqa: E402
 import montecarlo  # noqa: E402
 import threads_policy  # noqa: E402
@@ -36,6 +37,7 @@ BENCHMARKS = [
     interactive.plan_command,
     interactive.plan_optimiser,
     interactive.diagnose_command,
+    big_inputs.big_inputs,
 ]
 
 

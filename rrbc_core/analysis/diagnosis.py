@@ -36,6 +36,8 @@ from rrbc_core.analysis.diagnosis_arm import arm_columns
 from rrbc_core.analysis.diagnosis_field import fit_field, gls_whiten, krige_outliers, noise_beside_field
 from rrbc_core.analysis.diagnosis_stats import (
     _BOOTSTRAP,
+    _BOOTSTRAP_EXACT_POINTS,
+    _BOOTSTRAP_LARGE,
     _DRIFT_KEPT,
     _fit,
     _ftest,
@@ -322,9 +324,13 @@ def _systematic(d, inl, white, use_time, arm, a_each, rng) -> _Pass:
     res_acc = y - qa @ (qa.T @ y)
     nb = _moran_weights(p)
     i_obs = float(_moran(res_acc.reshape(n, 3), nb))
-    i_boot = _moran_bootstrap(rng, qa, nb)
+    large = n > _BOOTSTRAP_EXACT_POINTS
+    i_boot = _moran_bootstrap(rng, qa, nb, _BOOTSTRAP_LARGE if large else _BOOTSTRAP)
     exceed = int(np.sum(i_boot >= i_obs))
-    if exceed:
+    if large:  # Moran's I of many points is close to normal: its null moments from the bootstrap, the tail from z
+        z = (i_obs - i_boot.mean()) / max(float(i_boot.std(ddof=1)), 1e-300)
+        p_sm = float(stats.norm.sf(z))
+    elif exceed:
         p_sm = (1 + exceed) / (_BOOTSTRAP + 1)
     else:
         z = (i_obs - i_boot.mean()) / max(float(i_boot.std()), 1e-300)

@@ -17,8 +17,13 @@ _PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points
 
 
 _BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
+# Above this many points the bootstrap's cost (replicates x N) would dominate: Moran's I is then a sum of N*k
+# locally dependent terms, close to normal, so 199 replicates give its null mean and spread and the p-value is the
+# normal tail (docs/theory.md §6.1). Below it the empirical tail of 1999 replicates is used.
+_BOOTSTRAP_EXACT_POINTS = 20_000
+_BOOTSTRAP_LARGE = 199
 
-MAX_POINTS = 200_000  # distinct paired points diagnose accepts (issue 16: a stated limit, not minutes or gigabytes)
+MAX_POINTS = 1_000_000  # distinct paired points diagnose accepts (issue 16: a stated limit, not minutes or gigabytes)
 
 
 _KNN = 6  # neighbours in Moran's I weights

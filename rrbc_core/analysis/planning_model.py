@@ -33,6 +33,10 @@ IDW_POWER = 2.0
 _FD_STEP_MM = 1e-3
 
 
+#: Perturbed fits per vectorised call when differentiating the registration (memory: this x points x 48 bytes).
+_FD_CHUNK = 256
+
+
 #: Positions closer than this (mm) are the same physical point (as `scene.SAME_POINT_TOL_MM`).
 _SAME_MM = 1e-6
 
@@ -151,44 +155,51 @@ def _readings(cell) -> _Readings:
 @dataclass(frozen=True, eq=False)
 class _Registration:
     """The bias-only least-squares fit T̂ (rot (3,3), trans (3,)) and its sensitivities to the robot readings of
-    the registration points: dA (Nr, 3, 3, 3) = ∂R̂/∂b_jc and dt (Nr, 3, 3) = ∂t̂/∂b_jc ([j, c, ...])."""
+    the registration points, as one affine map per reading: T̂(x) moves by Σ_β d_affine[j, c, :, β] h_β for a unit
+    change of b_jc, h = (x, 1) (sensor frame, homogeneous); ``reg_var`` K (4, 4) with var = hᵀ K h the variance
+    of T̂(x) from the registration points' noise, and ``shared`` v (Nr, 4) with tr(∂T̂(x)/∂b_j Σ_j) = h · v_j —
+    both summed over the registration points once, so nothing later grows with their number."""
 
     rot: np.ndarray
     trans: np.ndarray
-    d_rot: np.ndarray
-    d_trans: np.ndarray
-    net_cov: np.ndarray  # (Nr,3,3)
-
-    @property
-    def net_cov_chol(self) -> np.ndarray:
-        """L (Nr,3,3) with L Lᵀ = net_cov (symmetric square root: also fine for a singular covariance)."""
-        evals, evecs = np.linalg.eigh(self.net_cov)
-        return evecs * np.sqrt(np.clip(evals, 0.0, None))[:, None, :]
+    d_affine: np.ndarray  # (Nr, 3, 3, 4): [j, c, a, β]
+    net_cov: np.ndarray  # (Nr, 3, 3)
+    reg_var: np.ndarray  # (4, 4)
+    shared: np.ndarray  # (Nr, 4)
 
     @classmethod
     def fit(cls, sensor: np.ndarray, robot: np.ndarray, net_cov: np.ndarray) -> _Registration:
+        """Fit, then central differences of the fit for each robot coordinate of each registration point, in
+        chunks of _FD_CHUNK perturbations: memory linear in the number of points."""
         n = len(sensor)
         a0, t0 = batch.least_squares_batch(sensor[None], robot[None])
         h = _FD_STEP_MM
-        pert = np.zeros((2, n, 3, n, 3))
-        for j in range(n):
-            for c in range(3):
-                pert[0, j, c, j, c] = h
-                pert[1, j, c, j, c] = -h
-        r = robot[None] + pert.reshape(2 * n * 3, n, 3)
-        s = np.broadcast_to(sensor, r.shape)
-        a, t = batch.least_squares_batch(s, r)
-        a = a.reshape(2, n, 3, 3, 3)
-        t = t.reshape(2, n, 3, 3)
-        return cls(a0[0], t0[0], (a[0] - a[1]) / (2 * h), (t[0] - t[1]) / (2 * h), net_cov)
+        d_rot = np.empty((n * 3, 3, 3))
+        d_trans = np.empty((n * 3, 3))
+        for start in range(0, n * 3, _FD_CHUNK):
+            k = np.arange(start, min(start + _FD_CHUNK, n * 3))
+            r = np.broadcast_to(robot, (2, len(k), n, 3)).copy()
+            r[0, np.arange(len(k)), k // 3, k % 3] += h
+            r[1, np.arange(len(k)), k // 3, k % 3] -= h
+            a, t = batch.least_squares_batch(np.broadcast_to(sensor, (2 * len(k), n, 3)), r.reshape(-1, n, 3))
+            a, t = a.reshape(2, len(k), 3, 3), t.reshape(2, len(k), 3)
+            d_rot[k] = (a[0] - a[1]) / (2 * h)
+            d_trans[k] = (t[0] - t[1]) / (2 * h)
+        d_aff = np.concatenate([d_rot.reshape(n, 3, 3, 3), d_trans.reshape(n, 3, 3, 1)], axis=3)  # [j,c,a,β]
+        reg_var = np.einsum("jcab,jcd,jdae->be", d_aff, net_cov, d_aff)
+        shared = np.einsum("jcab,jca->jb", d_aff, net_cov)
+        return cls(a0[0], t0[0], d_aff, net_cov, reg_var, shared)
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         return x @ self.rot.T + self.trans
 
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """J (..., Nr, 3, 3): J[..., j, :, c] = ∂T̂(x)/∂b_jc for sensor-frame points x (..., 3)."""
-        da = np.einsum("jcab,...b->...jac", self.d_rot, x)
-        return da + np.swapaxes(self.d_trans, 1, 2)
+    def variance(self, h: np.ndarray) -> np.ndarray:
+        """tr Cov of Σ_β h_β (δA, δt)_β for homogeneous combinations h (..., 4): hᵀ K h (mm²)."""
+        return np.einsum("...b,bc,...c->...", h, self.reg_var, h)
+
+
+def _homogeneous(x: np.ndarray) -> np.ndarray:
+    return np.concatenate([x, np.ones(x.shape[:-1] + (1,))], axis=-1)
 
 
 def _idw_weights(fid_sensor: np.ndarray, query: np.ndarray) -> np.ndarray:
@@ -216,7 +227,7 @@ class _Model:
     reg_pos: np.ndarray  # (Nr,3) robot frame (nominal)
     q_sensor: np.ndarray  # (M,3) check points, bias-only sensor readings
     q_rigid_err: np.ndarray  # (M,3) rigid bias error T̂(s_q) − truth_q
-    q_jac: np.ndarray  # (M,Nr,3,3)
+    q_h: np.ndarray  # (M,4) check points, homogeneous sensor coordinates
     q_target_var: np.ndarray  # (M,) tr R Σ_s(q) Rᵀ
     q_rigid_noise_var: np.ndarray  # (M,)
     n_targets: int
@@ -228,12 +239,10 @@ class _Model:
         qi = cell.index("check")
         reg = _Registration.fit(rd.sensor[ri], rd.robot[ri], rd.net_cov[ri])
         qs = rd.sensor[qi]
-        jac = reg.jacobian(qs)
+        hq = _homogeneous(qs)
         var_t = np.trace(rd.sensor_cov[qi], axis1=1, axis2=2)
-        gl = np.matmul(jac, reg.net_cov_chol)
-        var_reg = np.sum(gl * gl, axis=(1, 2, 3))
         n_t = len({t for t in (cell.check_target[i] for i in qi)})
-        model = cls(reg, cell.robot[ri], qs, reg.apply(qs) - rd.truth[qi], jac, var_t, var_reg + var_t, n_t)
+        model = cls(reg, cell.robot[ri], qs, reg.apply(qs) - rd.truth[qi], hq, var_t, reg.variance(hq) + var_t, n_t)
         return model, rd
 
     def rmst(self, sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -252,27 +261,22 @@ class _Model:
         r, s = self.rmst(sq)
         return float(r), float(s)
 
-    def rrbc_sq(self, f_sensor, f_corr, f_jac, f_cov, shared) -> np.ndarray:
+    def rrbc_sq(self, f_sensor, f_corr, f_cov, shared) -> np.ndarray:
         """Squared RRBC errors (T, M) for T fiducial sets (stacked): f_sensor (T,N,3) bias-only sensor readings,
-        f_corr (T,N,3) robot-frame corrections b − T̂(s), f_jac (T,N,Nr,3,3), f_cov (T,N,3,3) net FLE
-        covariance, shared (T,N) index of the registration point a fiducial is (−1: none)."""
+        f_corr (T,N,3) robot-frame corrections b − T̂(s), f_cov (T,N,3,3) net FLE covariance, shared (T,N) index
+        of the registration point a fiducial is (−1: none). The registration's share of the noise is
+        Var(T̂(x_q) − Σ_i w_qi T̂(x_i)) = hᵀ K h with h = h_q − Σ_i w_qi h_i (`_Registration`)."""
         if f_sensor.shape[1] == 0:
             sq = np.sum(self.q_rigid_err**2, axis=1) + self.q_rigid_noise_var
             return np.broadcast_to(sq, (f_sensor.shape[0], len(sq))).copy()
         w = _idw_weights(f_sensor, self.q_sensor)  # (T,M,N)
         bias = self.q_rigid_err[None] + np.matmul(w, f_corr)
-        t, n = f_jac.shape[:2]
-        nr = self.q_jac.shape[1]
-        g = np.matmul(w, f_jac.reshape(t, n, nr * 9)).reshape(t, -1, nr, 3, 3)
-        np.subtract(self.q_jac[None], g, out=g)  # G = J_q − Σ_i w_qi J_i
-        gl = np.matmul(g, self.reg.net_cov_chol)  # tr(G Σ Gᵀ) = ‖G L‖², Σ = L Lᵀ
-        var = np.sum(gl * gl, axis=(2, 3, 4))
+        hh = self.q_h[None] - np.matmul(w, _homogeneous(f_sensor))  # (T,M,4)
+        var = self.reg.variance(hh)
         var += np.einsum("tmn,tn->tm", w**2, np.trace(f_cov, axis1=2, axis2=3))
         if np.any(shared >= 0):
             ti, ni = np.nonzero(shared >= 0)
-            ji = shared[ti, ni]
-            gs = g[ti, :, ji]  # (S, M, 3, 3)
-            tr = np.einsum("smab,sba->sm", gs, self.reg.net_cov[ji])
+            tr = np.einsum("smb,sb->sm", hh[ti], self.reg.shared[shared[ti, ni]])
             np.add.at(var, ti, 2.0 * w[ti, :, ni] * tr)
         var += self.q_target_var[None]
         return np.sum(bias**2, axis=2) + var
@@ -285,16 +289,16 @@ class _Model:
 
 def _fid_arrays(model: _Model, rd: _Readings, idx: np.ndarray):
     s = rd.sensor[idx]
-    return s, rd.robot[idx] - model.reg.apply(s), model.reg.jacobian(s), rd.net_cov[idx]
+    return s, rd.robot[idx] - model.reg.apply(s), rd.net_cov[idx]
 
 
 def _predict_fast(scene, fid: np.ndarray, registration, samples_per_target: int, seed: int) -> RmstPrediction:
     cell, fi = _cell(scene, fid, registration, samples_per_target, seed)
     model, rd = _Model.from_cell(cell)
     rigid, rigid_std = model.rigid()
-    s, corr, jac, cov = _fid_arrays(model, rd, fi)
+    s, corr, cov = _fid_arrays(model, rd, fi)
     shared = model.shared_index(cell.robot[fi])
-    sq = model.rrbc_sq(s[None], corr[None], jac[None], cov[None], shared[None])
+    sq = model.rrbc_sq(s[None], corr[None], cov[None], shared[None])
     r, st = model.rmst(sq)
     return RmstPrediction(rigid, rigid_std, float(r[0]), float(st[0]), "first-order")
 

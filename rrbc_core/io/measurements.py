@@ -30,6 +30,7 @@ import io
 import math
 import os
 import re
+from array import array
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
@@ -165,7 +166,7 @@ class MeasurementSet:
     def rows(self, role: str) -> np.ndarray:
         """Indices of the rows selected by `role` (registration: registration or both; fiducial: fiducial or both)."""
         wanted = _selected_roles(role)
-        return np.array([i for i, r in enumerate(self.roles) if r in wanted], dtype=int)
+        return np.fromiter((i for i, r in enumerate(self.roles) if r in wanted), dtype=int)
 
     def points(self, role: str) -> PointGroup:
         """Points of a role aggregated per distinct id, in order of first appearance; repeated rows are averaged.
@@ -173,25 +174,21 @@ class MeasurementSet:
         "registration" selects rows whose role is registration or both, "fiducial" rows whose role is fiducial or
         both; "both", "target" and "check" select their own rows.
         """
-        order: list[str] = []
-        members: dict[str, list[int]] = {}
-        for i in self.rows(role):
-            key = self.ids[i]
-            if key not in members:
-                members[key] = []
-                order.append(key)
-            members[key].append(int(i))
+        rows = self.rows(role)
+        index: dict[str, int] = {}
+        point = np.fromiter((index.setdefault(self.ids[i], len(index)) for i in rows), dtype=int, count=len(rows))
+        order = list(index)
         k = len(order)
-        sensor = np.empty((k, 3))
-        robot = np.empty((k, 3))
-        count = np.empty(k, dtype=int)
-        first_line = []
-        for j, key in enumerate(order):
-            idx = members[key]
-            sensor[j] = self.sensor[idx].mean(axis=0)
-            robot[j] = self.robot[idx].mean(axis=0)
-            count[j] = len(idx)
-            first_line.append(self.lines[idx[0]] if idx[0] < len(self.lines) else 0)
+        count = np.bincount(point, minlength=k).astype(int)
+        sensor = np.zeros((k, 3))
+        robot = np.zeros((k, 3))
+        np.add.at(sensor, point, self.sensor[rows])
+        np.add.at(robot, point, self.robot[rows])
+        sensor /= np.maximum(count, 1)[:, None]
+        robot /= np.maximum(count, 1)[:, None]
+        first = rows[np.unique(point, return_index=True)[1]]  # ids are numbered in order of first appearance
+        n_lines = len(self.lines)
+        first_line = [self.lines[i] if i < n_lines else 0 for i in first.tolist()]
         return PointGroup(tuple(order), sensor, robot, count, tuple(first_line))
 
 
@@ -354,10 +351,10 @@ def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
 
     ids: list[str] = []
     roles: list[str] = []
-    sensor: list[list[float]] = []
-    robot: list[list[float]] = []
-    times: list[float] = []
-    lines: list[int] = []
+    sensor = array("d")  # flat x, y, z per row: 24 bytes a row, not a list of float objects
+    robot = array("d")
+    times = array("d")
+    lines = array("q")
     extra: dict[str, list[str]] = {name: [] for name in extra_names}
     seen: dict[str, tuple[str, int]] = {}  # id -> (role, first line)
 
@@ -398,8 +395,8 @@ def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
         _check_same_role(source, line, ident, role, seen)
         ids.append(ident)
         roles.append(role)
-        sensor.append(s)
-        robot.append(b)
+        sensor.extend(s)
+        robot.extend(b)
         times.append(t)
         lines.append(line)
         for name in extra_names:
@@ -408,10 +405,10 @@ def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
     mset = MeasurementSet(
         ids=tuple(ids),
         roles=tuple(roles),
-        sensor=np.array(sensor, dtype=float).reshape(-1, 3),
-        robot=np.array(robot, dtype=float).reshape(-1, 3),
-        time=np.array(times, dtype=float),
-        lines=tuple(lines),
+        sensor=np.frombuffer(sensor, dtype=float).reshape(-1, 3),
+        robot=np.frombuffer(robot, dtype=float).reshape(-1, 3),
+        time=np.frombuffer(times, dtype=float),
+        lines=tuple(lines.tolist()),
         source=source,
         extra={name: tuple(values) for name, values in extra.items()},
     )
