@@ -11,6 +11,11 @@ class InputError(ValueError):
     """Bad input: the message says what is wrong and, where it can, where and how to fix it."""
 
 
+class Cancelled(Exception):
+    """Work stopped before it finished because its caller said it was no longer wanted (a `should_stop` callable
+    returned True between chunks). Not an error of the input: nothing is reported to the user as a failure."""
+
+
 MESSAGE_LIMIT = 400  # characters of a message shown to a user (stderr line, app notification)
 
 

@@ -177,11 +177,21 @@ class TabActions:
             self.mc.request(snapshot, self.controls.monte_carlo_trials, seed)
             return True
 
+    def stop_monte_carlo(self) -> None:
+        """The Stop button: forget the queued run and stop the one under way at its next chunk of trials; the
+        plots keep the last finished run."""
+        with self._lock:
+            self.mc.cancel()
+            self.controls.montecarlo.mc_stop.disabled = True
+            self.controls.text["mc_info"] = "Monte Carlo: stopped (the plots show the last finished run, if any)."
+
     def _mc_started(self) -> None:
+        self.controls.montecarlo.mc_stop.disabled = False
         self.controls.text["mc_info"] = "Monte Carlo: running…"
 
     def _mc_result(self, plots, error: str | None, seconds: float) -> None:
         c = self.controls
+        c.montecarlo.mc_stop.disabled = True
         if plots is None:
             c.text["mc_info"] = f"Monte Carlo failed: {error}"
             return

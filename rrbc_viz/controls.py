@@ -276,6 +276,7 @@ class MonteCarloPanel:
         self.mc_info = gui.add_markdown("")
         self.mc_trials = gui.add_slider("Trials", 20, 1000, 10, 200)
         self.mc_run = gui.add_button("Run again")
+        self.mc_stop = gui.add_button("Stop", disabled=True, hint="Stop the Monte Carlo run under way")
         z2 = (np.array([0.0, 1.0]), np.zeros(2), np.zeros(2))
         self.mc_hist = gui.add_uplot(
             z2,
@@ -302,6 +303,7 @@ class MonteCarloPanel:
             aspect=1.4,
         )
         self.mc_run.on_click(lambda event: app.request_monte_carlo(new_noise=True))
+        self.mc_stop.on_click(lambda event: app.stop_monte_carlo())
 
         @self.mc_trials.on_update
         def _(event: viser.GuiEvent) -> None:
@@ -459,6 +461,7 @@ class Controls:
         simulate); with data, (centres, rigid, rrbc) and (distance, rigid, rrbc, and their intervals' edges)."""
         mc = self.montecarlo
         mc.mc_hist.visible = mc.mc_dist.visible = mc.mc_trials.visible = mc.mc_run.visible = bool(visible)
+        mc.mc_stop.visible = bool(visible)
         if histogram is not None:
             mc.mc_hist.data = histogram
         if by_distance is not None:

@@ -4,8 +4,9 @@
 thread (a `worker.CoalescingWorker`). Requests coalesce: a run starts only once no newer request has come for
 `delay_s` (a slider being dragged asks many times), while a run is under way only the newest request is kept,
 and a result that a newer request has made stale is dropped, so the plots always end on the latest setup. A run
-cannot be interrupted (the core has no cancellation), so this is what keeps slow setups (gp, clustering:
-seconds) from piling up. Pass a snapshot (`copy.copy(session)`: settings and layout are immutable values, so a
+that a newer request supersedes, or that `cancel()` stops, ends at its next chunk of trials
+(`ExplorerSession.monte_carlo(should_stop=...)` raises `errors.Cancelled`), so slow setups (gp, clustering:
+seconds) neither pile up nor keep a core busy for work nobody will see. Pass a snapshot (`copy.copy(session)`: settings and layout are immutable values, so a
 shallow copy is a consistent picture) so the live session can keep changing while the worker runs.
 """
 
@@ -15,7 +16,7 @@ import time
 import traceback
 from collections.abc import Callable
 
-from rrbc_core.errors import InputError
+from rrbc_core.errors import Cancelled, InputError
 
 from .worker import CoalescingWorker
 
@@ -35,7 +36,8 @@ class MonteCarloRunner:
         return self._worker.submit((session, int(trials), seed), supersede=True)
 
     def cancel(self) -> None:
-        """Forget queued work and make a running result stale (e.g. the source changed)."""
+        """Forget queued work and stop a running one at its next chunk of trials (the Stop button; the source
+        changed)."""
         self._worker.cancel()
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
@@ -59,7 +61,9 @@ class MonteCarloRunner:
         start = time.perf_counter()
         plots, error = None, None
         try:
-            plots = session.monte_carlo(trials=trials, seed=seed)
+            plots = session.monte_carlo(trials=trials, seed=seed, should_stop=lambda: not fresh())
+        except Cancelled:
+            return  # stopped or superseded: whoever stopped it says so
         except InputError as exc:
             error = " ".join(str(exc).split())
         except Exception as exc:  # noqa: BLE001 - report, keep the worker alive

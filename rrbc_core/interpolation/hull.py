@@ -15,6 +15,9 @@ from rrbc_core.geometry.points import LocalFrame, as_points
 HULL_TOL = 1e-9
 #: Elements per temporary array in the inside test (bounds memory for large query sets).
 CHUNK_ELEMENTS = 2_000_000
+#: Most facet tests (facets x query points) the inside test runs; a hull of uniformly spread fiducials has few
+#: facets, one of fiducials on a sphere about two per fiducial (issue 16: refused, not minutes).
+HULL_WORK_LIMIT = 20_000_000_000
 
 
 def dim_words(dim: int) -> str:
@@ -76,6 +79,11 @@ class Hull:
     def inside(self, local_q: np.ndarray) -> np.ndarray:
         """(M,) bool: local queries (dim 2/3) inside the hull or within HULL_TOL local units of it."""
         eq = self.equations
+        if len(eq) * len(local_q) > HULL_WORK_LIMIT:
+            raise InputError(
+                f"the extrapolation test would check {len(local_q):,} points against the {len(eq):,} facets of the "
+                f"fiducials' hull (more than {HULL_WORK_LIMIT:,} tests): use fewer fiducials or points"
+            )
         out = np.empty(len(local_q), dtype=bool)
         chunk = max(1, CHUNK_ELEMENTS // len(eq))
         for start in range(0, len(local_q), chunk):

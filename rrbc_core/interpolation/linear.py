@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import Delaunay
 
+from rrbc_core.errors import InputError
 from rrbc_core.geometry.points import COINCIDENT_MM
 from rrbc_core.interpolation.base import (
     CHUNK_ELEMENTS,
@@ -30,10 +31,18 @@ SLIVER_QUALITY = 0.05
 # Piecewise linear (Delaunay barycentric)
 
 
+MAX_FIDUCIALS = 200_000  # Delaunay of random 3-D points: 100 000 took 3 s and ~7 simplices a point (issue 16)
+
+
 class _FittedLinear(Fitted):
     method = "linear"
 
     def __init__(self, points, values):
+        if len(points) > MAX_FIDUCIALS:
+            raise InputError(
+                f"linear interpolates at most {MAX_FIDUCIALS:,} fiducials (a Delaunay triangulation of them), got "
+                f"{len(points):,}: use idw for more"
+            )
         self.hull = Hull(points)
         self.n_fiducials = len(points)
         dim = self.hull.frame.dim

@@ -25,10 +25,18 @@ from rrbc_core.interpolation.base import (
 # Thin-plate spline
 
 
+MAX_FIDUCIALS = 5000  # tps solves a dense (N+4)² system: O(N²) memory, O(N³) time (4000 took 0.9 s; issue 16)
+
+
 class _FittedTPS(Fitted):
     method = "tps"
 
     def __init__(self, points, values, smoothing):
+        if len(points) > MAX_FIDUCIALS:
+            raise InputError(
+                f"tps interpolates at most {MAX_FIDUCIALS} fiducials (its fit is a dense solve, O(N³)), got "
+                f"{len(points)}: use idw or linear for more"
+            )
         self.hull = Hull(points)
         self.n_fiducials = len(points)
         dim = self.hull.frame.dim

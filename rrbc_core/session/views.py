@@ -4,12 +4,13 @@ the exports (a measurement file, the JSON of `rrbc correct`)."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
 from rrbc_core import interpolation
 from rrbc_core.correction.rrbc import correct_points
-from rrbc_core.errors import InputError
+from rrbc_core.errors import Cancelled, InputError
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.evaluation import Evaluation, seed_for
 from rrbc_core.session.results import HeatMap, MonteCarloPlots, _scaled
@@ -17,6 +18,7 @@ from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import ErrorSlice, SlicePlane
 
 SESSION_TRIALS_MAX = 5000  # the app's background Monte Carlo (issue 16: bounded, whatever a client sends)
+MC_CHUNK_TRIALS = 50  # trials between two questions "still wanted?" of the app's Monte Carlo
 
 
 class SessionViews:
@@ -141,11 +143,21 @@ class SessionViews:
 
     # ----------------------------------------------------------------------------------------- Monte Carlo
     @thread_limited
-    def monte_carlo(self, trials: int = 200, checks_per_target: int = 10, seed: int | None = None) -> MonteCarloPlots:
+    def monte_carlo(
+        self,
+        trials: int = 200,
+        checks_per_target: int = 10,
+        seed: int | None = None,
+        should_stop: Callable[[], bool] | None = None,
+    ) -> MonteCarloPlots:
         """Scene mode: Monte Carlo of the current layout and settings (noise redrawn, bias fixed, both scaled);
         errors at check points sampled in the targets' regions, rigid vs RRBC, and their distance from the
-        scene's distance origin. Uses the current registration strategy and interpolation."""
-        from rrbc_core.simulation.montecarlo import WorkCell, measure, trial_errors
+        scene's distance origin. Uses the current registration strategy and interpolation.
+
+        The trials run in chunks of `MC_CHUNK_TRIALS` (the same numbers as one batch: the noise and the trials'
+        seeds are drawn first); `should_stop`, when given, is asked before each chunk and a True answer raises
+        `errors.Cancelled` — how the app stops a run that the user stopped or a newer request superseded."""
+        from rrbc_core.simulation.montecarlo import Measured, WorkCell, measure, trial_errors
 
         if self.kind != "scene":
             raise InputError("Monte Carlo needs a scene (an error model); measured data have none")
@@ -188,10 +200,18 @@ class SessionViews:
         )
         m = measure(cell, rng, trials)
         opts = s.method.interpolation_kwargs()
-        e = trial_errors(cell, m, s.registration, s.interpolation, seeds=rng.integers(0, 2**31 - 1, trials), **opts)
+        seeds = rng.integers(0, 2**31 - 1, trials)
+        rigid, rrbc = [], []
+        for a in range(0, trials, MC_CHUNK_TRIALS):
+            if should_stop is not None and should_stop():
+                raise Cancelled(f"Monte Carlo stopped after {a} of {trials} trials")
+            b = min(trials, a + MC_CHUNK_TRIALS)
+            part = Measured(m.sensor[a:b], m.robot[a:b], m.truth)
+            e = trial_errors(cell, part, s.registration, s.interpolation, seeds=seeds[a:b], **opts)
+            rigid.append(e.rigid), rrbc.append(e.rrbc)
         chk = cell.index("check")
         dist = np.linalg.norm(cell.robot[chk] - cell.distance_origin, axis=1)
-        return MonteCarloPlots(e.rigid, e.rrbc, dist, trials)
+        return MonteCarloPlots(np.concatenate(rigid), np.concatenate(rrbc), dist, trials)
 
     # -------------------------------------------------------------------------------------------- exporting
     def export_measurements(self):

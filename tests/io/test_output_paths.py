@@ -72,6 +72,27 @@ def test_super_linear_work_has_stated_limits():
         GP().fit(pts, np.zeros_like(pts))
 
 
+def test_tps_linear_and_the_hull_test_have_stated_limits(monkeypatch):
+    import numpy as np
+
+    from rrbc_core.interpolation import hull, linear, tps
+    from rrbc_core.interpolation.hull import hull_flags
+
+    pts = np.random.default_rng(0).uniform(0, 1000, (tps.MAX_FIDUCIALS + 1, 3))
+    with pytest.raises(InputError, match="tps interpolates at most 5000 fiducials"):
+        tps.TPS().fit(pts, np.zeros_like(pts))
+    monkeypatch.setattr(linear, "MAX_FIDUCIALS", 100)  # the check comes before the triangulation: no 200 001 needed
+    with pytest.raises(InputError, match="linear interpolates at most 100 fiducials"):
+        linear.Linear().fit(pts[:101], np.zeros((101, 3)))
+    sphere = np.random.default_rng(1).normal(size=(400, 3))
+    sphere *= 100 / np.linalg.norm(sphere, axis=1)[:, None]  # every point on the hull: ~800 facets
+    query = np.zeros((2000, 3))
+    assert not hull_flags(sphere, query)[0].any()
+    monkeypatch.setattr(hull, "HULL_WORK_LIMIT", 100_000)
+    with pytest.raises(InputError, match="would check 2,000 points against the .* facets"):
+        hull_flags(sphere, query)
+
+
 def test_check_points_per_target_is_bounded(tmp_path):
     from rrbc_core.io.scene_toml import MAX_CHECK_POINTS_PER_TARGET, load_scene
 

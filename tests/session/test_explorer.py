@@ -158,6 +158,31 @@ def test_monte_carlo_plots(scene):
     assert np.sqrt(np.mean(mc2.rrbc**2)) > np.sqrt(np.mean(mc2.rigid**2))
 
 
+def test_monte_carlo_in_chunks_gives_one_batchs_numbers_and_stops_when_asked(scene, monkeypatch):
+    """The app's Monte Carlo runs its trials in chunks, asking `should_stop` before each: the numbers are those of
+    one batch (the noise and the seeds are drawn first), and a True answer stops it with `Cancelled` at once."""
+    from rrbc_core.errors import Cancelled
+    from rrbc_core.session import views
+
+    ses = ExplorerSession.from_scene(scene)
+    chunked = ses.monte_carlo(trials=120, checks_per_target=3)  # 50 + 50 + 20
+    monkeypatch.setattr(views, "MC_CHUNK_TRIALS", 10_000)
+    whole = ses.monte_carlo(trials=120, checks_per_target=3)
+    # the same numbers up to the rounding of batched sums (the compiled kernels group trials differently)
+    np.testing.assert_allclose(chunked.rigid, whole.rigid, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(chunked.rrbc, whole.rrbc, rtol=0, atol=1e-9)
+    monkeypatch.setattr(views, "MC_CHUNK_TRIALS", 10)
+    asked = []
+
+    def stop_at_third() -> bool:
+        asked.append(1)
+        return len(asked) >= 3
+
+    with pytest.raises(Cancelled, match="stopped after 20 of 120 trials"):
+        ses.monte_carlo(trials=120, checks_per_target=3, should_stop=stop_at_third)
+    assert len(asked) == 3
+
+
 def test_hull_edges_of_a_cube_a_square_and_a_segment():
     cube = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float) * 100
     assert hull_edges(cube).shape == (12, 2, 3)

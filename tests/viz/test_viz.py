@@ -358,11 +358,34 @@ def test_run_again_draws_new_noise_and_a_setting_change_does_not(app):
     assert not np.array_equal(app.mc_plots.rigid, again.rigid) and "noise draw 2" in app.controls.text["mc_info"]
 
 
+def test_stop_ends_a_running_monte_carlo_at_its_next_chunk_and_keeps_the_last_plots(app, monkeypatch):
+    """A slow run (gp, 1000 trials) is stopped by the Stop button: the worker is idle again long before the run
+    would have finished, the plots are still those of the last finished run, and the panel says it stopped."""
+    import threading
+
+    from rrbc_core.session import views
+
+    assert app.mc.wait_idle(60)
+    before = app.mc_plots
+    monkeypatch.setattr(views, "MC_CHUNK_TRIALS", 5)
+    started = threading.Event()
+    real = app.controls.montecarlo.mc_stop
+    app.mc._on_start = lambda: (app._mc_started(), started.set())
+    app.controls.montecarlo.mc_trials.value = 1000  # queues a run of the new setup
+    assert started.wait(30)
+    assert real.disabled is False  # Stop is offered while a run is under way
+    _press(real)
+    assert app.mc.wait_idle(30)
+    assert app.mc_plots is before and real.disabled is True
+    assert "stopped" in app.controls.text["mc_info"]
+
+
 def test_measured_data_hide_the_controls_that_do_not_apply(app, measured):
     for a, scene in ((app, True), (measured, False)):
         e, mc, plan = a.controls.explore, a.controls.montecarlo, a.planning
         assert e.noise.visible is scene and e.bias.visible is scene and e.new_seed.visible is scene
         assert mc.mc_run.visible is scene and mc.mc_trials.visible is scene and mc.mc_hist.visible is scene
+        assert mc.mc_stop.visible is scene
         # measured data: Suggest proposes places to measure (coverage, no error model); nothing to accept or colour
         assert plan.suggest_button.visible and plan.k.visible
         assert plan.accept_button.visible is scene and plan.colour.visible is scene
