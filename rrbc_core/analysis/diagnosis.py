@@ -225,6 +225,7 @@ def _systematic(d, inl, white, use_time, arm, a_each, rng) -> _Pass:
     x_aff = np.hstack([x_rigid, g.linear()])
     p_af, q_af, nu_af, f_af, _, rss_af, _ = _ftest(y, x_scale, x_aff)
     tests["affine"] = p_af
+    del x_scale, x_aff  # (3n, k) each: a million points hold 24 MB a column
     wsum = float(np.sum(w))
     if p_af < a_each:
         found["affine"] = _affine_effect(p, resid, w, g, rss0, rss_sc, rss_af, q_af, nu_af, f_af, p_af, wsum)
@@ -336,6 +337,8 @@ def _systematic(d, inl, white, use_time, arm, a_each, rng) -> _Pass:
         z = (i_obs - i_boot.mean()) / max(float(i_boot.std()), 1e-300)
         p_sm = float(min(1.0 / (_BOOTSTRAP + 1), stats.norm.sf(z)))
     tests["smooth_field"] = p_sm
+    boot_mean = float(i_boot.mean())
+    del qa, res_acc, i_boot, x_acc
     field = None
     if p_sm < a_each:
         # the field's model from the residuals beside everything but scale and affine (a field has a linear part);
@@ -345,6 +348,7 @@ def _systematic(d, inl, white, use_time, arm, a_each, rng) -> _Pass:
         q_nl = _orth(np.hstack([v for k, v in blocks.items() if k not in ("scale", "affine")]))
         y_mm = _mm_cols(g, y[:, None])[:, 0]
         res_nl = _mm_cols(g, (y - q_nl @ (q_nl.T @ y))[:, None])[:, 0]
+        del q_nl
         mm_blocks = {k: _mm_cols(g, v) for k, v in blocks.items()}
         for _ in range(2):
             field = fit_field(p, res_nl.reshape(n, 3))
@@ -352,6 +356,7 @@ def _systematic(d, inl, white, use_time, arm, a_each, rng) -> _Pass:
             wb = {k: gls_whiten(field, v) for k, v in mm_blocks.items()}
             rejudged += _rejudge(y_w, wb, found, a_each, "the field", tests)
             mm_blocks = {k: v for k, v in mm_blocks.items() if k in wb}
+            del wb
             cols = {k: (_mm_cols(g, g.drift()) if k == "drift" else v) for k, v in mm_blocks.items()}
             coef = _fit(y_w, np.hstack([gls_whiten(field, c) for c in cols.values()]))[0]
             contrib, pos = np.zeros_like(y_mm), 0
@@ -401,7 +406,7 @@ def _systematic(d, inl, white, use_time, arm, a_each, rng) -> _Pass:
         t_mean,
         delta,
         field,
-        (i_obs, float(i_boot.mean()), nb.shape[1]),
+        (i_obs, boot_mean, nb.shape[1]),
         tuple(rejudged),
     )
 

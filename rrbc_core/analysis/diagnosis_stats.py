@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy import linalg, stats
 from scipy.spatial import cKDTree
 
 from rrbc_core.errors import InputError
@@ -143,30 +143,29 @@ class _Geometry:
         return self._cols([np.outer(tt, e[k]) for k in range(3)])
 
 
-def _rank(x: np.ndarray) -> int:
-    if x.shape[1] == 0:
-        return 0
-    norms = np.linalg.norm(x, axis=0)
-    xs = x[:, norms > 0] / norms[norms > 0]
-    if xs.shape[1] == 0:
-        return 0
-    sv = np.linalg.svd(xs, compute_uv=False)
-    return int(np.sum(sv > 1e-8 * sv[0]))
-
-
 def _fit(y: np.ndarray, x: np.ndarray):
-    """Least squares of y on the columns x along the directions `_rank` counts (normalised columns, singular
+    """Least squares of y on the columns x along the directions its rank counts (normalised columns, singular
     values above 1e-8 of the largest): the fit and the F-tests' degrees of freedom agree even for nearly dependent
-    columns (the arm's Jacobian beside the rigid terms). Returns (coef, residual, RSS, rank)."""
-    coef = np.zeros(x.shape[1])
+    columns (the arm's Jacobian beside the rigid terms). Returns (coef, residual, RSS, rank).
+
+    One Householder QR of [x y] (R only: memory one copy of x, however many rows), then the truncated SVD of the
+    small triangle: x = Q R_x, so x's singular values (and the truncated solution) are R_x's, and
+    RSS = |R_x c − Qᵀy|² + ρ² with ρ the part of y outside x's span."""
+    k = x.shape[1]
+    coef = np.zeros(k)
     norms = np.linalg.norm(x, axis=0)
     ok = norms > 0
+    rank = 0
     if ok.any():
-        u, sv, vt = np.linalg.svd(x[:, ok] / norms[ok], full_matrices=False)
+        r = linalg.qr(np.hstack([x[:, ok], y[:, None]]), mode="r", overwrite_a=True, check_finite=False)[0]
+        m = int(ok.sum())
+        r_x, r_y = r[:m, :m], r[:m, m]
+        u, sv, vt = np.linalg.svd(r_x / norms[ok], full_matrices=False)
         keep = sv > 1e-8 * sv[0]
-        coef[ok] = (vt[keep].T @ ((u[:, keep].T @ y) / sv[keep])) / norms[ok]
+        rank = int(keep.sum())
+        coef[ok] = (vt[keep].T @ ((u[:, keep].T @ r_y) / sv[keep])) / norms[ok]
     res = y - x @ coef
-    return coef, res, float(res @ res), _rank(x)
+    return coef, res, float(res @ res), rank
 
 
 def _ftest(y, x0, x1):
