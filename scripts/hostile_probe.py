@@ -218,6 +218,16 @@ def judge(code: int, out: str, err: str, seconds: float, timeout: float) -> str 
     return None
 
 
+def _tally(results: dict, run, args: list[str], timeout: float, case: str, log) -> None:
+    code, out, err, sec = run(args, timeout)
+    results["runs"] += 1
+    results[f"exit_{code}"] = results.get(f"exit_{code}", 0) + 1
+    broken = judge(code, out, err, sec, timeout)
+    if broken:
+        results["broken"].append({"case": case, "command": args[0], "what": broken})
+        log(f"BROKEN {args[0]} on {case!r}: {broken}")
+
+
 def probe(in_process: bool, n_random: int, seed: int, timeout: float, log=print) -> dict:
     run = _run_in_process if in_process else _run_process
     results = {"runs": 0, "exit_0": 0, "exit_2": 0, "broken": []}
@@ -228,26 +238,14 @@ def probe(in_process: bool, n_random: int, seed: int, timeout: float, log=print)
             path = tmp / f"m{k}.csv"
             path.write_bytes(data)
             for cmd in MEASUREMENT_COMMANDS:
-                code, out, err, sec = run([*cmd, str(path)], timeout)
-                results["runs"] += 1
-                results[f"exit_{code}"] = results.get(f"exit_{code}", 0) + 1
-                broken = judge(code, out, err, sec, timeout)
-                if broken:
-                    results["broken"].append({"case": name, "command": cmd[0], "what": broken})
-                    log(f"BROKEN {cmd[0]} on {name!r}: {broken}")
+                _tally(results, run, [*cmd, str(path)], timeout, name, log)
         shutil.copytree(ROOT / "scenes" / "meshes", tmp / "meshes")
         os.symlink(tmp / "loop.glb", tmp / "loop.glb")
         for k, (name, text) in enumerate(scene_cases().items()):
             path = tmp / f"s{k}.toml"
             path.write_text(text, encoding="utf-8")
             for cmd in SCENE_COMMANDS:
-                code, out, err, sec = run([cmd[0], str(path), *cmd[1:]], timeout)
-                results["runs"] += 1
-                results[f"exit_{code}"] = results.get(f"exit_{code}", 0) + 1
-                broken = judge(code, out, err, sec, timeout)
-                if broken:
-                    results["broken"].append({"case": name, "command": cmd[0], "what": broken})
-                    log(f"BROKEN {cmd[0]} on scene {name!r}: {broken}")
+                _tally(results, run, [cmd[0], str(path), *cmd[1:]], timeout, f"scene {name}", log)
     return results
 
 
