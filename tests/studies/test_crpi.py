@@ -134,3 +134,16 @@ def test_bad_options_and_files_are_one_line(tmp_path, capsys):
         crpi.parse(",".join(crpi.COLUMNS) + "\n1,2,x,4,5,6,7,8,9\n")
     with pytest.raises(InputError, match="replicates"):
         crpi_study.run(replicates=10**9)
+
+
+def test_sa_as_published_is_rejected_and_a_converged_sa_over_more_points_gains():
+    """scripts/sa_gap.py's study on 60 experiments: SA as the project reads the paper (cost in m²) leaves the
+    3-point frame's error where it was (mean ratio within 0.1 of 1) and the measured ratio lies outside its 95 %
+    range for at least one method under each model; SA over all 16 sites gains (mean ratio below 0.8)."""
+    from rrbc_core.studies import sa_gap
+
+    out = sa_gap.run(60, 3)
+    for model in sa_gap.MODELS:
+        pub = [o for o in out if o.model == model and o.hypothesis == "as_published"]
+        assert all(abs(o.ratio[0] - 1) < 0.1 for o in pub) and not all(o.consistent for o in pub)
+        assert all(o.ratio[0] < 0.8 for o in out if o.model == model and o.hypothesis == "all_sites")
