@@ -155,6 +155,13 @@ def build_parser() -> argparse.ArgumentParser:
         "crpi default 1000 (seconds)",
     )
     rp.add_argument("--layouts", default=None, help="vanwyk2018: comma-separated assumed layouts (default A,B,C,D)")
+    rp.add_argument(
+        "--joint-replicates",
+        type=int,
+        default=None,
+        help="crpi: simulated experiments per direction for the joint fit with the Van Wyk tables (default 100, "
+        "~1 min; 0 skips it)",
+    )
     rp.add_argument("--no-confusion", action="store_true", help="vanwyk2018: skip the planted-table confusion study")
     rp.add_argument("--seed", type=int, default=0, help="seed of every simulated draw (default 0)")
     rp.add_argument("--json", action="store_true", help="print one JSON object")
@@ -494,10 +501,13 @@ def _cmd_reproduce_crpi(args) -> str:
         raise InputError("--layouts and --no-confusion apply to vanwyk2018 only")
     _check_report_dir(args.out)
     replicates = crpi_study.DEFAULT_REPLICATES if args.replicates is None else args.replicates
-    st = crpi_study.run(replicates=replicates, seed=args.seed)
+    joint = crpi_study.DEFAULT_JOINT_REPLICATES if args.joint_replicates is None else args.joint_replicates
+    st = crpi_study.run(replicates=replicates, seed=args.seed, joint_replicates=joint)
     command = "rrbc reproduce crpi" + (f" --out {args.out}" if args.out else "")
     if args.replicates is not None:
         command += f" --replicates {args.replicates}"
+    if args.joint_replicates is not None:
+        command += f" --joint-replicates {args.joint_replicates}"
     if args.seed:
         command += f" --seed {args.seed}"
     report = write_report(st, args.out, command) if args.out else None
@@ -531,6 +541,8 @@ def _cmd_reproduce(args) -> str:
 
     if args.paper == "crpi":
         return _cmd_reproduce_crpi(args)
+    if args.joint_replicates is not None:
+        raise InputError("--joint-replicates applies to crpi only")
     args.layouts = "A,B,C,D" if args.layouts is None else args.layouts
     args.replicates = 200 if args.replicates is None else args.replicates
     names = [x.strip() for x in args.layouts.split(",") if x.strip()]

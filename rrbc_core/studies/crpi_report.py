@@ -162,11 +162,28 @@ def markdown(st: Study, command: str) -> str:
         "Sizes: seating, smooth and flatness in mm (per axis; flatness RMS over the sites), kinematic in units of "
         "(0.1° joint offsets, 0.2 mm lengths, 0.05° twists), scale in units of 1000 ppm.",
         "",
-        "## Not yet done",
-        "",
-        f"- {j['joint_fit_status']}.",
-        "",
     ]
+    if j["joint_fit"] is not None:
+        jf = j["joint_fit"]
+        lines += [
+            "## The Van Wyk tables and these points, fitted jointly",
+            "",
+            f"{jf['definition']}; {jf['replicates']} simulated experiments per direction for the tables. The same "
+            "physical parameters must explain both data sets.",
+            "",
+            "| model | fit | parameters | tables' misfit | points' misfit | RRBC on the plate |",
+            "|---|---|---|---|---|---|",
+        ]
+        for name, m in jf["models"].items():
+            for fit in ("tables_only", "points_only", "joint"):
+                f = m[fit]
+                par = ", ".join(f"{k} {v:.3g}" for k, v in f["params"].items())
+                gain = f"{100 * f['rrbc_change']:+.0f} %" if "rrbc_change" in f else "–"
+                lines.append(
+                    f"| {name} | {fit.replace('_', ' ')} | {par} | {f['deviance_tables']:.1f} | "
+                    f"{f['deviance_points']:.1f} | {gain} |"
+                )
+        lines += ["", f"Chosen by the joint misfit: **{jf['chosen']}**.", ""]
     return "\n".join(lines)
 
 

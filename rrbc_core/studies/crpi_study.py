@@ -13,9 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.studies import crpi, crpi_models
+from rrbc_core.studies import crpi, crpi_joint, crpi_models
 
 DEFAULT_REPLICATES = 1000
+DEFAULT_JOINT_REPLICATES = 100
 SMOOTH = f"{crpi_models.SMOOTH_LENGTHS_MM[0]:.0f}-{crpi_models.SMOOTH_LENGTHS_MM[-1]:.0f}"
 MAX_REPLICATES = 100_000
 
@@ -33,6 +34,7 @@ class Study:
     chosen: str
     replicates: int
     seed: int
+    joint: dict | None = None  # crpi_joint.to_json, None when skipped
 
     @property
     def measured_change(self) -> float:
@@ -63,6 +65,25 @@ class Study:
             f"({100 * kin[1]:+.1f} to {100 * kin[2]:+.1f} %) and is rejected by the points' likelihood "
             f"(REML {self.scores['kinematic'].reml:.1f} against {sc.reml:.1f})."
         )
+        if self.joint is not None:
+            m = self.joint["models"]
+            ch = m[self.joint["chosen"]]
+            other = [k for k in m if k != self.joint["chosen"]][0]
+            kin_tables = m["kinematic"]["tables_only"]["rrbc_change"]
+            t_best = min(m, key=lambda k: m[k]["tables_only"]["deviance_tables"])
+            text += (
+                f" The Van Wyk tables alone prefer '{t_best}' (their misfit "
+                f"{m[t_best]['tables_only']['deviance_tables']:.1f} against "
+                f"{min(v['tables_only']['deviance_tables'] for k, v in m.items() if k != t_best):.1f}), but fitted "
+                f"jointly with the points (layout A) '{self.joint['chosen']}' explains both better than '{other}' "
+                f"(joint misfit {ch['joint']['deviance']:.1f} against {m[other]['joint']['deviance']:.1f}), at "
+                f"{', '.join(f'{k} {v:.3g}' for k, v in ch['joint']['params'].items())}; there RRBC on the plate "
+                f"changes the error by {100 * ch['joint']['rrbc_change']:+.0f} %, where the kinematic model fitted to "
+                f"the tables alone predicted {100 * kin_tables:+.0f} %. The two data sets are in tension: at the "
+                f"joint fit the tables' misfit is {ch['joint']['deviance_tables']:.1f}, and they pull the noise apart "
+                f"(the points' repeated seatings scatter {ch['points_only']['params']['sigma_mm']:.3f} mm, the tables "
+                f"alone want {ch['tables_only']['params']['sigma_mm']:.3f} mm), so they may not come from one session."
+            )
         return text
 
     def to_json(self) -> dict:
@@ -104,17 +125,25 @@ class Study:
             "predicted_rrbc_change": {"mean": pr.rrbc_change[0], "lo95": pr.rrbc_change[1], "hi95": pr.rrbc_change[2]},
             "measured_rrbc_change": self.measured_change,
             "cause": self.cause(),
-            "joint_fit": None,
-            "joint_fit_status": "not computed: the joint fit with the Van Wyk tables is not built yet (issue 17)",
+            "joint_fit": self.joint,
+            "joint_fit_status": "computed" if self.joint is not None else "skipped (--joint-replicates 0)",
             "replicates": self.replicates,
             "seed": self.seed,
         }
 
 
-def run(replicates: int = DEFAULT_REPLICATES, seed: int = 0, sites: crpi.Sites | None = None) -> Study:
-    """The whole study on the shipped data (or `sites`). `replicates` simulated experiments per model."""
+def run(
+    replicates: int = DEFAULT_REPLICATES,
+    seed: int = 0,
+    sites: crpi.Sites | None = None,
+    joint_replicates: int = DEFAULT_JOINT_REPLICATES,
+) -> Study:
+    """The whole study on the shipped data (or `sites`). `replicates` simulated experiments per model;
+    `joint_replicates` per direction for the joint fit with the Van Wyk tables (`crpi_joint`; 0 skips it)."""
     if not (10 <= int(replicates) <= MAX_REPLICATES):
         raise InputError(f"--replicates must be from 10 to {MAX_REPLICATES}, got {replicates}")
+    if not (int(joint_replicates) == 0 or 20 <= int(joint_replicates) <= 2000):
+        raise InputError(f"--joint-replicates must be 0 (skip) or from 20 to 2000, got {joint_replicates}")
     sites = crpi.load() if sites is None else sites
     _, resid = crpi.rigid_fit(sites.truth, sites.means)
     loso = {m: crpi.loso(sites.truth, sites.means, m, **o) for m, o in crpi.LOSO_METHODS.items()}
@@ -136,4 +165,7 @@ def run(replicates: int = DEFAULT_REPLICATES, seed: int = 0, sites: crpi.Sites |
         crpi_models.select(list(scores.values())),
         int(replicates),
         int(seed),
+        crpi_joint.to_json(crpi_joint.run(joint_replicates, seed, sites), joint_replicates)
+        if joint_replicates
+        else None,
     )

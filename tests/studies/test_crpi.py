@@ -107,8 +107,9 @@ def test_planted_models_are_named(kind):
 
 
 def test_the_study_names_per_site_offsets_and_the_kinematic_prediction_misses(tmp_path, capsys):
-    st = crpi_study.run(replicates=200, seed=0)
+    st = crpi_study.run(replicates=200, seed=0, joint_replicates=0)
     j = st.to_json()
+    assert j["joint_fit"] is None
     assert j["chosen"] == "seating"
     p = j["predicted_rrbc_change"]
     assert p["lo95"] <= j["measured_rrbc_change"] <= p["hi95"]
@@ -117,7 +118,18 @@ def test_the_study_names_per_site_offsets_and_the_kinematic_prediction_misses(tm
     assert set(j["loso"]) >= {"idw", "linear", "tps", "gp"}
     assert len(j["repeatability_mm"]) == 3 and j["variogram"]["bins"] and j["cause"]
     # the CLI: JSON and the report
-    assert main(["reproduce", "crpi", "--replicates", "50", "--json", "--out", str(tmp_path / "r")]) == 0
+    args = [
+        "reproduce",
+        "crpi",
+        "--replicates",
+        "50",
+        "--joint-replicates",
+        "0",
+        "--json",
+        "--out",
+        str(tmp_path / "r"),
+    ]
+    assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["chosen"] == "seating" and out["loso"]["idw"]["rmst_rigid_mm"] == pytest.approx(0.608, abs=5e-4)
     for name in ("report.md", "summary.json", "crpi_residuals.png", "crpi_variogram.png", "crpi_loso.png"):
@@ -125,9 +137,31 @@ def test_the_study_names_per_site_offsets_and_the_kinematic_prediction_misses(tm
     assert "supported" in (tmp_path / "r" / "report.md").read_text(encoding="utf-8")
 
 
+def test_the_joint_fit_with_the_van_wyk_tables():
+    """30 simulated experiments per direction (the default run uses 100): the points decide the noise (the joint
+    sigma within 10 % of their pooled repeatability) and the per-site model explains both data sets better than
+    the kinematic field; at the joint fit RRBC on the plate gains less than the kinematic model fitted to the
+    tables alone predicts."""
+    from rrbc_core.studies import crpi_joint
+
+    j = crpi_joint.to_json(crpi_joint.run(30, 0, rrbc_replicates=60), 30)
+    seat, kin = j["models"]["seating"], j["models"]["kinematic"]
+    rep = float(np.sqrt(np.mean(np.square(crpi.repeatability(crpi.load())))))
+    assert abs(seat["joint"]["params"]["sigma_mm"] / rep - 1) < 0.1
+    assert j["chosen"] == "seating" and seat["joint"]["deviance"] < kin["joint"]["deviance"]
+    assert seat["joint"]["rrbc_change"] > kin["tables_only"]["rrbc_change"]
+    for m in (seat, kin):  # each part of the joint misfit is no better than that data set's own best fit
+        assert m["joint"]["deviance_tables"] >= m["tables_only"]["deviance_tables"] - 1e-9
+        assert m["joint"]["deviance_points"] >= m["points_only"]["deviance_points"] - 1e-9
+
+
 def test_bad_options_and_files_are_one_line(tmp_path, capsys):
     assert main(["reproduce", "crpi", "--layouts", "A"]) == 2
     assert "vanwyk2018 only" in capsys.readouterr().err
+    assert main(["reproduce", "vanwyk2018", "--joint-replicates", "5"]) == 2
+    assert "crpi only" in capsys.readouterr().err
+    assert main(["reproduce", "crpi", "--joint-replicates", "5"]) == 2
+    assert "joint-replicates" in capsys.readouterr().err
     with pytest.raises(InputError, match="line 1"):
         crpi.parse("a,b\n1,2\n")
     with pytest.raises(InputError, match="line 2"):
