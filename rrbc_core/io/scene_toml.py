@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rrbc_core.errors import InputError
+from rrbc_core.errors import InputError, excerpt
 from rrbc_core.geometry import points as geometry
 from rrbc_core.io.scene import (
     DEFAULT_CHECK_POINTS_PER_TARGET,
@@ -249,7 +249,10 @@ def load_scene(path: str | PathLike) -> Scene:
     try:
         mesh_path = (toml_path.parent / mesh_rel).resolve(strict=False)
     except (RuntimeError, OSError) as exc:  # a symlink loop
-        raise c.error("scene.mesh", f"cannot resolve {mesh_rel[:80]!r}: {exc.__class__.__name__}") from None
+        why = (
+            "a loop of symbolic links" if isinstance(exc, RuntimeError) or "loop" in str(exc).lower() else "an OS error"
+        )
+        raise c.error("scene.mesh", f"cannot resolve {excerpt(mesh_rel, 80)!r}: {why}") from None
     folder = toml_path.parent.resolve()
     if not mesh_path.is_relative_to(folder):
         # a scene opens only files in its own folder (or below): a scene from elsewhere cannot make the app read
