@@ -77,6 +77,6 @@ def test_a_mesh_that_is_a_loop_of_symbolic_links_is_named_as_one(tmp_path):
     text = (ROOT / "scenes" / "demo_workcell.toml").read_text(encoding="utf-8")
     (tmp_path / "s.toml").write_text(text.replace('"meshes/demo_workcell.glb"', '"loop.glb"'), encoding="utf-8")
     (tmp_path / "loop.glb").symlink_to(tmp_path / "loop.glb")
-    p = subprocess.run([RRBC, "plan", str(tmp_path / "s.toml")], capture_output=True, text=True, timeout=60)
+    p = subprocess.run([*RRBC, "plan", str(tmp_path / "s.toml")], capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and p.stdout == ""
     assert p.stderr.count("\n") == 1 and "a loop of symbolic links" in p.stderr
