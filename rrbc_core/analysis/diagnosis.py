@@ -628,6 +628,12 @@ def diagnose(
             "with joint angles a uniform scale is the same as all the arm's lengths scaled together: a scale the "
             "arm explains is reported as kinematic"
         )
+        if "affine" in effects or "scale" in effects:
+            limits.append(
+                "beside the arm's error, a smooth field of position (a sensor's distortion) is seen only through "
+                "what the arm's columns cannot follow: its linear part is reported as affine/scale and the rest, "
+                "absorbed by the arm's columns, may go unnamed"
+            )
 
     # bias, and RRBC on the file as given: rrbc correct's own figure on its check rows, else leave-one-out
     bias = float(np.sqrt(max(0.0, float(np.mean(np.sum(resid**2, axis=1))) - noise_pp)))

@@ -4,6 +4,7 @@ Hidden effects of seeded random size and geometry, run through the real `diagnos
 - joint columns present (the library's own simulator of a UR5 with a 100 mm tool, `studies.vec_study`): DH errors
   are named `kinematic` and nothing else; a sensor field with a perfect arm is a `smooth_field`, never `kinematic`;
   clean data give nothing;
+- DH errors with a sensor field: `kinematic` and the field as a position effect (its linear part beside the arm);
 - a smooth field with drift: exactly those two names, no noise effect, the noise and the field's size estimated
   beside each other (the field's RMS must not absorb the drift);
 - a smooth field with outliers, scale with outliers: exactly the planted names and ids;
@@ -52,6 +53,22 @@ def test_a_sensor_field_with_a_perfect_arm_is_a_field_not_kinematic(seed):
     dg = diagnose(m, tool_mm=TOOL_MM)
     assert "kinematic" not in dg.names, dg.tests
     assert "smooth_field" in dg.names or "affine" in dg.names  # found as a position effect
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_dh_errors_with_a_sensor_field_are_kinematic_plus_a_position_effect(seed):
+    """DH errors of random size with a sensor field of random size (length 300 mm): `kinematic` and the field as a
+    position effect - `smooth_field`, or its linear part `affine`/`scale` (the same standard as a field alone,
+    above: beside the arm's ~20 columns the rest of a long field is not identifiable) - with the limit saying so;
+    never outliers or a noise effect."""
+    rng = np.random.default_rng(9300 + seed)
+    m, _ = _joints(seed, dh_size=float(rng.uniform(0.7, 1.5)), field_mm=float(rng.uniform(0.2, 0.4)))
+    dg = diagnose(m, tool_mm=TOOL_MM)
+    names = set(dg.names)
+    assert "kinematic" in names and names & {"smooth_field", "affine", "scale"}, dg.tests
+    assert names <= {"kinematic", "smooth_field", "affine", "scale"}, dg.names
+    if names & {"affine", "scale"}:
+        assert any("linear part is reported as affine" in t for t in dg.limits)
 
 
 def test_clean_data_with_joints_report_nothing_over_20_seeds():
