@@ -106,6 +106,13 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--out", default=None, help="write one synthetic measured data set (measurement CSV) here")
     m.add_argument("--layout", default=None, help="use a named layout of the scene (e.g. large_5pt)")
     m.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the trial chunks on a dask cluster: 'local' (sized to this machine) or a scheduler address "
+        "such as tcp://127.0.0.1:8786 (default: $RRBC_SCHEDULER, else this process); the numbers do not change",
+    )
+    m.add_argument(
         "--icp",
         type=_non_negative_int,
         default=0,
@@ -395,6 +402,7 @@ def _cmd_simulate(args) -> str:
             layout=args.layout,
             icp=args.icp,
             progress=lambda n, label: bar.update(n, label),
+            scheduler=args.scheduler,
         )
     finally:
         bar.close()

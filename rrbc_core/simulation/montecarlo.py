@@ -310,12 +310,12 @@ class MonteCarloResult:
     icp_trials: int = 0  # trials behind an "icp" strategy row (point-cloud registration is ~1 s per trial)
 
     def to_json(self) -> dict:
-        """JSON of `rrbc simulate --json` (NaN, e.g. a correlation of constant errors, becomes null)."""
+        """JSON of `rrbc simulate --json` (NaN, e.g. a correlation of constant errors, becomes null). A function of
+        the inputs only - no wall time - so the same command prints the same bytes wherever its tasks ran."""
         return _nan_to_none(
             {
                 "scene": self.scene,
                 "trials": self.trials,
-                "seconds": self.seconds,
                 "seed": self.seed,
                 "strategies": [
                     {**s.__dict__, **({"trials": self.icp_trials} if s.name == "icp" else {})} for s in self.strategies
@@ -361,6 +361,30 @@ def _pearson(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @thread_limited
+@dataclass(frozen=True)
+class _Chunk:
+    """One independent task of a Monte Carlo: `n` trials of `cell` with their own seed sequence."""
+
+    cell: WorkCell
+    n: int
+    seed: np.random.SeedSequence
+    strategies: tuple
+    interpolations: tuple
+
+
+def _run_chunk(c: _Chunk) -> tuple[dict, dict]:
+    """Per strategy (rigid, rrbc) errors and per interpolation rrbc errors, (n, C) mm, for one chunk."""
+    rng = np.random.default_rng(c.seed)
+    measured = measure(c.cell, rng, c.n)
+    seeds = rng.integers(0, 2**31 - 1, c.n)
+    by_s = {}
+    for name in c.strategies:
+        e = trial_errors(c.cell, measured, name, "idw", seeds=seeds)
+        by_s[name] = (e.rigid, e.rrbc)
+    by_i = {name: trial_errors(c.cell, measured, "least-squares", name, seeds=seeds).rrbc for name in c.interpolations}
+    return by_s, by_i
+
+
 def monte_carlo(
     cell: WorkCell,
     trials: int,
@@ -369,12 +393,17 @@ def monte_carlo(
     interpolations=INTERPOLATION_NAMES,
     chunk: int = 2000,
     progress=None,
+    scheduler: str | None = None,
 ) -> MonteCarloResult:
     """Monte Carlo over `trials` sessions: per strategy, rigid TRE mean/RMS/max, correlation of the error with
     distance from the origin, and RMST after RRBC (IDW); per interpolation method, RMST after least-squares
-    registration + RRBC. Trials run in chunks of `chunk` (memory bound); `progress(n, label)` is called as
-    work completes. Seeded: the same seed gives the same numbers.
+    registration + RRBC. Trials run in chunks of `chunk` (memory bound), each an independent task with its own
+    seed sequence (`runtime.tasks.spawn_seeds(seed, chunks)`), run where `scheduler` says (`runtime.tasks`: in
+    this process by default) and reduced in chunk order: the same seed gives the same numbers on one process or
+    on any cluster. `progress(n, label)` is called as chunks complete.
     """
+    from rrbc_core.runtime.tasks import run_tasks, spawn_seeds
+
     if not 1 <= trials <= MAX_TRIALS:
         raise InputError(
             f"trials must be 1 to {MAX_TRIALS:,} (per-trial errors are kept for every check point), got {trials:,}"
@@ -386,28 +415,19 @@ def monte_carlo(
         if name not in INTERPOLATION_NAMES:
             raise InputError(f"unknown interpolation '{name}': choose from {', '.join(INTERPOLATION_NAMES)}")
     t0 = _time.perf_counter()
-    rng = np.random.default_rng(seed)
     chk = cell.index("check")
     dist = np.linalg.norm(cell.robot[chk] - cell.distance_origin, axis=1)
-    acc_s = {name: ([], []) for name in strategies}
-    acc_i = {name: [] for name in interpolations}
-    done = 0
-    while done < trials:
-        n = min(chunk, trials - done)
-        measured = measure(cell, rng, n)
-        seeds = rng.integers(0, 2**31 - 1, n)
-        for name in strategies:
-            e = trial_errors(cell, measured, name, "idw", seeds=seeds)
-            acc_s[name][0].append(e.rigid)
-            acc_s[name][1].append(e.rrbc)
-            if progress:
-                progress(n, f"{name}")
-        for name in interpolations:
-            e = trial_errors(cell, measured, "least-squares", name, seeds=seeds)
-            acc_i[name].append(e.rrbc)
-            if progress:
-                progress(n, f"least-squares + {name}")
-        done += n
+    sizes = [min(chunk, trials - a) for a in range(0, trials, chunk)]
+    tasks = [
+        _Chunk(cell, n, sq, tuple(strategies), tuple(interpolations))
+        for n, sq in zip(sizes, spawn_seeds(seed, len(sizes)))
+    ]
+    per_task = (len(strategies) + len(interpolations)) * chunk
+    done = run_tasks(
+        _run_chunk, tasks, scheduler, progress=(lambda k: progress(per_task * k, "trials")) if progress else None
+    )
+    acc_s = {name: ([r[0][name][0] for r in done], [r[0][name][1] for r in done]) for name in strategies}
+    acc_i = {name: [r[1][name] for r in done] for name in interpolations}
     stats = [
         _strategy_stats(name, np.concatenate(acc_s[name][0]), np.concatenate(acc_s[name][1]), dist)
         for name in strategies
@@ -494,6 +514,7 @@ def simulate(
     layout: str | None = None,
     icp: int = 0,
     progress: Callable[[int, str], object] | None = None,
+    scheduler: str | None = None,
 ) -> MonteCarloResult:
     """Monte Carlo of a scene's robot and sensor with its error model: what `rrbc simulate` reports.
 
@@ -511,6 +532,9 @@ def simulate(
         Also register by ICP of a simulated depth-sensor point cloud against the cell mesh, over this many trials.
     progress : callable, optional
         ``progress(n, label)``, called as work completes.
+    scheduler : str, optional
+        Where the trial chunks run (`runtime.tasks.run_tasks`): None (then $RRBC_SCHEDULER, else this process),
+        "local" or a dask scheduler's address. The numbers do not depend on it.
 
     Returns
     -------
@@ -523,7 +547,7 @@ def simulate(
         scene = scene.with_layout(layout)
     cell = work_cell_from_scene(scene, seed=seed)
     start = _time.perf_counter()
-    res = monte_carlo(cell, trials, seed=seed, progress=progress)
+    res = monte_carlo(cell, trials, seed=seed, progress=progress, scheduler=scheduler)
     if icp:
         icp_row = icp_statistics(scene, cell, icp, seed=seed, progress=progress)
         res = dataclasses.replace(

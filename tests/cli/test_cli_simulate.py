@@ -23,7 +23,7 @@ def test_scene_simulates_and_its_data_pass_through_correct(tmp_path, scene):
     res = run("simulate", ROOT / "scenes" / f"{scene}.toml", "--trials", 30, "--seed", 5, "--out", out, "--json")
     assert res.returncode == 0, res.stderr
     js = json.loads(res.stdout)
-    assert js["trials"] == 30 and js["seconds"] >= 0
+    assert js["trials"] == 30 and "seconds" not in js  # the JSON is a function of the inputs (issue 18)
     names = [s["name"] for s in js["strategies"]]
     assert names == ["least-squares", "three-point", "combinatorial", "annealing", "clustering"]
     for s in js["strategies"]:

@@ -1,0 +1,127 @@
+"""Independent tasks on one process or a dask cluster (`runtime.tasks`, issue 18): the same numbers wherever they
+run. A real scheduler and two workers are started as separate processes on 127.0.0.1."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rrbc_core.errors import InputError
+from rrbc_core.runtime.tasks import run_tasks, spawn_seeds
+from tests.paths import ROOT, RRBC
+
+DASK = str(Path(sys.executable).with_name("dask"))
+
+
+def _slow_square(x: int) -> int:
+    time.sleep(0.4)
+    return x * x
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A `dask scheduler` and two single-threaded `dask worker`s, each its own process."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    logs = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT, env=env, start_new_session=True)
+    procs = [
+        subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **logs)
+    ]
+    from distributed import Client
+
+    deadline = time.time() + 60
+    while True:
+        try:
+            with Client(address, timeout=2):
+                break
+        except OSError:
+            if time.time() > deadline:
+                raise
+            time.sleep(0.5)
+    workers = [
+        subprocess.Popen([DASK, "worker", address, "--nthreads", "1", "--no-dashboard"], **logs) for _ in range(2)
+    ]
+    with Client(address, timeout=10) as c:
+        c.wait_for_workers(2, timeout=60)
+    yield address, workers
+    for p in procs + workers:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGTERM)
+    for p in procs + workers:
+        try:
+            p.wait(10)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+
+
+def test_in_process_keeps_order_and_reports_progress():
+    seen = []
+    assert run_tasks(lambda x: x + 1, [3, 1, 2], progress=seen.append) == [4, 2, 3] and seen == [1, 1, 1]
+    a, b = spawn_seeds(5, 2), spawn_seeds(5, 2)
+    assert [s.generate_state(2).tolist() for s in a] == [s.generate_state(2).tolist() for s in b]
+    assert a[0].generate_state(2).tolist() != a[1].generate_state(2).tolist()
+
+
+def test_a_bad_or_unreachable_scheduler_is_one_clear_error():
+    with pytest.raises(InputError, match="give 'local' or a scheduler address"):
+        run_tasks(abs, [1, 2], scheduler="bogus")
+    with pytest.raises(InputError, match="cannot reach the dask scheduler"):
+        run_tasks(abs, [1, 2], scheduler=f"tcp://127.0.0.1:{_free_port()}")
+
+
+def test_monte_carlo_gives_the_same_numbers_on_a_cluster(cluster):
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_core.io.scene_toml import load_scene
+    from rrbc_core.simulation.montecarlo import monte_carlo, work_cell_from_scene
+
+    address, _ = cluster
+    cell = work_cell_from_scene(load_scene(default_scene_path()), seed=2)
+    here = monte_carlo(cell, 90, seed=2, chunk=30, strategies=("least-squares",), interpolations=("idw", "none"))
+    there = monte_carlo(
+        cell, 90, seed=2, chunk=30, strategies=("least-squares",), interpolations=("idw", "none"), scheduler=address
+    )
+    assert here.to_json() == there.to_json()
+
+
+def test_rrbc_simulate_prints_the_same_bytes_with_and_without_a_scheduler(cluster):
+    address, _ = cluster
+    args = [*RRBC, "simulate", str(ROOT / "scenes" / "demo_workcell.toml"), "--trials", "20", "--json"]
+    env = {k: v for k, v in os.environ.items() if k != "RRBC_SCHEDULER"}
+    local = subprocess.run(args, capture_output=True, timeout=300, env=env)
+    remote = subprocess.run([*args, "--scheduler", address], capture_output=True, timeout=300, env=env)
+    assert local.returncode == 0 and remote.returncode == 0, remote.stderr
+    assert local.stdout == remote.stdout
+    by_env = subprocess.run(args, capture_output=True, timeout=300, env=dict(env, RRBC_SCHEDULER=address))
+    assert by_env.stdout == local.stdout
+
+
+def test_a_worker_killed_mid_run_is_survived(cluster):
+    """Eight 0.4 s tasks on two workers; one worker is killed after the first results: the other finishes every
+    task (the scheduler reruns the lost ones) and the results come back complete and in order."""
+    address, workers = cluster
+    done = []
+
+    def progress(n):
+        done.append(n)
+        if len(done) == 2:
+            os.killpg(workers[0].pid, signal.SIGKILL)
+
+    out = run_tasks(_slow_square, list(range(8)), scheduler=address, progress=progress)
+    assert out == [x * x for x in range(8)]
+    assert workers[0].wait(10) is not None
+    assert np.all(np.diff(out) > 0)
