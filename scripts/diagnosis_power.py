@@ -1,6 +1,6 @@
 """Detection power of `rrbc diagnose` (issue 6): detection rate against effect size over noise.
 
-    python scripts/diagnosis_power.py [--quick] [--out docs] [--workers 2]
+    python scripts/diagnosis_power.py [--quick] [--out docs] [--scheduler local|ADDRESS]
 
 For each effect (scale, affine, drift, outliers, anisotropic_noise, smooth_field) and each geometry (a planar
 6 x 6 plate and a volumetric 4 x 3 x 3 block, 36 points each, random measurement order, isotropic sensor noise
@@ -25,7 +25,9 @@ Point count and measurement order (section "Point count and measurement order", 
 data sets per point (50; clean data included as size 0).
 
 Writes OUT/diagnosis_power.md (tables) and OUT/diagnosis_power.png (one panel per effect, a line per geometry).
-Every data set has its own seed (see `trial_seed`), so the output does not depend on the number of workers.
+Every data set has its own seed (see `trial_seed`) and is one task of `rrbc_core.runtime.tasks.run_tasks`, so the
+output does not depend on where the tasks ran: in this process (default), on a local dask cluster
+(`--scheduler local`) or on an existing one (`--scheduler ADDRESS` or $RRBC_SCHEDULER).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from rrbc_core.runtime.tasks import run_tasks
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.studies.diagnosis_power import (
     ALPHA,
@@ -57,6 +60,15 @@ from rrbc_core.studies.diagnosis_power import (
 )
 
 
+def _where(scheduler) -> str:
+    from rrbc_core.runtime.tasks import IN_PROCESS, scheduler_from
+
+    w = scheduler_from(scheduler)
+    return (
+        "in this process" if w in IN_PROCESS else ("on a local dask cluster" if w == "local" else "on a dask cluster")
+    )
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
@@ -65,7 +77,12 @@ def main(argv=None) -> int:
         help="8 trials per point, 40 clean (a smoke run); full: 100 per point, 500 clean per geometry",
     )
     ap.add_argument("--out", default="docs", help="output directory (default docs)")
-    ap.add_argument("--workers", type=int, default=2, help="processes (default 2; results do not depend on it)")
+    ap.add_argument(
+        "--scheduler",
+        default=None,
+        help="where the data sets run: 'local' (a dask cluster sized to this machine), a dask scheduler's address, "
+        "or in this process (default: $RRBC_SCHEDULER, else in this process); results do not depend on it",
+    )
     args = ap.parse_args(argv)
     apply_process_policy()  # one BLAS thread, as the rrbc command runs (docs/threads.md)
     trials, clean_trials = (8, 40) if args.quick else (100, 500)
@@ -87,13 +104,7 @@ def main(argv=None) -> int:
                     jobs.append((eff if size else None, geom, size, trial_seed(10 + ci, gi, si, k), order))
                     keys.append(("scan", ci, geom, size))
     t0 = time.perf_counter()
-    if args.workers > 1:
-        import multiprocessing as mp
-
-        with mp.get_context("fork").Pool(args.workers) as pool:
-            out = pool.map(run_one, jobs, chunksize=8)
-    else:
-        out = [run_one(j) for j in jobs]
+    out = run_tasks(run_one, jobs, args.scheduler)
     elapsed = time.perf_counter() - t0
 
     # aggregate
@@ -122,16 +133,11 @@ def main(argv=None) -> int:
 
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)
-    cmd = (
-        "python scripts/diagnosis_power.py"
-        + (" --quick" if args.quick else "")
-        + f" --out {args.out}"
-        + (f" --workers {args.workers}" if args.workers != 2 else "")
-    )
+    cmd = "python scripts/diagnosis_power.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
     lines = [
         "# Detection power of `rrbc diagnose`",
         "",
-        f"Made by `{cmd}` (wall time {elapsed:.0f} s with {args.workers} worker(s)); seeded and deterministic: data set "
+        f"Made by `{cmd}` (wall time {elapsed:.0f} s, tasks run {_where(args.scheduler)}); seeded and deterministic: data set "
         f"*k* of effect *e*, geometry *g*, size index *s* uses seed `{BASE_SEED} + 1000000 e + 100000 g + 1000 s + k` "
         "(clean data: e = 9, s = 0).",
         "",
