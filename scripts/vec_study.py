@@ -116,10 +116,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None, help="directory to write vec_study.md and vec_study.png into")
     ap.add_argument("--quick", action="store_true", help="one seed")
+    ap.add_argument(
+        "--scheduler",
+        default=None,
+        help="where the cells run: 'local' (a dask cluster sized to this machine), a dask scheduler's address, or in "
+        "this process (default: $RRBC_SCHEDULER, else in this process); results do not depend on it",
+    )
     args = ap.parse_args(argv)
     apply_process_policy()
     seeds = vec_study.SEEDS[:1] if args.quick else vec_study.SEEDS
-    rows = vec_study.run(seeds=seeds)
+    rows = vec_study.run(seeds=seeds, scheduler=args.scheduler)
     lines, cells = table(rows)
     if not args.out:
         print("\n".join(lines))
