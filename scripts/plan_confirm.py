@@ -131,12 +131,18 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="directory to write planning.md into")
     ap.add_argument("--quick", action="store_true", help="400 trials and 4 seeded scenes")
     ap.add_argument("--trials", type=int, default=None)
+    ap.add_argument(
+        "--scheduler",
+        default=None,
+        help="where the scenes run: 'local' (a dask cluster sized to this machine), a dask scheduler's address, or "
+        "in this process (default: $RRBC_SCHEDULER, else in this process); the numbers do not depend on it",
+    )
     args = ap.parse_args(argv)
     apply_process_policy()  # one BLAS thread, as the rrbc command runs (docs/threads.md)
     trials = args.trials or (400 if args.quick else TRIALS)
     seeds = STUDY_SEEDS[:4] if args.quick else STUDY_SEEDS
-    conf = confirm(trials)
-    study = optimiser_vs_random(seeds)
+    conf = confirm(trials, scheduler=args.scheduler)
+    study = optimiser_vs_random(seeds, scheduler=args.scheduler)
     cmd = (
         "python scripts/plan_confirm.py"
         + (" --out docs" if args.out else "")

@@ -59,57 +59,64 @@ def seeded_scene(seed: int, base_fiducials: int = BASE_FIDUCIALS):
     )
 
 
-def optimiser_vs_random(seeds, add: int = ADD) -> list[dict]:
-    """Per seeded scene: the optimiser's and the random baseline's predicted RRBC RMST (mm), gain = 1 − opt/random."""
-    rows = []
-    for s in seeds:
-        res = planning.plan(seeded_scene(s), add, seed=s)
-        rnd = res.baselines["random"]
-        rows.append(
-            {
-                "seed": s,
-                "optimiser": res.predicted_after.rrbc_mm,
-                "random": rnd.rrbc_mm,
-                "random_sd": rnd.rrbc_std_mm,
-                "corners": res.baselines["hull-corners"].rrbc_mm,
-                "before": res.predicted.rrbc_mm,
-                "coverage_before": res.overall_coverage(),
-                "coverage_after": res.overall_coverage(after=True),
-                "gain": 1.0 - res.predicted_after.rrbc_mm / rnd.rrbc_mm,
-            }
-        )
-    return rows
+def _optimiser_row(task: tuple) -> dict:
+    s, add = task
+    res = planning.plan(seeded_scene(s), add, seed=s)
+    rnd = res.baselines["random"]
+    return {
+        "seed": s,
+        "optimiser": res.predicted_after.rrbc_mm,
+        "random": rnd.rrbc_mm,
+        "random_sd": rnd.rrbc_std_mm,
+        "corners": res.baselines["hull-corners"].rrbc_mm,
+        "before": res.predicted.rrbc_mm,
+        "coverage_before": res.overall_coverage(),
+        "coverage_after": res.overall_coverage(after=True),
+        "gain": 1.0 - res.predicted_after.rrbc_mm / rnd.rrbc_mm,
+    }
 
 
-def confirm(trials: int, add: int = ADD) -> list[dict]:
-    rows = []
-    for name in SCENES:
-        scene = load_scene(default_scene_path().parent / f"{name}.toml")
-        t0 = time.perf_counter()
-        res = planning.plan(scene, add)
-        t_plan = time.perf_counter() - t0
-        before = scene.fiducials.positions
-        after = np.concatenate([before, res.suggested])
-        mc0 = planning.predict_rmst(scene, before, trials=trials)
-        mc1 = planning.predict_rmst(scene, after, trials=trials)
-        rows.append(
-            {
-                "scene": name,
-                "plan_s": t_plan,
-                "suggested": res.suggested_ids,
-                "fast0": res.predicted,
-                "fast1": res.predicted_after,
-                "mc0": mc0,
-                "mc1": mc1,
-                "cov0": res.overall_coverage(),
-                "cov1": res.overall_coverage(after=True),
-                "rejected": len(res.rejected),
-                "usable": res.n_usable,
-                "corners": res.baselines["hull-corners"].rrbc_mm,
-                "random": res.baselines["random"].rrbc_mm,
-            }
-        )
-    return rows
+def optimiser_vs_random(seeds, add: int = ADD, scheduler: str | None = None) -> list[dict]:
+    """Per seeded scene: the optimiser's and the random baseline's predicted RRBC RMST (mm), gain = 1 − opt/random.
+    One task per scene (`runtime.tasks.run_tasks`; each scene seeded by its own seed), rows in `seeds` order."""
+    from rrbc_core.runtime.tasks import run_tasks
+
+    return run_tasks(_optimiser_row, [(int(s), add) for s in seeds], scheduler)
+
+
+def _confirm_row(task: tuple) -> dict:
+    name, trials, add = task
+    scene = load_scene(default_scene_path().parent / f"{name}.toml")
+    t0 = time.perf_counter()
+    res = planning.plan(scene, add)
+    t_plan = time.perf_counter() - t0
+    before = scene.fiducials.positions
+    after = np.concatenate([before, res.suggested])
+    mc0 = planning.predict_rmst(scene, before, trials=trials)
+    mc1 = planning.predict_rmst(scene, after, trials=trials)
+    return {
+        "scene": name,
+        "plan_s": t_plan,
+        "suggested": res.suggested_ids,
+        "fast0": res.predicted,
+        "fast1": res.predicted_after,
+        "mc0": mc0,
+        "mc1": mc1,
+        "cov0": res.overall_coverage(),
+        "cov1": res.overall_coverage(after=True),
+        "rejected": len(res.rejected),
+        "usable": res.n_usable,
+        "corners": res.baselines["hull-corners"].rrbc_mm,
+        "random": res.baselines["random"].rrbc_mm,
+    }
+
+
+def confirm(trials: int, add: int = ADD, scheduler: str | None = None) -> list[dict]:
+    """Per shipped scene: `plan`, and the fast prediction against Monte Carlo before and after the suggestions.
+    One task per scene (`runtime.tasks.run_tasks`), rows in SCENES order."""
+    from rrbc_core.runtime.tasks import run_tasks
+
+    return run_tasks(_confirm_row, [(name, trials, add) for name in SCENES], scheduler)
 
 
 def _z(fast, mc, attr):
