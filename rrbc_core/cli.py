@@ -503,7 +503,6 @@ def _check_report_dir(out) -> None:
 def _cmd_reproduce_crpi(args) -> str:
     from rrbc_core.studies import crpi_study
     from rrbc_core.studies.crpi_report import write_report
-    from rrbc_core.studies.vanwyk2018_report import json_safe
 
     if args.layouts is not None or args.no_confusion:
         raise InputError("--layouts and --no-confusion apply to vanwyk2018 only")
@@ -521,10 +520,7 @@ def _cmd_reproduce_crpi(args) -> str:
     report = write_report(st, args.out, command) if args.out else None
     j = st.to_json()
     if args.json:
-        out = json_safe(j)
-        if report is not None:
-            out["report"] = str(report)
-        return json.dumps(out, allow_nan=False) + "\n"
+        return _reproduce_json(j, report)
     lines = [
         f"NIST breadboard points (CRPI): {j['data']['sites']} sites, {j['data']['readings']} readings",
         "repeatability x, y, z: " + ", ".join(f"{v:.3f}" for v in j["repeatability_mm"]) + " mm; "
@@ -537,15 +533,28 @@ def _cmd_reproduce_crpi(args) -> str:
         "",
         "cause: " + j["cause"],
     ]
+    return _reproduce_text(lines, report)
+
+
+def _reproduce_json(j: dict, report) -> str:
+    from rrbc_core.studies.vanwyk2018_report import json_safe
+
+    out = json_safe(j)
     if report is not None:
-        lines += ["", f"report: {report}"]
+        out["report"] = str(report)
+    return json.dumps(out, allow_nan=False) + "\n"
+
+
+def _reproduce_text(lines: list[str], report) -> str:
+    if report is not None:
+        lines = [*lines, "", f"report: {report}"]
     return "\n".join(lines) + "\n"
 
 
 def _cmd_reproduce(args) -> str:
     from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.studies import reproduction, vanwyk2018
-    from rrbc_core.studies.vanwyk2018_report import json_safe, write_report
+    from rrbc_core.studies.vanwyk2018_report import write_report
 
     if args.paper == "crpi":
         return _cmd_reproduce_crpi(args)
@@ -577,10 +586,7 @@ def _cmd_reproduce(args) -> str:
         command += f" --seed {args.seed}"
     report = write_report(rep, args.out, command) if args.out else None
     if args.json:
-        out = json_safe(rep.to_json())
-        if report is not None:
-            out["report"] = str(report)
-        return json.dumps(out, allow_nan=False) + "\n"
+        return _reproduce_json(rep.to_json(), report)
     j = rep.to_json()
     m = j["misfit"]
     lines = [
@@ -591,9 +597,7 @@ def _cmd_reproduce(args) -> str:
         "",
         "cause: " + j["cause"],
     ]
-    if report is not None:
-        lines += ["", f"report: {report}"]
-    return "\n".join(lines) + "\n"
+    return _reproduce_text(lines, report)
 
 
 def _cmd_view(args) -> str:

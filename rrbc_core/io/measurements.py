@@ -184,8 +184,8 @@ class MeasurementSet:
         robot = np.zeros((k, 3))
         np.add.at(sensor, point, self.sensor[rows])
         np.add.at(robot, point, self.robot[rows])
-        sensor /= np.maximum(count, 1)[:, None]
-        robot /= np.maximum(count, 1)[:, None]
+        sensor /= count[:, None]  # every id has at least one row
+        robot /= count[:, None]
         first = rows[np.unique(point, return_index=True)[1]]  # ids are numbered in order of first appearance
         n_lines = len(self.lines)
         first_line = [self.lines[i] if i < n_lines else 0 for i in first.tolist()]

@@ -45,7 +45,7 @@ def _points_deviance_grid(sites: crpi.Sites, component: str, model: rp.Model, lo
     lay = crpi_models.layout_of(sites)
     _, r = crpi.rigid_fit(sites.truth, sites.means)
     y = r.reshape(-1)
-    k = crpi_models._kernel(lay, "seating" if component == "seating" else component)
+    k = crpi_models._kernel(lay, component)
     ss = sum(float(np.sum((g - g.mean(axis=0)) ** 2)) for g in sites.readings)
     dof = 3 * int(np.sum(sites.counts - 1))
     n_rep = np.repeat(sites.counts, 3).astype(float)

@@ -4,15 +4,13 @@
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from rrbc_core.studies import crpi
 from rrbc_core.studies.crpi_study import Study
-from rrbc_core.studies.vanwyk2018_report import _plt, json_safe
+from rrbc_core.studies.vanwyk2018_report import _plt, json_safe, save_figure, write_folder
 
 FIGURES = ("crpi_residuals.png", "crpi_variogram.png", "crpi_loso.png")
 
@@ -33,9 +31,7 @@ def _fig_residuals(st: Study, path: Path) -> None:
     ax.set_title("Rigid-fit residual per site (in-plane arrows, 250x)", pad=22)
     ax.set_aspect("equal")
     ax.margins(0.15)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, 90)
 
 
 def _rotation(st: Study) -> np.ndarray:
@@ -59,14 +55,11 @@ def _fig_variogram(st: Study, path: Path) -> None:
     ax.set_yscale("log")
     ax.set_title("Variogram: measured against models fitted to the same points")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, 90)
 
 
-def _fig_loso(st: Study, path: Path) -> None:
+def _fig_loso(st: Study, j: dict, path: Path) -> None:
     plt = _plt()
-    j = st.to_json()
     names = [m["name"] for m in j["models"]]
     pr = np.array([[m["predictions"]["rrbc_change"][k] for k in ("mean", "lo95", "hi95")] for m in j["models"]])
     fig, ax = plt.subplots(figsize=(7.2, 4.6))
@@ -77,13 +70,11 @@ def _fig_loso(st: Study, path: Path) -> None:
     ax.set_xlabel("RRBC / rigid − 1 at the held-out site (%), IDW k = 4, p = 2")
     ax.set_title("Leave-one-site-out: each model's prediction (95 % of simulated experiments)")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, 90)
 
 
-def markdown(st: Study, command: str) -> str:
-    j = st.to_json()
+def markdown(st: Study, command: str, j: dict | None = None) -> str:
+    j = st.to_json() if j is None else j
     lines = [
         "# NIST breadboard points (CRPI): what they hold",
         "",
@@ -188,18 +179,14 @@ def markdown(st: Study, command: str) -> str:
 
 
 def write_report(st: Study, out_dir, command: str) -> Path:
-    out = Path(out_dir)
-    parent = out.resolve().parent
-    tmp = Path(tempfile.mkdtemp(prefix=".rrbc-report-", dir=parent))
-    try:
-        _fig_residuals(st, tmp / FIGURES[0])
-        _fig_variogram(st, tmp / FIGURES[1])
-        _fig_loso(st, tmp / FIGURES[2])
-        (tmp / "report.md").write_text(markdown(st, command), encoding="utf-8")
-        (tmp / "summary.json").write_text(json.dumps(json_safe(st.to_json()), indent=1) + "\n", encoding="utf-8")
-        out.mkdir(exist_ok=True)
-        for f in tmp.iterdir():
-            shutil.move(str(f), out / f.name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return out / "report.md"
+    j = st.to_json()
+    return write_folder(
+        out_dir,
+        {
+            FIGURES[0]: lambda p: _fig_residuals(st, p),
+            FIGURES[1]: lambda p: _fig_variogram(st, p),
+            FIGURES[2]: lambda p: _fig_loso(st, j, p),
+            "report.md": lambda p: p.write_text(markdown(st, command, j), encoding="utf-8"),
+            "summary.json": lambda p: p.write_text(json.dumps(json_safe(j), indent=1) + "\n", encoding="utf-8"),
+        },
+    )

@@ -63,9 +63,7 @@ def _fig_predicted_vs_measured(rep: Reproduction, path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7, loc="upper right")
     fig.suptitle(f"Layout {main.layout.name}: every statistic, predicted (fitted models) against measured", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, 100)
 
 
 def _fig_error_vs_distance(rep: Reproduction, path: Path) -> None:
@@ -96,9 +94,7 @@ def _fig_error_vs_distance(rep: Reproduction, path: Path) -> None:
         "per panel at the fitted parameters; dashed = measured mean",
         fontsize=9,
     )
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, 90)
 
 
 def _fig_error_ranges(rep: Reproduction, path: Path) -> None:
@@ -125,9 +121,7 @@ def _fig_error_ranges(rep: Reproduction, path: Path) -> None:
     ax.set_title("Per-method error ranges (paper's Fig. 6 style)", fontsize=10)
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, 100)
 
 
 def _fig_peg(rep: Reproduction, path: Path) -> None:
@@ -152,9 +146,7 @@ def _fig_peg(rep: Reproduction, path: Path) -> None:
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3, axis="y")
     ax.set_title("Peg success (Table III) from each model's horizontal error distribution", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, 100)
 
 
 def _fig_layouts(rep: Reproduction, path: Path) -> None:
@@ -522,15 +514,38 @@ def write_report(rep: Reproduction, outdir, command: str) -> Path:
     parent = out.resolve().parent
     if not parent.exists():
         raise InputError(f"--out {out}: parent directory {parent} does not exist")
-    tmp = Path(tempfile.mkdtemp(prefix=".rrbc-report-", dir=parent))
+    return write_folder(
+        out,
+        {
+            FIGURES[0]: lambda p: _fig_predicted_vs_measured(rep, p),
+            FIGURES[1]: lambda p: _fig_error_vs_distance(rep, p),
+            FIGURES[2]: lambda p: _fig_error_ranges(rep, p),
+            FIGURES[3]: lambda p: _fig_peg(rep, p),
+            FIGURES[4]: lambda p: _fig_layouts(rep, p),
+            "report.md": lambda p: p.write_text(markdown(rep, command), encoding="utf-8"),
+            "summary.json": lambda p: p.write_text(
+                json.dumps(json_safe(rep.to_json()), indent=1) + "\n", encoding="utf-8"
+            ),
+        },
+    )
+
+
+def save_figure(fig, path: Path, dpi: int) -> None:
+    """Lay out, write and close a figure (every report figure ends this way)."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    _plt().close(fig)
+
+
+def write_folder(out_dir, writers: dict) -> Path:
+    """Write a report folder all or nothing: each ``writers[name](path)`` writes one file into a temporary folder
+    beside `out_dir`; only when every file is written are they moved into `out_dir` (created if needed). Returns
+    `out_dir`/report.md."""
+    out = Path(out_dir)
+    tmp = Path(tempfile.mkdtemp(prefix=".rrbc-report-", dir=out.resolve().parent))
     try:
-        _fig_predicted_vs_measured(rep, tmp / FIGURES[0])
-        _fig_error_vs_distance(rep, tmp / FIGURES[1])
-        _fig_error_ranges(rep, tmp / FIGURES[2])
-        _fig_peg(rep, tmp / FIGURES[3])
-        _fig_layouts(rep, tmp / FIGURES[4])
-        (tmp / "report.md").write_text(markdown(rep, command), encoding="utf-8")
-        (tmp / "summary.json").write_text(json.dumps(json_safe(rep.to_json()), indent=1) + "\n", encoding="utf-8")
+        for name, write in writers.items():
+            write(tmp / name)
         out.mkdir(exist_ok=True)
         for f in tmp.iterdir():
             os.replace(f, out / f.name)
