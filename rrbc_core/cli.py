@@ -105,13 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--seed", type=int, default=0, help="seed of the noise, the check points and annealing (default 0)")
     m.add_argument("--out", default=None, help="write one synthetic measured data set (measurement CSV) here")
     m.add_argument("--layout", default=None, help="use a named layout of the scene (e.g. large_5pt)")
-    m.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="run the trial chunks on a dask cluster: 'local' (sized to this machine) or a scheduler address "
-        "such as tcp://127.0.0.1:8786 (default: $RRBC_SCHEDULER, else this process); the numbers do not change",
-    )
+    _scheduler_option(m, "the trial chunks", "this process")
     m.add_argument(
         "--icp",
         type=_non_negative_int,
@@ -158,7 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--replicates",
         type=_int_at_least(5),
         default=None,
-        help="simulated experiments per model (and direction): vanwyk2018 default 200 (~15 min on 2 cores), "
+        help="simulated experiments per model (and direction): vanwyk2018 default 200 (minutes), "
         "crpi default 1000 (seconds)",
     )
     rp.add_argument("--layouts", default=None, help="vanwyk2018: comma-separated assumed layouts (default A,B,C,D)")
@@ -171,6 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rp.add_argument("--no-confusion", action="store_true", help="vanwyk2018: skip the planted-table confusion study")
     rp.add_argument("--seed", type=int, default=0, help="seed of every simulated draw (default 0)")
+    _scheduler_option(rp, "the independent simulations and fits", "a local cluster for runs of a minute or more")
     rp.add_argument("--json", action="store_true", help="print one JSON object")
     rp.set_defaults(run=_cmd_reproduce)
 
@@ -500,6 +495,16 @@ def _check_report_dir(out) -> None:
         raise InputError(f"--out {p}: parent directory {p.resolve().parent} does not exist")
 
 
+def _scheduler_option(parser, what: str, default: str) -> None:
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help=f"where {what} run: 'in-process', 'local' (a dask cluster sized to this machine) or a scheduler "
+        f"address such as tcp://127.0.0.1:8786 (default: $RRBC_SCHEDULER, else {default}); the numbers do not change",
+    )
+
+
 def _cmd_reproduce_crpi(args) -> str:
     from rrbc_core.studies import crpi_study
     from rrbc_core.studies.crpi_report import write_report
@@ -509,7 +514,7 @@ def _cmd_reproduce_crpi(args) -> str:
     _check_report_dir(args.out)
     replicates = crpi_study.DEFAULT_REPLICATES if args.replicates is None else args.replicates
     joint = crpi_study.DEFAULT_JOINT_REPLICATES if args.joint_replicates is None else args.joint_replicates
-    st = crpi_study.run(replicates=replicates, seed=args.seed, joint_replicates=joint)
+    st = crpi_study.run(replicates=replicates, seed=args.seed, joint_replicates=joint, scheduler=args.scheduler)
     command = "rrbc reproduce crpi" + (f" --out {args.out}" if args.out else "")
     if args.replicates is not None:
         command += f" --replicates {args.replicates}"
@@ -574,6 +579,7 @@ def _cmd_reproduce(args) -> str:
         layout_names=names,
         confusion=not args.no_confusion,
         progress_factory=lambda total: ProgressBar(total, "reproducing vanwyk2018"),
+        scheduler=args.scheduler,
     )
     command = "rrbc reproduce vanwyk2018" + (f" --out {args.out}" if args.out else "")
     if args.replicates != 200:

@@ -13,7 +13,6 @@ from rrbc_core.errors import InputError
 from rrbc_core.geometry import points as geometry
 from rrbc_core.geometry.transforms import project_to_so3
 from rrbc_core.simulation.batch_checks import (
-    _CHUNK_ELEMENTS,
     _average_name,
     _check_pair_batch,
     _check_registration_batch,
@@ -26,9 +25,6 @@ from rrbc_core.simulation.batch_checks import (
     _stack,
     _trace_and_minors,
 )
-
-#: Annealing chains advanced in lockstep per group (bounds memory; larger groups amortise Python overhead).
-_ANNEALING_GROUP = 1024
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -230,18 +226,11 @@ class _Euler:
 def _annealing(s, r, a0, t0, seeds, iterations, cooling_c):
     """Batched `registration.annealing` from the initial mappings (a0, t0); returns (A, t).
 
-    The chains are independent: they are run in groups of at most _ANNEALING_GROUP trials, each group in
-    lockstep, with the proposals drawn in blocks of iterations so that memory stays bounded."""
-    a_out = np.empty(a0.shape)
-    t_out = np.empty(t0.shape)
-    for start in range(0, len(s), _ANNEALING_GROUP):
-        sl = slice(start, start + _ANNEALING_GROUP)
-        a_out[sl], t_out[sl] = _annealing_group(s[sl], r[sl], a0[sl], t0[sl], seeds[sl], iterations, cooling_c)
-    return a_out, t_out
+    The chains are independent; each runs compiled (`compiled_annealing.anneal_chain`) on the proposals and
+    uniforms its own generator draws, in the core's order (all normals, then all uniforms)."""
+    from rrbc_core.simulation.compiled_annealing import anneal_chain
 
-
-def _annealing_group(s, r, a0, t0, seeds, iterations, cooling_c):
-    trials, n = s.shape[:2]
+    trials = len(s)
     mapped = _apply(a0, t0, s)
     res = r - mapped
     fre0 = np.maximum(np.sqrt(np.mean(np.sum(res**2, axis=2), axis=1)), 1e-6)
@@ -249,49 +238,13 @@ def _annealing_group(s, r, a0, t0, seeds, iterations, cooling_c):
     step = np.empty((trials, 6))
     step[:, :3] = (fre0 / 4)[:, None]
     step[:, 3:] = (fre0 / (4 * radius))[:, None]
-    euler = _Euler(trials)
-
-    def cost(theta):  # theta (6, T), rows contiguous; the core's float(np.sum((r - mod.apply(mapped)) ** 2))
-        rot = euler(theta[3], theta[4], theta[5])
-        moved = np.matmul(mapped, np.swapaxes(rot, 1, 2)) + theta[:3].T[:, None, :]
-        return ((r - moved) ** 2).reshape(trials, 3 * n).sum(axis=1)
-
-    # Each chain's generator: normals first (iterations x 6), then uniforms (iterations), as in the core;
-    # a second generator per chain is advanced past the normals to deliver the uniforms block by block.
-    gen_normal = [np.random.default_rng(int(sd)) for sd in seeds]
-    gen_uniform = []
-    for sd in seeds:
-        g = np.random.default_rng(int(sd))
-        for done in range(0, iterations, 65536):
-            g.normal(size=(min(65536, iterations - done), 6))
-        gen_uniform.append(g)
-
-    theta = np.zeros((6, trials))
-    c_cur = cost(theta)
-    best, c_best = theta.copy(), c_cur.copy()
-    block = max(1, min(iterations, 4 * _CHUNK_ELEMENTS // (7 * trials)))
-    for start in range(0, iterations, block):
-        b = min(block, iterations - start)
-        steps = np.stack([g.normal(size=(b, 6)) for g in gen_normal]) * step[:, None, :]  # (T, b, 6)
-        steps = np.ascontiguousarray(np.transpose(steps, (1, 2, 0)))  # (b, 6, T)
-        uniforms = np.ascontiguousarray(np.stack([g.random(b) for g in gen_uniform]).T)  # (b, T)
-        for j in range(b):
-            tau = start + j + 2
-            temp = 1.0 / (cooling_c * np.log(tau))
-            cand = theta + steps[j]
-            c_new = cost(cand)
-            delta = c_new - c_cur
-            with np.errstate(over="ignore"):
-                acc = (delta < 0) | (uniforms[j] < np.exp(-delta / temp))
-            if not np.any(acc):
-                continue
-            theta = np.where(acc, cand, theta)
-            c_cur = np.where(acc, c_new, c_cur)
-            better = acc & (c_cur < c_best)
-            if np.any(better):
-                best = np.where(better, theta, best)
-                c_best = np.where(better, c_cur, c_best)
-    rot = euler(best[3], best[4], best[5])  # the core: _compose_modifier(_modifier(best), initial mapping)
+    best = np.empty((6, trials))
+    c = float(cooling_c)
+    for k in range(trials):
+        g = np.random.default_rng(int(seeds[k]))
+        steps = g.normal(size=(iterations, 6)) * step[k]
+        best[:, k] = anneal_chain(mapped[k], r[k], steps, g.random(iterations), c)
+    rot = _Euler(trials)(best[3], best[4], best[5])  # the core: _compose_modifier(_modifier(best), initial mapping)
     return np.matmul(rot, a0), np.matmul(rot, t0[:, :, None])[:, :, 0] + best[:3].T
 
 

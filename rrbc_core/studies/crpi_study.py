@@ -137,22 +137,28 @@ def run(
     seed: int = 0,
     sites: crpi.Sites | None = None,
     joint_replicates: int = DEFAULT_JOINT_REPLICATES,
+    scheduler: str | None = None,
 ) -> Study:
     """The whole study on the shipped data (or `sites`). `replicates` simulated experiments per model;
-    `joint_replicates` per direction for the joint fit with the Van Wyk tables (`crpi_joint`; 0 skips it)."""
+    `joint_replicates` per direction for the joint fit with the Van Wyk tables (`crpi_joint`; 0 skips it).
+    The candidates' simulations and the joint fits are tasks of `runtime.tasks` (`scheduler`), each with its own
+    seed: the same numbers wherever they run."""
     if not (10 <= int(replicates) <= MAX_REPLICATES):
         raise InputError(f"--replicates must be from 10 to {MAX_REPLICATES}, got {replicates}")
     if not (int(joint_replicates) == 0 or 20 <= int(joint_replicates) <= 2000):
         raise InputError(f"--joint-replicates must be 0 (skip) or from 20 to 2000, got {joint_replicates}")
+    from rrbc_core.runtime.tasks import task_runner
+
     sites = crpi.load() if sites is None else sites
     _, resid = crpi.rigid_fit(sites.truth, sites.means)
     loso = {m: crpi.loso(sites.truth, sites.means, m, **o) for m, o in crpi.LOSO_METHODS.items()}
     lay = crpi_models.layout_of(sites)
     scores = {c.name: crpi_models.score(sites, c, lay) for c in crpi_models.CANDIDATES}
-    predictions = {
-        c.name: crpi_models.simulate(sites, c, scores[c.name].sizes, int(replicates), seed + k)
-        for k, c in enumerate(crpi_models.CANDIDATES)
-    }
+    sims = [(sites, c, scores[c.name].sizes, int(replicates), seed + k) for k, c in enumerate(crpi_models.CANDIDATES)]
+    joints = crpi_joint.tasks(joint_replicates, seed, sites) if joint_replicates else []
+    with task_runner(scheduler) as run_all:
+        predicted = run_all(_simulate_task, sims)
+        joint = run_all(crpi_joint.fit_task, joints)
     return Study(
         sites,
         tuple(float(v) for v in crpi.repeatability(sites)),
@@ -161,11 +167,14 @@ def run(
         crpi.variogram(sites.truth, resid),
         loso,
         scores,
-        predictions,
+        {c.name: p for c, p in zip(crpi_models.CANDIDATES, predicted)},
         crpi_models.select(list(scores.values())),
         int(replicates),
         int(seed),
-        crpi_joint.to_json(crpi_joint.run(joint_replicates, seed, sites), joint_replicates)
-        if joint_replicates
-        else None,
+        crpi_joint.to_json(joint, joint_replicates) if joint_replicates else None,
     )
+
+
+def _simulate_task(task: tuple):
+    """One candidate's simulated predictions (a task of `runtime.tasks`, seeded by its own seed)."""
+    return crpi_models.simulate(*task)

@@ -27,6 +27,7 @@ runner-up is within CV_SEPARATION of it, the data do not separate the two and th
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy import interpolate, optimize, stats
@@ -106,27 +107,47 @@ class Moments:
     def power_flat(self) -> np.ndarray:
         return np.repeat(self.power, len(METHODS))
 
-    def _interp(self, values: np.ndarray, phi) -> np.ndarray:
-        """values (Φ, ...) at phi (P,): a cubic spline in phi (linear with fewer than 4 directions)."""
-        phi = np.clip(np.atleast_1d(np.asarray(phi, dtype=float)), self.phis[0], self.phis[-1])
-        if len(self.phis) == 1:
-            return np.repeat(values, len(phi), axis=0)
-        if len(self.phis) < 4:
-            i = np.clip(np.searchsorted(self.phis, phi) - 1, 0, len(self.phis) - 2)
-            f = ((phi - self.phis[i]) / (self.phis[i + 1] - self.phis[i])).reshape((-1,) + (1,) * (values.ndim - 1))
-            return (1 - f) * values[i] + f * values[i + 1]
-        return interpolate.CubicSpline(self.phis, values, axis=0)(phi)
+    @cached_property
+    def _splines(self) -> tuple:
+        """(mu, sd) as functions of phi, built once: cubic splines (linear with fewer than 4 directions)."""
+        return self._interpolant(self.mu), self._interpolant(self.sd)
+
+    @cached_property
+    def _corr(self) -> np.ndarray:
+        """(Φ, 28, 28) correlation matrices on the grid."""
+        sd = self.sd.reshape(len(self.sd), _N)
+        return self.cov / np.einsum("pi,pj->pij", sd, sd)
+
+    def _interpolant(self, values: np.ndarray):
+        """values (Φ, ...) as a function of phi (P,) -> (P, ...)."""
+        phis = self.phis
+        if len(phis) == 1:
+            return lambda phi: np.repeat(values, len(phi), axis=0)
+        if len(phis) < 4:
+
+            def linear(phi):
+                i = np.clip(np.searchsorted(phis, phi) - 1, 0, len(phis) - 2)
+                f = ((phi - phis[i]) / (phis[i + 1] - phis[i])).reshape((-1,) + (1,) * (values.ndim - 1))
+                return (1 - f) * values[i] + f * values[i + 1]
+
+            return linear
+        return interpolate.CubicSpline(phis, values, axis=0)
+
+    def _clip(self, phi) -> np.ndarray:
+        return np.clip(np.atleast_1d(np.asarray(phi, dtype=float)), self.phis[0], self.phis[-1])
 
     def at(self, phi):
-        """Interpolated (mu, sd) at phi (scalar or (P,)): (P, 4, 7)."""
-        return self._interp(self.mu, phi), np.maximum(self._interp(self.sd, phi), FLOOR_ABS)
+        """Interpolated (mu, sd) at phi (scalar or (P,)): (P, 4, 7); cubic splines in phi built once per Moments."""
+        phi = self._clip(phi)
+        mu, sd = self._splines
+        return mu(phi), np.maximum(sd(phi), FLOOR_ABS)
 
     def cov_at(self, phi) -> np.ndarray:
         """Interpolated unit-scale covariance (P, 28, 28): spline-interpolated sd, linearly interpolated
         correlations (a convex combination of correlation matrices is one)."""
         phi = np.atleast_1d(np.asarray(phi, dtype=float))
         sd = self.at(phi)[1].reshape(len(phi), _N)
-        corr = self.cov / np.einsum("pi,pj->pij", self.sd.reshape(len(self.sd), _N), self.sd.reshape(len(self.sd), _N))
+        corr = self._corr
         if len(self.phis) == 1:
             c = np.repeat(corr, len(phi), axis=0)
         else:
@@ -149,14 +170,13 @@ class Moments:
         log_rho = np.asarray(log_rho, dtype=float)
         mu_all = self.at(phis)[0].reshape(len(np.atleast_1d(phis)), _N)[:, idx]
         covs = self.cov_at(phis)[:, idx][:, :, idx]
-        out = np.empty((len(log_rho), len(mu_all)))
-        for j in range(len(mu_all)):
-            chol = np.linalg.cholesky(covs[j])
-            logdet = 2 * np.sum(np.log(np.diag(chol)))
-            z = yf[None] * np.exp(-np.outer(log_rho, k)) - mu_all[j][None]  # D⁻¹ y − mu, (nρ, p)
-            w = np.linalg.solve(chol, z.T)
-            out[:, j] = np.sum(w**2, axis=0) + logdet + 2 * log_rho * k.sum()
-        return out
+        chol = np.linalg.cholesky(covs)  # (Φ, p, p), one LAPACK call per matrix as before, in one numpy call
+        logdet = 2 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)  # (Φ,)
+        scaled = yf[None] * np.exp(-np.outer(log_rho, k))  # D⁻¹ y, (nρ, p)
+        z = scaled[None] - mu_all[:, None, :]  # (Φ, nρ, p)
+        w = np.linalg.solve(chol, np.swapaxes(z, 1, 2))  # (Φ, p, nρ)
+        out = np.sum(w**2, axis=1) + logdet[:, None] + (2 * log_rho * k.sum())[None]
+        return out.T
 
 
 @dataclass(frozen=True)

@@ -341,7 +341,9 @@ def ks_pvalues(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     # only compare after the last of a run of ties
     last = np.concatenate([srt[..., 1:] != srt[..., :-1], np.ones(srt.shape[:-1] + (1,), dtype=bool)], axis=-1)
     d = np.max(np.where(last, np.abs(cdf_diff), 0.0), axis=-1)
-    return stats.kstwo.sf(d, np.round(n * m / (n + m)))
+    # D takes few distinct values (multiples of 1/n and 1/m, to rounding): the exact tail once per value
+    values, where = np.unique(d, return_inverse=True)
+    return stats.kstwo.sf(values, np.round(n * m / (n + m)))[where].reshape(d.shape)
 
 
 def statistics(errors: np.ndarray, distance: np.ndarray) -> dict:

@@ -9,6 +9,8 @@ show how often a single table names its true cause.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import time
 from dataclasses import dataclass
 
@@ -83,34 +85,51 @@ def _tables_from(geo, model, rho, phi, count, seed) -> list:
     ]
 
 
-def confusion_study(geo, moments, count: int, seed: int, progress=None) -> dict:
-    """For each model, `count` tables simulated at sigma 0.15 mm with bias 3x noise (baseline: noise only),
-    run through assess + select: {planted: {chosen: count}}."""
-    out = {}
-    phi = float(np.arctan(CONFUSION_BIAS_TO_NOISE))
-    for i, model in enumerate(MODELS):
-        ph = 0.0 if model.name == "baseline" else phi
-        rho = CONFUSION_SIGMA_MM / np.cos(ph)  # first weight (noise, or horizontal noise) = 0.15 mm
-        counts: dict = {}
-        for y in _tables_from(geo, model, rho, ph, count, seed + 1000 + i):
-            chosen = model_fit.select(model_fit.assess(moments, MODELS, y)).chosen
-            counts[chosen] = counts.get(chosen, 0) + 1
-            if progress is not None:
-                progress.update(1)
-        out[model.name] = counts
-    return out
+def confusion_tables(layout_name: str, planted: int, moments: dict, count: int, seed: int) -> dict:
+    """One planted model (index into MODELS) of the confusion study: `count` tables simulated at sigma 0.15 mm with
+    bias 3x noise (baseline: noise only), each run through assess + select: {chosen: count}. One task."""
+    geo = _geometry(layout_name)
+    model = MODELS[planted]
+    ph = 0.0 if model.name == "baseline" else float(np.arctan(CONFUSION_BIAS_TO_NOISE))
+    rho = CONFUSION_SIGMA_MM / np.cos(ph)  # first weight (noise, or horizontal noise) = 0.15 mm
+    counts: dict = {}
+    for y in _tables_from(geo, model, rho, ph, count, seed + 1000 + planted):
+        chosen = model_fit.select(model_fit.assess(moments, MODELS, y)).chosen
+        counts[chosen] = counts.get(chosen, 0) + 1
+    return counts
+
+
+@functools.lru_cache(maxsize=8)
+def _geometry(layout_name: str) -> reproduction.Geometry:
+    """The layout's geometry, built once per process (a worker reuses it for every task of that layout)."""
+    return reproduction.geometry_for(reproduction.layout_by_name(layout_name))
+
+
+def layout_replicates(layout, replicates: int) -> int:
+    """Experiments simulated per direction: with G > 1 registrations per experiment an experiment costs G times
+    more, so half as many (still well over the 28 statistics whose covariance the fit estimates)."""
+    return replicates if layout.registrations == 1 else max(replicates // 2, 5)
+
+
+def simulate_task(task: tuple) -> reproduction.DirectionStats:
+    """(layout name, model name, replicates, seed) -> the model's statistics on its direction grid. One task."""
+    layout_name, model_name, replicates, seed = task
+    return reproduction.simulate_model(_geometry(layout_name), reproduction.model_by_name(model_name), replicates, seed)
+
+
+def assess_task(task: tuple) -> model_fit.Assessment:
+    """(model name, its Moments, table y) -> fit and leave-one-method-out assessment. One task."""
+    model_name, moments, y = task
+    return model_fit.assess({model_name: moments}, [reproduction.model_by_name(model_name)], y)[model_name]
 
 
 def analyse_layout(
-    layout, y: np.ndarray, replicates: int, seed: int, progress=None, confusion: bool = False
+    layout, y: np.ndarray, replicates: int, seed: int, directions: dict, moments: dict, assessments: dict
 ) -> LayoutResult:
-    geo = reproduction.geometry_for(layout)
-    # with G > 1 registrations per experiment an experiment costs G times more; use half as many experiments
-    # (still well over the 28 statistics whose covariance the fit estimates)
-    replicates = replicates if layout.registrations == 1 else max(replicates // 2, 5)
-    directions = {m.name: reproduction.simulate_model(geo, m, replicates, seed, progress) for m in MODELS}
-    moments = {k: model_fit.Moments.of(v) for k, v in directions.items()}
-    assessments = model_fit.assess(moments, MODELS, y)
+    """Choose a model from the layout's assessments, then peg success, RRBC's gain, the noise sweep and the
+    profile intervals of the best extension."""
+    geo = _geometry(layout.name)
+    replicates = layout_replicates(layout, replicates)
     sel = model_fit.select(assessments)
     successes = np.array([reference_data.successes_from_ps(r.ps)[0] for r in _rows_in_order()])
     names = ["baseline"] + ([sel.chosen] if sel.chosen != "baseline" else [])
@@ -130,8 +149,7 @@ def analyse_layout(
         lab: model_fit.profile_interval(moments[best_ext], y, model, assessments[best_ext].fit, lab)
         for lab in model.labels
     }
-    conf = confusion_study(geo, moments, CONFUSION_TABLES, seed, progress) if confusion else None
-    return LayoutResult(layout, directions, moments, sel, peg, rrbc, intervals, conf, sweep)
+    return LayoutResult(layout, directions, moments, sel, peg, rrbc, intervals, None, sweep)
 
 
 NOISE_FACTORS = (1.0, 0.5, 0.25, 0.1)
@@ -276,7 +294,6 @@ class Reproduction:
             "assumptions": list(main.layout.assumptions),
             "replicates": self.replicates,
             "seed": self.seed,
-            "seconds": self.seconds,
         }
 
 
@@ -324,6 +341,11 @@ def cause_sentence(rep: Reproduction) -> str:
     return text
 
 
+#: One core's seconds per simulated experiment of layout A at the default size, all models and directions
+#: (benchmarks/reproduce_speed.py measures it): the estimate that chooses a local cluster (runtime.tasks).
+SECONDS_PER_REPLICATE = 1.2
+
+
 @thread_limited
 def run(
     replicates: int = DEFAULT_REPLICATES,
@@ -331,8 +353,15 @@ def run(
     progress_factory=None,
     layout_names=None,
     confusion: bool = True,
+    scheduler: str | None = None,
 ) -> Reproduction:
-    """The whole analysis. progress_factory(total) -> an object with update(n) and close(), or None."""
+    """The whole analysis. progress_factory(total) -> an object with update(n) and close(), or None.
+
+    Its independent pieces — each (layout, model) simulation, each (layout, model) assessment, each planted model
+    of the confusion study — are tasks of `runtime.tasks` (`scheduler`: this process, "local", a dask address, or
+    automatic); each carries its own fixed seed, so the result is the same wherever they run."""
+    from rrbc_core.runtime.tasks import task_runner
+
     t0 = time.perf_counter()
     rows = reference_data.vanwyk2018()
     y = model_fit.measured_matrix(rows)
@@ -341,14 +370,36 @@ def run(
     lays = (
         reproduction.layouts() if layout_names is None else tuple(reproduction.layout_by_name(x) for x in layout_names)
     )
-    per_layout = sum(max(len(m.phis), 1) for m in MODELS)
-    total = per_layout * len(lays) + (CONFUSION_TABLES * len(MODELS) if confusion else 0)
+    sims = [(lay.name, m.name, layout_replicates(lay, replicates), seed) for lay in lays for m in MODELS]
+    total = 2 * len(sims) + (len(MODELS) if confusion else 0)
+    estimate = SECONDS_PER_REPLICATE * replicates * len(lays)
     bar = progress_factory(total) if progress_factory else None
+    tick = None if bar is None else bar.update
     try:
-        results = tuple(
-            analyse_layout(lay, y, replicates, seed, bar, confusion=confusion and i == 0) for i, lay in enumerate(lays)
-        )
+        with task_runner(scheduler, estimate) as run_all:
+            done = run_all(simulate_task, sims, tick)
+            directions = {(t[0], t[1]): d for t, d in zip(sims, done)}
+            moments = {k: model_fit.Moments.of(v) for k, v in directions.items()}
+            jobs = [(m.name, moments[(lay.name, m.name)], y) for lay in lays for m in MODELS]
+            done = run_all(assess_task, jobs, tick)
+            assessed = {(lay.name, m.name): a for (lay, m), a in zip(((la, m) for la in lays for m in MODELS), done)}
+            main_moments = {m.name: moments[(lays[0].name, m.name)] for m in MODELS}
+            conf_jobs = [(lays[0].name, i, main_moments, CONFUSION_TABLES, seed) for i in range(len(MODELS))]
+            counts = run_all(_confusion_task, conf_jobs if confusion else [], tick)
     finally:
         if bar is not None:
             bar.close()
-    return Reproduction(rows, n, successes, results, replicates, seed, time.perf_counter() - t0)
+    results = []
+    for i, lay in enumerate(lays):
+        dirs = {m.name: directions[(lay.name, m.name)] for m in MODELS}
+        mom = {m.name: moments[(lay.name, m.name)] for m in MODELS}
+        ass = {m.name: assessed[(lay.name, m.name)] for m in MODELS}
+        res = analyse_layout(lay, y, replicates, seed, dirs, mom, ass)
+        if confusion and i == 0:
+            res = dataclasses.replace(res, confusion={m.name: c for m, c in zip(MODELS, counts)})
+        results.append(res)
+    return Reproduction(rows, n, successes, tuple(results), replicates, seed, time.perf_counter() - t0)
+
+
+def _confusion_task(task: tuple) -> dict:
+    return confusion_tables(*task)

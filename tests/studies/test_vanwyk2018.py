@@ -61,5 +61,5 @@ def test_run_reports_progress_up_to_its_total_and_closes_the_bar():
 
     rep = vanwyk2018.run(replicates=6, layout_names=["A"], confusion=False, progress_factory=factory)
     assert len(bars) == 1 and bars[0].closed
-    assert bars[0].done == bars[0].total == sum(max(len(m.phis), 1) for m in rp.MODELS)
+    assert bars[0].done == bars[0].total == 2 * len(rp.MODELS)  # a simulation and an assessment per model
     assert rep.samples_per_method == 80
