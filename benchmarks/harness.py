@@ -93,7 +93,7 @@ def _peak_rss_mb(pid: int) -> float | None:
     return None
 
 
-def run_command(args, repeats: int = 3) -> tuple[float, float, str]:
+def run_command(args, repeats: int = 3, cwd=None) -> tuple[float, float, str]:
     """Run the real command `repeats` times, each a fresh process with the caller's environment minus any
     *_NUM_THREADS variable. Returns (median wall time s, largest peak resident memory MB, stdout of the last
     run); raises RuntimeError if a run fails.
@@ -108,7 +108,7 @@ def run_command(args, repeats: int = 3) -> tuple[float, float, str]:
             peak = 0.0
             t0 = time.perf_counter()
             proc = subprocess.Popen(
-                list(map(str, args)), stdout=fout, stderr=ferr, stdin=subprocess.DEVNULL, env=env, cwd=ROOT
+                list(map(str, args)), stdout=fout, stderr=ferr, stdin=subprocess.DEVNULL, env=env, cwd=cwd or ROOT
             )
             while proc.poll() is None:
                 mark = _peak_rss_mb(proc.pid)

@@ -25,6 +25,7 @@ sys.path.insert(0, str(HERE.parent))  # run from a checkout without installing
 import big_inputs  # noqa: E402
 import interactive  # noqa: E402
 import montecarlo  # noqa: E402
+import reproduce_speed  # noqa: E402
 import threads_policy  # noqa: E402
 
 BENCHMARKS = [
@@ -38,6 +39,7 @@ BENCHMARKS = [
     interactive.plan_optimiser,
     interactive.diagnose_command,
     big_inputs.big_inputs,
+    reproduce_speed.reproduce_speed,
 ]
 
 

@@ -12,6 +12,7 @@ Where the tasks run (`scheduler`, else the environment variable ``RRBC_SCHEDULER
   costs a few seconds);
 - ``""`` / ``"in-process"`` — one after the other in this process (no dask at all);
 - ``"local"`` — a `distributed.LocalCluster` sized to the machine (one single-threaded worker process per core);
+  ``"local:N"`` — one with N workers;
 - an address such as ``tcp://10.0.0.5:8786`` — an existing scheduler (`dask scheduler` with `dask worker`s, or any
   deployment dask supports). Unreachable: one clear `InputError`.
 
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import os
+import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -57,11 +59,12 @@ def scheduler_from(arg: str | None, estimate_s: float | None = None) -> str:
     return ""
 
 
-def task_runner(scheduler: str | None = None, estimate_s: float | None = None) -> TaskRunner:
+def task_runner(scheduler: str | None = None, estimate_s: float | None = None, log: list | None = None) -> TaskRunner:
     """A `TaskRunner` for one study (use as a context manager): where `scheduler` says, else $RRBC_SCHEDULER, else
-    automatically from the caller's estimate of one core's work in seconds (module docstring)."""
+    automatically from the caller's estimate of one core's work in seconds (module docstring). `log`: a list that
+    receives each call's task seconds when the tasks run in this process."""
     where = scheduler_from(scheduler, estimate_s)
-    return TaskRunner(where)
+    return TaskRunner(where, log)
 
 
 def run_tasks(
@@ -83,8 +86,9 @@ class TaskRunner:
     task order. `where` is "" (in this process), "local" or a scheduler address; `workers` the cluster's size
     (1 in this process)."""
 
-    def __init__(self, where: str):
+    def __init__(self, where: str, log: list | None = None):
         self.where = where
+        self.log = log  # in this process: one list of task seconds appended per call (benchmarks' task sizes)
         self._client = None
         self._cluster = None
 
@@ -109,11 +113,15 @@ class TaskRunner:
     def __call__(self, fn: Callable, tasks: Sequence, progress: Callable[[int], object] | None = None) -> list:
         tasks = list(tasks)
         if self._client is None or not tasks:
-            out = []
+            out, seconds = [], []
             for t in tasks:
+                t0 = time.perf_counter()
                 out.append(fn(t))
+                seconds.append(time.perf_counter() - t0)
                 if progress is not None:
                     progress(1)
+            if self.log is not None:
+                self.log.append(seconds)
             return out
         from distributed import as_completed
 
@@ -145,10 +153,15 @@ def _connect(where: str):
         from distributed import Client, LocalCluster
     except ImportError:  # pragma: no cover - a pinned dependency
         raise InputError("dask.distributed is not installed: run scripts/setup.sh") from None
-    if where == "local":
+    if where == "local" or where.startswith("local:"):
         workers = max(1, os.cpu_count() or 1)
+        if where != "local":
+            count = where.split(":", 1)[1]
+            if not count.isdigit() or not 1 <= int(count) <= 4 * workers:
+                raise InputError(f"--scheduler {where[:40]!r}: local:N takes N from 1 to {4 * workers} workers")
+            workers = int(count)
         cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=50
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50
         )
         return Client(cluster), cluster
     if "://" not in where and ":" not in where:

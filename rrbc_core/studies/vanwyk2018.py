@@ -85,18 +85,20 @@ def _tables_from(geo, model, rho, phi, count, seed) -> list:
     ]
 
 
-def confusion_tables(layout_name: str, planted: int, moments: dict, count: int, seed: int) -> dict:
-    """One planted model (index into MODELS) of the confusion study: `count` tables simulated at sigma 0.15 mm with
-    bias 3x noise (baseline: noise only), each run through assess + select: {chosen: count}. One task."""
+def confusion_tables(layout_name: str, planted: int, count: int, seed: int) -> list:
+    """`count` tables (4, 7) simulated from one planted model (index into MODELS) at sigma 0.15 mm with bias 3x
+    noise (baseline: noise only), for the confusion study. One task."""
     geo = _geometry(layout_name)
     model = MODELS[planted]
     ph = 0.0 if model.name == "baseline" else float(np.arctan(CONFUSION_BIAS_TO_NOISE))
     rho = CONFUSION_SIGMA_MM / np.cos(ph)  # first weight (noise, or horizontal noise) = 0.15 mm
-    counts: dict = {}
-    for y in _tables_from(geo, model, rho, ph, count, seed + 1000 + planted):
-        chosen = model_fit.select(model_fit.assess(moments, MODELS, y)).chosen
-        counts[chosen] = counts.get(chosen, 0) + 1
-    return counts
+    return _tables_from(geo, model, rho, ph, count, seed + 1000 + planted)
+
+
+def choose_task(task: tuple) -> str:
+    """(Moments by model name, table y) -> the model assess + select chooses for it. One task."""
+    moments, y = task
+    return model_fit.select(model_fit.assess(moments, MODELS, y)).chosen
 
 
 @functools.lru_cache(maxsize=8)
@@ -354,12 +356,14 @@ def run(
     layout_names=None,
     confusion: bool = True,
     scheduler: str | None = None,
+    task_log: list | None = None,
 ) -> Reproduction:
     """The whole analysis. progress_factory(total) -> an object with update(n) and close(), or None.
 
     Its independent pieces — each (layout, model) simulation, each (layout, model) assessment, each planted model
     of the confusion study — are tasks of `runtime.tasks` (`scheduler`: this process, "local", a dask address, or
-    automatic); each carries its own fixed seed, so the result is the same wherever they run."""
+    automatic); each carries its own fixed seed, so the result is the same wherever they run. `task_log`: a list
+    that receives each stage's task seconds when they run in this process (benchmarks/reproduce_speed.py)."""
     from rrbc_core.runtime.tasks import task_runner
 
     t0 = time.perf_counter()
@@ -371,12 +375,12 @@ def run(
         reproduction.layouts() if layout_names is None else tuple(reproduction.layout_by_name(x) for x in layout_names)
     )
     sims = [(lay.name, m.name, layout_replicates(lay, replicates), seed) for lay in lays for m in MODELS]
-    total = 2 * len(sims) + (len(MODELS) if confusion else 0)
+    total = 2 * len(sims) + (len(MODELS) * (1 + CONFUSION_TABLES) if confusion else 0)
     estimate = SECONDS_PER_REPLICATE * replicates * len(lays)
     bar = progress_factory(total) if progress_factory else None
     tick = None if bar is None else bar.update
     try:
-        with task_runner(scheduler, estimate) as run_all:
+        with task_runner(scheduler, estimate, task_log) as run_all:
             done = run_all(simulate_task, sims, tick)
             directions = {(t[0], t[1]): d for t, d in zip(sims, done)}
             moments = {k: model_fit.Moments.of(v) for k, v in directions.items()}
@@ -384,8 +388,9 @@ def run(
             done = run_all(assess_task, jobs, tick)
             assessed = {(lay.name, m.name): a for (lay, m), a in zip(((la, m) for la in lays for m in MODELS), done)}
             main_moments = {m.name: moments[(lays[0].name, m.name)] for m in MODELS}
-            conf_jobs = [(lays[0].name, i, main_moments, CONFUSION_TABLES, seed) for i in range(len(MODELS))]
-            counts = run_all(_confusion_task, conf_jobs if confusion else [], tick)
+            planted = [(lays[0].name, i, CONFUSION_TABLES, seed) for i in range(len(MODELS))] if confusion else []
+            tables = run_all(_confusion_tables_task, planted, tick)
+            chosen = run_all(choose_task, [(main_moments, y_k) for ys in tables for y_k in ys], tick)
     finally:
         if bar is not None:
             bar.close()
@@ -396,10 +401,21 @@ def run(
         ass = {m.name: assessed[(lay.name, m.name)] for m in MODELS}
         res = analyse_layout(lay, y, replicates, seed, dirs, mom, ass)
         if confusion and i == 0:
-            res = dataclasses.replace(res, confusion={m.name: c for m, c in zip(MODELS, counts)})
+            res = dataclasses.replace(res, confusion=_counts(chosen, CONFUSION_TABLES))
         results.append(res)
     return Reproduction(rows, n, successes, tuple(results), replicates, seed, time.perf_counter() - t0)
 
 
-def _confusion_task(task: tuple) -> dict:
+def _confusion_tables_task(task: tuple) -> list:
     return confusion_tables(*task)
+
+
+def _counts(chosen: list, per_model: int) -> dict:
+    """{planted model: {chosen model: count}}, chosen listed planted model by planted model."""
+    out = {}
+    for i, model in enumerate(MODELS):
+        counts: dict = {}
+        for c in chosen[i * per_model : (i + 1) * per_model]:
+            counts[c] = counts.get(c, 0) + 1
+        out[model.name] = counts
+    return out

@@ -110,6 +110,62 @@ def test_rrbc_simulate_prints_the_same_bytes_with_and_without_a_scheduler(cluste
     assert by_env.stdout == local.stdout
 
 
+def test_rrbc_reproduce_prints_the_same_bytes_with_and_without_a_scheduler(cluster):
+    """Both studies, small sizes, every stage (the simulations and assessments; the crpi candidates and joint fits;
+    the confusion tables in the next test) on two separate workers against one process."""
+    address, _ = cluster
+    env = {k: v for k, v in os.environ.items() if k != "RRBC_SCHEDULER"}
+    for args in (
+        [*RRBC, "reproduce", "vanwyk2018", "--replicates", "5", "--layouts", "A", "--no-confusion", "--json"],
+        [*RRBC, "reproduce", "crpi", "--replicates", "10", "--joint-replicates", "20", "--json"],
+    ):
+        here = subprocess.run([*args, "--scheduler", "in-process"], capture_output=True, timeout=600, env=env)
+        there = subprocess.run([*args, "--scheduler", address], capture_output=True, timeout=600, env=env)
+        assert here.returncode == 0 and there.returncode == 0, there.stderr
+        assert here.stdout == there.stdout and b'"replicates"' in here.stdout
+
+
+def test_the_confusion_tables_are_the_same_on_a_cluster(cluster):
+    from rrbc_core.studies import model_fit, reproduction, vanwyk2018
+
+    address, _ = cluster
+    sims = [("A", m.name, 5, 0) for m in reproduction.MODELS]
+    moments = {t[1]: model_fit.Moments.of(d) for t, d in zip(sims, run_tasks(vanwyk2018.simulate_task, sims, address))}
+    jobs = [("A", i, 1, 0) for i in range(len(reproduction.MODELS))]
+    tables = run_tasks(vanwyk2018._confusion_tables_task, jobs, address)
+    assert [t[0].tolist() for t in tables] == [
+        t[0].tolist() for t in run_tasks(vanwyk2018._confusion_tables_task, jobs)
+    ]
+    choose = [(moments, t[0]) for t in tables]
+    here = run_tasks(vanwyk2018.choose_task, choose, "in-process")
+    assert run_tasks(vanwyk2018.choose_task, choose, address) == here
+    assert set(here) <= {m.name for m in reproduction.MODELS}
+
+
+def test_no_scheduler_named_runs_long_jobs_on_a_local_cluster(monkeypatch):
+    from rrbc_core.runtime import tasks
+
+    monkeypatch.delenv(tasks.SCHEDULER_ENV, raising=False)
+    monkeypatch.setattr(tasks.os, "cpu_count", lambda: 2)
+    assert tasks.scheduler_from(None, tasks.AUTO_LOCAL_SECONDS) == "local"
+    assert tasks.scheduler_from(None, tasks.AUTO_LOCAL_SECONDS - 1) == ""
+    assert tasks.scheduler_from(None, None) == ""
+    assert tasks.scheduler_from("in-process", 1e6) == "in-process"
+    monkeypatch.setenv(tasks.SCHEDULER_ENV, "tcp://10.0.0.5:8786")
+    assert tasks.scheduler_from(None, 1e6) == "tcp://10.0.0.5:8786"
+    monkeypatch.delenv(tasks.SCHEDULER_ENV)
+    monkeypatch.setattr(tasks.os, "cpu_count", lambda: 1)
+    assert tasks.scheduler_from(None, 1e6) == ""  # one core: a cluster cannot help
+
+
+def test_a_local_cluster_of_n_workers_and_a_bad_n():
+    with pytest.raises(InputError, match="local:N takes N from 1"):
+        run_tasks(abs, [1, 2], scheduler="local:0")
+    with pytest.raises(InputError, match="local:N takes N from 1"):
+        run_tasks(abs, [1, 2], scheduler="local:x")
+    assert run_tasks(abs, [-1, 2, -3], scheduler="local:1") == [1, 2, 3]
+
+
 def test_a_worker_killed_mid_run_is_survived(cluster):
     """Eight 0.4 s tasks on two workers; one worker is killed after the first results: the other finishes every
     task (the scheduler reruns the lost ones) and the results come back complete and in order."""
