@@ -105,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--seed", type=int, default=0, help="seed of the noise, the check points and annealing (default 0)")
     m.add_argument("--out", default=None, help="write one synthetic measured data set (measurement CSV) here")
     m.add_argument("--layout", default=None, help="use a named layout of the scene (e.g. large_5pt)")
-    _scheduler_option(m, "the trial chunks", "this process")
+    _scheduler_option(m, "the trial chunks")
     m.add_argument(
         "--icp",
         type=_non_negative_int,
@@ -165,7 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rp.add_argument("--no-confusion", action="store_true", help="vanwyk2018: skip the planted-table confusion study")
     rp.add_argument("--seed", type=int, default=0, help="seed of every simulated draw (default 0)")
-    _scheduler_option(rp, "the independent simulations and fits", "a local cluster for runs of a minute or more")
+    _scheduler_option(rp, "the independent simulations and fits")
     rp.add_argument("--json", action="store_true", help="print one JSON object")
     rp.set_defaults(run=_cmd_reproduce)
 
@@ -397,7 +397,7 @@ def _cmd_simulate(args) -> str:
             layout=args.layout,
             icp=args.icp,
             progress=lambda n, label: bar.update(n, label),
-            scheduler=args.scheduler,
+            scheduler=_where(args.scheduler),
         )
     finally:
         bar.close()
@@ -495,17 +495,25 @@ def _check_report_dir(out) -> None:
         raise InputError(f"--out {p}: parent directory {p.resolve().parent} does not exist")
 
 
-def _scheduler_option(parser, what: str, default: str) -> None:
+def _where(arg):
+    from rrbc_core.runtime.tasks import command_scheduler
+
+    return command_scheduler(arg)
+
+
+def _scheduler_option(parser, what: str) -> None:
     parser.add_argument(
         "--scheduler",
         default=None,
         metavar="ADDRESS",
-        help=f"where {what} run: 'in-process', 'local' (a dask cluster sized to this machine) or a scheduler "
-        f"address such as tcp://127.0.0.1:8786 (default: $RRBC_SCHEDULER, else {default}); the numbers do not change",
+        help=f"where {what} run: 'in-process', 'local' (a dask cluster sized to this machine), 'local:N' or a "
+        "scheduler address such as tcp://127.0.0.1:8786 (default: $RRBC_SCHEDULER, else auto: the first task runs "
+        "here and, if the rest would take a minute or more, they go to a local cluster); the numbers do not change",
     )
 
 
 def _cmd_reproduce_crpi(args) -> str:
+    from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.studies import crpi_study
     from rrbc_core.studies.crpi_report import write_report
 
@@ -514,7 +522,13 @@ def _cmd_reproduce_crpi(args) -> str:
     _check_report_dir(args.out)
     replicates = crpi_study.DEFAULT_REPLICATES if args.replicates is None else args.replicates
     joint = crpi_study.DEFAULT_JOINT_REPLICATES if args.joint_replicates is None else args.joint_replicates
-    st = crpi_study.run(replicates=replicates, seed=args.seed, joint_replicates=joint, scheduler=args.scheduler)
+    st = crpi_study.run(
+        replicates=replicates,
+        seed=args.seed,
+        joint_replicates=joint,
+        scheduler=_where(args.scheduler),
+        progress_factory=lambda total: ProgressBar(total, "reproducing crpi"),
+    )
     command = "rrbc reproduce crpi" + (f" --out {args.out}" if args.out else "")
     if args.replicates is not None:
         command += f" --replicates {args.replicates}"
@@ -579,7 +593,7 @@ def _cmd_reproduce(args) -> str:
         layout_names=names,
         confusion=not args.no_confusion,
         progress_factory=lambda total: ProgressBar(total, "reproducing vanwyk2018"),
-        scheduler=args.scheduler,
+        scheduler=_where(args.scheduler),
     )
     command = "rrbc reproduce vanwyk2018" + (f" --out {args.out}" if args.out else "")
     if args.replicates != 200:

@@ -41,7 +41,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from rrbc_core.runtime.tasks import run_tasks
+from rrbc_core.runtime.tasks import command_scheduler, run_tasks
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.studies.diagnosis_power import (
     ALPHA,
@@ -61,11 +61,15 @@ from rrbc_core.studies.diagnosis_power import (
 
 
 def _where(scheduler) -> str:
-    from rrbc_core.runtime.tasks import IN_PROCESS, scheduler_from
+    from rrbc_core.runtime.tasks import AUTO, IN_PROCESS
 
-    w = scheduler_from(scheduler)
+    w = command_scheduler(scheduler)
+    if w == AUTO:
+        return "in this process or on a local dask cluster (auto)"
     return (
-        "in this process" if w in IN_PROCESS else ("on a local dask cluster" if w == "local" else "on a dask cluster")
+        "in this process"
+        if w in IN_PROCESS
+        else ("on a local dask cluster" if w.startswith("local") else "on a dask cluster")
     )
 
 
@@ -81,7 +85,7 @@ def main(argv=None) -> int:
         "--scheduler",
         default=None,
         help="where the data sets run: 'local' (a dask cluster sized to this machine), a dask scheduler's address, "
-        "or in this process (default: $RRBC_SCHEDULER, else in this process); results do not depend on it",
+        "or in this process (default: $RRBC_SCHEDULER, else auto: in this process unless the first task shows the rest would take a minute or more); results do not depend on it",
     )
     args = ap.parse_args(argv)
     apply_process_policy()  # one BLAS thread, as the rrbc command runs (docs/threads.md)
@@ -104,7 +108,7 @@ def main(argv=None) -> int:
                     jobs.append((eff if size else None, geom, size, trial_seed(10 + ci, gi, si, k), order))
                     keys.append(("scan", ci, geom, size))
     t0 = time.perf_counter()
-    out = run_tasks(run_one, jobs, args.scheduler)
+    out = run_tasks(run_one, jobs, command_scheduler(args.scheduler))
     elapsed = time.perf_counter() - t0
 
     # aggregate

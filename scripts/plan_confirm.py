@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from rrbc_core.analysis import planning
+from rrbc_core.runtime.tasks import command_scheduler
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.studies.planning_study import (
     ADD,
@@ -135,14 +136,16 @@ def main(argv=None) -> int:
         "--scheduler",
         default=None,
         help="where the scenes run: 'local' (a dask cluster sized to this machine), a dask scheduler's address, or "
-        "in this process (default: $RRBC_SCHEDULER, else in this process); the numbers do not depend on it",
+        "in this process (default: $RRBC_SCHEDULER, else auto: in this process unless the first task shows the rest "
+        "would take a minute or more); the numbers do not depend on it",
     )
     args = ap.parse_args(argv)
     apply_process_policy()  # one BLAS thread, as the rrbc command runs (docs/threads.md)
     trials = args.trials or (400 if args.quick else TRIALS)
     seeds = STUDY_SEEDS[:4] if args.quick else STUDY_SEEDS
-    conf = confirm(trials, scheduler=args.scheduler)
-    study = optimiser_vs_random(seeds, scheduler=args.scheduler)
+    where = command_scheduler(args.scheduler)
+    conf = confirm(trials, scheduler=where)
+    study = optimiser_vs_random(seeds, scheduler=where)
     cmd = (
         "python scripts/plan_confirm.py"
         + (" --out docs" if args.out else "")

@@ -21,6 +21,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from rrbc_core.runtime.tasks import command_scheduler  # noqa: E402
 from rrbc_core.runtime.threads import apply_process_policy  # noqa: E402
 from rrbc_core.studies import vec_study  # noqa: E402
 
@@ -120,12 +121,12 @@ def main(argv=None) -> int:
         "--scheduler",
         default=None,
         help="where the cells run: 'local' (a dask cluster sized to this machine), a dask scheduler's address, or in "
-        "this process (default: $RRBC_SCHEDULER, else in this process); results do not depend on it",
+        "this process (default: $RRBC_SCHEDULER, else auto: in this process unless the first task shows the rest would take a minute or more); results do not depend on it",
     )
     args = ap.parse_args(argv)
     apply_process_policy()
     seeds = vec_study.SEEDS[:1] if args.quick else vec_study.SEEDS
-    rows = vec_study.run(seeds=seeds, scheduler=args.scheduler)
+    rows = vec_study.run(seeds=seeds, scheduler=command_scheduler(args.scheduler))
     lines, cells = table(rows)
     if not args.out:
         print("\n".join(lines))

@@ -5,12 +5,13 @@ wherever they ran, so a reduction over them is the same on one process and on a 
 randomness (`spawn_seeds`: `numpy.random.SeedSequence` children), never a generator shared between tasks: the
 numbers cannot depend on which worker ran what, or in which order.
 
-Where the tasks run (`scheduler`, else the environment variable ``RRBC_SCHEDULER``, else automatically):
+Where the tasks run (`scheduler`, else the environment variable ``RRBC_SCHEDULER``, else in this process):
 
-- not given — automatic: a study whose caller estimates it at `AUTO_LOCAL_SECONDS` or more of one core's work, on a
-  machine with more than one core, gets a local cluster; anything smaller runs in this process (a cluster's start
-  costs a few seconds);
 - ``""`` / ``"in-process"`` — one after the other in this process (no dask at all);
+- ``"auto"`` — the commands' default (`command_scheduler`): the first task runs in this process and is timed; if
+  the rest would take `AUTO_LOCAL_SECONDS` or more of one core at that pace, on a machine with more than one core,
+  they go to a local cluster, else they stay here (a cluster costs seconds to start). Library calls do not start
+  processes unless asked;
 - ``"local"`` — a `distributed.LocalCluster` sized to the machine (one single-threaded worker process per core);
   ``"local:N"`` — one with N workers;
 - an address such as ``tcp://10.0.0.5:8786`` — an existing scheduler (`dask scheduler` with `dask worker`s, or any
@@ -37,8 +38,9 @@ SCHEDULER_ENV = "RRBC_SCHEDULER"
 IN_PROCESS = ("", "in-process")
 RETRIES = 3
 CONNECT_TIMEOUT_S = 10
-#: A job estimated at this many seconds of one core's work or more gets a local cluster when no scheduler is named
-#: (below it, a cluster's start-up, ~3 s measured by benchmarks/reproduce_speed.py, is not worth paying).
+AUTO = "auto"
+#: Under "auto", work measured at this many seconds of one core or more gets a local cluster (below it, a cluster's
+#: start and stop, measured by benchmarks/reproduce_speed.py `cluster_costs`, is not worth paying).
 AUTO_LOCAL_SECONDS = 60.0
 
 
@@ -47,24 +49,22 @@ def spawn_seeds(seed: int, n: int) -> list[np.random.SeedSequence]:
     return np.random.SeedSequence(int(seed)).spawn(int(n))
 
 
-def scheduler_from(arg: str | None, estimate_s: float | None = None) -> str:
-    """The scheduler a command uses: its `--scheduler` value, else $RRBC_SCHEDULER, else "local" for a job of at
-    least AUTO_LOCAL_SECONDS of one core's work (`estimate_s`) on a machine with more than one core, else
-    in-process ("")."""
-    value = arg if arg is not None else os.environ.get(SCHEDULER_ENV)
-    if value is not None:
-        return str(value).strip()
-    if estimate_s is not None and estimate_s >= AUTO_LOCAL_SECONDS and (os.cpu_count() or 1) > 1:
-        return "local"
-    return ""
+def scheduler_from(arg: str | None) -> str:
+    """The scheduler a library call uses: `arg`, else $RRBC_SCHEDULER, else in this process ("")."""
+    value = arg if arg is not None else os.environ.get(SCHEDULER_ENV, "")
+    return str(value).strip()
 
 
-def task_runner(scheduler: str | None = None, estimate_s: float | None = None, log: list | None = None) -> TaskRunner:
+def command_scheduler(arg: str | None) -> str:
+    """The scheduler a command or study script uses: its --scheduler value, else $RRBC_SCHEDULER, else "auto"."""
+    return scheduler_from(arg if arg is not None else os.environ.get(SCHEDULER_ENV, AUTO))
+
+
+def task_runner(scheduler: str | None = None, log: list | None = None) -> TaskRunner:
     """A `TaskRunner` for one study (use as a context manager): where `scheduler` says, else $RRBC_SCHEDULER, else
-    automatically from the caller's estimate of one core's work in seconds (module docstring). `log`: a list that
-    receives each call's task seconds when the tasks run in this process."""
-    where = scheduler_from(scheduler, estimate_s)
-    return TaskRunner(where, log)
+    in this process (module docstring). `log`: a list that receives each call's task seconds when the tasks run in
+    this process."""
+    return TaskRunner(scheduler_from(scheduler), log)
 
 
 def run_tasks(
@@ -72,10 +72,9 @@ def run_tasks(
     tasks: Sequence,
     scheduler: str | None = None,
     progress: Callable[[int], object] | None = None,
-    estimate_s: float | None = None,
 ) -> list:
     """``[fn(t) for t in tasks]``, run where `scheduler` says (module docstring), results in task order."""
-    with task_runner(scheduler, estimate_s) as run:
+    with task_runner(scheduler) as run:
         return run(fn, tasks, progress)
 
 
@@ -93,7 +92,7 @@ class TaskRunner:
         self._cluster = None
 
     def __enter__(self) -> TaskRunner:
-        if self.where not in IN_PROCESS:
+        if self.where not in IN_PROCESS and self.where != AUTO:
             self._client, self._cluster = _connect(self.where)
         return self
 
@@ -112,6 +111,8 @@ class TaskRunner:
 
     def __call__(self, fn: Callable, tasks: Sequence, progress: Callable[[int], object] | None = None) -> list:
         tasks = list(tasks)
+        if self.where == AUTO and tasks:
+            return self._first_then_decide(fn, tasks, progress)
         if self._client is None or not tasks:
             out, seconds = [], []
             for t in tasks:
@@ -139,6 +140,21 @@ class TaskRunner:
                 f"the dask scheduler {self.where!r} was lost during the run ({type(exc).__name__})"
             ) from None
 
+    def _first_then_decide(self, fn: Callable, tasks: list, progress) -> list:
+        """Under "auto": run the first task here, timed; the rest on a local cluster if they would take
+        AUTO_LOCAL_SECONDS or more at that pace (and there is more than one core), else here. Decided once."""
+        t0 = time.perf_counter()
+        first = fn(tasks[0])
+        if progress is not None:
+            progress(1)
+        rest_s = (time.perf_counter() - t0) * (len(tasks) - 1)
+        self.where = "local" if rest_s >= AUTO_LOCAL_SECONDS and (os.cpu_count() or 1) > 1 else ""
+        if self.where == "local":
+            self._client, self._cluster = _connect("local")
+        elif self.log is not None:
+            self.log.append([time.perf_counter() - t0])
+        return [first] + self(fn, tasks[1:], progress)
+
 
 def _limited_call(fn: Callable, task):
     """fn(task) under rrbc's thread policy (one BLAS thread while it runs), wherever it runs."""
@@ -160,9 +176,19 @@ def _connect(where: str):
             if not count.isdigit() or not 1 <= int(count) <= 4 * workers:
                 raise InputError(f"--scheduler {where[:40]!r}: local:N takes N from 1 to {4 * workers} workers")
             workers = int(count)
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50
-        )
+        import dask
+
+        # dask starts its workers with MALLOC_TRIM_THRESHOLD_=65536, which fixes glibc's mmap threshold low: every
+        # large numpy temporary is then mapped and unmapped afresh (ad hoc: the layout-A simulations of `reproduce
+        # vanwyk2018` took 46 s in one process and 52 s with that variable set); our tasks free what they allocate,
+        # so the workers keep glibc's default. The statistical profiler (a stack sample every 10 ms) is off too.
+        environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+        environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+        settings = {"distributed.nanny.pre-spawn-environ": environ, "distributed.worker.profile.enabled": False}
+        with dask.config.set(settings):
+            cluster = LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50
+            )
         return Client(cluster), cluster
     if "://" not in where and ":" not in where:
         raise InputError(

@@ -18,15 +18,15 @@ Vectorised over trials:
   (sigma2/sigma1 >= degeneracy_ratio in both frames): a closed form classifies the clear cases and the
   borderline ones (within 0.1 % of the threshold) are decided by the same SVD the core uses. Element-wise
   (published) or chordal averaging.
-- `annealing_batch`: T independent simulated-annealing chains advanced in lockstep. Chain k draws its
-  proposals from `np.random.default_rng(seeds[k])` in exactly the order `registration.annealing(seed=seeds[k])`
-  does (all normal steps, then all uniforms), and evaluates the cost with the same floating-point operations
-  (stacked `matmul` runs the same BLAS kernel per trial as the 3x3 products of the core), so every
+- `annealing_batch`: T independent simulated-annealing chains, each run by a compiled loop
+  (`compiled_annealing.anneal_chain`, numba). Chain k draws its proposals from `np.random.default_rng(seeds[k])`
+  in exactly the order `registration.annealing(seed=seeds[k])` does (all normal steps, then all uniforms), and
+  forms each rotation entry and each cost with the arithmetic of the core's 3x3 products, so every
   accept/reject decision, and hence the result, matches the per-trial function. (A decision could only differ
   if a cost difference sat within one rounding error of a threshold, which needs noise-free data where the
-  cost is itself rounding noise; tests and benchmark find the results bit-identical, noise-free data included.)
-  Chains run in groups of up to 1024 and draw their proposals in blocks, so memory does not grow with T or
-  `iterations`. seeds=None means seed k for trial k.
+  cost is itself rounding noise; tests find the results equal to the core's, and `rrbc reproduce vanwyk2018`
+  prints the same JSON as before the loop was compiled: benchmarks/reproduce_speed.py.) Memory per chain is
+  its own proposals. seeds=None means seed k for trial k.
 - `apply_batch` / `apply_inverse_batch`: A @ x + t and its inverse; the inverse solves A x = q - t (A may be
   an element-wise average, not a rotation) unless the caller flags A as rigid, then it uses Aᵀ like
   `RigidTransform.apply_inverse`.

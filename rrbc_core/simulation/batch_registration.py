@@ -251,7 +251,7 @@ def _annealing(s, r, a0, t0, seeds, iterations, cooling_c):
 def annealing_batch(
     sensor, robot, seeds=None, iterations: int = 5000, cooling_c: float = 2.0, initial=None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """`registration.annealing(seed=seeds[k])` for every trial k, chains advanced in lockstep: (A, t).
+    """`registration.annealing(seed=seeds[k])` for every trial k, each chain compiled: (A, t).
 
     seeds: (T,) non-negative integers (None: seed k for trial k). initial: None (the core's default, the
     element-wise combinatorial registration of each trial; A is then not exactly a rotation) or a pair

@@ -138,11 +138,13 @@ def run(
     sites: crpi.Sites | None = None,
     joint_replicates: int = DEFAULT_JOINT_REPLICATES,
     scheduler: str | None = None,
+    progress_factory=None,
 ) -> Study:
     """The whole study on the shipped data (or `sites`). `replicates` simulated experiments per model;
     `joint_replicates` per direction for the joint fit with the Van Wyk tables (`crpi_joint`; 0 skips it).
     The candidates' simulations and the joint fits are tasks of `runtime.tasks` (`scheduler`), each with its own
-    seed: the same numbers wherever they run."""
+    seed: the same numbers wherever they run. `progress_factory(total)` -> an object with update(n) and
+    close() (a progress bar), advanced as they finish."""
     if not (10 <= int(replicates) <= MAX_REPLICATES):
         raise InputError(f"--replicates must be from 10 to {MAX_REPLICATES}, got {replicates}")
     if not (int(joint_replicates) == 0 or 20 <= int(joint_replicates) <= 2000):
@@ -156,9 +158,15 @@ def run(
     scores = {c.name: crpi_models.score(sites, c, lay) for c in crpi_models.CANDIDATES}
     sims = [(sites, c, scores[c.name].sizes, int(replicates), seed + k) for k, c in enumerate(crpi_models.CANDIDATES)]
     joints = crpi_joint.tasks(joint_replicates, seed, sites) if joint_replicates else []
-    with task_runner(scheduler) as run_all:
-        predicted = run_all(_simulate_task, sims)
-        joint = run_all(crpi_joint.fit_task, joints)
+    bar = progress_factory(len(sims) + len(joints)) if progress_factory else None
+    tick = None if bar is None else bar.update
+    try:
+        with task_runner(scheduler) as run_all:
+            predicted = run_all(_simulate_task, sims, tick)
+            joint = run_all(crpi_joint.fit_task, joints, tick)
+    finally:
+        if bar is not None:
+            bar.close()
     return Study(
         sites,
         tuple(float(v) for v in crpi.repeatability(sites)),

@@ -343,11 +343,6 @@ def cause_sentence(rep: Reproduction) -> str:
     return text
 
 
-#: One core's seconds per simulated experiment of layout A at the default size, all models and directions
-#: (benchmarks/reproduce_speed.py measures it): the estimate that chooses a local cluster (runtime.tasks).
-SECONDS_PER_REPLICATE = 1.2
-
-
 @thread_limited
 def run(
     replicates: int = DEFAULT_REPLICATES,
@@ -362,7 +357,7 @@ def run(
 
     Its independent pieces — each (layout, model) simulation, each (layout, model) assessment, each planted model
     of the confusion study — are tasks of `runtime.tasks` (`scheduler`: this process, "local", a dask address, or
-    automatic); each carries its own fixed seed, so the result is the same wherever they run. `task_log`: a list
+    "auto"); each carries its own fixed seed, so the result is the same wherever they run. `task_log`: a list
     that receives each stage's task seconds when they run in this process (benchmarks/reproduce_speed.py)."""
     from rrbc_core.runtime.tasks import task_runner
 
@@ -374,13 +369,14 @@ def run(
     lays = (
         reproduction.layouts() if layout_names is None else tuple(reproduction.layout_by_name(x) for x in layout_names)
     )
-    sims = [(lay.name, m.name, layout_replicates(lay, replicates), seed) for lay in lays for m in MODELS]
+    # the baseline (one direction, the cheapest) last: under scheduler "auto" the first task's time is the estimate
+    order = [m for m in MODELS if m.phis] + [m for m in MODELS if not m.phis]
+    sims = [(lay.name, m.name, layout_replicates(lay, replicates), seed) for lay in lays for m in order]
     total = 2 * len(sims) + (len(MODELS) * (1 + CONFUSION_TABLES) if confusion else 0)
-    estimate = SECONDS_PER_REPLICATE * replicates * len(lays)
     bar = progress_factory(total) if progress_factory else None
     tick = None if bar is None else bar.update
     try:
-        with task_runner(scheduler, estimate, task_log) as run_all:
+        with task_runner(scheduler, task_log) as run_all:
             done = run_all(simulate_task, sims, tick)
             directions = {(t[0], t[1]): d for t, d in zip(sims, done)}
             moments = {k: model_fit.Moments.of(v) for k, v in directions.items()}

@@ -142,20 +142,36 @@ def test_the_confusion_tables_are_the_same_on_a_cluster(cluster):
     assert set(here) <= {m.name for m in reproduction.MODELS}
 
 
-def test_no_scheduler_named_runs_long_jobs_on_a_local_cluster(monkeypatch):
+def _nap(seconds: float) -> float:
+    time.sleep(seconds)
+    return seconds
+
+
+def test_auto_keeps_short_work_here_and_sends_long_work_to_a_local_cluster(monkeypatch):
+    """Under "auto" (the commands' default) the first task is timed here; the rest go to a local cluster only if
+    they would take AUTO_LOCAL_SECONDS or more at that pace (lowered here), and on one core never."""
     from rrbc_core.runtime import tasks
 
     monkeypatch.delenv(tasks.SCHEDULER_ENV, raising=False)
-    monkeypatch.setattr(tasks.os, "cpu_count", lambda: 2)
-    assert tasks.scheduler_from(None, tasks.AUTO_LOCAL_SECONDS) == "local"
-    assert tasks.scheduler_from(None, tasks.AUTO_LOCAL_SECONDS - 1) == ""
-    assert tasks.scheduler_from(None, None) == ""
-    assert tasks.scheduler_from("in-process", 1e6) == "in-process"
+    assert tasks.command_scheduler(None) == "auto" and tasks.scheduler_from(None) == ""
+    assert tasks.command_scheduler("in-process") == "in-process"
     monkeypatch.setenv(tasks.SCHEDULER_ENV, "tcp://10.0.0.5:8786")
-    assert tasks.scheduler_from(None, 1e6) == "tcp://10.0.0.5:8786"
+    assert tasks.command_scheduler(None) == "tcp://10.0.0.5:8786"
     monkeypatch.delenv(tasks.SCHEDULER_ENV)
+
+    monkeypatch.setattr(tasks, "AUTO_LOCAL_SECONDS", 0.5)
+    with tasks.task_runner("auto") as run:
+        assert run(_nap, [0.01] * 3) == [0.01] * 3
+        assert run.where == "" and run.workers == 1
+    monkeypatch.setattr(tasks.os, "cpu_count", lambda: 2)
+    with tasks.task_runner("auto") as run:
+        seen = []
+        assert run(_nap, [0.3] * 4, seen.append) == [0.3] * 4 and seen == [1] * 4
+        assert run.where == "local" and run.workers == 2
+        assert run(abs, [-1, -2]) == [1, 2]  # later stages use the same cluster
     monkeypatch.setattr(tasks.os, "cpu_count", lambda: 1)
-    assert tasks.scheduler_from(None, 1e6) == ""  # one core: a cluster cannot help
+    with tasks.task_runner("auto") as run:
+        assert run(_nap, [0.3] * 4) == [0.3] * 4 and run.where == ""
 
 
 def test_a_local_cluster_of_n_workers_and_a_bad_n():
