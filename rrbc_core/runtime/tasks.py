@@ -10,17 +10,18 @@ Where the tasks run (`scheduler`, else the environment variable ``RRBC_SCHEDULER
 - ``""`` / ``"in-process"`` — one after the other in this process (no dask at all);
 - ``"auto"`` — the commands' default (`command_scheduler`): the first task runs in this process and is timed; if
   the rest would take `AUTO_LOCAL_SECONDS` or more of one core at that pace, on a machine with more than one core,
-  they go to a local cluster, else they stay here (a cluster costs seconds to start). Library calls do not start
-  processes unless asked;
+  they go to a local cluster, else they stay here (a cluster takes about a second to start and stop). Library calls
+  do not start processes unless asked;
 - ``"local"`` — a `distributed.LocalCluster` sized to the machine (one single-threaded worker process per core);
   ``"local:N"`` — one with N workers;
 - an address such as ``tcp://10.0.0.5:8786`` — an existing scheduler (`dask scheduler` with `dask worker`s, or any
   deployment dask supports). Unreachable: one clear `InputError`.
 
 A study with several stages holds one cluster for all of them (`task_runner`). Every task runs with rrbc's thread
-policy (one BLAS thread, `runtime.threads.limited`), on a worker as in this process. Tasks are submitted with retries, so a worker that dies mid-task costs a rerun, not the study; a task that fails
-again and again fails the run (nothing is written: the commands write their outputs only after `run_tasks`
-returns). `progress(n)` is called as tasks finish.
+policy (one BLAS thread, `runtime.threads.limited`), on a worker as in this process. Tasks are submitted with
+retries, so a worker that dies mid-task costs a rerun, not the study; a task that fails again and again fails the
+run (nothing is written: the commands write their outputs only after their tasks return). `progress(n)` is called
+as tasks finish.
 """
 
 from __future__ import annotations
