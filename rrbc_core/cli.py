@@ -496,8 +496,9 @@ def _check_report_dir(out) -> None:
 
 
 def _where(arg):
-    from rrbc_core.runtime.tasks import command_scheduler
+    from rrbc_core.runtime.tasks import command_scheduler, quiet_dask_logs
 
+    quiet_dask_logs()  # this process is ours: failures are one line, never dask's log lines
     return command_scheduler(arg)
 
 

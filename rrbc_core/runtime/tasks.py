@@ -27,9 +27,11 @@ as tasks finish.
 from __future__ import annotations
 
 import functools
+import logging
 import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import CancelledError
 
 import numpy as np
 
@@ -40,6 +42,7 @@ IN_PROCESS = ("", "in-process")
 RETRIES = 3
 CONNECT_TIMEOUT_S = 10
 AUTO = "auto"
+_quiet = False  # set by quiet_dask_logs()
 #: Under "auto", work measured at this many seconds of one core or more gets a local cluster (below it, a cluster's
 #: start and stop, measured by benchmarks/reproduce_speed.py `cluster_costs`, is not worth paying).
 AUTO_LOCAL_SECONDS = 60.0
@@ -98,11 +101,13 @@ class TaskRunner:
         return self
 
     def __exit__(self, *exc) -> None:
-        if self._client is not None:
-            self._client.close()
-        if self._cluster is not None:
-            self._cluster.close()
-        self._client = self._cluster = None
+        try:
+            if self._client is not None:
+                self._client.close()
+            if self._cluster is not None:
+                self._cluster.close()
+        finally:
+            self._client = self._cluster = None
 
     @property
     def workers(self) -> int:
@@ -136,9 +141,10 @@ class TaskRunner:
                 if progress is not None:
                     progress(1)
             return results
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, CancelledError) as exc:
             raise InputError(
-                f"the dask scheduler {self.where!r} was lost during the run ({type(exc).__name__})"
+                f"the dask scheduler {self.where!r} was lost during the run ({type(exc).__name__}); nothing was "
+                "written: rerun when it is back, or drop --scheduler"
             ) from None
 
     def _first_then_decide(self, fn: Callable, tasks: list, progress) -> list:
@@ -157,6 +163,21 @@ class TaskRunner:
         return [first] + self(fn, tasks[1:], progress)
 
 
+def quiet_dask_logs() -> None:
+    """For processes rrbc owns (the command line): dask's own log lines (a lost scheduler is logged at ERROR with a
+    traceback before the run fails) never reach stderr; the failure is one `InputError` line instead. Library
+    calls leave dask's logging as the caller configured it."""
+    global _quiet
+    _quiet = True
+
+
+def _silence_dask() -> None:
+    if _quiet:
+        for name in list(logging.root.manager.loggerDict):
+            if name == "distributed" or name.startswith("distributed."):
+                logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
 def _limited_call(fn: Callable, task):
     """fn(task) under rrbc's thread policy (one BLAS thread while it runs), wherever it runs."""
     from rrbc_core.runtime.threads import limited
@@ -170,6 +191,7 @@ def _connect(where: str):
         from distributed import Client, LocalCluster
     except ImportError:  # pragma: no cover - a pinned dependency
         raise InputError("dask.distributed is not installed: run scripts/setup.sh") from None
+    _silence_dask()
     if where == "local" or where.startswith("local:"):
         workers = max(1, os.cpu_count() or 1)
         if where != "local":

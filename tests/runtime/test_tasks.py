@@ -32,9 +32,8 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.fixture(scope="module")
-def cluster():
-    """A `dask scheduler` and two single-threaded `dask worker`s, each its own process."""
+def _start(workers: int) -> tuple[str, list, list]:
+    """A `dask scheduler` and `workers` single-threaded `dask worker`s, each its own process group."""
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
@@ -53,20 +52,31 @@ def cluster():
             if time.time() > deadline:
                 raise
             time.sleep(0.5)
-    workers = [
-        subprocess.Popen([DASK, "worker", address, "--nthreads", "1", "--no-dashboard"], **logs) for _ in range(2)
+    started = [
+        subprocess.Popen([DASK, "worker", address, "--nthreads", "1", "--no-dashboard"], **logs) for _ in range(workers)
     ]
     with Client(address, timeout=10) as c:
-        c.wait_for_workers(2, timeout=60)
-    yield address, workers
-    for p in procs + workers:
+        c.wait_for_workers(workers, timeout=60)
+    return address, procs, started
+
+
+def _stop(procs) -> None:
+    for p in procs:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGTERM)
-    for p in procs + workers:
+    for p in procs:
         try:
             p.wait(10)
         except subprocess.TimeoutExpired:
             os.killpg(p.pid, signal.SIGKILL)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A `dask scheduler` and two single-threaded `dask worker`s, each its own process."""
+    address, procs, workers = _start(2)
+    yield address, workers
+    _stop(procs + workers)
 
 
 def test_in_process_keeps_order_and_reports_progress():
@@ -197,3 +207,22 @@ def test_a_worker_killed_mid_run_is_survived(cluster):
     assert out == [x * x for x in range(8)]
     assert workers[0].wait(10) is not None
     assert np.all(np.diff(out) > 0)
+
+
+def test_a_scheduler_lost_mid_run_is_one_line_and_exit_2():
+    """The scheduler is killed while `rrbc simulate` waits on it: one stderr line naming the loss, exit 2, no
+    output (the client gives up after its reconnect timeout)."""
+    address, procs, workers = _start(1)
+    try:
+        env = {k: v for k, v in os.environ.items() if k != "RRBC_SCHEDULER"}
+        args = [*RRBC, "simulate", str(ROOT / "scenes" / "demo_workcell.toml"), "--trials", "40000", "--json"]
+        run = subprocess.Popen([*args, "--scheduler", address], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+        time.sleep(8)
+        assert run.poll() is None, "the run ended before the scheduler was killed"
+        os.killpg(procs[0].pid, signal.SIGKILL)
+        out, err = run.communicate(timeout=120)
+        lines = err.decode().strip().splitlines()
+        assert run.returncode == 2 and out == b""
+        assert len(lines) == 1 and "was lost during the run" in lines[0], lines
+    finally:
+        _stop(procs + workers)
