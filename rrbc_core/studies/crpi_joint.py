@@ -70,17 +70,14 @@ def run(replicates: int = 100, seed: int = 0, sites: crpi.Sites | None = None, r
 def tasks(replicates: int = 100, seed: int = 0, sites: crpi.Sites | None = None, rrbc_replicates: int = 200) -> list:
     """One independent task per joint model (`fit_task`), in JOINT_MODELS order."""
     sites = crpi.load() if sites is None else sites
-    return [(name, comp, y_tables(), sites, replicates, seed, rrbc_replicates) for name, comp in JOINT_MODELS.items()]
-
-
-def y_tables() -> np.ndarray:
-    return model_fit.measured_matrix(reference_data.vanwyk2018())
+    y = model_fit.measured_matrix(reference_data.vanwyk2018())
+    return [(name, comp, y, sites, replicates, seed, rrbc_replicates) for name, comp in JOINT_MODELS.items()]
 
 
 def fit_task(task: tuple) -> JointFit:
     """(model, component, tables, sites, replicates, seed, rrbc replicates) -> its JointFit (layout A)."""
     name, comp, y, sites, replicates, seed, rrbc_replicates = task
-    geo = rp.geometry_for(rp.layout_by_name("A"))
+    geo = rp.geometry_named("A")
     return _fit_model(name, comp, geo, y, sites, replicates, seed, rrbc_replicates)
 
 

@@ -26,6 +26,7 @@ N, the 5th point and the robot placement are only in the paper's Fig. 1.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -190,6 +191,12 @@ def geometry_for(layout: Layout) -> Geometry:
         reach=reach / reach[:16].max(),
         scale_field=1e-3 * pr,
     )
+
+
+@functools.lru_cache(maxsize=8)
+def geometry_named(layout_name: str) -> Geometry:
+    """`geometry_for` the named layout, built once per process (a worker reuses it for every task of a layout)."""
+    return geometry_for(layout_by_name(layout_name))
 
 
 def component_fields(geo: Geometry, name: str, replicates: int, seed: int) -> np.ndarray:

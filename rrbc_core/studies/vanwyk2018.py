@@ -9,8 +9,6 @@ show how often a single table names its true cause.
 
 from __future__ import annotations
 
-import dataclasses
-import functools
 import time
 from dataclasses import dataclass
 
@@ -88,7 +86,7 @@ def _tables_from(geo, model, rho, phi, count, seed) -> list:
 def confusion_tables(layout_name: str, planted: int, count: int, seed: int) -> list:
     """`count` tables (4, 7) simulated from one planted model (index into MODELS) at sigma 0.15 mm with bias 3x
     noise (baseline: noise only), for the confusion study. One task."""
-    geo = _geometry(layout_name)
+    geo = reproduction.geometry_named(layout_name)
     model = MODELS[planted]
     ph = 0.0 if model.name == "baseline" else float(np.arctan(CONFUSION_BIAS_TO_NOISE))
     rho = CONFUSION_SIGMA_MM / np.cos(ph)  # first weight (noise, or horizontal noise) = 0.15 mm
@@ -101,12 +99,6 @@ def choose_task(task: tuple) -> str:
     return model_fit.select(model_fit.assess(moments, MODELS, y)).chosen
 
 
-@functools.lru_cache(maxsize=8)
-def _geometry(layout_name: str) -> reproduction.Geometry:
-    """The layout's geometry, built once per process (a worker reuses it for every task of that layout)."""
-    return reproduction.geometry_for(reproduction.layout_by_name(layout_name))
-
-
 def layout_replicates(layout, replicates: int) -> int:
     """Experiments simulated per direction: with G > 1 registrations per experiment an experiment costs G times
     more, so half as many (still well over the 28 statistics whose covariance the fit estimates)."""
@@ -116,7 +108,9 @@ def layout_replicates(layout, replicates: int) -> int:
 def simulate_task(task: tuple) -> reproduction.DirectionStats:
     """(layout name, model name, replicates, seed) -> the model's statistics on its direction grid. One task."""
     layout_name, model_name, replicates, seed = task
-    return reproduction.simulate_model(_geometry(layout_name), reproduction.model_by_name(model_name), replicates, seed)
+    return reproduction.simulate_model(
+        reproduction.geometry_named(layout_name), reproduction.model_by_name(model_name), replicates, seed
+    )
 
 
 def assess_task(task: tuple) -> model_fit.Assessment:
@@ -126,11 +120,18 @@ def assess_task(task: tuple) -> model_fit.Assessment:
 
 
 def analyse_layout(
-    layout, y: np.ndarray, replicates: int, seed: int, directions: dict, moments: dict, assessments: dict
+    layout,
+    y: np.ndarray,
+    replicates: int,
+    seed: int,
+    directions: dict,
+    moments: dict,
+    assessments: dict,
+    confusion: dict | None = None,
 ) -> LayoutResult:
     """Choose a model from the layout's assessments, then peg success, RRBC's gain, the noise sweep and the
     profile intervals of the best extension."""
-    geo = _geometry(layout.name)
+    geo = reproduction.geometry_named(layout.name)
     replicates = layout_replicates(layout, replicates)
     sel = model_fit.select(assessments)
     successes = np.array([reference_data.successes_from_ps(r.ps)[0] for r in _rows_in_order()])
@@ -151,7 +152,7 @@ def analyse_layout(
         lab: model_fit.profile_interval(moments[best_ext], y, model, assessments[best_ext].fit, lab)
         for lab in model.labels
     }
-    return LayoutResult(layout, directions, moments, sel, peg, rrbc, intervals, None, sweep)
+    return LayoutResult(layout, directions, moments, sel, peg, rrbc, intervals, confusion, sweep)
 
 
 NOISE_FACTORS = (1.0, 0.5, 0.25, 0.1)
@@ -355,8 +356,8 @@ def run(
 ) -> Reproduction:
     """The whole analysis. progress_factory(total) -> an object with update(n) and close(), or None.
 
-    Its independent pieces — each (layout, model) simulation, each (layout, model) assessment, each planted model
-    of the confusion study — are tasks of `runtime.tasks` (`scheduler`: this process, "local", a dask address, or
+    Its independent pieces — each (layout, model) simulation, each (layout, model) assessment, each planted model's
+    confusion tables and each table's choice — are tasks of `runtime.tasks` (`scheduler`: this process, "local", a dask address, or
     "auto"); each carries its own fixed seed, so the result is the same wherever they run. `task_log`: a list
     that receives each stage's task seconds when they run in this process (benchmarks/reproduce_speed.py)."""
     from rrbc_core.runtime.tasks import task_runner
@@ -380,9 +381,8 @@ def run(
             done = run_all(simulate_task, sims, tick)
             directions = {(t[0], t[1]): d for t, d in zip(sims, done)}
             moments = {k: model_fit.Moments.of(v) for k, v in directions.items()}
-            jobs = [(m.name, moments[(lay.name, m.name)], y) for lay in lays for m in MODELS]
-            done = run_all(assess_task, jobs, tick)
-            assessed = {(lay.name, m.name): a for (lay, m), a in zip(((la, m) for la in lays for m in MODELS), done)}
+            keys = [(lay.name, m.name) for lay in lays for m in MODELS]
+            assessed = dict(zip(keys, run_all(assess_task, [(k[1], moments[k], y) for k in keys], tick)))
             main_moments = {m.name: moments[(lays[0].name, m.name)] for m in MODELS}
             planted = [(lays[0].name, i, CONFUSION_TABLES, seed) for i in range(len(MODELS))] if confusion else []
             tables = run_all(_confusion_tables_task, planted, tick)
@@ -395,10 +395,8 @@ def run(
         dirs = {m.name: directions[(lay.name, m.name)] for m in MODELS}
         mom = {m.name: moments[(lay.name, m.name)] for m in MODELS}
         ass = {m.name: assessed[(lay.name, m.name)] for m in MODELS}
-        res = analyse_layout(lay, y, replicates, seed, dirs, mom, ass)
-        if confusion and i == 0:
-            res = dataclasses.replace(res, confusion=_counts(chosen, CONFUSION_TABLES))
-        results.append(res)
+        counts = _counts(chosen, CONFUSION_TABLES) if confusion and i == 0 else None
+        results.append(analyse_layout(lay, y, replicates, seed, dirs, mom, ass, counts))
     return Reproduction(rows, n, successes, tuple(results), replicates, seed, time.perf_counter() - t0)
 
 

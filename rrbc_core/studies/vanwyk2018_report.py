@@ -71,9 +71,9 @@ def _fig_error_vs_distance(rep: Reproduction, path: Path) -> None:
     main = rep.main
     sel = main.selection
     ext = best_extension(sel)
-    from rrbc_core.studies.reproduction import geometry_for
+    from rrbc_core.studies.reproduction import geometry_named
 
-    geo = geometry_for(main.layout)
+    geo = geometry_named(main.layout.name)
     d = geo.distance
     fig, axes = plt.subplots(2, 7, figsize=(18, 5.2), sharex=True, sharey="row")
     for row, name in enumerate(("baseline", ext)):
