@@ -310,35 +310,9 @@ def _tool_mm(text: str) -> float:
     return v
 
 
-def _diagnosis_table(dg) -> str:
-    sig = ", ".join(f"{v:.4g}" for v in dg.noise_sigma_mm)
-    lines = [
-        f"{dg.n_points} paired points; noise sigma per axis ({dg.noise_source}): {sig} mm; "
-        f"bias RMS {dg.bias_rms_mm:.4g} mm"
-    ]
-    if not dg.effects:
-        lines.append("no effect found: the data are consistent with a rigid transform plus isotropic noise")
-    for e in dg.effects:
-        lines.append(f"{e.name} (p {e.p_value:.2g}): {e.evidence}")
-    verdict = "recommended" if dg.rrbc_recommended else "not recommended"
-    if dg.checks_rms_mm is not None:
-        rig, rr = dg.checks_rms_mm
-        lines.append(
-            f"RRBC {verdict}: RMST change {100 * dg.expected_rmst_change:+.1f} % at the file's check rows "
-            f"(rigid {rig:.4g} mm, RRBC {rr:.4g} mm, as rrbc correct scores them); leave-one-out "
-            f"{100 * (dg.loo_rms_rrbc_mm / dg.loo_rms_rigid_mm - 1 if dg.loo_rms_rigid_mm > 0 else 0):+.1f} %"
-        )
-    else:
-        lines.append(f"RRBC {verdict}: expected RMST change {100 * dg.expected_rmst_change:+.1f} % (leave-one-out)")
-    if dg.expected_change_without_outliers is not None:
-        lines.append(f"  with the outliers removed from the file: {100 * dg.expected_change_without_outliers:+.1f} %")
-    lines.append(f"  {'measured' if dg.checks_rms_mm is not None else 'predicts'}: {dg.assumes}")
-    lines += [f"limit: {text}" for text in dg.limits]
-    return "\n".join(lines) + "\n"
-
-
 def _cmd_diagnose(args) -> str:
     from rrbc_core.analysis.diagnosis import diagnose
+    from rrbc_core.analysis.diagnosis_text import diagnosis_text
     from rrbc_core.io.measurements import read_measurements
 
     if not args.alpha < 1:
@@ -347,7 +321,7 @@ def _cmd_diagnose(args) -> str:
     dg = diagnose(mset, alpha=args.alpha, seed=args.seed, robot=args.robot, tool_mm=args.tool)
     if args.json:
         return json.dumps(dg.to_json(), allow_nan=False) + "\n"
-    return _diagnosis_table(dg)
+    return diagnosis_text(dg)
 
 
 def _simulate_table(res) -> str:

@@ -23,9 +23,9 @@ The Plan tab (`planning_panel`) shows the core's coverage and fast predicted RMS
 now, recomputed like the heat map (at most every `planning_panel.PLAN_INTERVAL_S` during a drag, and at its end;
 on scenes where it takes longer than `PLAN_LIVE_MAX_S`, drags hand it to a background thread instead);
 Suggest runs the planner on a snapshot of the session outside the lock (drags go on meanwhile).
-The Diagnose tab runs `rrbc_core.diagnosis.diagnose` synchronously on a button press (~15 ms on the bundled
-scene) over the current registration and fiducial rows only (targets withheld: no truth); a change to those rows
-marks the verdict stale instead of recomputing it.
+The Diagnose tab diagnoses the session's data set (`ExplorerSession.data()`: the file as opened or edited, or
+the scene's simulated data set as the CSV download writes it) on a button press, outside the lock, and shows the
+lines `rrbc diagnose` prints for it; a change to those data marks the verdict stale instead of recomputing it.
 
 Frames and units: the scene is drawn in the robot frame, in millimetres (see `nodes`).
 """
@@ -128,7 +128,8 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         self.mc_seconds = None
         self.diagnosis: Diagnosis | None = None  # the last verdict shown in the Diagnose tab (None: none or an error)
         self.diagnosis_stale = False  # the data changed since the Diagnose tab's content was computed
-        self._diagnosis_rows = None  # the rows it was computed from (MeasurementSet), None when nothing is shown
+        self.diagnosis_data = None  # the session's data set it was computed from (SessionData), None: nothing shown
+        self._diagnosis_key = None  # that data set's key (data_set.data_key)
         self._diagnosis_text = ""  # its content without the stale marker
         self.selected: tuple[str, str] | None = None  # (kind, id) of the selected point (the one with a gizmo)
         self.presentation = False  # presentation mode (set_presentation)
@@ -185,7 +186,8 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
             self._heat_stale = True
             self.diagnosis = None
             self.diagnosis_stale = False
-            self._diagnosis_rows = None
+            self.diagnosis_data = None
+            self._diagnosis_key = None
             self.display = self._default_display(ev)
             if self.presentation:
                 from .app_views import PRESENTATION_MARKERS

@@ -9,8 +9,9 @@ import traceback
 
 import numpy as np
 
-from rrbc_core.analysis.diagnosis import Diagnosis, diagnose
+from rrbc_core.analysis.diagnosis import Diagnosis
 from rrbc_core.errors import InputError
+from rrbc_core.session.data_set import data_key
 from rrbc_core.session.evaluation import Evaluation
 
 from . import diagnosis_panel, files
@@ -21,50 +22,53 @@ class TabActions:
     """Part of `RunningApp` (see there); split out to keep modules short."""
 
     # ------------------------------------------------------------------------------------------ diagnosis
-    def _diagnosis_input(self):
-        """The session's current data without its targets (roles registration, fiducial, both): no truth."""
-        return diagnosis_panel.diagnosis_rows(self.session.export_measurements())
-
     def run_diagnosis(self, client=None) -> Diagnosis | None:
-        """Diagnose the current data (what the Diagnose button does) and show the verdict in the Diagnose tab.
-        Synchronous: ~15 ms on the bundled scene. Returns None (and says why in the tab) on InputError."""
+        """Diagnose the session's data set (`ExplorerSession.data()`: the file as opened or edited, or the scene's
+        simulated data set as the CSV download writes it) and show, in the Diagnose tab, exactly the lines
+        `rrbc diagnose` prints for it. The data are taken under the lock; the diagnosis (seconds on a scene with
+        an arm) runs outside it, so drags go on. Returns None (and says why in the tab) on InputError."""
         with self._lock:
-            rows = self._diagnosis_input()
+            session = self.session
+            key = data_key(session)
             try:
-                arm = self.session.arm_term()
-                result = diagnose(rows, tool_mm=arm.dh.tool_mm if arm is not None else 0.0)
+                data = session.data()
             except InputError as exc:
-                result, text = None, diagnosis_panel.render_error(str(exc))
+                data, error = None, str(exc)
+        result, text = None, ""
+        if data is not None:
+            try:
+                result = data.diagnose()
+            except InputError as exc:
+                text = diagnosis_panel.render_error(str(exc))
             except Exception as exc:  # noqa: BLE001 - keep serving
                 traceback.print_exc()
-                result, text = None, diagnosis_panel.render_error(f"internal error: {type(exc).__name__}: {exc}")
+                text = diagnosis_panel.render_error(f"internal error: {type(exc).__name__}: {exc}")
             else:
-                text = diagnosis_panel.render(result, self.session.name)
+                text = diagnosis_panel.render(result, data)
+        else:
+            text = diagnosis_panel.render_error(error)
+        with self._lock:
+            if self.session is not session:  # another source was loaded meanwhile
+                return None
             self.diagnosis = result
-            self.diagnosis_stale = False
-            self._diagnosis_rows = rows
+            self.diagnosis_data = data
+            self._diagnosis_key = key
             self._diagnosis_text = text
+            self.diagnosis_stale = False
             with self.server.atomic():
                 self.controls.text["diagnosis"] = text
+            self._check_diagnosis()  # the data changed while it ran: say so at once
         if result is None:
             self._message("diagnosis failed: see the Diagnose tab", client, title="Not diagnosed")
         return result
 
     def _check_diagnosis(self) -> None:
-        """Mark the Diagnose tab's content stale once the rows it was computed from changed (caller holds the
-        lock). Compares data, so a target drag or a method change (which leave the diagnosed rows as they are)
-        keeps the verdict current; a fiducial drag, an exclusion or a noise/bias/seed change makes it stale."""
-        old = self._diagnosis_rows
-        if old is None or self.diagnosis_stale:
+        """Mark the Diagnose tab's content stale once the data set it was computed from changed (caller holds the
+        lock): a change of its key (`data_set.data_key`) — a moved or excluded point, a new seed or size — not a
+        method change, which leaves the data as they are."""
+        if self._diagnosis_key is None or self.diagnosis_stale:
             return
-        new = self._diagnosis_input()
-        same = (
-            new.ids == old.ids
-            and new.roles == old.roles
-            and np.array_equal(new.sensor, old.sensor, equal_nan=True)
-            and np.array_equal(new.robot, old.robot, equal_nan=True)
-        )
-        if not same:
+        if data_key(self.session) != self._diagnosis_key:
             self.diagnosis_stale = True
             self.controls.text["diagnosis"] = diagnosis_panel.STALE + "\n\n" + self._diagnosis_text
 

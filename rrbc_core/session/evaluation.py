@@ -5,7 +5,6 @@ measurement model (scene) or the file (measured data) give them."""
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -271,9 +270,3 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         hull,
         summary,
     )
-
-
-def seed_for(seed: int, pid: str) -> list[int]:
-    """The seed of a point's noise draw in the session: (session seed, CRC32 of the point's kind:id), so a dragged
-    point keeps its draw and a new session seed redraws every point."""
-    return [int(seed) & 0x7FFFFFFF, zlib.crc32(pid.encode("utf-8"))]

@@ -37,7 +37,7 @@ import numpy as np
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.authoring import SessionAuthoring
-from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate, seed_for
+from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate
 from rrbc_core.session.planning_view import SessionCoveragePlanning, SessionPlanning
 from rrbc_core.session.vec_view import SessionVec
 from rrbc_core.session.views import SessionViews
@@ -155,31 +155,43 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         return MeasurementModel(self.sensor_to_robot, sc.error_model, sc.joint_seed, s.bias_scale, s.noise_scale)
 
     def _measure_scene(self, kind: str, ids, positions, noise: bool = True) -> Readings:
-        """Scene mode: readings of points at `positions` (robot frame) through the measurement model, the noise of
-        each point drawn from a generator seeded by (seed, kind, id) (noise=False: the expected readings, bias
-        only)."""
-        from rrbc_core.simulation.errormodels import PointSet
-
+        """Scene mode: readings of points at `positions` (robot frame) through the measurement model at their times
+        in the data set (`row_times`), each point's noise drawn from its own generator seeded by (seed, id)
+        (`MeasurementModel.read_each`, as `rrbc simulate --out` draws it); noise=False: the expected readings, bias
+        only."""
         model = self.measurement_model()
         positions = np.asarray(positions, float).reshape(-1, 3)
-        n = len(positions)
-        pts = model.points(positions, self.tool_rotations(kind, ids))
-        noise_s, noise_r = np.zeros((1, n, 3)), np.zeros((1, n, 3))
-        rnd = model.error_model.random_terms()
-        if noise and (rnd.robot or rnd.sensor):
-            for i, pid in enumerate(ids):
-                one = PointSet(
-                    robot=positions[i : i + 1],
-                    sensor=pts.sensor[i : i + 1],
-                    time=np.zeros(1),
-                    tool_rotation=pts.tool_rotation[i : i + 1],
-                    joint_seed=pts.joint_seed,
-                )
-                rng = np.random.default_rng(seed_for(self.settings.seed, f"{kind}:{pid}"))
-                e_s, e_r = model.noise(one, rng, 1)
-                noise_s[0, i], noise_r[0, i] = e_s[0, 0], e_r[0, 0]
-        r = model.read(pts, noise=(noise_s, noise_r))
+        pts = model.points(positions, self.tool_rotations(kind, ids), self.row_times(kind, ids))
+        if not noise:
+            r = model.read(pts)
+        else:
+            r = model.read_each(pts, list(ids), self.settings.seed)
         return Readings(r.sensor[0], r.robot[0], r.truth)
+
+    def row_times(self, kind: str, ids) -> np.ndarray:
+        """(P,) s: when each point is measured in the session's data set — the rows in the order `rrbc simulate`
+        writes them (registration points, then the fiducials that are not also registration points, then the
+        targets), `measurement_interval_s` apart (0 for other kinds: heat map and slice samples)."""
+        order = self._row_order()
+        dt = float(getattr(self.scene, "measurement_interval_s", 0.0) or 0.0)
+        return np.array([order.get((kind, pid), 0) * dt for pid in ids], float)
+
+    def _row_order(self) -> dict:
+        """{(kind, id): row index} of the registration points, fiducials (a fiducial with a registration point's id
+        shares its row: role both) and targets."""
+        reg = self.layout["registration"].ids
+        order = {("registration", pid): i for i, pid in enumerate(reg)}
+        n = len(reg)
+        for pid in self.layout["fiducials"].ids:
+            if ("registration", pid) in order:
+                order[("fiducials", pid)] = order[("registration", pid)]
+            else:
+                order[("fiducials", pid)] = n
+                n += 1
+        for pid in self.layout["targets"].ids:
+            order[("targets", pid)] = n
+            n += 1
+        return order
 
     def _readings_for(self, kind: str) -> Readings:
         g = self.layout[kind]
@@ -191,16 +203,22 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         key_settings = (self.settings.seed, self.settings.noise_scale, self.settings.bias_scale)
         out_s, out_r, out_t = [], [], []
         missing = []
+        times = self.row_times(kind, g.ids)
         for i, pid in enumerate(g.ids):
             key = (kind, pid)
             cached = self._readings.get(key)
-            if cached is None or cached[0] != (key_settings, tuple(g.positions[i]), self.tool_of(kind, pid)):
+            if cached is None or cached[0] != (
+                key_settings,
+                tuple(g.positions[i]),
+                self.tool_of(kind, pid),
+                float(times[i]),
+            ):
                 missing.append(i)
         if missing:
             fresh = self._measure_scene(kind, [g.ids[i] for i in missing], g.positions[missing])
             for j, i in enumerate(missing):
                 self._readings[(kind, g.ids[i])] = (
-                    (key_settings, tuple(g.positions[i]), self.tool_of(kind, g.ids[i])),
+                    (key_settings, tuple(g.positions[i]), self.tool_of(kind, g.ids[i]), float(times[i])),
                     fresh.sensor[j],
                     fresh.robot[j],
                     fresh.truth[j],
@@ -210,6 +228,19 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
             out_s.append(a), out_r.append(b), out_t.append(c)
         n = len(g.ids)
         return Readings(np.array(out_s).reshape(n, 3), np.array(out_r).reshape(n, 3), np.array(out_t).reshape(n, 3))
+
+    def readings_of(self, kind: str, pid: str) -> Readings:
+        """The current readings of one point (sensor (3,), robot (3,), truth (3,))."""
+        i = self.layout[kind].index(pid)
+        r = self._readings_for(kind)
+        return Readings(r.sensor[i], r.robot[i], r.truth[i])
+
+    def data(self):
+        """The session's data as a measurement file holds them (`data_set.session_data`): what the Diagnose tab
+        diagnoses and the CSV download writes."""
+        from rrbc_core.session.data_set import session_data
+
+        return session_data(self)
 
     # -------------------------------------------------------------------------------------------- editing
     @thread_limited

@@ -12,10 +12,11 @@ from rrbc_core import interpolation
 from rrbc_core.correction.rrbc import correct_points
 from rrbc_core.errors import Cancelled, InputError
 from rrbc_core.runtime.threads import thread_limited
-from rrbc_core.session.evaluation import Evaluation, seed_for
+from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.results import HeatMap, MonteCarloPlots, _scaled
 from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import ErrorSlice, SlicePlane
+from rrbc_core.simulation.measurement import point_seed
 
 SESSION_TRIALS_MAX = 5000  # the app's background Monte Carlo (issue 16: bounded, whatever a client sends)
 MC_CHUNK_TRIALS = 50  # trials between two questions "still wanted?" of the app's Monte Carlo
@@ -46,7 +47,7 @@ class SessionViews:
             cached = self._heat_cache.get(pid)
             if cached is None or cached[0] != key:
                 region = self.regions.get(pid)
-                rng = np.random.default_rng(seed_for(0, f"heat:{pid}"))
+                rng = np.random.default_rng(point_seed(0, f"heat:{pid}"))
                 if region is not None:
                     local = region.sample(rng, samples_per_target) - region.center
                 else:
@@ -215,55 +216,11 @@ class SessionViews:
 
     # -------------------------------------------------------------------------------------------- exporting
     def export_measurements(self):
-        """The current data as a MeasurementSet (scene mode: targets become `check` rows with their truth, so
-        `rrbc correct` on the export reproduces the app's numbers)."""
-        from rrbc_core.io.measurements import MeasurementSet
-
-        ev = self.last
-        ids, roles, sensor, robot = [], [], [], []
-        fid_ids = set(ev.fiducial_ids)
-        for i, pid in enumerate(ev.registration_ids):
-            both = pid in fid_ids and pid not in self.settings.excluded
-            ids.append(pid), roles.append("both" if both else "registration")
-            sensor.append(ev.registration_readings.sensor[i]), robot.append(ev.registration_readings.robot[i])
-        reg_ids = set(ev.registration_ids)
-        for i, pid in enumerate(ev.fiducial_ids):
-            if pid in reg_ids or not ev.included[i]:
-                continue
-            ids.append(pid), roles.append("fiducial")
-            sensor.append(ev.fiducial_readings.sensor[i]), robot.append(ev.fiducial_readings.robot[i])
-        t = ev.targets
-        for i, pid in enumerate(t.ids):
-            known = np.all(np.isfinite(t.truth[i]))
-            ids.append(pid), roles.append("check" if known else "target")
-            sensor.append(t.sensor[i]), robot.append(t.truth[i] if known else np.full(3, np.nan))
-        n = len(ids)
-        extra = {}
-        if self.has_arm:  # the configurations the arm reached each point in (q1..q6, degrees: rrbc calibrate)
-            kinds = {"registration": set(ev.registration_ids), "fiducials": set(ev.fiducial_ids)}
-            pos = {("registration", p): x for p, x in zip(ev.registration_ids, ev.registration_positions)}
-            pos |= {("fiducials", p): x for p, x in zip(ev.fiducial_ids, ev.fiducial_positions)}
-            pos |= {("targets", p): x for p, x in zip(t.ids, t.positions)}
-            q = []
-            for pid, role in zip(ids, roles):
-                kind = (
-                    "targets"
-                    if role in ("check", "target")
-                    else ("registration" if pid in kinds["registration"] else "fiducials")
-                )
-                q.append(self.joints(kind, [pid], pos[(kind, pid)][None])[0])
-            deg = np.degrees(np.array(q).reshape(n, 6))
-            extra = {f"q{j + 1}": tuple(f"{v:.6f}" for v in deg[:, j]) for j in range(6)}
-        return MeasurementSet(
-            ids=tuple(ids),
-            roles=tuple(roles),
-            sensor=np.array(sensor).reshape(n, 3),
-            robot=np.array(robot).reshape(n, 3),
-            time=np.full(n, np.nan),
-            lines=tuple(0 for _ in ids),
-            source=f"<{self.name}>",
-            extra=extra,
-        )
+        """The session's data set as a MeasurementSet (`data_set.session_data`): the file as opened (or as edited) in
+        measurement mode, the simulated data set as `rrbc simulate --out` writes it in scene mode (targets as
+        `target` rows, check points in their regions with their truth). `rrbc correct` and `rrbc diagnose` on it
+        reproduce the app's numbers."""
+        return self.data().measurements
 
     @thread_limited
     def export_json(self) -> dict:

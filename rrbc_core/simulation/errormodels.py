@@ -133,6 +133,11 @@ class PointSet:
         """The points (P, 3) mm in the frame of `side` ("robot" or "sensor")."""
         return self.robot if _check_side(side) == "robot" else self.sensor
 
+    def subset(self, i: int) -> PointSet:
+        """The one point `i` as a PointSet of length 1."""
+        rot = None if self.tool_rotation is None else self.tool_rotation[i : i + 1]
+        return PointSet(self.robot[i : i + 1], self.sensor[i : i + 1], self.time[i : i + 1], rot, self.joint_seed)
+
 
 # --- the protocol ------------------------------------------------------------------------------------------
 @runtime_checkable

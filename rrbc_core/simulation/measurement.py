@@ -18,12 +18,21 @@ bias to the target, so the truth includes β_r; its noise is not part of the tru
 
 from __future__ import annotations
 
+import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.simulation.errormodels import ErrorModel, PointSet
+
+
+def point_seed(seed: int, pid: str) -> list[int]:
+    """The seed of one point's noise draw: (the data set's seed, CRC32 of the point's id). A point keeps its draw
+    wherever it is moved, a new seed redraws every point, and the app and `rrbc simulate --out` draw the same noise
+    for the same point."""
+    return [int(seed) & 0x7FFFFFFF, zlib.crc32(str(pid).encode("utf-8"))]
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,3 +125,34 @@ class MeasurementModel:
             return Readings(sensor[None], truth[None], truth)
         noise_s, noise_r = noise
         return Readings(sensor[None] + n * noise_s, truth[None] + n * noise_r, truth)
+
+    def read_each(self, pts: PointSet, ids: Sequence[str], seed: int) -> Readings:
+        """One reading of each point (T = 1), its noise drawn from its own generator seeded by `point_seed(seed,
+        id)` (sensor side first, then robot side): the readings of a measured data set, the same for a point
+        whatever else is in the set (`rrbc simulate --out`, the app's session and its download).
+
+        Parameters
+        ----------
+        pts : PointSet
+            P physical points (robot frame, mm) with their tool orientations and times.
+        ids : sequence of str
+            (P,) the points' ids.
+        seed : int
+            The data set's seed.
+
+        Returns
+        -------
+        Readings
+            sensor (1, P, 3) sensor frame, robot (1, P, 3) robot frame, truth (P, 3) robot frame, mm.
+        """
+        n = len(pts)
+        if len(ids) != n:
+            raise ValueError(f"read_each: {len(ids)} ids for {n} points")
+        noise_s, noise_r = np.zeros((1, n, 3)), np.zeros((1, n, 3))
+        rnd = self.error_model.random_terms()
+        if rnd.robot or rnd.sensor:
+            for i, pid in enumerate(ids):
+                rng = np.random.default_rng(point_seed(seed, pid))
+                e_s, e_r = self.noise(pts.subset(i), rng, 1)
+                noise_s[0, i], noise_r[0, i] = e_s[0, 0], e_r[0, 0]
+        return self.read(pts, noise=(noise_s, noise_r))

@@ -564,17 +564,41 @@ def simulated_data(scene: Scene, *, seed: int = 0, layout: str | None = None) ->
     scene : Scene
         A loaded scene.
     seed : int
-        The same seed as `simulate` uses for the same cell (check points, noise).
+        The same seed as `simulate` uses for the same cell (check points); each point's noise is drawn from its
+        own generator seeded by (seed, id) (`measurement.point_seed`), as the app draws it.
     layout : str, optional
         A named layout of the scene.
 
     Returns
     -------
     MeasurementSet
-        Registration, fiducial, target and check rows; check rows carry the robot-frame truth (the command that
-        reaches the point).
+        Registration, fiducial, target and check rows with their times (and joint columns with a kinematic arm);
+        check rows carry the robot-frame truth (the command that reaches the point).
     """
     if layout:
         scene = scene.with_layout(layout)
-    cell = work_cell_from_scene(scene, seed=seed)
-    return measurement_set(cell, measure(cell, np.random.default_rng([seed, 1]), 1))
+    return measured_data(work_cell_from_scene(scene, seed=seed), seed)
+
+
+def measured_data(cell: WorkCell, seed: int, bias_scale: float = 1.0, noise_scale: float = 1.0) -> MeasurementSet:
+    """One measured data set of a cell (module `measurement`: `MeasurementModel.read_each`, each point's noise
+    seeded by (seed, id)) in the measurement-file format (`measurement_set`). The one place a simulated data set
+    is made: `rrbc simulate --out` and the app's data (its Diagnose tab and CSV download) both come from here.
+
+    Parameters
+    ----------
+    cell : WorkCell
+        The points, their roles, times and tool orientations, and the error model.
+    seed : int
+        The data set's seed.
+    bias_scale, noise_scale : float
+        Sizes of the error model's deterministic and random terms (1: as given).
+
+    Returns
+    -------
+    MeasurementSet
+        As `measurement_set`.
+    """
+    model = MeasurementModel(cell.sensor_to_robot, cell.error_model, cell.joint_seed, bias_scale, noise_scale)
+    r = model.read_each(cell.point_set(), cell.ids, seed)
+    return measurement_set(cell, Measured(r.sensor, r.robot, r.truth))
