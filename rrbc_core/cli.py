@@ -248,9 +248,9 @@ def _table(result) -> str:
     lines.append(f"  {'id':<12} {'e_x':>9} {'e_y':>9} {'e_z':>9} {'|e|':>9}")
     for pid, e in zip(result.fiducials.ids, result.fiducial_corrections):
         lines.append(f"  {pid:<12} {_fmt_vec(e)} {np.linalg.norm(e):9.4f}")
-    for title, group, cp, checks in (
-        ("targets", result.targets, result.targets_corrected, False),
-        ("checks", result.checks, result.checks_corrected, True),
+    for title, group, cp, checks, cov in (
+        ("targets", result.targets, result.targets_corrected, False, result.targets_coverage),
+        ("checks", result.checks, result.checks_corrected, True, result.checks_coverage),
     ):
         if cp is None:
             continue
@@ -265,7 +265,7 @@ def _table(result) -> str:
             if checks:
                 row += f" {result.error_rigid[k]:9.4f} {result.error_rrbc[k]:9.4f}"
             if cp.extrapolated[k]:
-                row += "  extrapolated"
+                row += "  extrapolated" + (f": {cov.describe(k)}" if cov is not None else "")
             lines.append(row)
     s = result.summary()
     lines.append("")
@@ -398,35 +398,50 @@ def _cmd_simulate(args) -> str:
 
 
 def _plan_table(res) -> str:
+    from rrbc_core.interpolation.hull import OFF_PLANE_TOL_MM
+
     p0, p1 = res.predicted, res.predicted_after
     lines = [
         f"scene: {res.scene}   coverage of the target regions by the fiducials' hull: "
         f"{100 * res.overall_coverage():.1f} % (volume-weighted)"
     ]
-    lines.append(f"  {'target':<12} {'coverage':>9}" + (f" {'after':>9}" if res.suggested_ids else ""))
+    lines.append(
+        f"  {'target':<12} {'hull':<8} {'coverage':>9}"
+        + (f" {'after':>9} {'hull after':<10}" if res.suggested_ids else "")
+    )
+    word = lambda inside: "inside" if inside else "OUTSIDE"  # noqa: E731
     for k, tid in enumerate(res.target_ids):
-        row = f"  {tid:<12} {100 * res.coverage[k]:8.1f}%"
+        row = f"  {tid:<12} {word(res.inside[k]):<8} {100 * res.coverage[k]:8.1f}%"
         if res.suggested_ids:
-            row += f" {100 * res.coverage_after[k]:8.1f}%"
-        lines.append(row)
+            row += f" {100 * res.coverage_after[k]:8.1f}% {word(res.inside_after[k]):<10}"
+        if not res.inside[k] and res.off_plane_mm[k] > OFF_PLANE_TOL_MM:
+            row += f"  ({res.off_plane_mm[k]:.1f} mm off the fiducials' plane)"
+        lines.append(row.rstrip())
+    lines.append(
+        "  hull: the target's own position inside the fiducials' hull (what RRBC's extrapolation flag tests); "
+        "coverage: the fraction of its region of variability inside"
+    )
     lines += [
         "",
         f"predicted RMST over the regions ({p0.method}), mm:",
         f"  {'fiducials':<28} {'rigid':>8} {'RRBC':>8} {'+-':>7}",
         f"  {'current':<28} {p0.rigid_mm:8.4f} {p0.rrbc_mm:8.4f} {p0.rrbc_std_mm:7.4f}",
     ]
-    if res.suggested_ids:
-        k = len(res.suggested_ids)
-        lines.append(f"  {f'+ {k} suggested':<28} {p1.rigid_mm:8.4f} {p1.rrbc_mm:8.4f} {p1.rrbc_std_mm:7.4f}")
+    if res.requested:
+        k = res.requested
+        if res.suggested_ids:
+            n = len(res.suggested_ids)
+            lines.append(f"  {f'+ {n} suggested':<28} {p1.rigid_mm:8.4f} {p1.rrbc_mm:8.4f} {p1.rrbc_std_mm:7.4f}")
         for name, b in res.baselines.items():
             lines.append(
                 f"  {f'+ {k} by rule {name}':<28} {b.rigid_mm:8.4f} {b.rrbc_mm:8.4f} {b.rrbc_std_mm:7.4f}"
                 + ("  (mean, sd over draws)" if name == "random" else "")
             )
-        lines += [
-            "",
-            f"suggested fiducials ({res.n_usable} usable candidates, {len(res.rejected)} rejected), robot frame, mm:",
-        ]
+        lines += ["", f"suggestion: {res.note}"]
+        if res.suggested_ids:
+            lines.append(
+                f"suggested fiducials ({res.n_usable} usable candidates, {len(res.rejected)} rejected), robot frame, mm:"
+            )
         for pid, pos in zip(res.suggested_ids, res.suggested):
             lines.append(f"  {pid:<12} {_fmt_vec(pos, 9, 1)}")
     if res.rejected:

@@ -80,6 +80,13 @@ def _cmd_scene_new(args) -> str:
         f"fiducials planned from {s['candidates'] + s['fiducials']} candidate locations on the mesh",
         f"sensor at ({', '.join(f'{v:.0f}' for v in s['sensor'])}) mm"
         + (f"; hidden from it: {', '.join(s['hidden_targets'])}" if s["hidden_targets"] else "; sees every target"),
+        f"targets inside the fiducials' hull: {len(s['targets_inside_hull'])} of {s['targets']}"
+        + (
+            f"; outside: {', '.join(s['targets_outside_hull'])} (the mesh offers no candidates around them: add "
+            "fiducial places at their height, or check the sensor's view)"
+            if s["targets_outside_hull"]
+            else ""
+        ),
         f"predicted RMST over the targets' regions: rigid {s['predicted_rmst_mm']['rigid']:.3f} mm, RRBC "
         f"{s['predicted_rmst_mm']['rrbc']:.3f} mm",
         f"next: rrbc plan {s['scene']} --add 4   |   rrbc simulate {s['scene']} --out data.csv   |   rrbc view {s['scene']}",

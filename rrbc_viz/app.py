@@ -205,6 +205,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
                 self.controls.sync_display(self.display, self.session.kind)
                 self.controls.sync_layers(self.layers)
                 self.controls.sync_authoring(self.session.can_undo, self.session.can_redo)
+                self.planning.sync_undo(self.session.can_undo)
                 self.controls.text["source"] = (
                     f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}."
                 )
@@ -261,10 +262,10 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         c.text["table"] = tables.target_table(ev)
         if self.lesson_index is not None:
             c.text["lesson"] = teaching.render(self.lesson_index, ev, self._lesson_context())
-        self._show_selection(ev)
         self._heat_stale = True
         self._check_diagnosis()
         self.planning.refresh(self.session, due=plan)
+        self._show_selection(ev)  # after the Plan tab: the card shows its coverage of the selected target's region
         if heat:
             self._update_heat()
             self._update_slice()

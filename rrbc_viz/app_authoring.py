@@ -124,6 +124,7 @@ class AuthoringActions:
             self.planning.build(self.session)
             self._show(ev, heat=True)
             self.controls.sync_authoring(self.session.can_undo, self.session.can_redo)
+            self.planning.sync_undo(self.session.can_undo)
 
     def upload_mesh(self, name: str, content: bytes, client=None) -> bool:
         """Use an uploaded mesh (any format trimesh reads; robot frame, mm) as the cell's mesh: it is drawn, clicks

@@ -141,8 +141,10 @@ class TabActions:
                 self.nodes.add_new_fiducials(ev)
                 self.planning.remove_ghosts(prompt=True)
                 self._show(ev, heat=True)
+                self.controls.sync_authoring(self.session.can_undo, self.session.can_redo)
+                self.planning.sync_undo(self.session.can_undo)
             after = self.planning.state
-            text = f"Added {len(new)} fiducial{'s' if len(new) != 1 else ''}: {', '.join(new)}."
+            text = f"Added {len(new)} fiducial{'s' if len(new) != 1 else ''}: {', '.join(new)} (Undo takes them away)."
             if before is not None and after is not None:
                 text += (
                     f" Predicted RMST with RRBC {before.predicted.rrbc_mm:.3f} → {after.predicted.rrbc_mm:.3f} mm, "

@@ -225,7 +225,11 @@ class ViewActions:
         c = self.controls
         sel = self.selected
         c.sync_selection(selection_card.point_names(ev), selection_card.choice_of(sel), sel)
-        c.text["info"] = selection_card.info_card(ev, sel)
+        state = self.planning.state if self.planning is not None else None
+        fraction = None
+        if sel is not None and sel[0] == "targets" and state is not None and sel[1] in state.target_ids:
+            fraction = state.coverage_of(sel[1])  # the Plan tab's own number for this target's region
+        c.text["info"] = selection_card.info_card(ev, sel, fraction)
         land = getattr(self.nodes, "landing", None)
         target = land.target if land is not None else None  # the target whose bullseye the scene shows
         explore = sel[1] if sel is not None and sel[0] == "targets" else None

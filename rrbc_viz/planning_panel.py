@@ -35,6 +35,7 @@ import viser
 
 from rrbc_core.analysis.planning_coverage import DEFAULT_REGION_MM
 from rrbc_core.errors import InputError
+from rrbc_core.session.results import PlanningState
 
 from . import colors
 from .nodes import gizmo_name
@@ -43,7 +44,6 @@ from .worker import CoalescingWorker
 
 if TYPE_CHECKING:
     from rrbc_core.session.explorer import ExplorerSession
-    from rrbc_core.session.results import PlanningState
 
     from .actions import AppActions, PlanningView
 
@@ -103,18 +103,22 @@ def method_note(settings) -> str:
     )
 
 
-def render_state(state: PlanningState, excluded: int = 0, settings=None) -> str:
+def render_state(state: PlanningState, excluded: int = 0, settings=None, centres=None) -> str:
     """Predicted RMST and how many targets are covered, for the fiducials as they are now (and a note when the
-    session's method differs from the planner's)."""
+    session's method differs from the planner's). `centres`: the Evaluation's `coverage` (each target inside the
+    fiducials' hull or not, as the Explore card and RRBC's extrapolation flag say)."""
     pred = state.predicted
     n_full = int(np.sum(state.coverage >= 1.0))
     short = [f"{pid} {pct(c)}" for pid, c in zip(state.target_ids, state.coverage) if c < 1.0]
+    cover = f"**{n_full} of {len(state.target_ids)} regions** fully inside the fiducials' hull"
+    if centres is not None:
+        n_in = int(np.sum(centres.inside))
+        cover = f"**{n_in} of {len(centres.inside)} targets** inside the fiducials' hull; " + cover
     lines = [
         rmst_line(pred) + f" ({pred.method}; over the targets' regions of variability, {state.fiducials_used} "
         f"fiducials{f', {excluded} excluded' if excluded else ''}; least squares + IDW k=4, p=2 as the planner "
         "predicts). Follows drags, exclusions and the noise/bias sizes.",
-        f"Coverage: **{n_full} of {len(state.target_ids)} targets** fully inside the fiducials' hull"
-        + (f"; ⚠ {', '.join(short)}." if short else "."),
+        "Coverage: " + cover + (f"; ⚠ {', '.join(short)}." if short else "."),
     ]
     note = method_note(settings)
     return "\n\n".join(lines + ([note] if note else []))
@@ -126,10 +130,13 @@ PROMPT_MEASURED = (
 )
 
 
-def render_coverage(state: PlanningState) -> str:
-    """Per target: the fraction of its region of variability inside the fiducials' hull."""
-    return "| target | coverage |\n|---|---:|\n" + "\n".join(
-        f"| {pid} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |" for pid, c in zip(state.target_ids, state.coverage)
+def render_coverage(state: PlanningState, centres=None, ids=()) -> str:
+    """Per target: inside the fiducials' hull or not (`centres`, the Evaluation's coverage over `ids`) and the
+    fraction of its region of variability inside."""
+    where = dict(zip(ids, centres.inside)) if centres is not None else {}
+    return "| target | hull | region inside |\n|---|:---:|---:|\n" + "\n".join(
+        f"| {pid} | {'inside' if where.get(pid, True) else '⚠ outside'} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |"
+        for pid, c in zip(state.target_ids, state.coverage)
     )
 
 
@@ -156,12 +163,15 @@ def _rejected_text(rejected: dict) -> str:
 
 def render_suggestion(result, current: bool = True) -> str:
     """The suggested fiducials (numbered as their ghosts), the predicted gain, coverage after, the rules it was
-    compared with and the candidates rejected."""
+    compared with and the candidates rejected; or why nothing (or fewer than asked) is suggested."""
     k = len(result.suggested_ids)
     if k == 0:
-        return "⚠ The planner found no usable candidate to add (see the rejected candidates below)." + (
-            f"\n\nRejected candidates: {_rejected_text(result.rejected)}." if result.rejected else ""
+        why = (
+            f"**Nothing suggested:** {result.note}."
+            if getattr(result, "note", "")
+            else "⚠ The planner found no usable candidate to add (see the rejected candidates below)."
         )
+        return why + (f"\n\nRejected candidates: {_rejected_text(result.rejected)}." if result.rejected else "")
     b, a = result.predicted, result.predicted_after
     rows = "\n".join(
         f"| +{i + 1} | {cid} | {p[0]:.0f}, {p[1]:.0f}, {p[2]:.0f} |"
@@ -178,6 +188,8 @@ def render_suggestion(result, current: bool = True) -> str:
         f"{b.rrbc_mm:.3f} → **{a.rrbc_mm:.3f} ± {a.rrbc_std_mm:.4f} mm** (RRBC {change:+.0f} %).",
         "Coverage after: " + ("every target 100 %." if not short else ", ".join(short) + "."),
     ]
+    if getattr(result, "requested", k) > k:  # fewer than asked: only these are predicted to help
+        lines.insert(len(lines) - 2, f"⚠ {result.note}.")
     base = _baseline_text(result.baselines)
     if base:
         lines.append(f"Simple rules with the same K (predicted RMST with RRBC): {base}.")
@@ -205,6 +217,13 @@ class PlanningPanel:
             "Accept suggestions", icon=viser.Icon.CHECK, disabled=True, hint="Add the suggested fiducials to the cell"
         )
         self.clear_button = gui.add_button("Clear suggestions", icon=viser.Icon.TRASH, disabled=True)
+        self.undo_button = gui.add_button(
+            "Undo",
+            icon=viser.Icon.ARROW_BACK_UP,
+            disabled=True,
+            hint="Undo the last change to the cell (accepted suggestions, added or deleted points): the same history as "
+            "the File tab's Undo",
+        )
         with gui.add_folder("Coverage"):
             self.colour = gui.add_checkbox(
                 "Colour regions by coverage",
@@ -241,6 +260,7 @@ class PlanningPanel:
         self.suggest_button.on_click(lambda event: self.app.suggest_fiducials(client=event.client))
         self.accept_button.on_click(lambda event: self.app.accept_suggestions(client=event.client))
         self.clear_button.on_click(lambda event: self.app.clear_suggestions())
+        self.undo_button.on_click(lambda event: self.app.undo(client=event.client))
 
     @contextmanager
     def quiet(self):
@@ -320,14 +340,15 @@ class PlanningPanel:
                 self.coverage_md.content = ""
                 return
             full = int(np.sum(plan.coverage >= 1.0))
+            ev = session.last
+            n_in = int(np.sum(ev.coverage.inside)) if ev.coverage is not None else 0
             self.info.content = (
-                f"Measured data (no error model, so no predicted RMST): coverage of each target's region (taken as a "
-                f"{DEFAULT_REGION_MM:g} mm cube: measured targets carry none) by the fiducials' hull: **{full} of "
-                f"{len(plan.target_ids)} targets** fully inside."
+                f"Measured data (no error model, so no predicted RMST). **{n_in} of {len(ev.targets.ids)} targets** "
+                f"inside the fiducials' hull; **{full} of {len(plan.target_ids)} regions** (each taken as a "
+                f"{DEFAULT_REGION_MM:g} mm cube: measured targets carry none) fully inside."
             )
-            self.coverage_md.content = "| target | coverage |\n|---|---:|\n" + "\n".join(
-                f"| {pid} | {pct(c)}{'' if c >= 1.0 else ' ⚠'} |" for pid, c in zip(plan.target_ids, plan.coverage)
-            )
+            state = PlanningState(plan.target_ids, plan.coverage, None, 0)
+            self.coverage_md.content = render_coverage(state, ev.coverage, ev.targets.ids)
             return
         if not due:
             self.stale = True
@@ -371,13 +392,15 @@ class PlanningPanel:
         self.stale = False
         self.state = state
         excluded = sum(1 for pid in session.layout["fiducials"].ids if pid in session.settings.excluded)
-        self._assign(self.info, "content", render_state(state, excluded, session.settings))
-        self._assign(self.coverage_md, "content", render_coverage(state))
+        ev = session.last
+        self._assign(self.info, "content", render_state(state, excluded, session.settings, ev.coverage))
+        self._assign(self.coverage_md, "content", render_coverage(state, ev.coverage, ev.targets.ids))
         self.apply_colours(session)
         if session.suggestion is not None and self.ghosts:
             self._assign(
                 self.suggestion_md, "content", render_suggestion(session.suggestion, session.suggestion_current)
             )
+            self._assign(self.accept_button, "disabled", not session.suggestion_current)
 
     # ------------------------------------------------------------------------------------------ background
     def request_background(self, session: ExplorerSession) -> None:
@@ -482,12 +505,18 @@ class PlanningPanel:
                 )
             )
 
+    def sync_undo(self, can_undo: bool) -> None:
+        """Enable Undo while the session has an edit to undo."""
+        self.undo_button.disabled = not can_undo
+
     def show_suggestion(self, session: ExplorerSession, result) -> None:
-        """Ghost spheres +1 … +K at the suggested places and the suggestion's text (caller holds the lock)."""
+        """Ghost spheres +1 … +K at the suggested places and the suggestion's text (caller holds the lock). Accept
+        is offered only for a suggestion made for the fiducials as they are (the planner never suggests a set
+        predicted worse than the current one, but a stale suggestion may be)."""
         self._add_ghosts(result.suggested_ids, result.suggested)
         self.suggestion_md.content = render_suggestion(result, session.suggestion_current)
         has = len(self.ghosts) > 0
-        self.accept_button.disabled = not has
+        self.accept_button.disabled = not (has and session.suggestion_current)
         self.clear_button.disabled = not has
 
     def show_coverage_suggestion(self, plan) -> None:

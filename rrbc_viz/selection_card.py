@@ -48,7 +48,16 @@ def choice_of(selected: tuple[str, str] | None) -> str:
     return f"{'target' if kind == 'targets' else 'fiducial'} {pid}"
 
 
-def info_card(ev: Evaluation, selected: tuple[str, str] | None) -> str:
+def _hull_line(ev: Evaluation, i: int, region_fraction: float | None) -> str:
+    """The target's coverage in the core's words (`interpolation.hull.Coverage.describe`): inside or outside the
+    fiducials' hull, its distance from their plane when that puts it outside, its region's fraction inside."""
+    if ev.coverage is None:
+        return "- no fiducials included: nothing is covered"
+    words = ev.coverage.describe(i, region_fraction)
+    return f"- ⚠ {words}: extrapolated" if not ev.coverage.inside[i] else f"- {words}"
+
+
+def info_card(ev: Evaluation, selected: tuple[str, str] | None, region_fraction: float | None = None) -> str:
     """Markdown: the selected point's numbers (or how to select one)."""
     if selected is None:
         return "*Click a target or fiducial in the scene (or pick one above) to select it: it gets the drag handle.*"
@@ -62,9 +71,7 @@ def info_card(ev: Evaluation, selected: tuple[str, str] | None) -> str:
             f"- correction ê = {_v(t.correction[i])} mm, |ê| = {float(np.linalg.norm(t.correction[i])):.3f} mm"
             + (f" ± {float(np.linalg.norm(t.correction_std[i])):.3f} (1σ)" if t.correction_std is not None else ""),
             f"- error rigid **{_mm(t.error_rigid[i])}** → RRBC **{_mm(t.error_rrbc[i])}**",
-            "- ⚠ extrapolated (beyond the hull of the fiducials)"
-            if bool(t.extrapolated[i])
-            else "- inside the fiducials' hull",
+            _hull_line(ev, i, region_fraction),
         ]
         return "\n".join(lines)
     i = ev.fiducial_ids.index(pid)

@@ -9,13 +9,13 @@ sensor frame, as everywhere in the library.
 
 Coverage
 --------
-`coverage(fiducials, regions)`: per region, the fraction of its volume inside the convex hull of the fiducials,
-estimated from `samples_per_region` seeded uniform samples (`Region.sample`) tested with
-`interpolation.hull_flags` (the same hull RRBC uses for its extrapolation flags). For a coplanar (or collinear)
-fiducial set the hull is the polygon in the fiducials' plane: a sample counts as covered when its projection is
-inside the polygon AND it lies within `COPLANAR_TOL_MM` (1 mm) of the plane — the same 1 mm within which the
-library treats a point as lying on a surface (the visibility tolerance, `visibility.visible_points`), so a
-shallow region on a plate of fiducials is covered and a region 100 mm above the plate is not.
+`coverage(fiducials, regions)` (from `interpolation.hull`, the one coverage every caller uses): per region, the
+fraction of its volume inside the fiducials' hull, estimated from seeded uniform samples tested with
+`interpolation.hull_flags` (the same test RRBC's extrapolation flags use). For a coplanar (or collinear) fiducial set
+a sample is inside when its projection is inside their polygon AND it lies within `plane_tol_mm` of their plane —
+`OFF_PLANE_TOL_MM` (1 mm, the tolerance within which the library treats a point as on a surface), or the fiducials'
+own largest distance from their plane if that is more — so a shallow region on a plate of fiducials is covered and a
+region 100 mm above the plate is not.
 
 Prediction (`predict_rmst`, trials=0: "first-order")
 ---------------------------------------------------
@@ -58,22 +58,22 @@ finite region sample is common to both modes and is not part of this std.
 Candidates and the optimiser
 ----------------------------
 `usable_candidates(scene)` rejects candidates that are inside solid geometry (inside a closed mesh part, open3d
-occupancy, and more than `SURFACE_TOL_MM` below that part's surface, so markers on a surface stay usable), hidden from the sensor (ray cast
-against the cell mesh, `visibility.occluded_by`), or out of the arm's reach (the kinematic error model cannot
-evaluate them). `plan(scene, add=K)` chooses K of the usable candidates by greedy forward selection followed by
-exchange (swap a chosen candidate for an unused one while the objective improves), every step evaluating all
-candidates at once (vectorised). The objective is lexicographic: first NIST's rule — the fraction of the region
-samples inside the fiducials' hull, larger is better — then the fast predicted RMST with RRBC. Where the
-current fiducials already cover every region (the shipped demo and peg-in-hole scenes) it is the predicted RMST
-alone; where they do not, coverage comes first even at some cost in predicted RMST (an IDW prediction outside
-the hull does not blow up, so RMST alone can leave a region uncovered). Baselines for the same K: "hull-corners" (the usable candidates
-nearest the corners of the targets' bounding box, corners taken in farthest-first order) and "random" (the mean
-over `RANDOM_DRAWS` seeded random K-subsets).
+occupancy, and more than `SURFACE_TOL_MM` below that part's surface, so markers on a surface stay usable), hidden from
+the sensor (ray cast against the cell mesh, `visibility.occluded_by`), or out of the arm's reach (the kinematic error
+model cannot evaluate them). `plan(scene, add=K)` chooses up to K of the usable candidates. **The objective is the
+fast predicted RMST with RRBC**, smaller is better; coverage only breaks ties. Greedy forward selection gives one set;
+the simple rules give others — "hull-corners" (the usable candidates nearest the corners of the targets' bounding box,
+corners taken in farthest-first order) and "random" (`RANDOM_DRAWS` seeded random K-subsets; the baseline reported is
+their mean) — and exchange (swap a chosen candidate for an unused one while the prediction falls) starts from the best
+of these. So a suggestion is never predicted worse than either rule's set. Adding fiducials can make RRBC worse (each
+carries its noise into the targets near it): if no set of K is predicted to lower the RMST of the current fiducials,
+the best shorter prefix of the greedy path that does is suggested, or nothing, and `PlanResult.note` says so.
+(Coverage first, as an earlier version ranked, made cells worse: a hull-filling candidate can raise the RMST.)
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -82,25 +82,24 @@ from numpy.typing import ArrayLike
 
 from rrbc_core.analysis.planning_model import (
     _SAME_MM,
-    COPLANAR_TOL_MM,
     IDW_K,
     IDW_POWER,
     SAMPLES_PER_TARGET,
     RmstPrediction,
-    _covered,
     _points,
     _predict_fast,
     _predict_mc,
 )
 from rrbc_core.analysis.planning_search import SURFACE_TOL_MM, _corner_choice, _optimise, _pool, usable_candidates
 from rrbc_core.errors import InputError
+from rrbc_core.interpolation.hull import OFF_PLANE_TOL_MM, assess_coverage, coverage
 from rrbc_core.runtime.threads import thread_limited
 
 if TYPE_CHECKING:
     from rrbc_core.io.scene import Scene
 
 __all__ = [
-    "COPLANAR_TOL_MM",
+    "OFF_PLANE_TOL_MM",
     "IDW_K",
     "IDW_POWER",
     "RANDOM_DRAWS",
@@ -144,6 +143,11 @@ class PlanResult:
     n_usable: int = 0
     seconds: float = 0.0
     evaluations: int = 0  # fiducial sets the optimiser evaluated
+    requested: int = 0  # how many fiducials were asked for (`suggested_ids` may hold fewer: only those that help)
+    note: str = ""  # what the suggestion does, in words (or why fewer or none are suggested)
+    inside: np.ndarray | None = None  # (T,) bool: each target inside the fiducials' hull (`hull.assess_coverage`)
+    inside_after: np.ndarray | None = None  # the same with the suggestions
+    off_plane_mm: np.ndarray | None = None  # (T,) distance from the fiducials' plane (0: they span a volume)
 
     def overall_coverage(self, after: bool = False) -> float:
         """Volume-weighted fraction of all regions inside the hull (before, or after the suggestions)."""
@@ -164,48 +168,34 @@ class PlanResult:
             "coverage_after": self.overall_coverage(after=True),
             "coverage_per_target": {t: float(c) for t, c in zip(self.target_ids, self.coverage)},
             "coverage_per_target_after": {t: float(c) for t, c in zip(self.target_ids, self.coverage_after)},
+            "inside_hull_per_target": _per_target(self.target_ids, self.inside),
+            "inside_hull_per_target_after": _per_target(self.target_ids, self.inside_after),
+            "off_plane_mm_per_target": _per_target(self.target_ids, self.off_plane_mm, float),
             "predicted": self.predicted.to_json(),
             "predicted_after": self.predicted_after.to_json(),
             "suggested_ids": list(self.suggested_ids),
             "baselines": {k: v.to_json() for k, v in self.baselines.items()},
             "rejected": dict(self.rejected),
+            "requested": self.requested,
+            "note": self.note,
             "usable_candidates": self.n_usable,
             "evaluations": self.evaluations,
             "seconds": self.seconds,
         }
 
 
-@thread_limited
-def coverage(fiducials_mm: ArrayLike, regions: Sequence, *, samples_per_region: int = 512, seed: int = 0) -> np.ndarray:
-    """Per region of variability, the fraction of its volume inside the convex hull of the fiducials.
+def _per_target(ids, values, kind=bool) -> dict | None:
+    return None if values is None else {t: kind(v) for t, v in zip(ids, values)}
 
-    Parameters
-    ----------
-    fiducials_mm : (N, 3) array_like
-        Fiducial positions, robot frame, mm.
-    regions : sequence of Region (or targets with a ``region``)
-        The targets' regions of variability.
-    samples_per_region : int
-        Uniform samples per region (standard error <= 0.5 / sqrt(samples)).
-    seed : int
-        Seed of the samples.
 
-    Returns
-    -------
-    (R,) ndarray
-        Fractions in [0, 1]. Coplanar fiducials cover a sample whose projection is inside their polygon and that
-        lies within `COPLANAR_TOL_MM` of their plane; fewer than 3 or collinear fiducials cover nothing.
-    """
-    f = _points(fiducials_mm, "fiducial positions")
-    n = int(samples_per_region)
-    if n < 1:
-        raise InputError(f"samples_per_region must be >= 1, got {samples_per_region}")
-    regs = [getattr(r, "region", r) for r in regions]
-    if not regs:
-        return np.zeros(0)
-    rng = np.random.default_rng(seed)
-    samples = np.concatenate([r.sample(rng, n) for r in regs])
-    return _covered(f, samples).reshape(len(regs), n).mean(axis=1)
+def _centres(fiducials: np.ndarray, scene: Scene):
+    """(inside (T,), off-plane mm (T,)) of the targets' own positions (`hull.assess_coverage`); all outside with
+    no fiducials."""
+    pos = scene.target_positions
+    if len(fiducials) == 0:
+        return np.zeros(len(pos), bool), np.zeros(len(pos))
+    c = assess_coverage(fiducials, pos)
+    return c.inside, c.off_plane_mm
 
 
 @thread_limited
@@ -266,6 +256,7 @@ def plan(
     seed: int = 0,
     progress: Callable[[int, str], object] | None = None,
     samples_per_target: int = SAMPLES_PER_TARGET,
+    cover_targets: bool = False,
 ) -> PlanResult:
     """Coverage, predicted RMST and `add` suggested fiducial locations for a scene (`rrbc plan`).
 
@@ -283,6 +274,10 @@ def plan(
         ``progress(n, label)``, called as the search proceeds.
     samples_per_target : int
         Check points sampled in each target's region for the prediction.
+    cover_targets : bool
+        Rank sets first by how many targets lie inside their hull, then by the predicted RMST (`rrbc scene new`'s
+        first fiducials, where candidates that surround the targets are preferred when the mesh offers them);
+        default: the predicted RMST alone, never worse than either rule's set.
 
     Returns
     -------
@@ -331,6 +326,7 @@ def plan(
     cov0 = coverage(base, scene.targets, seed=seed)
     pred0 = predict_rmst(scene, base, seed=seed, samples_per_target=samples_per_target)
     volumes = np.array([t.region.volume() for t in scene.targets])
+    in0, off0 = _centres(base, scene)
     if add == 0:
         return PlanResult(
             scene.target_ids,
@@ -346,24 +342,53 @@ def plan(
             scene.name,
             len(cand_idx),
             time.perf_counter() - t0,
+            inside=in0,
+            inside_after=in0,
+            off_plane_mm=off0,
         )
     pool = _pool(scene, base, cand_pos, samples_per_target, seed)
-    chosen, evaluated = _optimise(pool, len(cand_idx), add, progress)
-    suggested = cand_pos[chosen]
+    rng = np.random.default_rng([seed, 7])
+    rules = {
+        "hull-corners": _corner_choice(scene, cand_pos, add),
+        "random": np.array([rng.choice(len(cand_idx), size=add, replace=False) for _ in range(RANDOM_DRAWS)]),
+    }
+    found = _optimise(pool, len(cand_idx), add, rules, progress, cover_first=cover_targets)
+    chosen = found.chosen
+    suggested = cand_pos[chosen].reshape(-1, 3)
     ids = tuple(scene.candidates.ids[i] for i in cand_idx[chosen])
     after = np.concatenate([base, suggested])
+    pred1 = predict_rmst(scene, after, seed=seed, samples_per_target=samples_per_target) if len(chosen) else pred0
+    if pred1.rrbc_mm > pred0.rrbc_mm:  # the optimiser's and the report's predictions disagree: suggest nothing
+        chosen, suggested, ids, after, pred1 = chosen[:0], suggested[:0], (), base, pred0
     cov1 = coverage(after, scene.targets, seed=seed)
-    pred1 = predict_rmst(scene, after, seed=seed, samples_per_target=samples_per_target)
     rigid, rigid_std = pool.model.rigid()
-    corner = _corner_choice(scene, cand_pos, add)
-    cr, cs = pool.rrbc(corner[None])
-    rng = np.random.default_rng([seed, 7])
-    draws = np.array([rng.choice(len(cand_idx), size=add, replace=False) for _ in range(RANDOM_DRAWS)])
-    rr, _ = pool.rrbc(draws)
+    cr, cs = pool.rrbc(rules["hull-corners"][None])
+    rr = found.random_draws
     baselines = {
         "hull-corners": RmstPrediction(rigid, rigid_std, float(cr[0]), float(cs[0]), "first-order"),
         "random": RmstPrediction(rigid, rigid_std, float(rr.mean()), float(rr.std(ddof=1)), "first-order"),
     }
+    if len(chosen) == add:
+        note = (
+            f"the {add} suggested are predicted to lower the RMST with RRBC from {pred0.rrbc_mm:.4f} to "
+            f"{pred1.rrbc_mm:.4f} mm"
+            + (
+                f", no worse than either rule for {add}"
+                if not cover_targets
+                else f", with {int(np.sum(_centres(after, scene)[0]))} of {len(scene.targets)} targets inside their hull"
+            )
+        )
+    elif len(chosen):
+        note = (
+            f"no set of {add} candidates is predicted to lower the RMST with RRBC ({pred0.rrbc_mm:.4f} mm now); the "
+            f"best {len(chosen)} do ({pred1.rrbc_mm:.4f} mm), so only {len(chosen)} are suggested"
+        )
+    else:
+        note = (
+            f"no candidate is predicted to lower the RMST with RRBC ({pred0.rrbc_mm:.4f} mm now; the best of up to "
+            f"{add} found would give {min(found.rmst, float(np.min(found.greedy_path))):.4f} mm): nothing is suggested "
+            "- more fiducials here would carry more noise into the targets than bias they remove"
+        )
     return PlanResult(
         scene.target_ids,
         cov0,
@@ -378,5 +403,10 @@ def plan(
         scene.name,
         len(cand_idx),
         time.perf_counter() - t0,
-        evaluated,
+        found.evaluated,
+        add,
+        note,
+        in0,
+        _centres(after, scene)[0],
+        off0,
     )

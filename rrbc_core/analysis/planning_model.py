@@ -11,11 +11,9 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.points import as_points
-from rrbc_core.interpolation import hull_flags
 from rrbc_core.simulation import batch
 
 #: A sample within this distance (mm) of a coplanar fiducial set's plane (and inside its polygon) is covered.
-COPLANAR_TOL_MM = 1.0
 
 
 #: Check points sampled per target region for the prediction (the app calls it on every drag: keep it small).
@@ -73,14 +71,6 @@ class RmstPrediction:
 # ------------------------------------------------------------------------------------------------------
 def _points(x, what: str) -> np.ndarray:
     return as_points(x, what, single=True, frame="scene frame, mm")
-
-
-def _covered(fiducials: np.ndarray, samples: np.ndarray) -> np.ndarray:
-    """Bool per sample: inside the fiducials' hull (coplanar: inside the polygon and within COPLANAR_TOL_MM)."""
-    if len(fiducials) < 3 or len(samples) == 0:
-        return np.zeros(len(samples), dtype=bool)
-    extrapolated, off = hull_flags(fiducials, samples)
-    return ~extrapolated & (off <= COPLANAR_TOL_MM)
 
 
 # ------------------------------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """Where fiducials can go and which to add: usable candidates (not buried in solids, visible to the sensor, within
-the arm's reach) and the optimiser (greedy forward selection, then exchange, on the lexicographic objective: coverage
-first, then the predicted RMST with RRBC), scoring many candidate sets at once. The method: `planning`."""
+the arm's reach) and the optimiser (greedy forward selection, then exchange from the best of the greedy set and the
+simple rules' sets, on the predicted RMST with RRBC; coverage breaks ties), scoring many candidate sets at once. The
+method: `planning`."""
 
 from __future__ import annotations
 
@@ -8,8 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rrbc_core.analysis.planning_model import _SETS_PER_CHUNK, _cell, _covered, _fid_arrays, _Model
+from rrbc_core.analysis.planning_model import _SETS_PER_CHUNK, _cell, _fid_arrays, _Model
 from rrbc_core.errors import InputError
+from rrbc_core.interpolation.hull import covered
 from rrbc_core.runtime.threads import thread_limited
 
 #: A candidate inside a solid but within this distance (mm) of a surface lies on that surface (usable).
@@ -141,6 +143,7 @@ class _Pool:
     base_pos: np.ndarray
     cand_pos: np.ndarray
     query_pos: np.ndarray
+    target_pos: np.ndarray  # (T,3) the targets' own positions
 
     def stack(self, choices: np.ndarray) -> tuple:
         """Arrays for T fiducial sets: base + candidates `choices` (T, K) (indices into the candidates)."""
@@ -166,12 +169,27 @@ class _Pool:
         """Fraction (T,) of the region samples (all targets weighted equally) inside the hull of each set."""
         choices = np.asarray(choices, int).reshape(len(choices), -1)
         return np.array(
-            [_covered(np.concatenate([self.base_pos, self.cand_pos[c]]), self.query_pos).mean() for c in choices]
+            [covered(np.concatenate([self.base_pos, self.cand_pos[c]]), self.query_pos).mean() for c in choices]
         )
 
-    def score(self, choices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(coverage, RRBC RMST) per set: the optimiser's lexicographic objective (more coverage first)."""
-        return self.covered(choices), self.rrbc(choices)[0]
+    def centres(self, choices: np.ndarray) -> np.ndarray:
+        """Number (T,) of targets whose own position is inside the hull of each set."""
+        choices = np.asarray(choices, int).reshape(len(choices), -1)
+        return np.array(
+            [covered(np.concatenate([self.base_pos, self.cand_pos[c]]), self.target_pos).sum() for c in choices]
+        )
+
+    def score(self, choices: np.ndarray, cover_first: bool = False) -> np.ndarray:
+        """(T, 3) keys, smaller is better, compared in order: [−targets inside the hull (with `cover_first`, else
+        0), predicted RRBC RMST, −coverage of the regions]. The objective is the RMST; coverage breaks ties, and
+        with `cover_first` (`rrbc scene new`'s first fiducials) covering the targets comes first."""
+        rmst = self.rrbc(choices)[0]
+        first = -self.centres(choices).astype(float) if cover_first else np.zeros(len(rmst))
+        return np.column_stack([first, rmst, -self.covered(choices)])
+
+    def current(self) -> float:
+        """The predicted RRBC RMST of the base fiducials alone (rigid without any)."""
+        return float(self.rrbc(np.zeros((1, 0), int))[0][0])
 
 
 def _pool(scene, base: np.ndarray, cand: np.ndarray, samples_per_target: int, seed: int) -> _Pool:
@@ -187,59 +205,118 @@ def _pool(scene, base: np.ndarray, cand: np.ndarray, samples_per_target: int, se
         pos[:nb],
         pos[nb:],
         cell.robot[cell.index("check")],
+        np.asarray(scene.target_positions, float).reshape(-1, 3),
     )
 
 
-def _best(cov: np.ndarray, rmst: np.ndarray) -> int:
-    """Index of the best set: the largest coverage (to 1e-12), then the smallest RMST."""
-    top = cov >= cov.max() - 1e-12
-    return int(np.flatnonzero(top)[np.argmin(rmst[top])])
+def _best(keys: np.ndarray) -> int:
+    """Index of the best of (T, 3) keys (`_Pool.score`): the smallest first key; then the smallest RMST, RMSTs
+    within 1e-12 relative of it counted equal; then the largest coverage."""
+    top = keys[:, 0] <= keys[:, 0].min()
+    rmst = keys[:, 1]
+    top &= rmst <= rmst[top].min() * (1 + 1e-12)
+    idx = np.flatnonzero(top)
+    return int(idx[np.argmin(keys[idx, 2])])
 
 
-def _better(cov: float, rmst: float, cov0: float, rmst0: float) -> bool:
-    if cov > cov0 + 1e-12:
-        return True
-    return cov >= cov0 - 1e-12 and rmst < rmst0 * (1 - _IMPROVE_REL)
+def _better(a: np.ndarray, b: np.ndarray) -> bool:
+    """Key `a` better than key `b`: fewer uncovered targets first, then a lower RMST by more than `_IMPROVE_REL`."""
+    if a[0] != b[0]:
+        return bool(a[0] < b[0])
+    return bool(a[1] < b[1] * (1 - _IMPROVE_REL))
 
 
-def _optimise(pool: _Pool, n_cand: int, add: int, progress=None) -> tuple[np.ndarray, int]:
-    """Greedy forward selection, then exchange (Fedorov-style swaps of one chosen candidate for an unused one
-    while the objective improves), on the lexicographic objective (coverage of the region samples by the hull,
-    then predicted RRBC RMST). Returns (candidate indices (add,), number of sets evaluated)."""
-    chosen: list[int] = []
-    evaluated = 0
-    for step in range(add):
-        rest = np.array([i for i in range(n_cand) if i not in chosen], dtype=int)
-        trial = np.column_stack([np.tile(chosen, (len(rest), 1)).reshape(len(rest), len(chosen)), rest])
-        j = _best(*pool.score(trial))
-        evaluated += len(trial)
-        chosen.append(int(rest[j]))
-        if progress:
-            progress(1, f"greedy {step + 1}/{add}")
-    if add == 0:
-        return np.zeros(0, dtype=int), 0
-    c0, r0 = pool.score(np.array([chosen]))
-    best = (float(c0[0]), float(r0[0]))
+def _exchange(pool: _Pool, chosen: list[int], n_cand: int, cover_first: bool, progress=None):
+    """Fedorov-style exchange: swap one chosen candidate for an unused one while the key improves (`_better`).
+    Returns (the set, its key (3,), sets evaluated)."""
+    chosen = list(chosen)
+    best = pool.score(np.array([chosen]), cover_first)[0]
+    evaluated = 1
     for _ in range(_MAX_EXCHANGE_PASSES):
         improved = False
-        for slot in range(add):
+        for slot in range(len(chosen)):
             rest = np.array([i for i in range(n_cand) if i not in chosen], dtype=int)
             if len(rest) == 0:
                 break
             trial = np.tile(chosen, (len(rest), 1))
             trial[:, slot] = rest
-            cov, val = pool.score(trial)
+            keys = pool.score(trial, cover_first)
             evaluated += len(trial)
-            j = _best(cov, val)
-            if _better(float(cov[j]), float(val[j]), *best):
+            j = _best(keys)
+            if _better(keys[j], best):
                 chosen[slot] = int(rest[j])
-                best = (float(cov[j]), float(val[j]))
+                best = keys[j]
                 improved = True
         if progress:
             progress(1, "exchange")
         if not improved:
             break
-    return np.array(chosen, dtype=int), evaluated
+    return chosen, best, evaluated
+
+
+@dataclass(frozen=True, eq=False)
+class Search:
+    """What `_optimise` found: the chosen candidates (indices, possibly fewer than asked: only those that lower the
+    predicted RMST), its predicted RRBC RMST, the current set's, the greedy path's RMST after each step, the rule
+    sets' RMST (hull-corners; each random draw), how many sets were scored and which start exchange improved."""
+
+    chosen: np.ndarray
+    rmst: float
+    current: float
+    greedy_path: np.ndarray
+    corners: float
+    random_draws: np.ndarray
+    evaluated: int
+    started_from: str  # "greedy", "hull-corners" or "random"
+
+
+def _optimise(pool: _Pool, n_cand: int, add: int, rule_sets: dict, progress=None, cover_first: bool = False) -> Search:
+    """The suggestion for `add` fiducials: greedy forward selection on the key (`_Pool.score`), then exchange from
+    the best of the greedy set and the rules' sets (`rule_sets`: "hull-corners" -> (add,) indices, "random" ->
+    (D, add) draws), so the result is never worse than a rule's. If it is not predicted better than the current
+    fiducials, the best shorter greedy prefix that is, or nothing."""
+    current = pool.current()
+    chosen: list[int] = []
+    path = []
+    evaluated = 0
+    for step in range(add):
+        rest = np.array([i for i in range(n_cand) if i not in chosen], dtype=int)
+        trial = np.column_stack([np.tile(chosen, (len(rest), 1)).reshape(len(rest), len(chosen)), rest])
+        keys = pool.score(trial, cover_first)
+        j = _best(keys)
+        evaluated += len(trial)
+        chosen.append(int(rest[j]))
+        path.append(keys[j])
+        if progress:
+            progress(1, f"greedy {step + 1}/{add}")
+    if add == 0:
+        return Search(np.zeros(0, int), current, current, np.zeros(0), current, np.zeros(0), 0, "greedy")
+    corners = np.asarray(rule_sets["hull-corners"], int)
+    draws = np.asarray(rule_sets["random"], int).reshape(-1, add)
+    c_key = pool.score(corners[None], cover_first)[0]
+    d_keys = pool.score(draws, cover_first) if len(draws) else np.zeros((0, 3))
+    evaluated += 1 + len(draws)
+    starts = {"greedy": (chosen, path[-1]), "hull-corners": (list(corners), c_key)}
+    if len(draws):
+        k = _best(d_keys)
+        starts["random"] = (list(draws[k]), d_keys[k])
+    name = "greedy"
+    for other in ("hull-corners", "random"):
+        if other in starts and _better(starts[other][1], starts[name][1]):
+            name = other
+    best, key, n_ex = _exchange(pool, starts[name][0], n_cand, cover_first, progress)
+    evaluated += n_ex
+    rmst_path = np.array([p[1] for p in path])
+    val = float(key[1])
+    if val >= current:  # no set of `add` helps: the best greedy prefix that does, or nothing
+        k = int(np.argmin(rmst_path))
+        if rmst_path[k] < current:
+            best, val = chosen[: k + 1], float(rmst_path[k])
+        else:
+            best, val = [], current
+    return Search(
+        np.array(best, int), val, current, rmst_path, float(c_key[1]), d_keys[:, 1].astype(float), evaluated, name
+    )
 
 
 def _corner_choice(scene, cand_pos: np.ndarray, add: int) -> np.ndarray:

@@ -12,7 +12,9 @@ What is chosen, in order (each choice is written as a comment into the scene):
 4. Registration points: up to 6 well-spread points in free space over the work (80 and 280 mm above the
    targets' top), reachable, seen and outside solids.
 5. A default error model for the robot and sensor type (stated in the file).
-6. The initial fiducials: the planner (`analysis.planning.plan`) picks `fiducials` of the candidates.
+6. The initial fiducials: the planner (`analysis.planning.plan`, `cover_targets=True`) picks `fiducials` of the
+   candidates, preferring sets that hold the targets inside their hull (`interpolation.hull`, the one coverage
+   test), then the lowest predicted RMST; which targets are inside is reported and written into the scene.
 
 The file is written atomically (a temporary file in the output directory, loaded back with `load_scene` as a
 check, then renamed): a refusal or a failure leaves nothing behind.
@@ -200,15 +202,21 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
         )
         tmp_path.write_text(_toml(**parts, fiducials=np.zeros((0, 3)), plan_note=""), encoding="utf-8")
         scene = load_scene(tmp_path)
-        result = plan(scene, add=int(opt.fiducials), seed=opt.seed)
+        result = plan(scene, add=int(opt.fiducials), seed=opt.seed, cover_targets=True)
         fids = np.asarray(result.suggested, float).reshape(-1, 3)
         chosen = set(result.suggested_ids)
         rest = np.array([p for i, p in zip(scene.candidates.ids, scene.candidates.positions) if i not in chosen])
         parts["cand"] = rest.reshape(-1, 3)
         pr = result.predicted_after
+        inside = np.asarray(result.inside_after, bool)
+        covered_ids = [pid for pid, ok in zip(scene.target_ids, inside) if ok]
+        outside_ids = [pid for pid, ok in zip(scene.target_ids, inside) if not ok]
         note = (
-            f"planned by `rrbc plan` (seed {opt.seed}) from {len(cand)} candidates: predicted RMST over the targets' "
-            f"regions rigid {pr.rigid_mm:.3f} mm, RRBC {pr.rrbc_mm:.3f} mm (first-order prediction)"
+            f"planned by `rrbc plan` (seed {opt.seed}) from {len(cand)} candidates, targets inside their hull first, "
+            f"then the predicted RMST: {len(covered_ids)} of {len(inside)} targets inside their hull"
+            + (f" (outside: {', '.join(outside_ids)})" if outside_ids else "")
+            + f"; predicted RMST over the targets' regions rigid {pr.rigid_mm:.3f} mm, RRBC {pr.rrbc_mm:.3f} mm "
+            "(first-order prediction)"
         )
         text = _toml(**parts, fiducials=fids, plan_note=note)
         tmp_path.write_text(text, encoding="utf-8")
@@ -226,6 +234,9 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
         "sensor": [float(v) for v in sensor],
         "hidden_targets": hidden,
         "predicted_rmst_mm": {"rigid": float(pr.rigid_mm), "rrbc": float(pr.rrbc_mm)},
+        "targets_inside_hull": covered_ids,
+        "targets_outside_hull": outside_ids,
+        "region_coverage": {pid: float(c) for pid, c in zip(scene.target_ids, result.coverage_after)},
     }
     return NewScene(out, text, summary)
 

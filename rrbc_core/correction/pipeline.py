@@ -14,6 +14,7 @@ from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
 from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.errors import InputError
+from rrbc_core.interpolation.hull import Coverage, assess_coverage
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
 from rrbc_core.methods import SEEDED, MethodOptions
 from rrbc_core.runtime.threads import thread_limited
@@ -40,6 +41,10 @@ class CorrectionResult:
     checks_corrected: CorrectedPoints | None
     error_rigid: np.ndarray  # (C,) check-point errors, mm
     error_rrbc: np.ndarray
+    #: targets' and checks' coverage (`interpolation.hull.assess_coverage` over the fiducials' sensor readings: the
+    #: same test as the extrapolation flags, with the distance from the fiducials' plane); None without fiducials
+    targets_coverage: Coverage | None = None
+    checks_coverage: Coverage | None = None
 
     def summary(self) -> dict:
         if len(self.error_rigid) == 0:
@@ -142,4 +147,6 @@ def correct_measurements(mset: MeasurementSet, options: MethodOptions | None = N
         err_rrbc = metrics.tre(c_corr.robot_rrbc, checks.robot)
     else:
         err_rigid = err_rrbc = np.zeros(0)
-    return CorrectionResult(options, reg, fid, corr, targets, t_corr, checks, c_corr, err_rigid, err_rrbc)
+    t_cov = assess_coverage(fid.sensor, targets.sensor) if len(fid.ids) and len(targets.ids) else None
+    c_cov = assess_coverage(fid.sensor, checks.sensor) if len(fid.ids) and len(checks.ids) else None
+    return CorrectionResult(options, reg, fid, corr, targets, t_corr, checks, c_corr, err_rigid, err_rrbc, t_cov, c_cov)

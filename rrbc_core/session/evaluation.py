@@ -13,6 +13,7 @@ from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.errors import InputError
+from rrbc_core.interpolation.hull import Coverage, assess_coverage
 from rrbc_core.methods import MethodOptions
 
 #: Bounds of what a user controls (issue 16: a value sent by a client cannot push the session into overflow).
@@ -126,6 +127,9 @@ class Evaluation:
     targets: TargetResult
     hull_edges: np.ndarray  # (E,2,3) robot frame: edges of the included fiducials' convex hull
     summary: dict
+    #: each target inside the included fiducials' hull or not, and how far from their plane (sensor readings, as
+    #: RRBC sees them; `interpolation.hull.assess_coverage`, the one coverage); None without included fiducials
+    coverage: Coverage | None = None
 
 
 def hull_edges(points) -> np.ndarray:
@@ -254,6 +258,7 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         "extrapolated": [pid for pid, e in zip(tg.ids, targets.extrapolated) if e],
         "fiducials_used": int(np.count_nonzero(included)),
     }
+    coverage = assess_coverage(fid_r.sensor[included], tgt_r.sensor) if np.any(included) else None
     return Evaluation(
         s,
         reg,
@@ -269,4 +274,5 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         targets,
         hull,
         summary,
+        coverage,
     )

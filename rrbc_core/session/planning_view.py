@@ -167,8 +167,8 @@ class SessionPlanning:
         """Add fiducials and re-evaluate. `which`: None = every fiducial of the pending suggestion; a list of
         candidate ids (of the scene's candidates); or (K,3) robot-frame positions (mm). New fiducials get the
         candidate's id (or P1, P2, … for bare positions; a suffix if taken), are included, and are measured from
-        the error model with noise seeded by their id. Refused with InputError (session unchanged) if there is
-        nothing to add or a point is not usable."""
+        the error model with noise seeded by their id. One step of the edit history (`undo` removes them). Refused
+        with InputError (session unchanged) if there is nothing to add or a point is not usable."""
         self._require_planning()
         ids, pos = self._new_fiducials(which)
         fid = self.layout["fiducials"]
@@ -181,13 +181,16 @@ class SessionPlanning:
                 name = f"{base}-{n}"
             taken.add(name)
             new_ids.append(name)
-        old_layout, old_settings = self.layout, self.settings
-        self.layout = {**self.layout, "fiducials": Group(fid.ids + tuple(new_ids), np.vstack([fid.positions, pos]))}
-        self.settings = dataclasses.replace(self.settings, excluded=self.settings.excluded - set(new_ids))
+        old_settings = self.settings
+
+        def change():
+            self.layout = {**self.layout, "fiducials": Group(fid.ids + tuple(new_ids), np.vstack([fid.positions, pos]))}
+            self.settings = dataclasses.replace(self.settings, excluded=self.settings.excluded - set(new_ids))
+
         try:
-            ev = self.evaluate()
+            ev = self._edit(change)  # one step of the edit history: `undo` takes the accepted fiducials away again
         except InputError:
-            self.layout, self.settings = old_layout, old_settings
+            self.settings = old_settings
             raise
         self.clear_suggestion()
         self.accepted = self.accepted + tuple(new_ids)

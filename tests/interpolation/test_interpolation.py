@@ -29,6 +29,7 @@ from rrbc_core.interpolation import (
 from rrbc_core.interpolation import gp as gp_module
 from rrbc_core.interpolation import hull as hull_module
 from rrbc_core.interpolation import linear as linear_module
+from rrbc_core.interpolation.hull import OFF_PLANE_TOL_MM
 
 HYP = settings(
     max_examples=12,
@@ -114,10 +115,10 @@ def test_registry_and_protocol():
 
 def test_no_correction_predicts_zero_with_flags():
     p = plate_grid()
-    pred = NoCorrection().fit(p, smooth_field(p)).predict([[375.0, 262.5, 80.0], [5000.0, 0.0, 50.0]])
+    pred = NoCorrection().fit(p, smooth_field(p)).predict([[375.0, 262.5, 50.5], [5000.0, 0.0, 50.0]])
     assert np.all(pred.values == 0.0) and pred.std is None
     assert pred.extrapolated.tolist() == [False, True]
-    np.testing.assert_allclose(pred.off_plane_mm, [30.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(pred.off_plane_mm, [0.5, 0.0], atol=1e-9)
 
 
 def test_empty_query():
@@ -314,10 +315,12 @@ def test_collinear_fiducials(name):
     e = 0.1 + t[:, None] * np.array([1e-3, -2e-3, 5e-4])  # linear along the line
     tq = np.array([-200.0, 0.0, 40.0, 333.0, 520.0, 800.0])
     side = np.cross(direction, [0.0, 0.0, 1.0])  # perpendicular to the line
-    q = np.array([10.0, 20.0, 30.0]) + tq[:, None] * direction + 7.0 * side / np.linalg.norm(side)
+    q = np.array([10.0, 20.0, 30.0]) + tq[:, None] * direction + 0.7 * side / np.linalg.norm(side)
     pred = make_interpolator(name).fit(p, e).predict(q)
     assert pred.extrapolated.tolist() == [True, False, False, False, False, True]
-    np.testing.assert_allclose(pred.off_plane_mm, 7.0, atol=1e-9)
+    np.testing.assert_allclose(pred.off_plane_mm, 0.7, atol=1e-9)
+    # 7 mm off the line is outside the segment's hull wherever along it (issue 25: farther than 1 mm)
+    assert make_interpolator(name).fit(p, e).predict(q + 6.3 * side / np.linalg.norm(side)).extrapolated.all()
     assert np.all(np.isfinite(pred.values))
     if name != "idw":  # linear precision along the line, extension beyond both ends
         np.testing.assert_allclose(pred.values, 0.1 + tq[:, None] * [1e-3, -2e-3, 5e-4], rtol=0, atol=1e-9)
@@ -410,10 +413,15 @@ def test_flags_on_plate():
     assert not extra[: len(inside)].any()
     assert extra[len(inside) :].all()
     np.testing.assert_allclose(off, 0.0, atol=1e-9)
-    for h in (0.5, 20.0, -300.0):
+    for h in (0.5, 0.999, 1.001, 20.0, 100.0, -300.0):
         extra, off = hull_flags(p, [375.0, 262.5, 50.0 + h])
-        assert not extra[0]  # judged by its projection onto the plate
+        # over the plate's polygon, but farther than OFF_PLANE_TOL_MM (1 mm) from its plane: outside (issue 25)
+        assert extra[0] == (abs(h) > OFF_PLANE_TOL_MM)
         assert off[0] == pytest.approx(abs(h), abs=1e-9)
+    # a plate that is not quite flat: the tolerance grows to its own farthest fiducial from the plane
+    bumpy = p + np.c_[np.zeros((16, 2)), np.where(np.arange(16) % 2, 3.0, -3.0)]
+    extra, off = hull_flags(bumpy, [[375.0, 262.5, 52.5], [375.0, 262.5, 54.0]])
+    assert extra.tolist() == [False, True]
 
 
 @HYP
@@ -427,7 +435,7 @@ def test_flags_on_tilted_plate(rv, h):
     q = np.vstack([p, centroid, centroid + h * normal, far])
     for name in METHODS:
         pred = make_interpolator(name).fit(p, smooth_field(p)).predict(q)
-        assert pred.extrapolated.tolist() == [False] * 18 + [True]
+        assert pred.extrapolated.tolist() == [False] * 17 + [abs(h) > OFF_PLANE_TOL_MM, True]
         np.testing.assert_allclose(pred.off_plane_mm[:17], 0.0, atol=1e-9)
         assert pred.off_plane_mm[17] == pytest.approx(abs(h), abs=1e-9)
 

@@ -110,7 +110,10 @@ def test_the_plan_tab_suggests_where_to_measure_for_measured_data():
 
     app = serve(str(EXAMPLE_CSV))
     try:
-        assert "coverage of each target's region" in app.planning.info.content
+        info = app.planning.info.content
+        ev = app.session.last  # the Plan tab says what the Explore card says about each target (one coverage)
+        assert f"**{int(ev.coverage.inside.sum())} of {len(ev.targets.ids)} targets** inside" in info
+        assert "regions**" in info and "fully inside" in info
         assert app.planning.suggest_button.visible and not app.planning.suggest_button.disabled
         plan = app.suggest_fiducials(3)
         assert plan is not None and len(app.planning.ghosts) == 3

@@ -37,7 +37,7 @@ def shown_rmst(app) -> tuple[float, float, float, float]:
 
 
 def shown_coverage(app) -> dict[str, str]:
-    return dict(re.findall(r"\| (H\d) \| ([0-9.]+ %)", app.planning.coverage_md.content))
+    return dict(re.findall(r"\| (H\d) \| (?:inside|⚠ outside) \| ([0-9.]+ %)", app.planning.coverage_md.content))
 
 
 def test_plan_tab_shows_the_sessions_planning(app):
