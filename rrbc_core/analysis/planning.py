@@ -66,8 +66,9 @@ the simple rules give others — "hull-corners" (the usable candidates nearest t
 corners taken in farthest-first order) and "random" (`RANDOM_DRAWS` seeded random K-subsets; the baseline reported is
 their mean) — and exchange (swap a chosen candidate for an unused one while the prediction falls) starts from the best
 of these. So a suggestion is never predicted worse than either rule's set. Adding fiducials can make RRBC worse (each
-carries its noise into the targets near it): if no set of K is predicted to lower the RMST of the current fiducials,
-the best shorter prefix of the greedy path that does is suggested, or nothing, and `PlanResult.note` says so.
+carries its noise into the targets near it): if no set of K is predicted to lower the RMST of the current fiducials
+by more than `MIN_GAIN` (2 %, the first-order prediction's own accuracy), the best shorter prefix of the greedy path
+that does is suggested, or nothing, and `PlanResult.note` says so.
 (Coverage first, as an earlier version ranked, made cells worse: a hull-filling candidate can raise the RMST.)
 """
 
@@ -90,7 +91,14 @@ from rrbc_core.analysis.planning_model import (
     _predict_fast,
     _predict_mc,
 )
-from rrbc_core.analysis.planning_search import SURFACE_TOL_MM, _corner_choice, _optimise, _pool, usable_candidates
+from rrbc_core.analysis.planning_search import (
+    MIN_GAIN,
+    SURFACE_TOL_MM,
+    _corner_choice,
+    _optimise,
+    _pool,
+    usable_candidates,
+)
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.hull import OFF_PLANE_TOL_MM, assess_coverage, coverage
 from rrbc_core.runtime.threads import thread_limited
@@ -99,6 +107,7 @@ if TYPE_CHECKING:
     from rrbc_core.io.scene import Scene
 
 __all__ = [
+    "MIN_GAIN",
     "OFF_PLANE_TOL_MM",
     "IDW_K",
     "IDW_POWER",
@@ -380,14 +389,17 @@ def plan(
         )
     elif len(chosen):
         note = (
-            f"no set of {add} candidates is predicted to lower the RMST with RRBC ({pred0.rrbc_mm:.4f} mm now); the "
-            f"best {len(chosen)} do ({pred1.rrbc_mm:.4f} mm), so only {len(chosen)} are suggested"
+            f"no set of {add} candidates is predicted to lower the RMST with RRBC ({pred0.rrbc_mm:.4f} mm now) by "
+            f"more than {100 * MIN_GAIN:g} %, the prediction's accuracy; the best {len(chosen)} do "
+            f"({pred1.rrbc_mm:.4f} mm), so only {len(chosen)} are suggested"
         )
     else:
+        best = min(found.rmst, float(np.min(found.greedy_path)))
         note = (
             f"no candidate is predicted to lower the RMST with RRBC ({pred0.rrbc_mm:.4f} mm now; the best of up to "
-            f"{add} found would give {min(found.rmst, float(np.min(found.greedy_path))):.4f} mm): nothing is suggested "
-            "- more fiducials here would carry more noise into the targets than bias they remove"
+            f"{add} found gives {best:.4f} mm, {100 * (best / pred0.rrbc_mm - 1):+.1f} %) by more than "
+            f"{100 * MIN_GAIN:g} %, the prediction's accuracy: nothing is suggested - more fiducials here would carry "
+            "about as much noise into the targets as bias they remove, or more"
         )
     return PlanResult(
         scene.target_ids,

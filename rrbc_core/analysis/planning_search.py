@@ -26,6 +26,11 @@ _MAX_EXCHANGE_PASSES = 20
 _IMPROVE_REL = 1e-9
 
 
+#: Least relative drop of the predicted RMST for a suggestion to be made: the first-order prediction's own accuracy
+#: (docs/theory.md §2.3 measured its noise term within 1-2 % of Monte Carlo), so a smaller predicted gain is not one.
+MIN_GAIN = 0.02
+
+
 # ------------------------------------------------------------------------------------------------------
 # Candidates
 # ------------------------------------------------------------------------------------------------------
@@ -274,7 +279,7 @@ def _optimise(pool: _Pool, n_cand: int, add: int, rule_sets: dict, progress=None
     """The suggestion for `add` fiducials: greedy forward selection on the key (`_Pool.score`), then exchange from
     the best of the greedy set and the rules' sets (`rule_sets`: "hull-corners" -> (add,) indices, "random" ->
     (D, add) draws), so the result is never worse than a rule's. If it is not predicted better than the current
-    fiducials, the best shorter greedy prefix that is, or nothing."""
+    fiducials by at least `MIN_GAIN`, the best shorter greedy prefix that is, or nothing."""
     current = pool.current()
     chosen: list[int] = []
     path = []
@@ -308,9 +313,10 @@ def _optimise(pool: _Pool, n_cand: int, add: int, rule_sets: dict, progress=None
     evaluated += n_ex
     rmst_path = np.array([p[1] for p in path])
     val = float(key[1])
-    if val >= current:  # no set of `add` helps: the best greedy prefix that does, or nothing
+    enough = current * (1 - MIN_GAIN)
+    if val > enough:  # no set of `add` helps by more than the prediction's accuracy: a shorter prefix, or nothing
         k = int(np.argmin(rmst_path))
-        if rmst_path[k] < current:
+        if rmst_path[k] <= enough:
             best, val = chosen[: k + 1], float(rmst_path[k])
         else:
             best, val = [], current

@@ -39,6 +39,10 @@ def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
     summary = json.loads(r.stdout)
     assert summary["targets"] == 6 and summary["fiducials"] == 6 and summary["registration"] >= 4
     assert summary["hidden_targets"] == []
+    # the fixture's top offers candidates around the targets: scene new covers every target (issue 25) ...
+    assert (
+        summary["targets_inside_hull"] == ["T1", "T2", "T3", "T4", "T5", "T6"] and not summary["targets_outside_hull"]
+    )
     scene = load_scene(out)  # what plan, simulate and view read
     assert scene.robot_model == "ur5" and len(scene.candidates.ids) >= 20
     np.testing.assert_allclose(scene.target_positions, info["targets"], atol=1e-3)
@@ -50,8 +54,10 @@ def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
     r = _run("plan", out, "--add", 4, "--json")
     assert r.returncode == 0, r.stderr
     plan = json.loads(r.stdout)
-    sugg = np.array(plan["suggested"], float)
-    assert len(sugg) == 4
+    sugg = np.array(plan["suggested"], float).reshape(-1, 3)
+    assert 1 <= len(sugg) <= 4 and plan["predicted_rmst_after_mm"] < plan["predicted_rmst_mm"]
+    # ... and so say plan (before the suggestions) and the app's Explore card
+    assert all(plan["inside_hull_per_target"].values())
     d, inside = _on_surface_and_outside(info["mesh"], info, sugg)
     assert d.max() < 0.01 and not inside.any()
     # simulate and correct: RRBC helps on the generated cell as the planner predicted it would
@@ -68,6 +74,7 @@ def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
     app = serve(str(out))
     try:
         assert app.session.last.targets.ids == scene.target_ids and app.nodes.arm is not None
+        assert app.session.last.coverage.inside.all()
     finally:
         app.stop()
 
