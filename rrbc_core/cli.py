@@ -264,6 +264,8 @@ def _table(result) -> str:
             row = f"  {pid:<12} {_fmt_vec(cp.correction[k])}   {_fmt_vec(cp.robot_rrbc[k], 12, 4)}"
             if checks:
                 row += f" {result.error_rigid[k]:9.4f} {result.error_rrbc[k]:9.4f}"
+            if checks and result.error_rrbc[k] > result.error_rigid[k]:
+                row += "  RRBC worse"
             if cp.extrapolated[k]:
                 row += "  extrapolated" + (f": {cov.describe(k)}" if cov is not None else "")
             lines.append(row)
@@ -278,6 +280,7 @@ def _table(result) -> str:
             f"RRBC {s['rmst_rrbc_mm']:.4f} mm ({change:+.1f} %); max rigid {s['max_rigid_mm']:.4f} mm, "
             f"RRBC {s['max_rrbc_mm']:.4f} mm"
         )
+        lines += result.statistics().lines()
     return "\n".join(lines) + "\n"
 
 

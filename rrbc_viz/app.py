@@ -46,6 +46,7 @@ import viser
 from rrbc_core.analysis.diagnosis import Diagnosis
 from rrbc_core.errors import InputError, one_line
 from rrbc_core.runtime.threads import apply_process_policy
+from rrbc_core.session.data_set import check_statistics
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
@@ -269,6 +270,17 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         if heat:
             self._update_heat()
             self._update_slice()
+            self._update_checks()
+
+    def _update_checks(self) -> None:
+        """The Explore tab's check statistics and histogram (`data_set.check_statistics`: rrbc correct on the CSV
+        download), refreshed when the heat map is (a drag's end, a setting, a load), not on every drag update."""
+        s = self.session.settings
+        try:
+            stats = check_statistics(self.session)
+        except InputError:
+            stats = None
+        self.controls.checks.show(stats, f"{s.registration} + {s.interpolation}")
 
     def _update_heat(self) -> None:
         """Recompute the heat map now if its layer is on (else leave it stale until shown)."""

@@ -21,6 +21,7 @@ from rrbc_core.session.evaluation import Settings
 
 from .authoring_panel import AuthoringPanel
 from .camera import PRESETS
+from .checks_panel import ChecksPanel
 from .colors import legend_html
 from .diagnosis_panel import PROMPT
 from .nodes import LAYERS, Display
@@ -424,6 +425,7 @@ class Controls:
         with tabs.add_tab("Explore", icon=viser.Icon.ADJUSTMENTS):
             self.selection = SelectionPanel(gui, app, self.syncing)
             self.explore = ExplorePanel(gui, app, self.syncing)
+            self.checks = ChecksPanel(gui)
         with tabs.add_tab("View", icon=viser.Icon.EYE):
             self.view = ViewPanel(gui, app, self.syncing)
         with tabs.add_tab("Learn", icon=viser.Icon.SCHOOL):

@@ -41,7 +41,12 @@ def render(d: Diagnosis, data: SessionData, stale: bool = False) -> str:
         f"{note}Diagnosis of {escape(data.what)}. The same as `{data.diagnose_command('DATA.csv')}` on "
         "these data (**File → Download data (CSV)** writes them)."
     )
-    body = [escape(line) for line in diagnosis_lines(d)]
+    lines = diagnosis_lines(d)
+    table = d.check_statistics.lines() if d.check_statistics is not None else []
+    at = next((i for i in range(len(lines)) if lines[i : i + len(table)] == table), None) if table else None
+    body = [escape(line) for line in lines]
+    if at is not None:  # the before/after table as the command prints it, its columns kept
+        body[at : at + len(table)] = ["```\n" + "\n".join(table) + "\n```"]
     return "\n\n".join(head + body)
 
 

@@ -55,6 +55,7 @@ from rrbc_core.analysis.diagnosis_stats import (
     _whitener,
 )
 from rrbc_core.analysis.diagnosis_verdict import rrbc_verdict
+from rrbc_core.correction.check_statistics import CheckStatistics
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.registration.strategies import least_squares
@@ -108,6 +109,7 @@ class Diagnosis:
     expected_change_without_outliers: float | None = None
     basis: str = "leave-one-out"  # or "checks": rrbc correct's own figure on the file's check rows
     checks_rms_mm: tuple[float, float] | None = None  # rrbc correct's check RMST (rigid, RRBC), None without checks
+    check_statistics: CheckStatistics | None = None  # rrbc correct's before/after statistics of the checks
 
     @property
     def assumes(self) -> str:
@@ -165,6 +167,7 @@ class Diagnosis:
             "alpha": float(self.alpha),
             "tests": {k: float(v) for k, v in self.tests.items()},
             "limits": list(self.limits),
+            "check_statistics": None if self.check_statistics is None else self.check_statistics.to_json(),
         }
 
 
@@ -656,4 +659,5 @@ def diagnose(
         expected_change_without_outliers=verdict.without_outliers,
         basis=verdict.basis,
         checks_rms_mm=(verdict.rms_rigid_mm, verdict.rms_rrbc_mm) if verdict.basis == "checks" else None,
+        check_statistics=verdict.statistics,
     )

@@ -58,6 +58,8 @@ def diagnosis_lines(dg: Diagnosis) -> list[str]:
             f"  leave-one-out over the paired points (not the basis of the verdict): {_pct(loo)}; it treats each "
             "paired point as a stand-in for a check at its place"
         )
+    if dg.check_statistics is not None:
+        lines += dg.check_statistics.lines()
     lines += [f"limit: {text}" for text in dg.limits]
     return lines
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rrbc_core.analysis.diagnosis_stats import _loo
+from rrbc_core.correction.check_statistics import CheckStatistics
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
@@ -40,6 +41,7 @@ class Verdict:
     without_outliers: float | None
     loo_rigid_mm: float
     loo_rrbc_mm: float
+    statistics: CheckStatistics | None = None  # `rrbc correct`'s before/after statistics of the checks (basis checks)
 
     @property
     def change(self) -> float:
@@ -50,17 +52,19 @@ class Verdict:
         return bool(self.rms_rrbc_mm < self.rms_rigid_mm)
 
 
-def _check_rms(mset: MeasurementSet) -> tuple[float, float] | None:
-    """`rrbc correct`'s check RMST (rigid, RRBC) on `mset`, or None when it has no scored checks or cannot run."""
+def _check_rms(mset: MeasurementSet) -> tuple[float, float, CheckStatistics] | None:
+    """`rrbc correct`'s check RMST (rigid, RRBC) on `mset` and its check statistics, or None when it has no scored
+    checks or cannot run."""
     if not any(r == "check" for r in mset.roles):
         return None
     try:
-        s = correct_measurements(mset).summary()
+        res = correct_measurements(mset)
     except InputError:  # too few registration points, no fiducials: rrbc correct refuses, no check figure
         return None
+    s = res.summary()
     if s["rmst_rigid_mm"] is None:
         return None
-    return float(s["rmst_rigid_mm"]), float(s["rmst_rrbc_mm"])
+    return float(s["rmst_rigid_mm"]), float(s["rmst_rrbc_mm"]), res.statistics()
 
 
 def _without_ids(mset: MeasurementSet, drop: set) -> MeasurementSet:
@@ -116,7 +120,7 @@ def rrbc_verdict(
         if drop:
             w = _check_rms(_without_ids(mset, drop))
             without = (w[1] / w[0] - 1.0 if w[0] > 0 else 0.0) if w is not None else None
-        return Verdict("checks", checks[0], checks[1], without, loo_rigid, loo_rrbc)
+        return Verdict("checks", checks[0], checks[1], without, loo_rigid, loo_rrbc, checks[2])
     without = None
     if drop:
         r2, f2 = _loo(sensor[good], robot[good], count[good])

@@ -12,6 +12,7 @@ import numpy as np
 
 from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
+from rrbc_core.correction.check_statistics import CheckStatistics, check_statistics
 from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
@@ -56,6 +57,13 @@ class CorrectionResult:
             "max_rrbc_mm": metrics.max_error(self.error_rrbc),
         }
 
+    def statistics(self) -> CheckStatistics | None:
+        """Before/after statistics of the check errors (`check_statistics`), None without checks."""
+        if self.checks_corrected is None or len(self.error_rigid) == 0:
+            return None
+        c = self.checks_corrected
+        return check_statistics(self.checks.ids, c.robot_rigid, c.robot_rrbc, self.checks.robot)
+
     def to_json(self) -> dict:
         """The JSON object of `rrbc correct --json` (docs/cli.md)."""
         reg = self.registration
@@ -72,6 +80,7 @@ class CorrectionResult:
             "targets": _points_json(self.targets, self.targets_corrected),
             "checks": _points_json(self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc),
             "summary": self.summary(),
+            "check_statistics": None if (st := self.statistics()) is None else st.to_json(),
         }
 
 
@@ -96,6 +105,7 @@ def _points_json(group: PointGroup, corrected: CorrectedPoints | None, err_rigid
             row["robot_truth"] = group.robot[k].tolist()
             row["error_rigid_mm"] = float(err_rigid[k])
             row["error_rrbc_mm"] = float(err_rrbc[k])
+            row["rrbc_worse"] = bool(err_rrbc[k] > err_rigid[k])
         rows.append(row)
     return rows
 

@@ -32,7 +32,7 @@ from rrbc_core.io.measurements import MeasurementSet
 if TYPE_CHECKING:
     from rrbc_core.session.explorer import ExplorerSession
 
-__all__ = ["SessionData", "data_key", "session_data"]
+__all__ = ["SessionData", "check_statistics", "data_key", "session_data"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -237,3 +237,23 @@ def _scene_data(session: ExplorerSession) -> SessionData:
         return SessionData(mset, False, what, sc.robot_model, float(arm.dh.tool_mm))
 
     return session._cached("data_set", key, build)
+
+
+def check_statistics(session: ExplorerSession):
+    """Before/after statistics of the data set's check rows (`correction.check_statistics`) as `rrbc correct` with
+    the session's method computes them on the CSV download; None without checks (or when correct refuses)."""
+    from rrbc_core.correction.pipeline import correct_measurements
+    from rrbc_core.errors import InputError
+
+    method = session.settings.method
+
+    def compute():
+        data = session_data(session).measurements
+        if "check" not in data.roles:
+            return None
+        try:
+            return correct_measurements(data, method).statistics()
+        except InputError:
+            return None
+
+    return session._cached("check_statistics", (data_key(session), method), compute)

@@ -28,10 +28,16 @@ def _cli(capsys, *args) -> str:
 
 
 def _tab_lines(app) -> list[str]:
-    """The tab's paragraphs after its heading, as plain text."""
+    """The tab's paragraphs after its heading, as plain text (a fenced block's lines as they are)."""
     paragraphs = app.controls.diagnose.diagnosis.content.split("\n\n")
     assert paragraphs[0].startswith(("Diagnosis of", "**Edited data.**")), paragraphs[0]
-    return [unescape(p) for p in paragraphs[1:]]
+    out = []
+    for p in paragraphs[1:]:
+        if p.startswith("```\n") and p.endswith("\n```"):
+            out += p[4:-4].split("\n")
+        else:
+            out.append(unescape(p))
+    return out
 
 
 def _assert_tab_is_cli(app, capsys, path, *options) -> None:
