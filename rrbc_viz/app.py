@@ -13,9 +13,10 @@ change came from Python); the status line at the top of the panel shows the last
 Per-student state would mean one session per `ClientHandle` built in `on_client_connect` (client-scoped
 scene and GUI); it is not done.
 
-Concurrency. viser runs gizmo callbacks (async) on its event loop and GUI callbacks on a thread pool; every
-change to the session and the scene goes through one re-entrant lock, and scene updates of one change are
-sent in one `server.atomic()` block. A drag update re-evaluates the session (milliseconds) and updates node
+Concurrency. viser runs gizmo callbacks (async) on its event loop and GUI callbacks on a thread pool. A gizmo
+callback only records its event in a latest-wins queue (`drag_queue.DragQueue`: per handle only the newest update
+is handled, a drag's start and end never dropped), which one thread works off; every change to the session and the
+scene goes through one re-entrant lock, and scene updates of one change are sent in one `server.atomic()` block. A drag update re-evaluates the session (milliseconds) and updates node
 properties in place; the heat map is recomputed at most every `HEAT_INTERVAL_S` during a drag and at its end;
 Monte Carlo runs in a background thread (`montecarlo.MonteCarloRunner`) after a setting changes, a drag ends or
 the seed changes. (A heat map that takes longer than `HEAT_LIVE_MAX_S` waits for the drag's end.)
@@ -58,6 +59,7 @@ from .app_vec import VecActions
 from .app_views import ViewActions
 from .camera import OPENING, CameraDirector, preset_view
 from .colors import legend_markdown
+from .drag_queue import DragQueue
 from .controls import HEAT_CHOICES, Controls
 from .montecarlo import MonteCarloRunner
 from .nodes import LAYERS, Display, SceneNodes, gizmo_name, nice_down
@@ -136,7 +138,9 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         self.presentation = False  # presentation mode (set_presentation)
         self.camera = CameraDirector(server)
         self.camera_preset = OPENING
-        self.nodes = SceneNodes(server, self._on_gizmo, self._on_point_click)
+        # gizmo events go through a latest-wins queue handled by one thread (drag_queue): never a backlog
+        self.drags = DragQueue(self._on_gizmo, name="rrbc-drags")
+        self.nodes = SceneNodes(server, self.drags.submit, self._on_point_click)
         self.slice_node = SliceNode(server.scene)
         self.error_slice = None  # the last ErrorSlice shown
         self.planning: PlanningPanel | None = None
@@ -165,6 +169,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         if self._stopped:
             return
         self._stopped = True
+        self.drags.stop()
         self.mc.stop()
         self.planning.stop()
         if not self.owns_server:
@@ -321,6 +326,10 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         return self.messages[-1] if self.messages else None
 
     # ------------------------------------------------------------------------------------------- dragging
+    def wait_drags(self, timeout: float = 10.0) -> bool:
+        """Block until every drag event from the browser has been handled (True if within `timeout` s)."""
+        return self.drags.wait_idle(timeout)
+
     def _on_gizmo(self, kind: str, pid: str, position, phase: str, client=None) -> None:
         try:
             self.handle_drag(kind, pid, position, phase, client=client)

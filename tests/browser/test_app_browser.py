@@ -225,7 +225,7 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
     assert server_position(app, "targets", "H1")[0] < 300.0
     row2 = target_row(page, "H1")
     assert "extrapolated" in row2[-1] and row2[1:4] != row1[1:4], (row1, row2)
-    note = page.get_by_text("outside the fiducials' hull", exact=False).first
+    note = page.get_by_text("(outside the fiducials' hull):", exact=False).first  # the summary's list
     note.wait_for(state="visible")
     assert "H1" in note.inner_text()
     assert np.allclose(server_position(app, "targets", "H2"), [400.0, -50.0, 15.0])  # the others stay

@@ -30,6 +30,7 @@ def _gizmo_drag(app: RunningApp, kind: str, pid: str, positions) -> None:
         await scene._handle_transform_controls_drag_end(0, msg.TransformControlsDragEndMessage(name=name))
 
     asyncio.run_coroutine_threadsafe(run(), loop).result(timeout=20)
+    assert app.wait_drags(20.0), "the drag events were not handled in time"
 
 
 def _press(button) -> None:
