@@ -59,8 +59,8 @@ from .app_vec import VecActions
 from .app_views import ViewActions
 from .camera import OPENING, CameraDirector, preset_view
 from .colors import legend_markdown
-from .drag_queue import DragQueue
 from .controls import HEAT_CHOICES, Controls
+from .drag_queue import DragQueue
 from .montecarlo import MonteCarloRunner
 from .nodes import LAYERS, Display, SceneNodes, gizmo_name, nice_down
 from .planning_panel import PlanningPanel
