@@ -151,6 +151,42 @@ def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(ap
     assert app.handle_drag("fiducials", cid, np.add(result.suggested[0], [0.0, 0.0, 5.0]), "end") is not None
 
 
+def test_accept_is_undone_by_the_plan_tabs_undo(app):
+    """Accept is one step of the edit history (issue 25): Undo in the Plan tab takes the fiducials away again and
+    the prediction back; Redo (File tab) brings them back."""
+    panel = app.planning
+    assert panel.undo_button.disabled
+    ids0 = app.session.layout["fiducials"].ids
+    rmst0 = shown_rmst(app)
+    panel.k.value = 2
+    _press(panel.suggest_button)
+    new = app.session.suggestion.suggested_ids
+    _press(panel.accept_button)
+    assert app.session.layout["fiducials"].ids == ids0 + tuple(new) and not panel.undo_button.disabled
+    assert "Undo takes them away" in app.last_message
+    _press(panel.undo_button)
+    assert app.session.layout["fiducials"].ids == ids0
+    assert all(app.server.scene.get_handle_by_name(f"/fiducials/{c}/gizmo/sphere") is None for c in new)
+    settled(app)
+    assert shown_rmst(app) == rmst0 and panel.undo_button.disabled
+    _press(app.controls.authoring.redo)
+    assert app.session.layout["fiducials"].ids == ids0 + tuple(new)
+
+
+def test_a_stale_suggestion_cannot_be_accepted(app):
+    """A suggestion is never predicted worse than the fiducials it was made for; once they change (a drag) it
+    may be, so Accept is offered only again after a new Suggest."""
+    panel = app.planning
+    panel.k.value = 2
+    _press(panel.suggest_button)
+    assert not panel.accept_button.disabled
+    app.handle_drag("fiducials", "F2", [300.0, 230.0, 10.0], "end")
+    settled(app)
+    assert panel.accept_button.disabled and "press Suggest again" in panel.suggestion_md.content
+    _press(panel.suggest_button)
+    assert not panel.accept_button.disabled
+
+
 def test_clear_and_refusals_are_visible(app):
     panel = app.planning
     assert app.accept_suggestions() is None and "Suggest first" in app.last_message  # nothing to accept
