@@ -278,10 +278,14 @@ def test_plan_asks_for_too_many(partial):
 def test_plan_runs_on_every_shipped_scene(name):
     scene = load_scene(ROOT / "scenes" / f"{name}.toml")
     res = planning.plan(scene, 2, seed=1)
-    assert len(res.suggested_ids) == 2 and set(res.suggested_ids) <= set(scene.candidates.ids)
+    assert len(res.suggested_ids) <= 2 and set(res.suggested_ids) <= set(scene.candidates.ids)
     assert not set(res.suggested_ids) & set(res.rejected)
     assert set(res.baselines) == {"hull-corners", "random"}
-    # the optimiser's objective: never worse than the rules it is compared with (same coverage here)
+    if name == "breadboard_vanwyk2018":  # every target sits on a fiducial: no set gains more than 2 % (planning.md)
+        assert res.suggested_ids == () and "nothing is suggested" in res.note
+        return
+    assert len(res.suggested_ids) == 2
+    # the optimiser's objective: never worse than the rules it is compared with
     assert res.predicted_after.rrbc_mm <= res.baselines["hull-corners"].rrbc_mm * (1 + 1e-9)
     assert res.predicted_after.rrbc_mm <= res.baselines["random"].rrbc_mm * (1 + 1e-9)
     js = res.to_json()
