@@ -218,6 +218,20 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def progress_bar(total: int, label: str):
+    """A tqdm bar on stderr (so `--json` on stdout stays clean), silent for the first second and off a terminal."""
+    from tqdm import tqdm
+
+    return tqdm(total=max(int(total), 1), desc=label, file=sys.stderr, delay=1.0, disable=None, leave=False)
+
+
+def _advance(bar, n: int, label: str | None = None) -> None:
+    """A library progress callback `(n, label)` on a tqdm bar."""
+    if label is not None:
+        bar.set_description_str(label, refresh=False)
+    bar.update(n)
+
+
 def _fmt_vec(v, width=9, prec=4):
     return " ".join(f"{x:{width}.{prec}f}" for x in v)
 
@@ -355,7 +369,6 @@ def _simulate_table(res) -> str:
 def _cmd_simulate(args) -> str:
     from rrbc_core.io.measurements_write import write_measurements
     from rrbc_core.io.scene_toml import load_scene
-    from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.simulation.montecarlo import INTERPOLATION_NAMES, STRATEGY_NAMES, simulate, simulated_data
 
     if args.out is not None:
@@ -365,7 +378,7 @@ def _cmd_simulate(args) -> str:
     scene = load_scene(args.scene)
     if args.layout:
         scene.with_layout(args.layout)  # an unknown layout is refused before any work
-    bar = ProgressBar(args.trials * (len(STRATEGY_NAMES) + len(INTERPOLATION_NAMES)) + args.icp, "simulating")
+    bar = progress_bar(args.trials * (len(STRATEGY_NAMES) + len(INTERPOLATION_NAMES)) + args.icp, "simulating")
     try:
         res = simulate(
             scene,
@@ -373,7 +386,7 @@ def _cmd_simulate(args) -> str:
             seed=args.seed,
             layout=args.layout,
             icp=args.icp,
-            progress=lambda n, label: bar.update(n, label),
+            progress=lambda n, label: _advance(bar, n, label),
             scheduler=_where(args.scheduler),
         )
     finally:
@@ -460,12 +473,11 @@ def _plan_table(res) -> str:
 def _cmd_plan(args) -> str:
     from rrbc_core.analysis.planning import plan
     from rrbc_core.io.scene_toml import load_scene
-    from rrbc_core.runtime.progress import ProgressBar
 
     scene = load_scene(args.scene)
-    bar = ProgressBar(2 * args.add + 2, "planning")
+    bar = progress_bar(2 * args.add + 2, "planning")
     try:
-        res = plan(scene, args.add, seed=args.seed, progress=lambda n, label: bar.update(n, label))
+        res = plan(scene, args.add, seed=args.seed, progress=lambda n, label: _advance(bar, n, label))
     finally:
         bar.close()
     if args.json:
@@ -506,7 +518,6 @@ def _scheduler_option(parser, what: str) -> None:
 
 
 def _cmd_reproduce_crpi(args) -> str:
-    from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.studies import crpi_study
     from rrbc_core.studies.crpi_report import write_report
 
@@ -520,7 +531,7 @@ def _cmd_reproduce_crpi(args) -> str:
         seed=args.seed,
         joint_replicates=joint,
         scheduler=_where(args.scheduler),
-        progress_factory=lambda total: ProgressBar(total, "reproducing crpi"),
+        progress_factory=lambda total: progress_bar(total, "reproducing crpi"),
     )
     command = "rrbc reproduce crpi" + (f" --out {args.out}" if args.out else "")
     if args.replicates is not None:
@@ -564,7 +575,6 @@ def _reproduce_text(lines: list[str], report) -> str:
 
 
 def _cmd_reproduce(args) -> str:
-    from rrbc_core.runtime.progress import ProgressBar
     from rrbc_core.studies import reproduction, vanwyk2018
     from rrbc_core.studies.vanwyk2018_report import write_report
 
@@ -585,7 +595,7 @@ def _cmd_reproduce(args) -> str:
         seed=args.seed,
         layout_names=names,
         confusion=not args.no_confusion,
-        progress_factory=lambda total: ProgressBar(total, "reproducing vanwyk2018"),
+        progress_factory=lambda total: progress_bar(total, "reproducing vanwyk2018"),
         scheduler=_where(args.scheduler),
     )
     command = "rrbc reproduce vanwyk2018" + (f" --out {args.out}" if args.out else "")

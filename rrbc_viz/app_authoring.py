@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.visibility import cast_from
+from rrbc_core.models.visibility import cast_from
 
 from . import files
 

@@ -22,7 +22,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.kinematics import DHParameters, forward
+from rrbc_core.models.kinematics import DHParameters, forward
 
 ANGLE_SCALE_MM = 500.0  # an angle error of 1 rad moves a point ~500 mm at a UR5's reach: parameters compared in mm
 RANK_TOL = 1e-4  # singular values below this fraction of the largest: a combination the data do not determine

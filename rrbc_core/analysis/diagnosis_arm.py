@@ -20,7 +20,7 @@ import numpy as np
 from rrbc_core.analysis.calibration import position_jacobian
 from rrbc_core.errors import InputError
 from rrbc_core.io.joints import joint_angles
-from rrbc_core.simulation.kinematics import ROBOT_DH
+from rrbc_core.models.kinematics import ROBOT_DH
 
 MIN_POINTS = 12  # fewer paired points with joints: the kinematic test is not run (said in the limits)
 

@@ -41,7 +41,7 @@ def _buried(mesh, points: np.ndarray) -> dict:
     part passing through it, like a table top through a block standing on it — stays usable."""
     import open3d as o3d
 
-    from rrbc_core.simulation.visibility import inside_solids, raycasting_scene
+    from rrbc_core.models.visibility import inside_solids, raycasting_scene
 
     flagged = np.flatnonzero(inside_solids(mesh, points))
     if len(flagged) == 0:
@@ -66,8 +66,8 @@ def _buried(mesh, points: np.ndarray) -> dict:
 
 def _unreachable(scene, positions: np.ndarray) -> dict:
     """{index: message} for points the error model cannot evaluate (e.g. out of the arm's reach)."""
-    from rrbc_core.simulation.errormodels import PointSet
-    from rrbc_core.simulation.kinematics import tool_down
+    from rrbc_core.models.errormodels import PointSet
+    from rrbc_core.models.kinematics import tool_down
 
     det = scene.error_model.deterministic()
     if not det.robot and not det.sensor:
@@ -109,7 +109,7 @@ def usable_candidates(scene) -> tuple[np.ndarray, dict]:
     `ground_truth` sensor, which has no line of sight); not evaluable by the error model (e.g. out of the arm's
     reach). Positions: scene frame (robot base frame), mm.
     """
-    from rrbc_core.simulation.visibility import occluded_by
+    from rrbc_core.models.visibility import occluded_by
 
     c = scene.candidates
     mask = np.ones(len(c), dtype=bool)

@@ -28,7 +28,7 @@ from rrbc_core.analysis.calibration import PARAM_NAMES, Calibration, calibrate
 from rrbc_core.errors import InputError
 from rrbc_core.io.joints import joint_angles
 from rrbc_core.io.measurements import MeasurementSet
-from rrbc_core.simulation.kinematics import ROBOT_DH, forward, inverse
+from rrbc_core.models.kinematics import ROBOT_DH, forward, inverse
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
 CV_FOLDS = 10

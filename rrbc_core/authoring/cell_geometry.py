@@ -2,7 +2,7 @@
 the sensor sees, marker locations sampled on the mesh's surfaces, points spread out.
 
 Frames and units: robot base frame, mm (the mesh, the targets and everything placed are in the robot frame; the
-robot's base is at the origin). Visibility and inside tests are `simulation.visibility`'s (open3d ray casting).
+robot's base is at the origin). Visibility and inside tests are `models.visibility`'s (open3d ray casting).
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.kinematics import ROBOT_DH, UR5_TOOL_DOWN_SEED, reachable, tool_down
-from rrbc_core.simulation.visibility import inside_solids, visible_points
+from rrbc_core.models.kinematics import ROBOT_DH, UR5_TOOL_DOWN_SEED, reachable, tool_down
+from rrbc_core.models.visibility import inside_solids, visible_points
 
 MESH_MAX_BYTES = 200 << 20
 MESH_MAX_FACES = 2_000_000

@@ -32,7 +32,7 @@ from rrbc_core.geometry.points import LocalFrame, as_points
 HULL_TOL = 1e-9
 #: Least distance (mm) from the plane (line) of coplanar (collinear) fiducials at which a point is outside their
 #: hull: 1 mm, the tolerance within which the library treats a point as lying on a surface
-#: (`simulation.visibility`); it grows to the fiducials' own largest distance from their plane.
+#: (`models.visibility`); it grows to the fiducials' own largest distance from their plane.
 OFF_PLANE_TOL_MM = 1.0
 #: Elements per temporary array in the inside test (bounds memory for large query sets).
 CHUNK_ELEMENTS = 2_000_000

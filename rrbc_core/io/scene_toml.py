@@ -31,6 +31,9 @@ from rrbc_core.io.scene import (
     _load_mesh_file,
     sensor_pose,
 )
+from rrbc_core.models.errormodels import ErrorModel
+from rrbc_core.models.errorterms import Kinematic, error_model_from_dict
+from rrbc_core.models.kinematics import ROBOT_DH, reachable, tool_down
 
 _TOP_KEYS = (
     "scene",
@@ -378,7 +381,6 @@ def load_scene(path: str | PathLike) -> Scene:
     # message could only give point indices, later, with no file)
     arm = [t for t in error_model.terms("robot") if hasattr(t, "true_robot")]
     if arm:
-        from rrbc_core.simulation.kinematics import reachable, tool_down
 
         groups = (
             ("registration", registration.ids, registration.positions),
@@ -578,9 +580,6 @@ def _with_tool(model, table: dict, tool_mm: float, robot_model: str = "ur5", sou
     describes. A robot without kinematics ("none") cannot carry a kinematic term."""
     import dataclasses
 
-    from rrbc_core.simulation.errormodels import ErrorModel
-    from rrbc_core.simulation.errorterms import Kinematic
-    from rrbc_core.simulation.kinematics import ROBOT_DH
 
     rows = table.get("robot", []) if isinstance(table, dict) else []
     terms = []
@@ -598,11 +597,7 @@ def _with_tool(model, table: dict, tool_mm: float, robot_model: str = "ur5", sou
 
 
 def _error_model(c: _Checker, table: dict):
-    """Build the error model with the error-model module (imported lazily: it is optional for loading)."""
-    try:
-        from rrbc_core.simulation.errorterms import error_model_from_dict
-    except ImportError as exc:  # pragma: no cover - only while the module is being written
-        raise c.error("error_model", f"the error-model module is not available ({exc})") from None
+    """Build the error model (`models.errorterms.error_model_from_dict`), its errors named after the file."""
     try:
         return error_model_from_dict(table, f"{c.source}: error_model")
     except InputError as exc:

@@ -1,7 +1,7 @@
 """The arm as the app draws it: the scene's robot posed (by the nominal controller's inverse kinematics) to reach
 a place, and where the real, biased arm's tool then lands.
 
-Frames and units: robot base frame, mm, rad. A scene's kinematic error term (simulation.errorterms.Kinematic)
+Frames and units: robot base frame, mm, rad. A scene's kinematic error term (models.errorterms.Kinematic)
 stands for the real arm (perturbed DH parameters); the controller knows only the nominal ones. Commanded to put
 its tool at p with the tool pointing down, the controller solves q = IK_nominal(p); the real arm at q puts its
 tool at FK_real(q) ≠ p. With the bias size b (the app's "Bias size ×") the landing is p + b·(FK_real(q) − p).
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.kinematics import (
+from rrbc_core.models.kinematics import (
     ROBOT_DH,
     UR5_TOOL_DOWN_SEED,
     forward,

@@ -35,13 +35,13 @@ import dataclasses
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.models.measurement import MeasurementModel
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.authoring import SessionAuthoring
 from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate
 from rrbc_core.session.planning_view import SessionCoveragePlanning, SessionPlanning
 from rrbc_core.session.vec_view import SessionVec
 from rrbc_core.session.views import SessionViews
-from rrbc_core.simulation.measurement import MeasurementModel
 
 
 class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, SessionAuthoring, SessionVec):

@@ -101,7 +101,7 @@ class _Scaled:
 
 def _scaled(model, noise: float, bias: float):
     """The model with random terms scaled by `noise` and deterministic ones by `bias`."""
-    from rrbc_core.simulation.errormodels import ErrorModel
+    from rrbc_core.models.errormodels import ErrorModel
 
     def sc(t):
         f = noise if t.random else bias

@@ -30,7 +30,7 @@ VARIED_TILT_DEG = 30.0
 def tool_rotation(yaw_deg: float, tilt_deg: float = 0.0, azimuth_deg: float = 0.0) -> np.ndarray:
     """Tool rotation (3, 3), robot frame: tool-down turned by yaw (kinematics.tool_down), then its axis leaned by
     tilt_deg towards the azimuth azimuth_deg (degrees)."""
-    from rrbc_core.simulation.kinematics import tool_down
+    from rrbc_core.models.kinematics import tool_down
 
     base = tool_down(yaw_deg)
     if tilt_deg == 0:
@@ -64,7 +64,7 @@ class SessionVec:
 
     def arm_term(self):
         """The scene's kinematic error term, or None (measured data; a scene without one)."""
-        from rrbc_core.simulation.errorterms import Kinematic
+        from rrbc_core.models.errorterms import Kinematic
 
         if self.kind != "scene":
             return None

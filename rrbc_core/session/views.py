@@ -11,12 +11,12 @@ import numpy as np
 from rrbc_core import interpolation
 from rrbc_core.correction.rrbc import correct_points
 from rrbc_core.errors import Cancelled, InputError
+from rrbc_core.models.measurement import point_seed
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.results import HeatMap, MonteCarloPlots, _scaled
 from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import ErrorSlice, SlicePlane
-from rrbc_core.simulation.measurement import point_seed
 
 SESSION_TRIALS_MAX = 5000  # the app's background Monte Carlo (issue 16: bounded, whatever a client sends)
 MC_CHUNK_TRIALS = 50  # trials between two questions "still wanted?" of the app's Monte Carlo
@@ -78,7 +78,7 @@ class SessionViews:
         (scene mode: expected sensor reading with the scene's bias; cached per plane and bias size, so a drag only
         re-corrects) and corrected with the current fiducials. Unreachable grid points and unknown values are NaN.
         Values (n, n) mm: rigid and RRBC error against the truth, |ê|, and gp's std of ê."""
-        from rrbc_core.simulation.kinematics import tool_down
+        from rrbc_core.models.kinematics import tool_down
 
         ev = self.last
         grid = plane.grid().reshape(-1, 3)
@@ -167,7 +167,7 @@ class SessionViews:
                 f"the app's Monte Carlo takes 1 to {SESSION_TRIALS_MAX} trials and 1 to 100 check points per target, "
                 f"got {trials} and {checks_per_target} (larger studies: rrbc simulate)"
             )
-        from rrbc_core.simulation.kinematics import tool_down
+        from rrbc_core.models.kinematics import tool_down
 
         s = self.settings
         sc = self.scene

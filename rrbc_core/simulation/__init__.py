@@ -1,3 +1,3 @@
-"""Simulated cells: the robot (`kinematics`), error terms and models (`errormodels`), the one measurement model
-(`measurement`), what the sensor sees (`visibility`), simulated depth clouds and ICP (`cloud_registration`), the true
-cell and the Monte Carlo (`montecarlo`), and the kernels vectorised over trials (`batch`, `compiled`)."""
+"""Simulation of cells built from the models (`rrbc_core.models`): the true cell and the Monte Carlo
+(`montecarlo`), and the kernels vectorised or compiled over trials (`batch`, `batch_registration`, `batch_checks`,
+`compiled`, `compiled_annealing`)."""

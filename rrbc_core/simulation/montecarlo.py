@@ -28,10 +28,10 @@ from rrbc_core.correction import metrics
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.models.errormodels import ErrorModel, PointSet
+from rrbc_core.models.measurement import MeasurementModel
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.simulation import batch
-from rrbc_core.simulation.errormodels import ErrorModel, PointSet
-from rrbc_core.simulation.measurement import MeasurementModel
 
 if TYPE_CHECKING:
     from rrbc_core.io.scene import Scene
@@ -90,7 +90,7 @@ def work_cell_from_scene(
     `visibility` (and a sensor with a line of sight, not `ground_truth`), points the sensor cannot see from its
     pose (ray cast against the scene mesh) are dropped and listed in `occluded`.
     """
-    from rrbc_core.simulation.kinematics import tool_down
+    from rrbc_core.models.kinematics import tool_down
 
     rng = np.random.default_rng(scene.seed if seed is None else seed)
     n_checks = scene.check_points_per_target if checks_per_target is None else checks_per_target
@@ -118,7 +118,7 @@ def work_cell_from_scene(
     yaw = np.array(yaw, dtype=float)
     occluded: tuple[str, ...] = ()
     if visibility and scene.line_of_sight:
-        from rrbc_core.simulation.visibility import visible_points
+        from rrbc_core.models.visibility import visible_points
 
         vis = visible_points(scene.load_mesh(), scene.sensor_to_robot.translation, robot)
         occluded = tuple(i for i, v in zip(ids, vis) if not v)
@@ -209,7 +209,7 @@ def joint_columns(cell: WorkCell) -> dict:
     """The columns q1..q6 (degrees, as text) of a cell whose robot error model has a kinematic term: the joints at
     which the (true) arm reaches each point — what the robot measured a registration or fiducial row at, and the
     configuration it will use for a check or target row. {} when the error model has no kinematic term."""
-    from rrbc_core.simulation.errorterms import Kinematic
+    from rrbc_core.models.errorterms import Kinematic
 
     arm = [t for t in cell.error_model.robot if isinstance(t, Kinematic)]
     if not arm:
@@ -468,7 +468,7 @@ def icp_statistics(
     from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
     from rrbc_core.geometry.transforms import rotation_from_rotvec
     from rrbc_core.interpolation import IDW
-    from rrbc_core.simulation.cloud_registration import icp_registration, simulate_cloud
+    from rrbc_core.models.cloud_registration import icp_registration, simulate_cloud
 
     if trials < 1:
         raise InputError(f"ICP trials must be >= 1, got {trials}")

@@ -9,9 +9,9 @@ from scipy.spatial.transform import Rotation
 
 from rrbc_core.analysis.diagnosis import diagnose
 from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.models.errormodels import PointSet
+from rrbc_core.models.errorterms import Affine, AnisotropicNoise, Drift, Scale, SmoothField
 from rrbc_core.registration.strategies import least_squares
-from rrbc_core.simulation.errormodels import PointSet
-from rrbc_core.simulation.errorterms import Affine, AnisotropicNoise, Drift, Scale, SmoothField
 
 SIGMA = 0.02  # mm per axis
 

@@ -13,8 +13,8 @@ import numpy as np
 from rrbc_core.analysis import planning
 from rrbc_core.io.scene import NamedPoints, default_scene_path
 from rrbc_core.io.scene_toml import load_scene
-from rrbc_core.simulation.errormodels import ErrorModel
-from rrbc_core.simulation.errorterms import Kinematic
+from rrbc_core.models.errormodels import ErrorModel
+from rrbc_core.models.errorterms import Kinematic
 
 SCENES = ("demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell")
 

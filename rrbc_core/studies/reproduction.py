@@ -34,8 +34,8 @@ from scipy import stats
 
 from rrbc_core import registration
 from rrbc_core.errors import InputError
+from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, inverse_path, tool_down
 from rrbc_core.simulation import batch
-from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, inverse_path, tool_down
 from rrbc_core.studies.vanwyk2018_layouts import (  # noqa: F401 - the layouts are part of this module's API
     REPETITIONS,
     TOOL_MM,

@@ -14,13 +14,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rrbc_core.io.measurements import MeasurementSet
-from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, perturbed
+from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, perturbed
 
 TOOL_MM = 100.0
 
 
 def _field(term, s: np.ndarray) -> np.ndarray:
-    from rrbc_core.simulation.errormodels import PointSet
+    from rrbc_core.models.errormodels import PointSet
 
     pts = PointSet(robot=s, sensor=s, time=np.zeros(len(s)), tool_rotation=None, joint_seed=None)
     return term.sample(pts, "sensor", None, 1)[0]
@@ -38,7 +38,7 @@ def joint_measurements(
     source: str = "<simulated>",
 ) -> MeasurementSet:
     """A simulated measurement set with joint angles q1..q6 (degrees) in its extra columns (module docstring)."""
-    from rrbc_core.simulation.errorterms import SmoothField
+    from rrbc_core.models.errorterms import SmoothField
 
     rng = np.random.default_rng(seed)
     nominal = UR5.with_tool(TOOL_MM)

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from rrbc_core.analysis.calibration import PARAM_NAMES, calibrate, dh_vector
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, perturbed
+from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, perturbed
 
 
 def _poses(rng, n):

@@ -21,10 +21,10 @@ from rrbc_core.io.measurements import MeasurementSet, read_measurements
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.io.scene import NamedPoints, Region, Target
 from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.models.errormodels import ErrorModel
+from rrbc_core.models.errorterms import IsotropicNoise
 from rrbc_core.session.evaluation import Settings
 from rrbc_core.session.explorer import ExplorerSession
-from rrbc_core.simulation.errormodels import ErrorModel
-from rrbc_core.simulation.errorterms import IsotropicNoise
 from rrbc_viz.planning_panel import render_coverage
 from rrbc_viz.selection_card import info_card
 from tests.paths import DEMO

@@ -16,9 +16,9 @@ from rrbc_core.analysis.diagnosis import diagnose
 from rrbc_core.cli import main
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.io.measurements_write import write_measurements
+from rrbc_core.models.errormodels import PointSet
+from rrbc_core.models.errorterms import Affine, AnisotropicNoise, Drift, Scale, SmoothField
 from rrbc_core.registration.strategies import least_squares
-from rrbc_core.simulation.errormodels import PointSet
-from rrbc_core.simulation.errorterms import Affine, AnisotropicNoise, Drift, Scale, SmoothField
 
 
 def synth(seed, n=None, planar=None, sigma=None, terms=(), repeats=1, noise=None, order="random"):

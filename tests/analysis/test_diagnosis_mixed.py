@@ -23,8 +23,8 @@ from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.methods import MethodOptions
+from rrbc_core.models.errorterms import Drift, Scale, SmoothField
 from rrbc_core.registration.strategies import least_squares
-from rrbc_core.simulation.errorterms import Drift, Scale, SmoothField
 from rrbc_core.studies.vec_study import TOOL_MM, joint_measurements
 from tests.analysis.test_diagnosis import synth
 from tests.analysis.test_diagnosis_validation import _data_set

@@ -26,8 +26,8 @@ from rrbc_core.analysis.diagnosis import diagnose
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.methods import MethodOptions
-from rrbc_core.simulation.errormodels import PointSet
-from rrbc_core.simulation.errorterms import Scale, SmoothField
+from rrbc_core.models.errormodels import PointSet
+from rrbc_core.models.errorterms import Scale, SmoothField
 
 SETS_PER_CLASS = 20
 MIN_AGREE = 18  # 9 in 10

@@ -28,9 +28,9 @@ from rrbc_core.correction import metrics
 from rrbc_core.errors import InputError
 from rrbc_core.io.scene import Region
 from rrbc_core.io.scene_toml import load_scene
-from rrbc_core.simulation.errormodels import ErrorModel
-from rrbc_core.simulation.errorterms import IsotropicNoise
-from rrbc_core.simulation.visibility import visible_points
+from rrbc_core.models.errormodels import ErrorModel
+from rrbc_core.models.errorterms import IsotropicNoise
+from rrbc_core.models.visibility import visible_points
 from rrbc_core.studies.planning_study import candidate_grid, seeded_scene  # noqa: E402
 from tests.paths import ROOT
 

@@ -128,7 +128,7 @@ def test_out_carries_the_arms_joint_angles_and_diagnose_tests_the_arm(tmp_path, 
     from rrbc_core.cli import main
     from rrbc_core.io.joints import joint_angles
     from rrbc_core.io.measurements import read_measurements
-    from rrbc_core.simulation.kinematics import UR5, forward
+    from rrbc_core.models.kinematics import UR5, forward
 
     out = tmp_path / "m.csv"
     assert main(["simulate", str(ROOT / "scenes" / "demo_workcell.toml"), "--trials", "2", "--out", str(out)]) == 0

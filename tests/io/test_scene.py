@@ -232,7 +232,7 @@ def test_points_are_on_surfaces_or_in_free_space(scenes):
     nothing is buried inside a solid part."""
     import trimesh
 
-    from rrbc_core.simulation.visibility import inside_solids
+    from rrbc_core.models.visibility import inside_solids
 
     for name, s in scenes.items():
         mesh = s.load_mesh()
@@ -568,7 +568,7 @@ def test_default_scene_path_missing(monkeypatch, tmp_path):
 def test_robot_models_ur10_and_none(tmp_path):
     """robot.model picks the arm of the scene's kinematic error terms (UR10's DH for "ur10"); "none" is a robot
     without kinematics and refuses a kinematic term."""
-    from rrbc_core.simulation.kinematics import UR10
+    from rrbc_core.models.kinematics import UR10
 
     text = (SCENES / "demo_workcell.toml").read_text(encoding="utf-8")
     (tmp_path / "meshes").mkdir()

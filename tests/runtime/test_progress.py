@@ -1,6 +1,10 @@
+"""The command line's progress bars (tqdm, issue 26): on stderr, silent off a terminal, so `--json` on stdout and a
+piped stderr stay clean."""
+
 import io
 
-from rrbc_core.runtime.progress import ProgressBar
+from rrbc_core.cli import _advance, main, progress_bar
+from tests.paths import DEMO
 
 
 class _Tty(io.StringIO):
@@ -8,24 +12,19 @@ class _Tty(io.StringIO):
         return True
 
 
-def test_silent_for_short_runs_and_off_a_terminal():
-    out = _Tty()
-    bar = ProgressBar(10, "work", stream=out, delay_s=60.0)
-    bar.update(5)
-    bar.close()
-    assert out.getvalue() == ""  # shorter than the delay: nothing
-    plain = io.StringIO()
-    bar = ProgressBar(10, "work", stream=plain, delay_s=0.0)
-    bar.update(5)
-    bar.close()
-    assert plain.getvalue() == ""  # not a terminal: nothing
+def test_a_command_off_a_terminal_prints_no_bar(capsys):
+    assert main(["plan", str(DEMO), "--add", "1", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("{") and err == ""
 
 
-def test_draws_on_a_terminal_after_the_delay():
-    out = _Tty()
-    bar = ProgressBar(4, "simulating", stream=out, delay_s=0.0)
-    bar.update(2)
-    bar.update(2, "done")
+def test_the_bar_is_tqdm_on_stderr_silent_for_a_second_and_off_a_terminal(monkeypatch):
+    tty = _Tty()
+    monkeypatch.setattr("sys.stderr", tty)
+    bar = progress_bar(4, "simulating")
+    assert bar.delay == 1.0 and bar.fp is not None and not bar.disable  # a terminal: enabled, after a second
+    _advance(bar, 2, "half")
+    assert bar.n == 2 and bar.desc == "half"
     bar.close()
-    text = out.getvalue()
-    assert "50.0 %" in text and "100.0 %" in text and text.endswith("\n")
+    monkeypatch.setattr("sys.stderr", io.StringIO())
+    assert progress_bar(4, "x").disable  # not a terminal: off

@@ -8,10 +8,10 @@ from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import read_measurements
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.models.kinematics import forward, tool_down
+from rrbc_core.models.measurement import MeasurementModel
 from rrbc_core.session.arm import arm_pose
 from rrbc_core.session.explorer import ExplorerSession
-from rrbc_core.simulation.kinematics import forward, tool_down
-from rrbc_core.simulation.measurement import MeasurementModel
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +31,7 @@ def test_the_nominal_arm_reaches_the_commanded_place_and_its_frames_chain_up(sce
 
 
 def test_the_real_arm_lands_where_the_measurement_models_truth_says(scene):
-    """The truth c of a physical point p is the command that really reaches p (simulation.measurement). Sending
+    """The truth c of a physical point p is the command that really reaches p (models.measurement). Sending
     the arm to c must therefore land it at p, up to the second-order change of the error over |c - p| ~ 1 mm."""
     model = MeasurementModel(scene.sensor_to_robot, scene.error_model, scene.joint_seed)
     rng = np.random.default_rng(11)

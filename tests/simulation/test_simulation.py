@@ -6,9 +6,9 @@ from scipy.spatial.transform import Rotation
 
 from rrbc_core.correction import metrics
 from rrbc_core.geometry.transforms import RigidTransform
+from rrbc_core.models.errormodels import ErrorModel
+from rrbc_core.models.errorterms import AnisotropicNoise, IsotropicNoise
 from rrbc_core.simulation import batch
-from rrbc_core.simulation.errormodels import ErrorModel
-from rrbc_core.simulation.errorterms import AnisotropicNoise, IsotropicNoise
 from rrbc_core.simulation.montecarlo import WorkCell, measure, measurement_set, monte_carlo, trial_errors
 
 Z = 4.0  # z-score of the statistical tolerances

@@ -10,9 +10,9 @@ import trimesh
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform, rotation_from_rotvec
 from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.models.cloud_registration import icp_registration, pinhole_directions, simulate_cloud
+from rrbc_core.models.visibility import inside_solids, occluded_by, visible_points
 from rrbc_core.registration.strategies import Registration
-from rrbc_core.simulation.cloud_registration import icp_registration, pinhole_directions, simulate_cloud
-from rrbc_core.simulation.visibility import inside_solids, occluded_by, visible_points
 from tests.paths import SCENES
 
 # The only shipped point the demo sensor cannot see: candidate grid-0100 at (450, -250, 20), behind the F10 post.

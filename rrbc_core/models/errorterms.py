@@ -11,7 +11,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.errormodels import (
+from rrbc_core.models.errormodels import (
     SIDES,
     TERM_TYPES,
     ErrorModel,
@@ -25,7 +25,7 @@ from rrbc_core.simulation.errormodels import (
     _Term,
     _vector,
 )
-from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, DHParameters, forward, inverse_path, perturbed
+from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, DHParameters, forward, inverse_path, perturbed
 
 _FIELD_CHUNK = 8192  # points per block when evaluating a smooth field
 

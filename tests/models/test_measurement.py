@@ -1,4 +1,4 @@
-"""The one measurement model (`simulation.measurement`): its formula, and that the Monte Carlo, the session and the
+"""The one measurement model (`models.measurement`): its formula, and that the Monte Carlo, the session and the
 planner read points through it alike."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import pytest
 
 from rrbc_core.analysis import planning_model
 from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.models.kinematics import tool_down
+from rrbc_core.models.measurement import MeasurementModel
 from rrbc_core.session.explorer import ExplorerSession
-from rrbc_core.simulation.kinematics import tool_down
-from rrbc_core.simulation.measurement import MeasurementModel
 from rrbc_core.simulation.montecarlo import measure, work_cell_from_scene
 from tests.paths import DEMO
 

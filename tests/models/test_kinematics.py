@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from rrbc_core.errors import InputError
-from rrbc_core.simulation.kinematics import (
+from rrbc_core.models.kinematics import (
     UR5,
     UR5_TOOL_DOWN_SEED,
     DHParameters,

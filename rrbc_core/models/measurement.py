@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rrbc_core.geometry.transforms import RigidTransform
-from rrbc_core.simulation.errormodels import ErrorModel, PointSet
+from rrbc_core.models.errormodels import ErrorModel, PointSet
 
 
 def point_seed(seed: int, pid: str) -> list[int]:
@@ -83,7 +83,7 @@ class MeasurementModel:
     def reachable(self, pts: PointSet) -> np.ndarray:
         """(P,) bool: the points every kinematic term of the error model can reach (all True without one). Points
         outside are refused by `bias` and `read` (InputError); mask them out first when sampling a volume."""
-        from rrbc_core.simulation.kinematics import UR5_TOOL_DOWN_SEED, reachable
+        from rrbc_core.models.kinematics import UR5_TOOL_DOWN_SEED, reachable
 
         ok = np.ones(len(pts), bool)
         for side in ("robot", "sensor"):

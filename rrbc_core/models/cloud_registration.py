@@ -30,8 +30,8 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform, project_to_so3, rotation_from_rotvec
+from rrbc_core.models.visibility import _mesh_arrays, cast_from
 from rrbc_core.registration.strategies import Registration
-from rrbc_core.simulation.visibility import _mesh_arrays, cast_from
 
 
 def pinhole_directions(width: int, height: int, fov_deg: float) -> np.ndarray:
@@ -127,7 +127,7 @@ def _refine_on_mesh(src, vertices, faces, mapping: RigidTransform, max_distance_
     Returns (mapping, iterations used, converged, inlier mask, closest points (robot frame))."""
     import open3d as o3d
 
-    from rrbc_core.simulation.visibility import raycasting_scene
+    from rrbc_core.models.visibility import raycasting_scene
 
     c = mapping.apply(src).mean(axis=0)
     scene = raycasting_scene(vertices, faces, c)

@@ -11,8 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
-from rrbc_core.simulation.errormodels import TERM_TYPES, ErrorModel, ErrorTerm, PointSet
-from rrbc_core.simulation.errorterms import (
+from rrbc_core.models.errormodels import TERM_TYPES, ErrorModel, ErrorTerm, PointSet
+from rrbc_core.models.errorterms import (
     Affine,
     AnisotropicNoise,
     Drift,
@@ -26,7 +26,7 @@ from rrbc_core.simulation.errorterms import (
     error_model_from_dict,
     error_model_to_dict,
 )
-from rrbc_core.simulation.kinematics import UR5, UR5_TOOL_DOWN_SEED, tool_down
+from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, tool_down
 
 # The sensor hangs 1.5 m above the plate looking straight down: its +z is the robot's -z.
 SENSOR_POSE = RigidTransform(np.diag([1.0, -1.0, -1.0]), [-450.0, 0.0, 1550.0])
