@@ -47,6 +47,7 @@ import viser
 from rrbc_core.analysis.diagnosis import Diagnosis
 from rrbc_core.errors import InputError, one_line
 from rrbc_core.runtime.threads import apply_process_policy
+from rrbc_core.session import authoring, views
 from rrbc_core.session.data_set import check_statistics
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
@@ -210,8 +211,8 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
                 self.controls.sync_settings(self.session.settings, self.session.kind)
                 self.controls.sync_display(self.display, self.session.kind)
                 self.controls.sync_layers(self.layers)
-                self.controls.sync_authoring(self.session.can_undo, self.session.can_redo)
-                self.planning.sync_undo(self.session.can_undo)
+                self.controls.sync_authoring(authoring.can_undo(self.session), authoring.can_redo(self.session))
+                self.planning.sync_undo(authoring.can_undo(self.session))
                 self.controls.text["source"] = (
                     f"**{loaded.label}**: {'simulated from the scene error model' if self.session.kind == 'scene' else 'measured data (no error model)'}."
                 )
@@ -292,7 +293,7 @@ class RunningApp(TabActions, ViewActions, AuthoringActions, VecActions):
         if not self.layers.get("heatmap"):
             return
         start = time.perf_counter()
-        self.heat_map = self.session.heat_map(self.heat_samples_per_target)
+        self.heat_map = views.heat_map(self.session, self.heat_samples_per_target)
         self._heat_cost = time.perf_counter() - start
         self._heat_time = time.monotonic()
         self._heat_stale = False

@@ -18,6 +18,7 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.models.visibility import cast_from
+from rrbc_core.session import authoring, views
 
 from . import files
 
@@ -77,7 +78,7 @@ class AuthoringActions:
                 return None
             if kind == "registration":
                 hit = hit + [0.0, 0.0, REGISTRATION_LIFT_MM]
-            return self._author(lambda s: s.add_point(kind, hit, region_mm=self.target_region_mm), client)
+            return self._author(lambda s: authoring.add_point(s, kind, hit, region_mm=self.target_region_mm), client)
 
     def delete_selected(self, client=None):
         """Delete the selected point."""
@@ -87,16 +88,16 @@ class AuthoringActions:
                 return None
             kind, pid = self.selected
             self.selected = None
-            return self._author(lambda s: s.remove_point(kind, pid), client)
+            return self._author(lambda s: authoring.remove_point(s, kind, pid), client)
 
     def undo(self, client=None):
-        return self._author(lambda s: s.undo(), client)
+        return self._author(lambda s: authoring.undo(s), client)
 
     def redo(self, client=None):
-        return self._author(lambda s: s.redo(), client)
+        return self._author(lambda s: authoring.redo(s), client)
 
     def move_sensor(self, position, client=None):
-        return self._author(lambda s: s.move_sensor(position), client)
+        return self._author(lambda s: authoring.move_sensor(s, position), client)
 
     def _author(self, change, client):
         """Apply a structural edit to the session and redraw the scene (points were added or removed)."""
@@ -123,8 +124,8 @@ class AuthoringActions:
             self.slice_node.clear()
             self.planning.build(self.session)
             self._show(ev, heat=True)
-            self.controls.sync_authoring(self.session.can_undo, self.session.can_redo)
-            self.planning.sync_undo(self.session.can_undo)
+            self.controls.sync_authoring(authoring.can_undo(self.session), authoring.can_redo(self.session))
+            self.planning.sync_undo(authoring.can_undo(self.session))
 
     def upload_mesh(self, name: str, content: bytes, client=None) -> bool:
         """Use an uploaded mesh (any format trimesh reads; robot frame, mm) as the cell's mesh: it is drawn, clicks
@@ -160,12 +161,12 @@ class AuthoringActions:
             slug = files.slug(self.session.name)
             if what == "scene":
                 mesh = getattr(self, "uploaded_mesh", None)
-                text = self.session.scene_toml(mesh=mesh.name if mesh is not None else None)
+                text = authoring.scene_toml(self.session, mesh=mesh.name if mesh is not None else None)
                 return [(f"{slug}.toml", text.encode("utf-8"))]
             if what == "plan":
-                return [(f"{slug}-measurement-plan.csv", self.session.measurement_plan().encode("utf-8"))]
+                return [(f"{slug}-measurement-plan.csv", authoring.measurement_plan(self.session).encode("utf-8"))]
             if what == "slicer":
-                sensor, robot = to_markups(self.session.export_measurements())
+                sensor, robot = to_markups(views.export_measurements(self.session))
                 return [
                     (f"{slug}_sensor.mrk.json", (json.dumps(sensor, indent=1) + "\n").encode("utf-8")),
                     (f"{slug}_robot.mrk.json", (json.dumps(robot, indent=1) + "\n").encode("utf-8")),

@@ -11,6 +11,7 @@ import numpy as np
 
 from rrbc_core.analysis.diagnosis import Diagnosis
 from rrbc_core.errors import InputError
+from rrbc_core.session import authoring, data_set, planning_view, views
 from rrbc_core.session.data_set import data_key
 from rrbc_core.session.evaluation import Evaluation
 
@@ -31,7 +32,7 @@ class TabActions:
             session = self.session
             key = data_key(session)
             try:
-                data = session.data()
+                data = data_set.session_data(session)
             except InputError as exc:
                 data, error = None, str(exc)
         result, text = None, ""
@@ -93,7 +94,7 @@ class TabActions:
             k = int(clamped(panel.k)) if k is None else k
             if session.kind != "scene":  # measured data: coverage first, then spread (no error model needed)
                 try:
-                    plan = session.coverage_plan(k)
+                    plan = planning_view.coverage_plan(session, k)
                 except InputError as exc:
                     self._message(str(exc), client, title="Cannot plan")
                     return None
@@ -106,7 +107,7 @@ class TabActions:
             snapshot = copy.copy(session)  # settings and layout are immutable values
         result, error = None, None
         try:
-            result = snapshot.suggest_fiducials(k, seed=seed, progress=panel.progress)
+            result = planning_view.suggest_fiducials(snapshot, k, seed=seed, progress=panel.progress)
         except InputError as exc:
             error = str(exc)
         except Exception as exc:  # noqa: BLE001 - keep serving
@@ -120,7 +121,7 @@ class TabActions:
                 panel.suggestion_md.content = f"⚠ Cannot suggest: {' '.join(error.split())}"
                 self._message(error, client, title="Cannot plan")
                 return None
-            session.adopt_suggestion(snapshot)
+            planning_view.adopt_suggestion(session, snapshot)
             with self.server.atomic():
                 panel.show_suggestion(session, result)
         return result
@@ -132,7 +133,7 @@ class TabActions:
             before = self.planning.state
             known = set(self.session.layout["fiducials"].ids)
             try:
-                ev = self.session.accept_suggestions()
+                ev = planning_view.accept_suggestions(self.session)
             except InputError as exc:
                 self._message(str(exc), client, title="Not accepted")
                 return None
@@ -141,8 +142,8 @@ class TabActions:
                 self.nodes.add_new_fiducials(ev)
                 self.planning.remove_ghosts(prompt=True)
                 self._show(ev, heat=True)
-                self.controls.sync_authoring(self.session.can_undo, self.session.can_redo)
-                self.planning.sync_undo(self.session.can_undo)
+                self.controls.sync_authoring(authoring.can_undo(self.session), authoring.can_redo(self.session))
+                self.planning.sync_undo(authoring.can_undo(self.session))
             after = self.planning.state
             text = f"Added {len(new)} fiducial{'s' if len(new) != 1 else ''}: {', '.join(new)} (Undo takes them away)."
             if before is not None and after is not None:
@@ -156,7 +157,7 @@ class TabActions:
 
     def clear_suggestions(self) -> None:
         with self._lock:
-            self.session.clear_suggestion()
+            planning_view.clear_suggestion(self.session)
             with self.server.atomic():
                 self.planning.remove_ghosts(prompt=True)
 
@@ -278,14 +279,14 @@ class TabActions:
         return True
 
     def export(self, what: str) -> tuple[str, bytes]:
-        """(file name, content) of "csv" (session.export_measurements() as a measurement file) or "json"
-        (session.export_json())."""
+        """(file name, content) of "csv" (views.export_measurements(session) as a measurement file) or "json"
+        (views.export_json(session))."""
         with self._lock:
             slug = files.slug(self.session.name)
             if what == "csv":
                 s = self.session.settings
                 text = files.measurements_csv(
-                    self.session.export_measurements(),
+                    views.export_measurements(self.session),
                     comments=[
                         f"exported by the rrbc browser app from {self.session.name}",
                         f"settings: registration {s.registration}, interpolation {s.interpolation}, noise x{s.noise_scale:g}, "
@@ -294,9 +295,9 @@ class TabActions:
                 )
                 return f"rrbc-{slug}.csv", text.encode("utf-8")
             if what == "json":
-                return f"rrbc-{slug}-results.json", (json.dumps(self.session.export_json(), indent=2) + "\n").encode(
-                    "utf-8"
-                )
+                return f"rrbc-{slug}-results.json", (
+                    json.dumps(views.export_json(self.session), indent=2) + "\n"
+                ).encode("utf-8")
         raise InputError(f"unknown export '{what}': csv or json")
 
     def download(self, what: str, client=None) -> tuple[str, bytes] | None:

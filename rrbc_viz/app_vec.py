@@ -6,6 +6,7 @@ from __future__ import annotations
 import traceback
 
 from rrbc_core.errors import InputError
+from rrbc_core.session import vec_view
 
 from . import vec_panel
 
@@ -33,13 +34,13 @@ class VecActions:
     def set_varied_registration(self, varied: bool, client=None):
         """Measure the registration points with leaned tools (True) or tool down."""
         with self._lock:
-            return self._apply(lambda s: s.set_varied_registration(varied), client)
+            return self._apply(lambda s: vec_view.set_varied_registration(s, varied), client)
 
     def set_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0, client=None):
         """Reach target `pid` with its tool leaned tilt_deg towards azimuth_deg (degrees)."""
         with self._lock:
             self.vec_target = pid
-            return self._apply(lambda s: s.set_target_tool(pid, tilt_deg, azimuth_deg), client)
+            return self._apply(lambda s: vec_view.set_target_tool(s, pid, tilt_deg, azimuth_deg), client)
 
     def sync_vec_target(self, pid: str) -> None:
         """The tab's target choice changed: show that target's tool on the sliders."""
@@ -69,7 +70,7 @@ class VecActions:
             self.vec_view, text = None, "Tick **Compare with VEC** to calibrate the arm on the current data."
         else:
             try:
-                self.vec_view = self.session.vec_view()
+                self.vec_view = vec_view.vec_view(self.session)
                 text = vec_panel.render(self.vec_view, self.vec_target)
             except InputError as exc:
                 self.vec_view, text = None, f"VEC not computed: {exc}"

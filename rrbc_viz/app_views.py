@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.session import views
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import default_plane
@@ -182,7 +183,7 @@ class ViewActions:
         """Recompute and redraw the error slice if its layer is on (caller holds the lock)."""
         if not self.layers.get("slice"):
             return
-        self.error_slice = self.session.error_slice(self.slice_plane())
+        self.error_slice = views.error_slice(self.session, self.slice_plane())
         value = self.display.slice_value
         values = self.error_slice.values[value]
         if not np.any(np.isfinite(values)):

@@ -33,7 +33,7 @@ class HeatMapNodes:
 
     # ------------------------------------------------------------------------------------------ heat map
     def update_heatmap(self, hm, ev: Evaluation) -> tuple[str, float, float] | None:
-        """Show a `HeatMap` (from session.heat_map()) coloured by the chosen value; returns (title, lo, hi) for
+        """Show a `HeatMap` (from views.heat_map(session)) coloured by the chosen value; returns (title, lo, hi) for
         the legend, or None if there is nothing to show. Samples are drawn `region_zoom` times farther from
         their target than they are."""
         node = self.nodes["/heatmap/points"]

@@ -43,7 +43,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session.arm import arm_pose
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
-from rrbc_core.session.vec_view import tool_rotation
+from rrbc_core.session.tools import tool_rotation
 
 from . import colors
 from .heatmap_nodes import HeatMapNodes

@@ -35,6 +35,7 @@ import viser
 
 from rrbc_core.analysis.planning_coverage import DEFAULT_REGION_MM
 from rrbc_core.errors import InputError
+from rrbc_core.session import planning_view
 from rrbc_core.session.results import PlanningState
 
 from . import colors
@@ -334,7 +335,7 @@ class PlanningPanel:
             if not due:
                 return
             try:
-                plan = session.coverage_plan(0)
+                plan = planning_view.coverage_plan(session, 0)
             except InputError as exc:
                 self.info.content = f"Cannot plan: {exc}"
                 self.coverage_md.content = ""
@@ -367,9 +368,9 @@ class PlanningPanel:
 
     @staticmethod
     def _compute(session: ExplorerSession):
-        """session.planning_state(), or the exception that says why not."""
+        """planning_view.planning_state(session), or the exception that says why not."""
         try:
-            return session.planning_state()
+            return planning_view.planning_state(session)
         except InputError as exc:
             return exc
         except Exception as exc:  # noqa: BLE001 - keep serving; say so in the tab
@@ -398,9 +399,11 @@ class PlanningPanel:
         self.apply_colours(session)
         if session.suggestion is not None and self.ghosts:
             self._assign(
-                self.suggestion_md, "content", render_suggestion(session.suggestion, session.suggestion_current)
+                self.suggestion_md,
+                "content",
+                render_suggestion(session.suggestion, planning_view.suggestion_current(session)),
             )
-            self._assign(self.accept_button, "disabled", not session.suggestion_current)
+            self._assign(self.accept_button, "disabled", not planning_view.suggestion_current(session))
 
     # ------------------------------------------------------------------------------------------ background
     def request_background(self, session: ExplorerSession) -> None:
@@ -514,9 +517,9 @@ class PlanningPanel:
         is offered only for a suggestion made for the fiducials as they are (the planner never suggests a set
         predicted worse than the current one, but a stale suggestion may be)."""
         self._add_ghosts(result.suggested_ids, result.suggested)
-        self.suggestion_md.content = render_suggestion(result, session.suggestion_current)
+        self.suggestion_md.content = render_suggestion(result, planning_view.suggestion_current(session))
         has = len(self.ghosts) > 0
-        self.accept_button.disabled = not (has and session.suggestion_current)
+        self.accept_button.disabled = not (has and planning_view.suggestion_current(session))
         self.clear_button.disabled = not has
 
     def show_coverage_suggestion(self, plan) -> None:

@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING
 
 import viser
 
-from rrbc_core.session.vec_view import TILT_MAX_DEG, VARIED_TILT_DEG, VecView
+from rrbc_core.session.tools import TILT_MAX_DEG, VARIED_TILT_DEG
+from rrbc_core.session.vec_view import VecView
 
 from .syncing import clamped
 

@@ -381,7 +381,6 @@ def load_scene(path: str | PathLike) -> Scene:
     # message could only give point indices, later, with no file)
     arm = [t for t in error_model.terms("robot") if hasattr(t, "true_robot")]
     if arm:
-
         groups = (
             ("registration", registration.ids, registration.positions),
             ("fiducial", fiducials.ids, fiducials.positions),
@@ -579,7 +578,6 @@ def _with_tool(model, table: dict, tool_mm: float, robot_model: str = "ur5", sou
     not give its own `dh`: the simulated arm then reaches the scene's points with its tool tip, as the scene
     describes. A robot without kinematics ("none") cannot carry a kinematic term."""
     import dataclasses
-
 
     rows = table.get("robot", []) if isinstance(table, dict) else []
     terms = []

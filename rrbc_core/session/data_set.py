@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.session import planning_view
 
 if TYPE_CHECKING:
     from rrbc_core.session.explorer import ExplorerSession
@@ -79,7 +80,7 @@ def session_data(session: ExplorerSession) -> SessionData:
     """The session's data set (module docstring). Cached on `data_key`."""
     if session.kind == "scene":
         return _scene_data(session)
-    return session._cached("data_set", data_key(session), lambda: _file_data(session))
+    return session.cached("data_set", data_key(session), lambda: _file_data(session))
 
 
 def data_key(session: ExplorerSession) -> tuple:
@@ -95,7 +96,7 @@ def data_key(session: ExplorerSession) -> tuple:
         s.noise_scale,
         s.bias_scale,
         tuple(sorted(s.excluded)),
-        session._planning_key(),
+        planning_view.planning_key(session),
         tuple(session.layout["fiducials"].ids),
         session.layout["fiducials"].positions.tobytes(),
         tuple(sorted(session.target_tools.items())),
@@ -173,7 +174,7 @@ def _scene_data(session: ExplorerSession) -> SessionData:
 
     def build() -> SessionData:
         ids, roles, pos, rot, time, owner = [], [], [], [], [], []
-        order = session._row_order()
+        order = session.row_order()
         dt = float(sc.measurement_interval_s)
         fid = session.layout["fiducials"]
         fid_at = dict(zip(fid.ids, fid.positions))
@@ -199,7 +200,7 @@ def _scene_data(session: ExplorerSession) -> SessionData:
         rng = np.random.default_rng(s.seed)
         n_checks = int(sc.check_points_per_target)
         row = max(order.values(), default=-1) + 1
-        t_ids, regions = session.planning_regions()
+        t_ids, regions = planning_view.planning_regions(session)
         for pid, region in zip(t_ids, regions):
             tool = session.tool_rotations("targets", [pid])[0]
             for k, p in enumerate(region.sample(rng, n_checks)):
@@ -236,7 +237,7 @@ def _scene_data(session: ExplorerSession) -> SessionData:
             return SessionData(mset, False, what)
         return SessionData(mset, False, what, sc.robot_model, float(arm.dh.tool_mm))
 
-    return session._cached("data_set", key, build)
+    return session.cached("data_set", key, build)
 
 
 def check_statistics(session: ExplorerSession):
@@ -256,4 +257,4 @@ def check_statistics(session: ExplorerSession):
         except InputError:
             return None
 
-    return session._cached("check_statistics", (data_key(session), method), compute)
+    return session.cached("check_statistics", (data_key(session), method), compute)

@@ -20,38 +20,44 @@ Two sources:
 Display positions are robot-frame (mm): scene mode shows physical points, measurement mode shows robot
 readings (registration, fiducials) and rigidly mapped sensor readings (targets).
 
-Planning (scene mode; thin wrappers over `rrbc_core.planning`): `planning_state()` gives each target's coverage
-(fraction of its region of variability inside the INCLUDED fiducials' hull, at their current, possibly dragged,
-positions) and the fast predicted RMST, cached on the fiducials, targets and noise/bias sizes;
-`suggest_fiducials(k)` asks the planner for K more fiducials from the scene's candidates (kept as `suggestion`);
-`accept_suggestions()` adds them as fiducials (measured from the error model like moved fiducials: stable ids,
-noise seeded by id). The scene frame is the robot frame here, so layout positions go to the planner as they are.
+The session holds state and measures; what is computed from it lives in small modules of functions that take the
+session as their first argument (no mixins): `planning_view` (coverage, predicted RMST, suggestions), `views`
+(heat map, error slice, Monte Carlo, the JSON export), `data_set` (the data as a measurement file holds them, what
+the Diagnose tab diagnoses), `authoring` (edits and their history) and `vec_view` (the arm's joints, leaned tools,
+VEC). They read the session's public state and its one-entry caches (`cached`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.models.errorterms import Kinematic
 from rrbc_core.models.measurement import MeasurementModel
 from rrbc_core.runtime.threads import thread_limited
-from rrbc_core.session.authoring import SessionAuthoring
 from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate
-from rrbc_core.session.planning_view import SessionCoveragePlanning, SessionPlanning
-from rrbc_core.session.vec_view import SessionVec
-from rrbc_core.session.views import SessionViews
+from rrbc_core.session.tools import VARIED_TILT_DEG, tool_rotation
 
 
-class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, SessionAuthoring, SessionVec):
+@dataclass
+class History:
+    """The edit history of a session (`authoring.undo`, `authoring.redo`): states before each edit, newest last."""
+
+    undo: list = field(default_factory=list)
+    redo: list = field(default_factory=list)
+
+
+class ExplorerSession:
     """The interactive session behind the browser app: a layout of points, the settings, and everything shown.
 
     Make one with `from_scene(scene)` (points measured through the scene's measurement model wherever they are
     moved) or `from_measurements(mset)` (readings as measured). Every method that changes it (`move`, `update`,
-    `set_excluded`, `accept_suggestions`) returns the new `Evaluation` and leaves the session unchanged when it
-    raises `InputError`. Views: `evaluate()` / `last`, `heat_map()`, `planning_state()`, `suggest_fiducials()`,
-    `monte_carlo()`, `export_measurements()`, `export_json()`. Positions are robot frame, mm.
+    `set_excluded`) returns the new `Evaluation` and leaves the session unchanged when it raises `InputError`;
+    `evaluate()` / `last` give the current one. Positions are robot frame, mm. The functions over a session are in
+    `planning_view`, `views`, `data_set`, `authoring` and `vec_view` (module docstring).
     """
 
     def __init__(
@@ -90,8 +96,7 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
             tuple(cands.ids) if cands is not None else (),
             np.array(cands.positions, float).reshape(-1, 3) if cands is not None else np.zeros((0, 3)),
         )
-        self._undo: list = []
-        self._redo: list = []
+        self.history = History()  # the edits (authoring.undo / redo)
         self.target_tools: dict = {}  # target id -> (tilt, azimuth) degrees of its tool (vec_view); absent: tool down
         self.varied_registration = False  # registration points measured with the tool leaned (vec_view)
 
@@ -154,7 +159,7 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         sc, s = self.scene, self.settings
         return MeasurementModel(self.sensor_to_robot, sc.error_model, sc.joint_seed, s.bias_scale, s.noise_scale)
 
-    def _measure_scene(self, kind: str, ids, positions, noise: bool = True) -> Readings:
+    def measure_points(self, kind: str, ids, positions, noise: bool = True) -> Readings:
         """Scene mode: readings of points at `positions` (robot frame) through the measurement model at their times
         in the data set (`row_times`), each point's noise drawn from its own generator seeded by (seed, id)
         (`MeasurementModel.read_each`, as `rrbc simulate --out` draws it); noise=False: the expected readings, bias
@@ -172,11 +177,11 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         """(P,) s: when each point is measured in the session's data set — the rows in the order `rrbc simulate`
         writes them (registration points, then the fiducials that are not also registration points, then the
         targets), `measurement_interval_s` apart (0 for other kinds: heat map and slice samples)."""
-        order = self._row_order()
+        order = self.row_order()
         dt = float(getattr(self.scene, "measurement_interval_s", 0.0) or 0.0)
         return np.array([order.get((kind, pid), 0) * dt for pid in ids], float)
 
-    def _row_order(self) -> dict:
+    def row_order(self) -> dict:
         """{(kind, id): row index} of the registration points, fiducials (a fiducial with a registration point's id
         shares its row: role both) and targets."""
         reg = self.layout["registration"].ids
@@ -215,7 +220,7 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
             ):
                 missing.append(i)
         if missing:
-            fresh = self._measure_scene(kind, [g.ids[i] for i in missing], g.positions[missing])
+            fresh = self.measure_points(kind, [g.ids[i] for i in missing], g.positions[missing])
             for j, i in enumerate(missing):
                 self._readings[(kind, g.ids[i])] = (
                     (key_settings, tuple(g.positions[i]), self.tool_of(kind, g.ids[i]), float(times[i])),
@@ -235,12 +240,33 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
         r = self._readings_for(kind)
         return Readings(r.sensor[i], r.robot[i], r.truth[i])
 
-    def data(self):
-        """The session's data as a measurement file holds them (`data_set.session_data`): what the Diagnose tab
-        diagnoses and the CSV download writes."""
-        from rrbc_core.session.data_set import session_data
+    # ---------------------------------------------------------------------------------- the arm and its tool
+    def arm_term(self) -> Kinematic | None:
+        """The scene's kinematic error term, or None (measured data; a scene without one)."""
+        if self.kind != "scene":
+            return None
+        found = [t for t in self.scene.error_model.robot if isinstance(t, Kinematic)]
+        return found[0] if found else None
 
-        return session_data(self)
+    @property
+    def has_arm(self) -> bool:
+        return self.arm_term() is not None
+
+    def tool_of(self, kind: str, pid: str) -> tuple[float, float]:
+        """(tilt, azimuth) degrees of a point's tool; (0, 0): tool down. With `varied_registration` the i-th
+        registration point is reached leaned `VARIED_TILT_DEG` towards azimuth 360·i/n + 45·(i mod 2)."""
+        if kind == "targets":
+            return self.target_tools.get(pid, (0.0, 0.0))
+        if kind == "registration" and self.varied_registration:
+            ids = self.layout["registration"].ids
+            i = ids.index(pid) if pid in ids else 0
+            return (VARIED_TILT_DEG, float(360.0 * i / max(len(ids), 1) + 45.0 * (i % 2)))
+        return (0.0, 0.0)
+
+    def tool_rotations(self, kind: str, ids) -> np.ndarray:
+        """(P, 3, 3) the tool orientations the points of `kind` are reached with (robot frame)."""
+        yaw = float(getattr(self.scene, "tool_yaw_deg", 0.0) or 0.0)
+        return np.array([tool_rotation(yaw, *self.tool_of(kind, pid)) for pid in ids]).reshape(-1, 3, 3)
 
     # -------------------------------------------------------------------------------------------- editing
     @thread_limited
@@ -299,10 +325,10 @@ class ExplorerSession(SessionPlanning, SessionCoveragePlanning, SessionViews, Se
     def evaluate(self) -> Evaluation:
         """Measure what changed (scene mode) and run `evaluation.evaluate` on the layout as it is now."""
         readings = {kind: self._readings_for(kind) for kind in ("registration", "fiducials", "targets")}
-        self._last = evaluate(self.settings, self.layout, readings, self._cached)
+        self._last = evaluate(self.settings, self.layout, readings, self.cached)
         return self._last
 
-    def _cached(self, name: str, key, compute):
+    def cached(self, name: str, key, compute):
         """One-entry cache per name: a drag that leaves the registration points (or the fiducials) unchanged
         reuses the registration (or the fitted interpolator) instead of recomputing it."""
         hit = self._cache.get(name)

@@ -23,6 +23,7 @@ from rrbc_core.io.scene import NamedPoints, Region, Target
 from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.models.errormodels import ErrorModel
 from rrbc_core.models.errorterms import IsotropicNoise
+from rrbc_core.session import authoring, planning_view
 from rrbc_core.session.evaluation import Settings
 from rrbc_core.session.explorer import ExplorerSession
 from rrbc_viz.planning_panel import render_coverage
@@ -117,7 +118,7 @@ def test_every_caller_gives_the_same_verdict(kind, tmp_path, capsys):
     scene_path = tmp_path / "cell.toml"
     session = ExplorerSession.from_scene(scene, Settings(noise_scale=0.0))
     shutil.copy(scene.mesh_path, tmp_path / scene.mesh_path.name)  # a scene opens meshes in its own folder
-    scene_path.write_text(session.scene_toml())
+    scene_path.write_text(authoring.scene_toml(session))
     assert main(["plan", str(scene_path), "--json"]) == 0
     pj = json.loads(capsys.readouterr().out)
     assert [pj["inside_hull_per_target"][i] for i in ids] == expected
@@ -125,7 +126,7 @@ def test_every_caller_gives_the_same_verdict(kind, tmp_path, capsys):
     # the app's session: the Explore card and the Plan tab, on the scene and on the measurement file
     ev = session.evaluate()
     assert ev.coverage.inside.tolist() == expected and (~ev.targets.extrapolated).tolist() == expected
-    table = render_coverage(session.planning_state(), ev.coverage, ev.targets.ids)
+    table = render_coverage(planning_view.planning_state(session), ev.coverage, ev.targets.ids)
     shown = [("| inside |" in line) for line in table.splitlines()[2:]]
     assert shown == expected
     for i, pid in enumerate(ids):

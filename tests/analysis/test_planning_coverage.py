@@ -10,6 +10,7 @@ from rrbc_core.analysis.planning import coverage
 from rrbc_core.analysis.planning_coverage import cube_regions, grid_candidates, suggest_by_coverage
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import read_measurements
+from rrbc_core.session import planning_view
 from rrbc_core.session.explorer import ExplorerSession
 from tests.paths import EXAMPLE_CSV
 
@@ -34,8 +35,8 @@ def test_the_greedy_choice_raises_coverage_to_full_then_spreads():
 
 def test_measured_sessions_plan_by_coverage():
     s = ExplorerSession.from_measurements(read_measurements(EXAMPLE_CSV))
-    p0 = s.coverage_plan(0)
+    p0 = planning_view.coverage_plan(s, 0)
     assert len(p0.target_ids) == len(s.layout["targets"].ids) and p0.suggested.shape == (0, 3)
-    p = s.coverage_plan(3)
+    p = planning_view.coverage_plan(s, 3)
     assert p.suggested.shape == (3, 3) and np.mean(p.coverage_after) > np.mean(p0.coverage)
     assert "grid" in p.candidate_source  # no mesh came with these data

@@ -9,6 +9,7 @@ import re
 
 import pytest
 
+from rrbc_core.session import planning_view
 from rrbc_viz.app import serve
 
 from .helpers import canvas_rect, is_local_url, node_exists, node_screen_position, wait_for, wait_until_rendered
@@ -25,7 +26,7 @@ def page_rmst(page) -> tuple[float, ...] | None:
 
 
 def server_rmst(app) -> tuple[float, ...]:
-    p = app.session.planning_state().predicted
+    p = planning_view.planning_state(app.session).predicted
     return tuple(
         float(f"{x:.{3 if i % 2 == 0 else 4}f}")
         for i, x in enumerate((p.rigid_mm, p.rigid_std_mm, p.rrbc_mm, p.rrbc_std_mm))

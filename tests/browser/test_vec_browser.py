@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from rrbc_core.session import vec_view
 from rrbc_viz.app import serve
 
 from .helpers import canvas_rect, node_exists, node_screen_position, wait_for, wait_until_rendered
@@ -35,7 +36,7 @@ def test_vec_tab_compares_and_a_leaned_tool_shows_what_rrbc_cannot_follow(viser_
     page.get_by_label("Compare with VEC").click()
     pid = app.session.layout["targets"].ids[0]
     wait_for(lambda: page_row(page, pid) is not None, 30, message="the VEC table", page=page)
-    view = app.session.vec_view()
+    view = vec_view.vec_view(app.session)
     assert page_row(page, pid) == (
         "down",
         round(float(view.error_rigid[0]), 3),

@@ -53,6 +53,6 @@ def test_monte_carlo_session_and_planner_read_the_same_biased_points(scene):
     session = ExplorerSession.from_scene(scene)
     ids = list(cell.ids)
     for kind, group in (("registration", session.layout["registration"]), ("fiducials", session.layout["fiducials"])):
-        expected = session._measure_scene(kind, group.ids, group.positions, noise=False)
+        expected = session.measure_points(kind, group.ids, group.positions, noise=False)
         for pid, t in zip(group.ids, expected.truth):
             np.testing.assert_allclose(t, truth[ids.index(pid)], atol=1e-9)

@@ -8,8 +8,9 @@ from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import read_measurements
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.session import vec_view
 from rrbc_core.session.explorer import ExplorerSession
-from rrbc_core.session.vec_view import TILT_MAX_DEG, tool_rotation
+from rrbc_core.session.tools import TILT_MAX_DEG, tool_rotation
 from tests.paths import ROOT
 
 
@@ -27,11 +28,11 @@ def test_tool_rotation_leans_the_tool_axis_towards_the_azimuth(tilt, az):
 
 
 def test_rrbc_cannot_follow_a_tilted_tool_and_vec_calibrated_in_varied_poses_can(session):
-    session.set_varied_registration(True)
+    vec_view.set_varied_registration(session, True)
     pid = session.layout["targets"].ids[0]
-    ev0, v0 = session.evaluate(), session.vec_view()
-    session.set_target_tool(pid, 40.0, 0.0)
-    ev1, v1 = session.evaluate(), session.vec_view()
+    ev0, v0 = session.evaluate(), vec_view.vec_view(session)
+    vec_view.set_target_tool(session, pid, 40.0, 0.0)
+    ev1, v1 = session.evaluate(), vec_view.vec_view(session)
     # the physical point and its noise are the same: RRBC's command (position only) does not move at all...
     assert np.array_equal(ev0.targets.robot_rrbc[0], ev1.targets.robot_rrbc[0])
     # ... while the command that truly reaches the point moves with the arm's configuration
@@ -46,9 +47,9 @@ def test_rrbc_cannot_follow_a_tilted_tool_and_vec_calibrated_in_varied_poses_can
 
 
 def test_vec_from_tool_down_poses_alone_identifies_less(session):
-    down = session.vec_view()
-    session.set_varied_registration(True)
-    varied = session.vec_view()
+    down = vec_view.vec_view(session)
+    vec_view.set_varied_registration(session, True)
+    varied = vec_view.vec_view(session)
     assert varied.rank > down.rank  # orientation-dependent combinations become identifiable
     assert down.poses == varied.poses == len(session.layout["registration"].ids) + len(session.layout["fiducials"].ids)
 
@@ -58,9 +59,9 @@ def test_bad_tool_orientations_are_refused_and_leave_the_session_unchanged(sessi
     before = session.evaluate().targets.truth.copy()
     for tilt, az in [(TILT_MAX_DEG + 1, 0), (-1, 0), (float("nan"), 0), (10, 400)]:
         with pytest.raises(InputError):
-            session.set_target_tool(pid, tilt, az)
+            vec_view.set_target_tool(session, pid, tilt, az)
     with pytest.raises(InputError):
-        session.set_target_tool("no-such-target", 10, 0)
+        vec_view.set_target_tool(session, "no-such-target", 10, 0)
     assert session.target_tools == {}
     assert np.array_equal(session.evaluate().targets.truth, before)
 
@@ -68,6 +69,6 @@ def test_bad_tool_orientations_are_refused_and_leave_the_session_unchanged(sessi
 def test_no_vec_without_a_kinematic_arm(tmp_path):
     mset = read_measurements(ROOT / "rrbc_core" / "data" / "example_measurements.csv")
     measured = ExplorerSession.from_measurements(mset)
-    assert measured.vec_view() is None and not measured.has_arm
+    assert vec_view.vec_view(measured) is None and not measured.has_arm
     with pytest.raises(InputError):
-        measured.set_target_tool(measured.layout["targets"].ids[0], 10, 0)
+        vec_view.set_target_tool(measured, measured.layout["targets"].ids[0], 10, 0)

@@ -6,6 +6,7 @@ import math
 import pytest
 
 from rrbc_core.errors import InputError
+from rrbc_core.session import views
 from rrbc_core.session.evaluation import SCALE_MAX, Settings
 
 
@@ -26,7 +27,7 @@ def test_trials_a_client_sends_are_bounded(app):
     _send(app.controls.montecarlo.mc_trials, 200000)
     assert app.controls.monte_carlo_trials == 1000
     with pytest.raises(InputError, match="trials"):
-        app.session.monte_carlo(trials=200000)
+        views.monte_carlo(app.session, trials=200000)
 
 
 @pytest.mark.parametrize("field", ["noise_scale", "bias_scale"])

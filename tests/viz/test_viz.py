@@ -20,6 +20,7 @@ import viser
 
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import parse_measurements
+from rrbc_core.session import views
 from rrbc_viz import colors
 from rrbc_viz.app import RunningApp, serve
 from tests.paths import EXAMPLE_CSV
@@ -319,7 +320,7 @@ def test_display_controls_and_heat_map_follow_drags(app):
     app.handle_drag("targets", "H1", [420.0, -150.0, 15.0], "end")  # the heat map follows at drag end
     pts = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner]
     assert abs(pts.mean(0)[0] - 420.0) < 3.0
-    hm = app.session.heat_map()
+    hm = views.heat_map(app.session)
     np.testing.assert_allclose(app.heat_map.error_rrbc, hm.error_rrbc)
     with pytest.raises(InputError):
         app.set_display(handles="both")  # no such option any more: selection decides
@@ -395,11 +396,11 @@ def test_exports_come_from_the_session(app):
     name, content = app.export("csv")
     assert name.endswith(".csv")
     mset = parse_measurements(content.decode("utf-8"), name)
-    ref = app.session.export_measurements()
+    ref = views.export_measurements(app.session)
     assert mset.ids == ref.ids and mset.roles == ref.roles
     np.testing.assert_allclose(mset.sensor, ref.sensor)
     name, content = app.export("json")
-    assert json.loads(content) == json.loads(json.dumps(app.session.export_json()))
+    assert json.loads(content) == json.loads(json.dumps(views.export_json(app.session)))
     app.controls.file.download_csv.value = True  # no tab connected: nothing to send, nothing breaks
     app.controls.file.download_json.value = True
 

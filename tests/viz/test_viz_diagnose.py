@@ -13,6 +13,7 @@ from rrbc_core.cli import main
 from rrbc_core.io.measurements import MeasurementSet, read_measurements
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.io.scene_toml import load_scene
+from rrbc_core.session import data_set
 from rrbc_core.simulation.montecarlo import simulated_data
 from rrbc_viz.app import serve
 from rrbc_viz.diagnosis_panel import unescape
@@ -139,7 +140,7 @@ def test_a_scenes_tab_is_rrbc_diagnose_of_its_download_which_is_what_rrbc_simula
         for x, y in ((a.sensor, b.sensor), (a.robot, b.robot), (a.time, b.time)):
             np.testing.assert_array_equal(x, y)
         assert {"registration", "fiducial", "target", "check"} <= set(a.roles) and "q1" in a.extra
-        data = app.session.data()
+        data = data_set.session_data(app.session)
         assert data.robot == "ur5" and data.tool_mm == 100.0  # the scene's arm reads the joint columns
         _assert_tab_is_cli(app, capsys, download, "--robot", "ur5", "--tool", "100")
         assert "rrbc diagnose DATA.csv --tool 100" in app.controls.diagnose.diagnosis.content

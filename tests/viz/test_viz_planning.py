@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 
+from rrbc_core.session import planning_view
 from rrbc_viz import colors
 from rrbc_viz.app import serve
 from rrbc_viz.planning_panel import PLAN_INTERVAL_S, rmst_line
@@ -41,7 +42,7 @@ def shown_coverage(app) -> dict[str, str]:
 
 
 def test_plan_tab_shows_the_sessions_planning(app):
-    st = app.session.planning_state()
+    st = planning_view.planning_state(app.session)
     assert app.planning.state is st
     assert rmst_line(st.predicted) in app.planning.info.content
     p = st.predicted
@@ -68,7 +69,7 @@ def test_coverage_colours_follow_a_fiducial_drag_out_of_the_hull(app):
     p0 = np.array(app.gizmo("fiducials", "F1").position, float)
     _gizmo_drag(app, "fiducials", "F1", [p0 + (np.asarray(F1_AWAY) - p0) * f for f in (0.3, 0.7, 1.0)])
     settled(app)
-    st = app.session.planning_state()
+    st = planning_view.planning_state(app.session)
     assert st.coverage_of("H1") < 1.0
     c = colors.coverage_color(st.coverage_of("H1"))
     assert c != full
@@ -89,7 +90,7 @@ def test_predicted_rmst_text_changes_while_dragging(app):
     ev = app.handle_drag("fiducials", "F1", F1_AWAY, "update")
     assert ev is not None
     settled(app)
-    st = app.session.planning_state()
+    st = planning_view.planning_state(app.session)
     assert app.planning.state is st and app.planning.info.content != before
     assert shown_rmst(app) != rmst0
     p = st.predicted
@@ -98,14 +99,14 @@ def test_predicted_rmst_text_changes_while_dragging(app):
     app.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "update")
     app.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "end")
     settled(app)
-    assert app.planning.state is app.session.planning_state() and not app.planning.stale
+    assert app.planning.state is planning_view.planning_state(app.session) and not app.planning.stale
 
 
 def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(app):
     panel = app.planning
     app.handle_drag("fiducials", "F1", F1_AWAY, "end")
     settled(app)
-    cov0 = app.session.planning_state().coverage
+    cov0 = planning_view.planning_state(app.session).coverage
     rmst0 = shown_rmst(app)
     assert panel.accept_button.disabled and panel.clear_button.disabled and not panel.ghosts
     panel.k.value = 3
@@ -134,7 +135,7 @@ def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(ap
         assert app.server.scene.get_handle_by_name(f"/fiducials/{cid}/gizmo/sphere") is not None
     assert not panel.ghosts and app.server.scene.get_handle_by_name("/plan/ghosts/0") is None
     assert panel.accept_button.disabled
-    st = app.session.planning_state()
+    st = planning_view.planning_state(app.session)
     np.testing.assert_array_equal(st.coverage, np.asarray(result.coverage_after))
     for pid, c in zip(st.target_ids, result.coverage_after):
         if c >= 1.0:
@@ -230,7 +231,7 @@ def test_a_slow_scene_plans_in_the_background_during_drags(app):
     assert app.handle_drag("fiducials", "F1", F1_AWAY, "update") is not None
     assert panel.stale  # the tab still shows the old numbers, marked as following
     assert panel.wait_idle(30)
-    st = app.session.planning_state()
+    st = planning_view.planning_state(app.session)
     assert panel.state is st and not panel.stale  # the worker's result for the dragged layout is shown
     assert shown_rmst(app) != rmst0 and shown_coverage(app)["H1"] != "100 %"
     assert panel.cost_s < 10.0  # the worker measured the real cost

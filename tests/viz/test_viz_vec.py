@@ -3,7 +3,8 @@ varied orientations, a target's leaned tool — every number the tab shows equal
 
 import numpy as np
 
-from rrbc_core.session.vec_view import TILT_MAX_DEG
+from rrbc_core.session import vec_view
+from rrbc_core.session.tools import TILT_MAX_DEG
 
 
 def _row(text: str, pid: str) -> list[str]:
@@ -17,7 +18,7 @@ def test_vec_tab_shows_the_sessions_vec_and_follows_a_leaned_tool(app):
     app.set_vec(True)
     assert app.vec_view is not None
     pid = app.session.layout["targets"].ids[0]
-    view = app.session.vec_view()
+    view = vec_view.vec_view(app.session)
     row = _row(app.controls.text["vec_table"], pid)
     assert row[1] == "down" and [float(x) for x in row[2:]] == [
         round(float(view.error_rigid[0]), 3),
@@ -26,10 +27,10 @@ def test_vec_tab_shows_the_sessions_vec_and_follows_a_leaned_tool(app):
     ]
     app.set_varied_registration(True)
     assert panel.varied.value and app.session.varied_registration
-    before = app.session.vec_view()
+    before = vec_view.vec_view(app.session)
     truth_before = app.session.last.targets.truth[0].copy()
     app.set_target_tool(pid, 40.0, 0.0)
-    after = app.session.vec_view()
+    after = vec_view.vec_view(app.session)
     row = _row(app.controls.text["vec_table"], pid)
     assert row[1] == "40°, 0°" and float(row[3]) == round(float(after.error_rrbc[0]), 3)
     assert after.error_rrbc[0] > before.error_rrbc[0] and after.error_vec[0] < after.error_rrbc[0]

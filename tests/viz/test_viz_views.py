@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from rrbc_core.errors import InputError
+from rrbc_core.session import views
 from rrbc_viz import colors, selection_card, teaching
 from rrbc_viz.camera import PRESETS, CellGeometry, preset_view
 from rrbc_viz.nodes import landing_display, nice_up
@@ -119,7 +120,7 @@ def test_the_error_slice_follows_drags_and_its_controls(app):
     np.testing.assert_allclose(app.slice_node.handle.position[2], sl.plane.offset_mm)
     app.handle_drag("fiducials", "F5", [475.0, -100.0, 45.0], "end")
     assert not np.array_equal(np.array(app.slice_node.handle.image), img0)  # the field follows the drag
-    np.testing.assert_allclose(app.error_slice.values["rrbc"], app.session.error_slice(sl.plane).values["rrbc"])
+    np.testing.assert_allclose(app.error_slice.values["rrbc"], views.error_slice(app.session, sl.plane).values["rrbc"])
     c.view.slice_axis.value = "vertical, along x (y)"
     assert app.error_slice.plane.axis == "y" and c.view.slice_offset.min < 0 < c.view.slice_offset.max
     c.view.slice_offset.value = 50.0
