@@ -66,9 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("measurements", help="measurement CSV (docs/formats/measurement-file.md)")
     c.add_argument("--registration", default="least-squares", choices=list(registration.STRATEGIES))
     c.add_argument("--interpolation", default="idw", choices=list(interpolation.METHODS))
-    c.add_argument("--neighbors", type=_positive_int, default=None, help="IDW: number of nearest fiducials (default 4)")
-    c.add_argument("--power", type=_positive_float, default=None, help="IDW: weight exponent p in 1/d^p (default 2)")
-    c.add_argument("--seed", type=int, default=0, help="seed for annealing and clustering (default 0)")
+    _method_option_flags(c)
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(run=_cmd_correct)
 
@@ -232,6 +230,50 @@ def _advance(bar, n: int, label: str | None = None) -> None:
     bar.update(n)
 
 
+def _dest(flag: str) -> str:
+    return "opt_" + flag.replace("-", "_")
+
+
+def _method_option_flags(parser) -> None:
+    """One flag per method option, from the option fields' specs (`methods.method_flags`): the same names, bounds
+    and help as the app's widgets; checked against the chosen methods by `MethodOptions.named`."""
+    from rrbc_core.methods import method_flags
+
+    parser.add_argument("--seed", type=int, default=0, help="seed of annealing and clustering (default 0)")
+    for flag, owners in method_flags().items():
+        if flag == "seed":
+            continue
+        spec = owners[0][2]
+        kind = spec.kind if spec.kind in (int, float) else str
+        parser.add_argument(
+            f"--{flag}",
+            dest=_dest(flag),
+            type=_spec_type(spec, kind),
+            default=None,
+            metavar=spec.flag.upper().replace("-", "_") if spec.choices is None else None,
+            choices=list(spec.choices) if spec.choices else None,
+            help=" / ".join(dict.fromkeys(s.help for _, _, s in owners)),
+        )
+
+
+def _spec_type(spec, kind):
+    """argparse type: a number of the option's kind within its bounds (else one line, exit 2)."""
+    if kind is str:
+        return str
+
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+        try:
+            return spec.check(value, "")
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).strip()) from None
+
+    return parse
+
+
 def _fmt_vec(v, width=9, prec=4):
     return " ".join(f"{x:{width}.{prec}f}" for x in v)
 
@@ -301,16 +343,11 @@ def _table(result) -> str:
 def _cmd_correct(args) -> str:
     from rrbc_core.correction.pipeline import correct_measurements
     from rrbc_core.io.measurements import read_measurements
-    from rrbc_core.methods import MethodOptions
+    from rrbc_core.methods import MethodOptions, method_flags
 
     mset = read_measurements(args.measurements)
-    opts = MethodOptions(
-        registration=args.registration,
-        interpolation=args.interpolation,
-        neighbors=args.neighbors,
-        power=args.power,
-        seed=args.seed,
-    )
+    flags = {flag: getattr(args, _dest(flag)) for flag in method_flags() if flag != "seed"}
+    opts = MethodOptions.named(args.registration, args.interpolation, seed=args.seed, **flags)
     result = correct_measurements(mset, opts)
     if args.json:
         return json.dumps(result.to_json(), allow_nan=False) + "\n"

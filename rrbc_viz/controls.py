@@ -17,6 +17,7 @@ import numpy as np
 import viser
 
 from rrbc_core import interpolation, registration
+from rrbc_core.methods import method_flags
 from rrbc_core.session.evaluation import Settings
 
 from .authoring_panel import AuthoringPanel
@@ -107,16 +108,20 @@ class ExplorePanel:
                 "Registration", tuple(registration.STRATEGIES), initial_value="least-squares"
             )
             self.interpolation = gui.add_dropdown("Interpolation", tuple(interpolation.METHODS), initial_value="idw")
-            self.neighbors = gui.add_slider("IDW neighbours k", 1, 16, 1, 4)
-            self.power = gui.add_slider("IDW power p", 0.5, 6.0, 0.1, 2.0)
-            self.smoothing = gui.add_slider(
-                "TPS smoothing",
-                0.0,
-                1.0,
-                0.005,
-                0.0,
-                hint="scipy RBF smoothing in the fiducials' local units; 0 = exact",
-            )
+            # one widget per method option the app offers, from the option fields' specs (bounds stated once)
+            self.options: dict = {}  # flag -> widget
+            self.option_owners: dict = {}  # flag -> names of the methods that take it
+            for flag, owners in method_flags().items():
+                spec = owners[0][2]
+                if flag == "seed" or not (spec.choices or spec.ui):
+                    continue
+                if spec.choices:
+                    widget = gui.add_dropdown(spec.label, spec.choices, initial_value=spec.default, hint=spec.help)
+                else:
+                    lo, hi, step = spec.ui
+                    widget = gui.add_slider(spec.label, lo, hi, step, spec.default, hint=spec.help)
+                self.options[flag] = widget
+                self.option_owners[flag] = {name for _, name, _ in owners}
         with gui.add_folder("Errors (scene)"):
             self.noise = gui.add_slider(
                 "Noise size ×", 0.0, 3.0, 0.05, 1.0, hint="Multiplies the scene's random error terms"
@@ -133,11 +138,12 @@ class ExplorePanel:
         for handle, name, cast in (
             (self.registration, "registration", str),
             (self.interpolation, "interpolation", str),
-            (self.neighbors, "neighbors", int),
-            (self.power, "power", float),
-            (self.smoothing, "smoothing", float),
             (self.noise, "noise_scale", float),
             (self.bias, "bias_scale", float),
+            *(
+                (widget, flag.replace("-", "_"), method_flags()[flag][0][2].kind)
+                for flag, widget in self.options.items()
+            ),
         ):
             handle.on_update(_forward(handle, syncing, app.change_settings, name, cast))
         self.magnification.on_update(_forward(self.magnification, syncing, app.set_display, "magnification", float))
@@ -150,21 +156,32 @@ class ExplorePanel:
                 return
             self.registration.value = settings.registration
             self.interpolation.value = settings.interpolation
-            self.neighbors.value = int(settings.neighbors)
-            self.power.value = float(settings.power)
-            self.smoothing.value = float(settings.smoothing)
+            chosen = {settings.registration, settings.interpolation}
+            for flag, widget in self.options.items():
+                widget.value = getattr(settings, flag.replace("-", "_"))
+                widget.visible = bool(self.option_owners[flag] & chosen)
             self.noise.value = float(settings.noise_scale)
             self.bias.value = float(settings.bias_scale)
             scene = kind == "scene"
             self.noise.visible = self.bias.visible = self.new_seed.visible = scene  # measured data: nothing to scale
-            self.neighbors.visible = self.power.visible = settings.interpolation == "idw"
-            self.smoothing.visible = settings.interpolation == "tps"
             self.seed_md.content = (
                 f"Noise seed **{settings.seed}**."
                 if scene
                 else f"Measured data: noise and bias are what they are (seed {settings.seed} only "
                 "seeds annealing and clustering)."
             )
+
+    @property
+    def neighbors(self):
+        return self.options["neighbors"]
+
+    @property
+    def power(self):
+        return self.options["power"]
+
+    @property
+    def smoothing(self):
+        return self.options["smoothing"]
 
 
 class ViewPanel:

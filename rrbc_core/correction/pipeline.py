@@ -17,7 +17,7 @@ from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
-from rrbc_core.methods import SEEDED, MethodOptions
+from rrbc_core.methods import MethodOptions
 from rrbc_core.runtime.threads import thread_limited
 
 
@@ -68,8 +68,7 @@ class CorrectionResult:
         """The JSON object of `rrbc correct --json` (docs/cli.md)."""
         reg = self.registration
         reg_json = {"method": reg.method, **reg.mapping.as_dict(), "fre_rms_mm": reg.fre_rms_mm}
-        if self.options.registration in SEEDED:
-            reg_json["seed"] = self.options.seed
+        reg_json.update(self.options.registration_json())  # the strategy's options (a seeded one's seed)
         return {
             "registration": reg_json,
             "interpolation": self.options.interpolation_json(),
@@ -141,7 +140,7 @@ def correct_measurements(mset: MeasurementSet, options: MethodOptions | None = N
     targets = mset.points("target")
     checks = mset.points("check")
     if len(fid.ids) == 0:
-        if options.interpolation != "none":
+        if options.interpolation_name != "none":
             raise InputError(
                 f"{mset.source}: no fiducial rows (role fiducial or both); add fiducials or use --interpolation none"
             )

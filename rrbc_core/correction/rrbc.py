@@ -20,7 +20,7 @@ from rrbc_core.geometry.points import as_points
 
 
 def _pieces(mapping, sensor):
-    return mapping.piece_of(sensor) if getattr(mapping, "piecewise", False) else None
+    return mapping.piece_of(sensor) if mapping.piecewise else None
 
 
 def _inverse(mapping, robot, pieces):

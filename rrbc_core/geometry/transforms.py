@@ -11,6 +11,7 @@ else in the project writes `X @ R.T + t` by hand.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -93,6 +94,7 @@ class RigidTransform:
 
     rotation: np.ndarray
     translation: np.ndarray
+    piecewise: ClassVar[bool] = False  # one transform everywhere (`registration.SensorToRobot`)
 
     def __post_init__(self):
         r = np.array(self.rotation, dtype=float)

@@ -5,6 +5,7 @@ reports the predictive standard deviation."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.linalg import LinAlgError, cho_solve, cholesky, solve_triangular
@@ -22,6 +23,7 @@ from rrbc_core.interpolation.base import (
     dim_words,
     too_few,
 )
+from rrbc_core.option_specs import check_options, option
 
 # ---------------------------------------------------------------------------------------------------------------
 # Gaussian process with a linear mean (universal kriging)
@@ -230,8 +232,21 @@ class GP:
     The predictive std is that of the latent correction (without the white noise), in mm.
     """
 
-    kernel: str = "matern52"
-    noise_mm: float | None = None
+    name: ClassVar[str] = "gp"
+    kernel: str = option(
+        "matern52",
+        label="GP kernel",
+        help="gp: covariance kernel, matern52 (default) or se (squared exponential)",
+        choices=("matern52", "se"),
+    )
+    noise_mm: float | None = option(
+        None,
+        flag="noise-mm",
+        label="GP noise (mm)",
+        help="gp: the white-noise standard deviation per axis, mm (default: estimated by REML)",
+        bounds=(0.0, 1e3),
+        kind=float,
+    )
 
     def __post_init__(self):
         kern = str(self.kernel).strip().lower()
@@ -240,6 +255,7 @@ class GP:
         object.__setattr__(self, "kernel", kern)
         if self.noise_mm is not None:
             object.__setattr__(self, "noise_mm", check_float("gp noise_mm", self.noise_mm, positive=False))
+        check_options(self, "gp")
 
     def fit(self, points, values) -> FittedInterpolator:
         p, v = check_data(points, values)

@@ -4,6 +4,7 @@ frame, weights 1/d^p) and the zero baseline (`NoCorrection`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -17,6 +18,7 @@ from rrbc_core.interpolation.base import (
     check_float,
     check_positive_int,
 )
+from rrbc_core.option_specs import check_options, option
 
 # ---------------------------------------------------------------------------------------------------------------
 # No correction
@@ -36,6 +38,8 @@ class _FittedZero(Fitted):
 @dataclass(frozen=True)
 class NoCorrection:
     """Baseline: predicts zero corrections everywhere (std None); the hull flags are still reported."""
+
+    name: ClassVar[str] = "none"
 
     def fit(self, points, values) -> FittedInterpolator:
         p, v = check_data(points, values)
@@ -98,12 +102,28 @@ class _FittedIDW(Fitted):
 class IDW:
     """Inverse distance weighting over the k nearest fiducials (3-D distance, sensor frame), weights 1/d^power."""
 
-    k: int = 4
-    power: float = 2.0
+    name: ClassVar[str] = "idw"
+    k: int = option(
+        4,
+        flag="neighbors",
+        label="IDW neighbours k",
+        help="IDW: number of nearest fiducials (default 4)",
+        bounds=(1, 1000),
+        ui=(1, 16, 1),
+    )
+    power: float = option(
+        2.0,
+        label="IDW power p",
+        help="IDW: weight exponent p in 1/d^p (default 2)",
+        bounds=(0.0, 50.0),
+        lo_open=True,
+        ui=(0.5, 6.0, 0.1),
+    )
 
     def __post_init__(self):
         object.__setattr__(self, "k", check_positive_int("idw k (number of nearest fiducials)", self.k))
         object.__setattr__(self, "power", check_float("idw power", self.power, positive=True))
+        check_options(self, "idw")
 
     def fit(self, points, values) -> FittedInterpolator:
         p, v = check_data(points, values)

@@ -4,6 +4,7 @@ local coordinates, extended linearly outside the hull from well-shaped boundary 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.spatial import Delaunay
@@ -143,6 +144,8 @@ class Linear:
 
     Linear extension outside the hull (queries flagged extrapolated); piecewise linear along collinear fiducials.
     """
+
+    name: ClassVar[str] = "linear"
 
     def fit(self, points, values) -> FittedInterpolator:
         p, v = check_data(points, values)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.interpolate import RBFInterpolator
@@ -20,6 +21,7 @@ from rrbc_core.interpolation.base import (
     group_mean,
     too_few,
 )
+from rrbc_core.option_specs import check_options, option
 
 # ---------------------------------------------------------------------------------------------------------------
 # Thin-plate spline
@@ -69,10 +71,18 @@ class TPS:
     smoothing >= 0 is scipy's RBFInterpolator smoothing in local units (0: exact interpolation).
     """
 
-    smoothing: float = 0.0
+    name: ClassVar[str] = "tps"
+    smoothing: float = option(
+        0.0,
+        label="TPS smoothing",
+        help="TPS: scipy RBF smoothing in the fiducials' local units (default 0: exact interpolation)",
+        bounds=(0.0, 1e12),
+        ui=(0.0, 1.0, 0.005),
+    )
 
     def __post_init__(self):
         object.__setattr__(self, "smoothing", check_float("tps smoothing", self.smoothing, positive=False))
+        check_options(self, "tps")
 
     def fit(self, points, values) -> FittedInterpolator:
         p, v = check_data(points, values)

@@ -1,17 +1,29 @@
 """Registration: from paired sensor/robot points to the sensor→robot mapping (`robot = mapping.apply(sensor)`).
 
-`register(name, sensor, robot, **options)` runs a strategy by its command-line name (`STRATEGIES`); each strategy
-is also callable by itself. The strategies, the mappings they return and the checks they make are described in
-`strategies.py`.
+Each strategy is a frozen option object (`LeastSquares`, `ThreePoint`, `Combinatorial`, `Annealing`, `Clustering`;
+`options.py`) with `.register(sensor, robot)`; `make_strategy(name, **options)` builds one from its command-line
+name (`STRATEGIES`, the one registry) and `register(name, sensor, robot, **options)` runs it. The numerics, the
+mappings they return (typed by the `SensorToRobot` protocol) and the checks they make are in `strategies.py`.
 """
 
-from rrbc_core.registration.strategies import (
-    MAX_SUBSET_POINTS,
+from rrbc_core.registration.options import (
     STRATEGIES,
     STRATEGY_OPTIONS,
+    Annealing,
+    Clustering,
+    Combinatorial,
+    LeastSquares,
+    Strategy,
+    ThreePoint,
+    make_strategy,
+    register,
+)
+from rrbc_core.registration.strategies import (
+    MAX_SUBSET_POINTS,
     LinearMap,
     PiecewiseMap,
     Registration,
+    SensorToRobot,
     annealing,
     check_subset_count,
     clustering,
@@ -19,18 +31,25 @@ from rrbc_core.registration.strategies import (
     kabsch,
     kmeans,
     least_squares,
-    register,
     three_point,
     three_point_matrices,
 )
 
 __all__ = [
+    "Annealing",
+    "Clustering",
+    "Combinatorial",
+    "LeastSquares",
+    "Strategy",
+    "ThreePoint",
+    "make_strategy",
     "MAX_SUBSET_POINTS",
     "STRATEGIES",
     "STRATEGY_OPTIONS",
     "LinearMap",
     "PiecewiseMap",
     "Registration",
+    "SensorToRobot",
     "annealing",
     "check_subset_count",
     "clustering",

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from itertools import combinations
+from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -30,12 +31,33 @@ from numpy.typing import ArrayLike
 from rrbc_core.errors import InputError
 from rrbc_core.geometry import points as geometry
 from rrbc_core.geometry.transforms import RigidTransform, chordal_mean, project_to_so3, rotation_from_euler_zyx
-from rrbc_core.runtime.threads import thread_limited
 
 
 # ------------------------------------------------------------------------------------------------------
 # Mappings
 # ------------------------------------------------------------------------------------------------------
+@runtime_checkable
+class SensorToRobot(Protocol):
+    """What every sensor→robot mapping offers (`RigidTransform`, `LinearMap`, `PiecewiseMap`): robot =
+    apply(sensor) and its inverse, points (..., 3) mm; a rotation and translation for display (a summary for a
+    piecewise map); its JSON (`as_dict`); and whether it is one map everywhere (`piecewise` False) or one per
+    region of the sensor frame (True: `PiecewiseMap.piece_of` says which)."""
+
+    piecewise: ClassVar[bool]
+
+    def apply(self, points: ArrayLike) -> np.ndarray: ...
+
+    def apply_inverse(self, points: ArrayLike) -> np.ndarray: ...
+
+    @property
+    def rotation(self) -> np.ndarray: ...
+
+    @property
+    def translation(self) -> np.ndarray: ...
+
+    def as_dict(self) -> dict: ...
+
+
 @dataclass(frozen=True, eq=False)
 class LinearMap:
     """robot = matrix @ sensor + translation, with `matrix` near a rotation (element-wise averages) or a
@@ -43,7 +65,7 @@ class LinearMap:
 
     matrix: np.ndarray
     translation: np.ndarray
-    piecewise = False
+    piecewise: ClassVar[bool] = False
 
     def apply(self, points) -> np.ndarray:
         p = np.asarray(points, dtype=float)
@@ -73,7 +95,7 @@ class PiecewiseMap:
 
     kernels: np.ndarray  # (K, 3) sensor frame
     pieces: tuple  # K mappings
-    piecewise = True
+    piecewise: ClassVar[bool] = True
 
     def piece_of(self, sensor_points) -> np.ndarray:
         p = np.atleast_2d(np.asarray(sensor_points, dtype=float))
@@ -136,14 +158,14 @@ class Registration:
     """
 
     method: str
-    mapping: object
+    mapping: SensorToRobot
     residuals: np.ndarray
     fre_rms_mm: float
     details: dict = field(default_factory=dict)
 
     @property
     def piecewise(self) -> bool:
-        return bool(getattr(self.mapping, "piecewise", False))
+        return bool(self.mapping.piecewise)
 
 
 def _finish(method, mapping, sensor, robot, **details) -> Registration:
@@ -470,54 +492,3 @@ def _average_rooted(mats, average, kernel):
         images = np.einsum("kij,j->ki", mats[:, :3, :3], kernel) + mats[:, :3, 3]
         return LinearMap(m[:3, :3], images.mean(axis=0) - m[:3, :3] @ kernel)
     return _average(mats, average, kernel)
-
-
-# ------------------------------------------------------------------------------------------------------
-STRATEGIES = {
-    "least-squares": least_squares,
-    "three-point": three_point,
-    "combinatorial": combinatorial,
-    "annealing": annealing,
-    "clustering": clustering,
-}
-
-
-#: The options each strategy takes by name besides its seed (`methods.SEEDED`), in `register` and in the batch
-#: kernels (`simulation.batch.rrbc_batch`). From Python, `annealing` also takes `initial` (a Registration).
-STRATEGY_OPTIONS = {
-    "least-squares": ("weights",),
-    "three-point": (),
-    "combinatorial": ("average", "degeneracy_ratio"),
-    "annealing": ("iterations", "cooling_c"),
-    "clustering": ("clusters", "average"),
-}
-
-
-@thread_limited
-def register(method: str, sensor: ArrayLike, robot: ArrayLike, **options) -> Registration:
-    """Register paired points with a named strategy: the sensor→robot mapping and its residuals.
-
-    Parameters
-    ----------
-    method : str
-        A name in `STRATEGIES`: "least-squares", "three-point", "combinatorial", "annealing", "clustering".
-    sensor, robot : (N, 3) array_like
-        The same N physical points measured in the sensor frame and in the robot frame, mm.
-    **options
-        The strategy's options (`STRATEGY_OPTIONS`, and ``seed`` for annealing and clustering).
-
-    Returns
-    -------
-    Registration
-        ``mapping`` (robot = mapping.apply(sensor)), ``residuals`` (N, 3) robot frame, mm, and ``fre_rms_mm``.
-
-    Raises
-    ------
-    InputError
-        An unknown name or option, fewer than 3 points, coincident or (nearly) collinear points.
-    """
-    try:
-        fn = STRATEGIES[method]
-    except KeyError:
-        raise InputError(f"unknown registration '{method}': choose one of {', '.join(STRATEGIES)}") from None
-    return fn(sensor, robot, **options)

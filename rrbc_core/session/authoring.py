@@ -7,7 +7,6 @@ Every edit, and every drag that calls `checkpoint()` first, can be undone; a new
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -155,7 +154,7 @@ def remove_point(session: ExplorerSession, kind: str, pid: str) -> Evaluation:
         if kind == "targets":
             session.regions = {k: v for k, v in session.regions.items() if k != pid}
         if kind == "fiducials" and pid in session.settings.excluded:
-            session.settings = dataclasses.replace(session.settings, excluded=session.settings.excluded - {pid})
+            session.settings = session.settings.replace(excluded=session.settings.excluded - {pid})
 
     return edit(session, change)
 

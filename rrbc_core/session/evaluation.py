@@ -14,54 +14,118 @@ from rrbc_core.correction import metrics
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
-from rrbc_core.methods import MethodOptions
+from rrbc_core.methods import MethodOptions, method_flags
 
-#: Bounds of what a user controls (issue 16: a value sent by a client cannot push the session into overflow).
-SCALE_MAX = 100.0  # noise and bias sizes (the app's sliders go to 3)
-SMOOTHING_MAX = 1e6
-NEIGHBORS_MAX = 1000
-POWER_MAX = 50.0
+#: Bounds of the noise and bias sizes a user controls (issue 16: a value sent by a client cannot push the session
+#: into overflow; the app's sliders go to 3). The method's options carry their own bounds (`option_specs`).
+SCALE_MAX = 100.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Settings:
-    """What the user controls. noise_scale/bias_scale multiply the scene's random/deterministic error terms."""
+    """What the user controls: the method (names of the registration strategy and the interpolation, and the
+    options the user set, by flag), the noise and bias sizes (multipliers of the scene's random and deterministic
+    error terms), the seed (the session's noise draws and a seeded strategy's) and the excluded fiducials.
 
-    registration: str = "least-squares"
-    interpolation: str = "idw"
-    neighbors: int = 4
-    power: float = 2.0
-    smoothing: float = 0.0
-    noise_scale: float = 1.0
-    bias_scale: float = 1.0
-    seed: int = 0
-    excluded: frozenset = frozenset()
+    ``Settings(interpolation="tps", smoothing=0.1, noise_scale=2.0)``: options are keyed by their flags
+    (`methods.method_flags`: ``neighbors``, ``power``, ``smoothing``, ``kernel``, ``noise_mm``, ``clusters``,
+    ``average``, …) and checked against their one spec each; an option of a method not chosen is kept (the app's
+    widgets keep their values) and applies when that method is chosen. `method` is the `MethodOptions` in force;
+    ``settings.neighbors`` (any flag) reads an option, its default when not set.
+    """
 
-    def __post_init__(self):
-        for name, top in (("noise_scale", SCALE_MAX), ("bias_scale", SCALE_MAX), ("smoothing", SMOOTHING_MAX)):
-            v = getattr(self, name)
-            if not np.isfinite(v) or not 0 <= v <= top:
+    registration: str
+    interpolation: str
+    noise_scale: float
+    bias_scale: float
+    seed: int
+    excluded: frozenset
+    options: tuple  # ((flag, value), ...) sorted: the method options the user set
+
+    def __init__(
+        self,
+        registration: str = "least-squares",
+        interpolation: str = "idw",
+        noise_scale: float = 1.0,
+        bias_scale: float = 1.0,
+        seed: int = 0,
+        excluded=frozenset(),
+        options=(),
+        **flagged,
+    ):
+        flags = method_flags()
+        merged = dict(options)
+        for k, v in flagged.items():
+            merged[k.replace("_", "-") if k.replace("_", "-") in flags else k] = v
+        for k in list(merged):
+            if k not in flags:
+                raise InputError(f"unknown setting '{k}'")
+            merged[k] = flags[k][0][2].check(merged[k], "setting")
+        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+        set_("registration", str(registration).strip().lower())
+        set_("interpolation", str(interpolation).strip().lower())
+        for name, v, top in (("noise_scale", noise_scale, SCALE_MAX), ("bias_scale", bias_scale, SCALE_MAX)):
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v):
+                raise InputError(f"{name} must be a number from 0 to {top:g}, got {v!r}")
+            if not 0 <= v <= top:
                 raise InputError(f"{name} must be a number from 0 to {top:g}, got {v}")
-        if not 1 <= int(self.neighbors) <= NEIGHBORS_MAX or not 0 < self.power <= POWER_MAX:
-            raise InputError(
-                f"neighbors must be 1 to {NEIGHBORS_MAX} and power in (0, {POWER_MAX:g}], got {self.neighbors}, "
-                f"{self.power}"
-            )
-        object.__setattr__(self, "excluded", frozenset(self.excluded))
-        self.method  # noqa: B018 - validates the names and the chosen method's options
+            set_(name, float(v))
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise InputError(f"seed must be an integer, got {seed!r}")
+        set_("seed", int(seed))
+        set_("excluded", frozenset(excluded))
+        set_("options", tuple(sorted(merged.items())))
+        self.method  # noqa: B018 - validates the names and the chosen methods' options
+
+    def replace(self, **changes) -> Settings:
+        """A copy with fields or flag-named options changed (what `ExplorerSession.update` applies)."""
+        base = {
+            "registration": self.registration,
+            "interpolation": self.interpolation,
+            "noise_scale": self.noise_scale,
+            "bias_scale": self.bias_scale,
+            "seed": self.seed,
+            "excluded": self.excluded,
+        }
+        opts = dict(self.options)
+        for k, v in changes.items():
+            if k in base:
+                base[k] = v
+            else:
+                opts[k.replace("_", "-") if k.replace("_", "-") in method_flags() else k] = v
+        return Settings(**base, options=tuple(opts.items()))
 
     @property
     def method(self) -> MethodOptions:
-        """The registration and interpolation chosen, with the options of the chosen interpolation only."""
-        idw, tps = self.interpolation == "idw", self.interpolation == "tps"
-        return MethodOptions(
-            registration=self.registration,
-            interpolation=self.interpolation,
-            neighbors=int(self.neighbors) if idw else None,
-            power=float(self.power) if idw else None,
-            smoothing=float(self.smoothing) if tps else None,
-            seed=int(self.seed),
-        )
+        """The registration and interpolation in force, with the options the user set for them (and the session's
+        seed for a seeded strategy)."""
+        flags = method_flags()
+        chosen = {self.registration, self.interpolation}
+        given = {k: v for k, v in self.options if any(name in chosen for _, name, _ in flags[k])}
+        return MethodOptions.named(self.registration, self.interpolation, seed=self.seed, **given)
+
+    def __getattr__(self, name: str):
+        """An option by its flag (``settings.neighbors``): the value set, else its default."""
+        flags = method_flags()
+        flag = name.replace("_", "-") if name.replace("_", "-") in flags else name
+        if flag not in flags:
+            raise AttributeError(name)
+        given = dict(object.__getattribute__(self, "options"))
+        return given.get(flag, flags[flag][0][2].default)
+
+    def to_json(self) -> dict:
+        """The settings as JSON: names, sizes, seed, excluded fiducials and every option of the chosen methods."""
+        m = self.method
+        return {
+            "registration": self.registration,
+            "interpolation": self.interpolation,
+            **m.registration_json(),
+            **{k: v for k, v in m.interpolation_json().items() if k != "method"},
+            "noise_scale": self.noise_scale,
+            "bias_scale": self.bias_scale,
+            "seed": self.seed,
+            "excluded": sorted(self.excluded),
+        }
 
     def interpolator(self):
         return self.method.interpolator()
@@ -207,7 +271,7 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
     reg_r, fid_r, tgt_r = readings["registration"], readings["fiducials"], readings["targets"]
     reg = cached(
         "registration",
-        (s.registration, s.seed, reg_r.sensor.tobytes(), reg_r.robot.tobytes()),
+        (s.method.registration, reg_r.sensor.tobytes(), reg_r.robot.tobytes()),
         lambda: s.method.register(reg_r.sensor, reg_r.robot),
     )
     fids = layout["fiducials"]

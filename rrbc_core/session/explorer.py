@@ -29,7 +29,6 @@ VEC). They read the session's public state and its one-entry caches (`cached`).
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -309,7 +308,7 @@ class ExplorerSession:
     def update(self, **changes) -> Evaluation:
         """Change settings (names as in Settings) and re-evaluate; invalid values raise InputError and leave
         the session unchanged."""
-        new = dataclasses.replace(self.settings, **changes)
+        new = self.settings.replace(**changes)
         if self.kind == "measurements" and (new.noise_scale != 1.0 or new.bias_scale != 1.0):
             raise InputError("noise and bias sizes apply to scenes; measured data are what they are")
         old = self.settings

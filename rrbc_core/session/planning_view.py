@@ -197,7 +197,7 @@ def accept_suggestions(session: ExplorerSession, which=None) -> Evaluation:
             **session.layout,
             "fiducials": Group(fid.ids + tuple(new_ids), np.vstack([fid.positions, pos])),
         }
-        session.settings = dataclasses.replace(session.settings, excluded=session.settings.excluded - set(new_ids))
+        session.settings = session.settings.replace(excluded=session.settings.excluded - set(new_ids))
 
     try:
         ev = authoring.edit(

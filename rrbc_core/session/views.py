@@ -3,7 +3,6 @@ the exports (a measurement file, the JSON of `rrbc correct`)."""
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -238,6 +237,6 @@ def export_json(session: ExplorerSession) -> dict:
     s = session.settings
     opts = s.method
     out = correct_measurements(export_measurements(session), opts).to_json()
-    out["settings"] = {**dataclasses.asdict(s), "excluded": sorted(s.excluded)}
+    out["settings"] = s.to_json()
     out["source"] = {"kind": session.kind, "name": session.name}
     return out
