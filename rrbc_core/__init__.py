@@ -39,7 +39,7 @@ _EXPORTS = {
     "default_scene_path": "rrbc_core.io.scene",
     "Scene": "rrbc_core.io.scene",
     "simulate": "rrbc_core.simulation.montecarlo",
-    "simulated_data": "rrbc_core.simulation.montecarlo",
+    "simulated_data": "rrbc_core.simulation.datasets",
     "MonteCarloResult": "rrbc_core.simulation.montecarlo",
     "diagnose": "rrbc_core.analysis.diagnosis",
     "Diagnosis": "rrbc_core.analysis.diagnosis",
@@ -64,7 +64,8 @@ if TYPE_CHECKING:  # what type checkers and editors see
     from rrbc_core.methods import MethodOptions
     from rrbc_core.registration import Registration, register
     from rrbc_core.session.explorer import ExplorerSession
-    from rrbc_core.simulation.montecarlo import MonteCarloResult, simulate, simulated_data
+    from rrbc_core.simulation.datasets import simulated_data
+    from rrbc_core.simulation.montecarlo import MonteCarloResult, simulate
 
 
 def __getattr__(name: str):

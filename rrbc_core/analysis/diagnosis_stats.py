@@ -13,28 +13,28 @@ from scipy.spatial import cKDTree
 from rrbc_core.errors import InputError
 from rrbc_core.registration.strategies import least_squares
 
-_PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points are treated as coplanar
+PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points are treated as coplanar
 
 
-_BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
+BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
 # Above this many points the bootstrap's cost (replicates x N) would dominate: Moran's I is then a sum of N*k
 # locally dependent terms, close to normal, so 199 replicates give its null mean and spread and the p-value is the
 # normal tail (docs/theory.md §6.1). Below it the empirical tail of 1999 replicates is used.
-_BOOTSTRAP_EXACT_POINTS = 20_000
-_BOOTSTRAP_LARGE = 199
+BOOTSTRAP_EXACT_POINTS = 20_000
+BOOTSTRAP_LARGE = 199
 
 MAX_POINTS = 1_000_000  # distinct paired points diagnose accepts (issue 16: a stated limit, not minutes or gigabytes)
 
 
-_KNN = 6  # neighbours in Moran's I weights
+KNN = 6  # neighbours in Moran's I weights
 
 
-_BOOTSTRAP_CHUNK_ELEMENTS = 1 << 20  # bootstrap draws held at once (8 MiB): memory stays linear in N
+BOOTSTRAP_CHUNK_ELEMENTS = 1 << 20  # bootstrap draws held at once (8 MiB): memory stays linear in N
 
 
 # ------------------------------------------------------------------------------------------------ data
 @dataclass
-class _Data:
+class Data:
     ids: list
     sensor: np.ndarray  # (N, 3) per-id means
     robot: np.ndarray
@@ -47,7 +47,7 @@ class _Data:
     row_time: np.ndarray  # (R,) NaN when absent
 
 
-def _paired(mset) -> _Data:
+def paired(mset) -> Data:
     robot = np.asarray(mset.robot, float)
     sensor = np.asarray(mset.sensor, float)
     rows = [
@@ -86,11 +86,11 @@ def _paired(mset) -> _Data:
         tm /= count
         if np.ptp(tm) > 0:
             time = tm
-    return _Data(list(order), s, r, count, time, row_point, rs, rr, np.asarray(rows, int), t)
+    return Data(list(order), s, r, count, time, row_point, rs, rr, np.asarray(rows, int), t)
 
 
 # ------------------------------------------------------------------------------------------ linear model
-class _Geometry:
+class Geometry:
     """Design columns of the linearised residual model at mapped points p (robot frame)."""
 
     def __init__(self, p: np.ndarray, time: np.ndarray | None, weights: np.ndarray, white: np.ndarray | None = None):
@@ -99,7 +99,7 @@ class _Geometry:
         c = p - self.center
         _, sv, vt = np.linalg.svd(c, full_matrices=False)
         self.axes = vt  # rows: principal directions
-        self.planar = bool(sv[-1] <= _PLANAR_RATIO * sv[0])
+        self.planar = bool(sv[-1] <= PLANAR_RATIO * sv[0])
         self.normal = vt[2]
         self.scale = float(np.sqrt(np.mean(np.sum(c**2, axis=1)))) or 1.0
         u = c / self.scale
@@ -143,7 +143,7 @@ class _Geometry:
         return self._cols([np.outer(tt, e[k]) for k in range(3)])
 
 
-def _fit(y: np.ndarray, x: np.ndarray):
+def fit(y: np.ndarray, x: np.ndarray):
     """Least squares of y on the columns x along the directions its rank counts (normalised columns, singular
     values above 1e-8 of the largest): the fit and the F-tests' degrees of freedom agree even for nearly dependent
     columns (the arm's Jacobian beside the rigid terms). Returns (coef, residual, RSS, rank).
@@ -168,10 +168,10 @@ def _fit(y: np.ndarray, x: np.ndarray):
     return coef, res, float(res @ res), rank
 
 
-def _ftest(y, x0, x1):
+def ftest(y, x0, x1):
     """Nested F-test of x1 ⊃ x0 on y. Returns (p, q, nu, F, rss0, rss1, coef1)."""
-    _, _, rss0, k0 = _fit(y, x0)
-    coef1, _, rss1, k1 = _fit(y, x1)
+    _, _, rss0, k0 = fit(y, x0)
+    coef1, _, rss1, k1 = fit(y, x1)
     q, nu = k1 - k0, len(y) - k1
     if q <= 0 or nu <= 0 or rss1 <= 0:
         return 1.0, q, nu, 0.0, rss0, rss1, coef1
@@ -179,12 +179,12 @@ def _ftest(y, x0, x1):
     return float(stats.f.sf(f, q, nu)), q, nu, float(f), rss0, rss1, coef1
 
 
-def _orth(x: np.ndarray) -> np.ndarray:
+def orth(x: np.ndarray) -> np.ndarray:
     u, sv, _ = np.linalg.svd(x, full_matrices=False)
     return u[:, sv > 1e-8 * (sv[0] if len(sv) else 1.0)]
 
 
-def _usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1):
+def usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1):
     """The directions of the span of `cols` that keep at least `kept` of their energy beside the span of `base`.
     A direction almost inside the base is, beside it, mostly the data's own noise carried by the columns (they are
     built from measured positions): fitting it fits that noise. Returns (columns (3N, j) = cols @ m, fraction
@@ -194,28 +194,28 @@ def _usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1):
     u, sv, vt = np.linalg.svd(cols, full_matrices=False)
     keep = sv > 1e-8 * sv[0]
     qc, to_q = u[:, keep], vt[keep].T / sv[keep]  # qc = cols @ to_q, orthonormal
-    qb = _orth(base)
+    qb = orth(base)
     beside = qc - qb @ (qb.T @ qc)
     frac, vec = np.linalg.eigh(beside.T @ beside)
     m = to_q @ vec[:, frac >= kept]
     return cols @ m, frac, m
 
 
-_DRIFT_KEPT = 0.1  # drift directions keeping less than this fraction of their energy beside the model: not testable
+DRIFT_KEPT = 0.1  # drift directions keeping less than this fraction of their energy beside the model: not testable
 
 
-def _usable_drift(base: np.ndarray, dcol: np.ndarray):
+def usable_drift(base: np.ndarray, dcol: np.ndarray):
     """Drift columns restricted to the directions not (almost) absorbed by the columns `base`.
 
     In raster order time is (nearly) linear in the coordinates, so some drift directions equal a rotation or linear
     term up to the noise in the mapped points; fitting them would fit noise patterns (false drift and anisotropy).
-    Returns (columns, fraction of drift energy kept per direction): `_usable` with the drift's threshold."""
-    cols, frac, _ = _usable(base, dcol, _DRIFT_KEPT)
+    Returns (columns, fraction of drift energy kept per direction): `usable` with the drift's threshold."""
+    cols, frac, _ = usable(base, dcol, DRIFT_KEPT)
     return cols, frac
 
 
 # ----------------------------------------------------------------------------------------------- outliers
-def _outliers(d: _Data, use_time: bool, alpha: float, white: np.ndarray, extra: np.ndarray | None = None):
+def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np.ndarray | None = None):
     """Generalised ESD on deleted (mean-shift) studentised residuals of a rigid + linear (+ drift) (+ `extra`:
     fields (k, N, 3) per point, e.g. the arm's kinematic columns) model.
 
@@ -228,13 +228,13 @@ def _outliers(d: _Data, use_time: bool, alpha: float, white: np.ndarray, extra: 
         idx = np.flatnonzero(active)
         reg = least_squares(d.sensor[idx], d.robot[idx], weights=d.count[idx])
         p = reg.mapping.apply(d.sensor[idx])
-        g = _Geometry(p, d.time[idx] if use_time else None, d.count[idx], white)
+        g = Geometry(p, d.time[idx] if use_time else None, d.count[idx], white)
         x = np.hstack([g.rigid(), g.linear()])
         if use_time:
-            x = np.hstack([x, _usable_drift(x, g.drift())[0]])
+            x = np.hstack([x, usable_drift(x, g.drift())[0]])
         if extra is not None:
             x = np.hstack([x, g._cols(extra[:, idx])])
-        q = _orth(x)
+        q = orth(x)
         y = g.vec(d.robot[idx] - p)
         res = y - q @ (q.T @ y)
         rss = float(res @ res)
@@ -268,14 +268,14 @@ def _outliers(d: _Data, use_time: bool, alpha: float, white: np.ndarray, extra: 
 
 
 # ---------------------------------------------------------------------------------------------- Moran's I
-def _moran_weights(p: np.ndarray):
-    """Indices (N, k) of each point's k nearest other points (k = min(_KNN, N - 1))."""
-    k = min(_KNN, len(p) - 1)
+def moran_weights(p: np.ndarray):
+    """Indices (N, k) of each point's k nearest other points (k = min(KNN, N - 1))."""
+    k = min(KNN, len(p) - 1)
     _, nb = cKDTree(p).query(p, k=k + 1)
     return nb[:, 1:]
 
 
-def _moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
+def moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
     """Vector Moran's I with k-NN weights: res (..., N, 3) -> (...).
 
     I = (1/k) Σ_i Σ_{j ∈ nb(i)} r_i·r_j / Σ_i |r_i|², the neighbour sums taken with a sparse (N, N) weight
@@ -292,22 +292,22 @@ def _moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
     return (num / (k * den)).reshape(lead)
 
 
-def _moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = _BOOTSTRAP) -> np.ndarray:
+def moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = BOOTSTRAP) -> np.ndarray:
     """Moran's I of `replicates` white-noise residual fields with the accepted model's columns (orthonormal qa,
-    (3N, q)) projected out. Drawn and evaluated in chunks of _BOOTSTRAP_CHUNK_ELEMENTS: memory is linear in N and
+    (3N, q)) projected out. Drawn and evaluated in chunks of BOOTSTRAP_CHUNK_ELEMENTS: memory is linear in N and
     the draws are those of one rng.standard_normal((replicates, 3N)) call (a Generator fills rows in order)."""
     n3 = qa.shape[0]
     out = np.empty(replicates)
-    step = max(1, _BOOTSTRAP_CHUNK_ELEMENTS // n3)
+    step = max(1, BOOTSTRAP_CHUNK_ELEMENTS // n3)
     for start in range(0, replicates, step):
         b = min(step, replicates - start)
         eps = rng.standard_normal((b, n3))
         eps -= (eps @ qa) @ qa.T
-        out[start : start + b] = _moran(eps.reshape(b, n3 // 3, 3), nb)
+        out[start : start + b] = moran(eps.reshape(b, n3 // 3, 3), nb)
     return out
 
 
-def _length_scale(p: np.ndarray, r: np.ndarray) -> tuple[float, float]:
+def length_scale(p: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     """Fit r_i·r_j ≈ v exp(−d²/2ℓ²) (i ≠ j) over a grid of ℓ; returns (ℓ, v)."""
     n = len(p)
     if n > 400:
@@ -330,7 +330,7 @@ def _length_scale(p: np.ndarray, r: np.ndarray) -> tuple[float, float]:
 
 
 # ---------------------------------------------------------------------------------------------- anisotropy
-def _sphericity(s: np.ndarray, nu: float):
+def sphericity(s: np.ndarray, nu: float):
     """LR test of Σ = σ²I for a 3x3 covariance estimate s with nu dof (Mauchly, Bartlett-corrected)."""
     p = 3
     ev = np.clip(np.linalg.eigvalsh(s), 1e-300, None)
@@ -341,7 +341,7 @@ def _sphericity(s: np.ndarray, nu: float):
 
 
 # ------------------------------------------------------------------------------------------------- LOO
-def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
+def loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
     """Weighted least-squares fits (R (N,3,3), t (N,3)) of all points but i, for every i at once: the weighted
     sums of the full set minus point i's share (a rank-one downdate of the cross-covariance), then one batched
     SVD with the reflection fix — the same fit as `registration.kabsch` on the N−1 points (to rounding), in O(N)
@@ -369,7 +369,7 @@ def _loo_rotations(sensor: np.ndarray, robot: np.ndarray, weights: np.ndarray):
     return rot, t
 
 
-def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
+def loo(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
     """Leave-one-out prediction error at each point: rigid only, and rigid + IDW correction from its k nearest
     others (sensor frame), with the registration of the others; the RMS is taken over the points `evaluate` (N,)
     bool (default all: a point left out of the RMS still takes part in the others' fits). Returns the two RMS
@@ -385,7 +385,7 @@ def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
     keep = np.ones_like(nb, bool)
     keep[np.arange(n), drop] = False
     nb, dj = nb[keep].reshape(n, kk), dist[keep].reshape(n, kk)
-    rot, t = _loo_rotations(sensor, robot, weights)
+    rot, t = loo_rotations(sensor, robot, weights)
     e_rigid = robot - (np.einsum("nij,nj->ni", rot, sensor) + t)
     corr = robot[nb] - (np.einsum("nij,nkj->nki", rot, sensor[nb]) + t[:, None, :])  # (N, k, 3)
     on = dj <= 1e-12
@@ -397,8 +397,8 @@ def _loo(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
     return rms(e_rigid), rms(e_rrbc)
 
 
-def _noise_cov(
-    d: _Data, inl: np.ndarray, use_time: bool, extra: np.ndarray | None = None, row_systematic: np.ndarray | None = None
+def noise_cov(
+    d: Data, inl: np.ndarray, use_time: bool, extra: np.ndarray | None = None, row_systematic: np.ndarray | None = None
 ):
     """Noise covariance (3x3, robot frame, per single measurement) and its degrees of freedom.
 
@@ -420,13 +420,13 @@ def _noise_cov(
         nu = float(np.sum(d.count - 1))
         return e.T @ e / nu, nu, "repeats"
     p = reg.mapping.apply(s)
-    g = _Geometry(p, d.time[inl] if use_time else None, w)
+    g = Geometry(p, d.time[inl] if use_time else None, w)
     x = np.hstack([g.rigid(), g.linear()])
     if use_time:
-        x = np.hstack([x, _usable_drift(x, g.drift())[0]])
+        x = np.hstack([x, usable_drift(x, g.drift())[0]])
     if extra is not None:
         x = np.hstack([x, g._cols(extra[:, inl])])
-    q = _orth(x)
+    q = orth(x)
     y = g.vec(r - p)
     rr = (y - q @ (q.T @ y)).reshape(len(inl), 3)
     qb = q.reshape(len(inl), 3, -1)
@@ -437,7 +437,7 @@ def _noise_cov(
     return bi @ (rr.T @ rr) @ bi, nu, "fit"
 
 
-def _whitener(cov: np.ndarray) -> np.ndarray:
+def whitener(cov: np.ndarray) -> np.ndarray:
     ev, vec = np.linalg.eigh(cov)
     ev = np.clip(ev, 1e-12 * max(ev.max(), 1e-300), None)
     return vec @ np.diag(np.sqrt(ev.mean() / ev)) @ vec.T

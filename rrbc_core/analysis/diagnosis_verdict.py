@@ -7,7 +7,7 @@ Two bases, chosen by what the file holds:
   registration rows, fiducial rows, IDW k = 4, p = 2). Nothing is predicted that the file can measure: whatever the
   check rows hold (noisy readings or noise-free truth, outliers or not) is scored as `rrbc correct` scores it.
 - **leave-one-out** — no check rows. Each paired point is left out in turn and predicted by a rigid fit and RRBC
-  from all the others, scored against its own reading (`diagnosis_stats._loo`). This is a prediction for points
+  from all the others, scored against its own reading (`diagnosis_stats.loo`). This is a prediction for points
   measured like the paired ones; against noise-free truth RRBC does worse than it says (the left-out reading's own
   noise is added to both errors and dilutes the difference).
 
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rrbc_core.analysis.diagnosis_stats import _loo
+from rrbc_core.analysis.diagnosis_stats import loo
 from rrbc_core.correction.check_statistics import CheckStatistics
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.errors import InputError
@@ -113,7 +113,7 @@ def rrbc_verdict(
     """
     drop = set(outlier_ids)
     good = np.array([pid not in drop for pid in ids], bool)
-    loo_rigid, loo_rrbc = (float(v) for v in _loo(sensor, robot, count, evaluate=good))
+    loo_rigid, loo_rrbc = (float(v) for v in loo(sensor, robot, count, evaluate=good))
     checks = _check_rms(mset)
     if checks is not None:
         without = None
@@ -123,6 +123,6 @@ def rrbc_verdict(
         return Verdict("checks", checks[0], checks[1], without, loo_rigid, loo_rrbc, checks[2])
     without = None
     if drop:
-        r2, f2 = _loo(sensor[good], robot[good], count[good])
+        r2, f2 = loo(sensor[good], robot[good], count[good])
         without = f2 / r2 - 1.0 if r2 > 0 else 0.0
     return Verdict("leave-one-out", loo_rigid, loo_rrbc, without, loo_rigid, loo_rrbc)

@@ -3,10 +3,7 @@ the key and, for TOML syntax errors, the line. The format: scenes/README.md; the
 
 from __future__ import annotations
 
-import math
 import os
-import re
-import tomllib
 from os import PathLike
 from pathlib import Path
 
@@ -31,9 +28,12 @@ from rrbc_core.io.scene import (
     _load_mesh_file,
     sensor_pose,
 )
+from rrbc_core.io.toml_checks import Checker, fmt_value, read_toml
 from rrbc_core.models.errormodels import ErrorModel
 from rrbc_core.models.errorterms import Kinematic, error_model_from_dict
 from rrbc_core.models.kinematics import ROBOT_DH, reachable, tool_down
+
+MAX_CHECK_POINTS_PER_TARGET = 10_000  # a scene's simulated check points per target (issue 16: bounded work)
 
 _TOP_KEYS = (
     "scene",
@@ -60,158 +60,6 @@ _POINT_KINDS = ("registration", "fiducial", "site", "candidate", "target")
 # ------------------------------------------------------------------------------------------------------
 # Validation helpers
 # ------------------------------------------------------------------------------------------------------
-def _fmt(v, limit: int = 80) -> str:
-    """A TOML-like rendering of a value for error messages."""
-
-    def r(x):
-        if isinstance(x, bool):
-            return "true" if x else "false"
-        if isinstance(x, str):
-            return '"' + x.replace('"', '\\"') + '"'
-        if isinstance(x, float):
-            if math.isnan(x):
-                return "nan"
-            if math.isinf(x):
-                return "inf" if x > 0 else "-inf"
-            return repr(x)
-        if isinstance(x, (list, tuple)):
-            return "[" + ", ".join(r(e) for e in x) + "]"
-        if isinstance(x, dict):
-            return "{" + ", ".join(f"{k} = {r(e)}" for k, e in x.items()) + "}"
-        return str(x)
-
-    s = r(v)
-    return s if len(s) <= limit else s[: limit - 3] + "..."
-
-
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-class _Checker:
-    """Builds one-line errors `<file>: <key>: <what>` and validates TOML values."""
-
-    def __init__(self, source: str):
-        self.source = source
-
-    def error(self, key: str, what: str) -> InputError:
-        what = " ".join(str(what).split())  # one line, whatever the cause said
-        return InputError(f"{self.source}: {key}: {what}" if key else f"{self.source}: {what}")
-
-    def table(self, v, key: str) -> dict:
-        if not isinstance(v, dict):
-            raise self.error(key, f"must be a table, got {_fmt(v)}")
-        return v
-
-    def keys(self, d: dict, key: str, allowed, required=(), where: str | None = None) -> None:
-        allowed = tuple(allowed)
-        for k in d:
-            if k not in allowed:
-                where = where or (f"[{key}]" if key else "the top level")
-                raise self.error(
-                    f"{key}.{k}" if key else k,
-                    f"unknown key; valid keys in {where}: {', '.join(allowed)}",
-                )
-        for k in required:
-            if k not in d:
-                raise self.error(f"{key}.{k}" if key else k, "missing required key")
-
-    def string(self, v, key: str, choices=None, nonempty: bool = True) -> str:
-        if not isinstance(v, str):
-            raise self.error(key, f"must be a string, got {_fmt(v)}")
-        if nonempty and not v.strip():
-            raise self.error(key, "must not be empty")
-        if choices is not None and v not in choices:
-            raise self.error(key, f"must be one of {', '.join(repr(c) for c in choices)}, got {_fmt(v)}")
-        return v
-
-    def number(self, v, key: str, *, positive=False, nonneg=False) -> float:
-        if not _is_number(v):
-            raise self.error(key, f"must be a number, got {_fmt(v)}")
-        x = float(v)
-        if not math.isfinite(x) or abs(x) > VALUE_LIMIT:
-            raise self.error(key, f"must be a finite number at most {VALUE_LIMIT:g} in size, got {_fmt(v)}")
-        if positive and not x > 0:
-            raise self.error(key, f"must be a positive number, got {_fmt(v)}")
-        if nonneg and not x >= 0:
-            raise self.error(key, f"must be a number >= 0, got {_fmt(v)}")
-        return x
-
-    def integer(self, v, key: str, minimum=None, maximum=None) -> int:
-        if isinstance(v, bool) or not (isinstance(v, int) or (isinstance(v, float) and v.is_integer())):
-            raise self.error(key, f"must be an integer, got {_fmt(v)}")
-        i = int(v)
-        if minimum is not None and i < minimum:
-            raise self.error(key, f"must be an integer >= {minimum}, got {_fmt(v)}")
-        if maximum is not None and i > maximum:
-            raise self.error(key, f"must be at most {maximum}, got {_fmt(v)}")
-        return i
-
-    def vector(self, v, key: str, n: int = 3, *, positive=False, what=None) -> np.ndarray:
-        desc = what or (f"{n} positive numbers" if positive else f"{n} finite numbers")
-        ok = isinstance(v, list) and len(v) == n and all(_is_number(e) for e in v)
-        if ok:
-            a = np.array([float(e) for e in v])
-            ok = bool(np.all(np.isfinite(a)) and np.all(np.abs(a) <= VALUE_LIMIT)) and (
-                not positive or bool(np.all(a > 0))
-            )
-        if not ok:
-            raise self.error(key, f"must be {desc}, got {_fmt(v)} (each at most {VALUE_LIMIT:g} in size)")
-        return a
-
-    def array_of_tables(self, v, key: str) -> list:
-        if isinstance(v, dict):
-            raise self.error(key, f"must be an array of tables ([[{key}]] blocks), got a single table [{key}]")
-        if not isinstance(v, list) or not all(isinstance(e, dict) for e in v):
-            raise self.error(key, f"must be an array of tables ([[{key}]] blocks), got {_fmt(v)}")
-        return v
-
-
-# ------------------------------------------------------------------------------------------------------
-# The loader
-# ------------------------------------------------------------------------------------------------------
-_TOML_POS = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
-
-
-_TOML_EOF = re.compile(r"\s*\(at end of document\)\s*$")
-
-
-VALUE_LIMIT = 1e9  # every number in a scene is at most this in size (mm, degrees, s): larger is a slip
-MAX_CHECK_POINTS_PER_TARGET = 10_000  # a scene's simulated check points per target (issue 16: bounded work)
-SCENE_FILE_LIMIT = 16 * 1024 * 1024  # bytes: a scene file larger than this is refused (shipped scenes: < 20 kB)
-
-
-def _read_toml(path, source: str, c: _Checker) -> dict:
-    try:
-        if os.path.exists(path) and not os.path.isfile(path):
-            raise c.error("", "not a regular file (a scene is a .toml file)")
-        with open(path, "rb") as fh:
-            data = fh.read(SCENE_FILE_LIMIT + 1)
-    except OSError as exc:
-        raise c.error("", f"cannot read the scene file: {exc.strerror or exc.__class__.__name__}") from None
-    if len(data) > SCENE_FILE_LIMIT:
-        raise c.error("", f"larger than {SCENE_FILE_LIMIT // (1024 * 1024)} MiB: not a scene file")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        raise c.error(f"line {line}", "not UTF-8 text; save the scene file as UTF-8") from None
-    text = text.removeprefix("\ufeff")  # a byte-order mark (some editors write one) is not part of the TOML
-    try:
-        return tomllib.loads(text)
-    except RecursionError:
-        raise c.error("", "TOML nested too deeply to read") from None
-    except tomllib.TOMLDecodeError as exc:
-        msg = str(exc)
-        m = _TOML_POS.search(msg)
-        if m:
-            raise c.error(f"line {m.group(1)}, column {m.group(2)}", f"TOML syntax error: {msg[: m.start()]}") from None
-        m = _TOML_EOF.search(msg)
-        if m:
-            raise c.error("end of file", f"TOML syntax error: {msg[: m.start()]}") from None
-        raise c.error("", f"TOML syntax error: {msg}") from None
-
-
 def load_scene(path: str | PathLike) -> Scene:
     """Read and validate a scene TOML file (format: scenes/README.md).
 
@@ -234,8 +82,8 @@ def load_scene(path: str | PathLike) -> Scene:
     source = os.fspath(path)
     if isinstance(source, bytes):
         source = os.fsdecode(source)
-    c = _Checker(source)
-    doc = _read_toml(path, source, c)
+    c = Checker(source)
+    doc = read_toml(path, source, c)
     toml_path = Path(source).resolve()
 
     c.keys(doc, "", _TOP_KEYS, _REQUIRED_TOP)
@@ -247,7 +95,7 @@ def load_scene(path: str | PathLike) -> Scene:
     description = c.string(sc.get("description", ""), "scene.description", nonempty=False)
     units = c.string(sc["units"], "scene.units")
     if units != "mm":
-        raise c.error("scene.units", f'only "mm" is supported (all coordinates in millimetres), got {_fmt(units)}')
+        raise c.error("scene.units", f'only "mm" is supported (all coordinates in millimetres), got {fmt_value(units)}')
     mesh_rel = c.string(sc["mesh"], "scene.mesh")
     try:
         mesh_path = (toml_path.parent / mesh_rel).resolve(strict=False)
@@ -287,14 +135,15 @@ def load_scene(path: str | PathLike) -> Scene:
     s_up = c.vector(sn.get("up", [0.0, 0.0, 1.0]), "sensor.up")
     if np.linalg.norm(s_look - s_pos) <= 1e-9:
         raise c.error(
-            "sensor.look_at", f"equals sensor.position {_fmt(sn['position'])}; the sensor needs a viewing direction"
+            "sensor.look_at",
+            f"equals sensor.position {fmt_value(sn['position'])}; the sensor needs a viewing direction",
         )
     if np.linalg.norm(s_up) <= 1e-12:
         raise c.error("sensor.up", "must be a non-zero vector")
     try:
         sensor_to_robot = sensor_pose(s_pos, s_look, s_up)
     except InputError:
-        up_text = _fmt(sn.get("up", [0.0, 0.0, 1.0])) + ("" if "up" in sn else " (the default)")
+        up_text = fmt_value(sn.get("up", [0.0, 0.0, 1.0])) + ("" if "up" in sn else " (the default)")
         raise c.error(
             "sensor.up",
             f"{up_text} is parallel to the viewing direction (look_at − position); choose another up vector",
@@ -327,7 +176,7 @@ def load_scene(path: str | PathLike) -> Scene:
                 other_pos, other_key = placed[pid]
                 raise c.error(
                     f"{key}.position",
-                    f"id {pid!r} is also {other_key} at {_fmt(other_pos.tolist())}; one id names one place "
+                    f"id {pid!r} is also {other_key} at {fmt_value(other_pos.tolist())}; one id names one place "
                     f"(use another id or the same position)",
                 )
             placed.setdefault(pid, (pos, key))
@@ -438,7 +287,7 @@ def load_scene(path: str | PathLike) -> Scene:
     )
 
 
-def _points(c: _Checker, doc: dict, kind: str, default_yaw: float, site_pos: dict, with_region=False) -> list:
+def _points(c: Checker, doc: dict, kind: str, default_yaw: float, site_pos: dict, with_region=False) -> list:
     """Parse `[[kind]]` blocks -> list of (id, position, yaw, key, region|None)."""
     if kind not in doc:
         return []
@@ -463,7 +312,7 @@ def _points(c: _Checker, doc: dict, kind: str, default_yaw: float, site_pos: dic
                 raise c.error(f"{key}.site", "give either position or site, not both")
             if ref not in site_pos:
                 valid = ", ".join(site_pos) or "(no [[site]] defined)"
-                raise c.error(f"{key}.site", f"unknown site {ref!r}; sites: {_fmt(valid, 60)[1:-1]}")
+                raise c.error(f"{key}.site", f"unknown site {ref!r}; sites: {fmt_value(valid, 60)[1:-1]}")
             pos = site_pos[ref][0]
         elif "position" in b:
             pos = c.vector(b["position"], f"{key}.position")
@@ -480,13 +329,13 @@ def _points(c: _Checker, doc: dict, kind: str, default_yaw: float, site_pos: dic
     return out
 
 
-def _region(c: _Checker, v, key: str, center: np.ndarray) -> Region:
+def _region(c: Checker, v, key: str, center: np.ndarray) -> Region:
     r = c.table(v, key)
     if "kind" not in r:
         raise c.error(f"{key}.kind", f"missing required key (one of {', '.join(REGION_KINDS)})")
     kind = c.string(r["kind"], f"{key}.kind")
     if kind not in REGION_KINDS:
-        raise c.error(f"{key}.kind", f"unknown region kind {_fmt(kind)}; valid kinds: {', '.join(REGION_KINDS)}")
+        raise c.error(f"{key}.kind", f"unknown region kind {fmt_value(kind)}; valid kinds: {', '.join(REGION_KINDS)}")
     if kind == "box":
         c.keys(r, key, ("kind", "size"), ("size",), where="a box region")
         size = c.vector(r["size"], f"{key}.size", positive=True)
@@ -499,7 +348,7 @@ def _region(c: _Checker, v, key: str, center: np.ndarray) -> Region:
     return Region(kind, center, size)
 
 
-def _grid(c: _Checker, doc: dict, default_yaw: float) -> list:
+def _grid(c: Checker, doc: dict, default_yaw: float) -> list:
     """`[candidates] grid = {min, max, step}` -> candidate points with ids grid-0001, grid-0002, ..."""
     if "candidates" not in doc:
         return []
@@ -511,7 +360,7 @@ def _grid(c: _Checker, doc: dict, default_yaw: float) -> list:
     hi = c.vector(g["max"], "candidates.grid.max")
     step = c.vector(g["step"], "candidates.grid.step", positive=True)
     if np.any(hi < lo):
-        raise c.error("candidates.grid.max", f"must be >= candidates.grid.min on every axis, got {_fmt(g['max'])}")
+        raise c.error("candidates.grid.max", f"must be >= candidates.grid.min on every axis, got {fmt_value(g['max'])}")
     yaw = c.number(t["tool_yaw_deg"], "candidates.tool_yaw_deg") if "tool_yaw_deg" in t else default_yaw
     counts = np.floor((hi - lo) / step + 1e-9).astype(int) + 1
     total = int(np.prod(counts))
@@ -526,14 +375,14 @@ def _grid(c: _Checker, doc: dict, default_yaw: float) -> list:
     return [(f"grid-{i + 1:0{width}d}", p, yaw, f"candidates.grid (point {i})", None) for i, p in enumerate(pts)]
 
 
-def _check_spread(c: _Checker, key: str, positions: np.ndarray) -> None:
+def _check_spread(c: Checker, key: str, positions: np.ndarray) -> None:
     try:
         geometry.check_registration_points(positions, "points")
     except InputError as exc:
         raise c.error(key, str(exc)) from None
 
 
-def _layouts(c: _Checker, doc: dict, pool: dict) -> tuple[dict, dict]:
+def _layouts(c: Checker, doc: dict, pool: dict) -> tuple[dict, dict]:
     if "layouts" not in doc:
         return {}, {}
     lt = c.table(doc["layouts"], "layouts")
@@ -554,7 +403,7 @@ def _layouts(c: _Checker, doc: dict, pool: dict) -> tuple[dict, dict]:
             pkey = f"{key}.{part}"
             ids = b[part]
             if not isinstance(ids, list) or not ids or not all(isinstance(i, str) for i in ids):
-                raise c.error(pkey, f"must be a non-empty list of point ids (strings), got {_fmt(ids)}")
+                raise c.error(pkey, f"must be a non-empty list of point ids (strings), got {fmt_value(ids)}")
             for j, pid in enumerate(ids):
                 if pid not in pool:
                     raise c.error(
@@ -594,7 +443,7 @@ def _with_tool(model, table: dict, tool_mm: float, robot_model: str = "ur5", sou
     return ErrorModel(robot=tuple(terms), sensor=model.sensor)
 
 
-def _error_model(c: _Checker, table: dict):
+def _error_model(c: Checker, table: dict):
     """Build the error model (`models.errorterms.error_model_from_dict`), its errors named after the file."""
     try:
         return error_model_from_dict(table, f"{c.source}: error_model")

@@ -7,7 +7,7 @@ One data set, so that `rrbc diagnose` and `rrbc correct` on the app's download g
 - **Measured data, edited** (a fiducial excluded, a target or check point moved): the file's rows with the edits
   applied — an excluded fiducial's `fiducial` rows dropped and its `both` rows kept as `registration`; a moved target
   or check point becomes one `target` row with its new sensor position (a moved check point has no truth there).
-- **A scene**: the simulated data set as `rrbc simulate --out` writes it (`simulation.montecarlo.measured_data`):
+- **A scene**: the simulated data set as `rrbc simulate --out` writes it (`simulation.datasets.measured_data`):
   registration points, the included fiducials (a fiducial at a registration point's id and place is one `both`
   row), the targets (sensor readings only) and `check_points_per_target` check points sampled in each target's
   region (seeded by the session's seed, as `work_cell_from_scene` samples them) with their truth; each row's time;
@@ -166,7 +166,8 @@ def _moved_points(session: ExplorerSession) -> dict:
 
 # ------------------------------------------------------------------------------------------------------- scenes
 def _scene_data(session: ExplorerSession) -> SessionData:
-    from rrbc_core.simulation.montecarlo import WorkCell, measured_data
+    from rrbc_core.simulation.datasets import measured_data
+    from rrbc_core.simulation.montecarlo import WorkCell
 
     s = session.settings
     sc = session.scene

@@ -27,7 +27,6 @@ from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
-from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.errormodels import ErrorModel, PointSet
 from rrbc_core.models.measurement import MeasurementModel
 from rrbc_core.runtime.threads import thread_limited
@@ -184,38 +183,6 @@ def measure(cell: WorkCell, rng: np.random.Generator, trials: int = 1) -> Measur
         np.ascontiguousarray(np.broadcast_to(r.robot, (trials,) + pts.robot.shape)),
         r.truth,
     )
-
-
-def measurement_set(cell: WorkCell, measured: Measured, trial: int = 0) -> MeasurementSet:
-    """One simulated session in the measurement-file format: check rows carry the truth, target rows no robot
-    values; an extra `target` column names the target a check point belongs to."""
-    robot = measured.robot[trial].copy()
-    roles = np.array(cell.roles)
-    robot[roles == "check"] = measured.truth[roles == "check"]
-    robot[roles == "target"] = np.nan
-    return MeasurementSet(
-        ids=cell.ids,
-        roles=cell.roles,
-        sensor=measured.sensor[trial],
-        robot=robot,
-        time=cell.time,
-        lines=tuple(0 for _ in cell.ids),
-        source=f"<simulated {cell.name}>",
-        extra={"target": tuple(cell.check_target), **joint_columns(cell)},
-    )
-
-
-def joint_columns(cell: WorkCell) -> dict:
-    """The columns q1..q6 (degrees, as text) of a cell whose robot error model has a kinematic term: the joints at
-    which the (true) arm reaches each point — what the robot measured a registration or fiducial row at, and the
-    configuration it will use for a check or target row. {} when the error model has no kinematic term."""
-    from rrbc_core.models.errorterms import Kinematic
-
-    arm = [t for t in cell.error_model.robot if isinstance(t, Kinematic)]
-    if not arm:
-        return {}
-    q = np.degrees(arm[0].joints(cell.point_set()))
-    return {f"q{j + 1}": tuple(f"{v:.6f}" for v in q[:, j]) for j in range(6)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -554,51 +521,3 @@ def simulate(
             res, strategies=res.strategies + (icp_row,), icp_trials=icp, seconds=_time.perf_counter() - start
         )
     return res
-
-
-def simulated_data(scene: Scene, *, seed: int = 0, layout: str | None = None) -> MeasurementSet:
-    """One simulated measurement of a scene, as a measurement file holds it: what `rrbc simulate --out` writes.
-
-    Parameters
-    ----------
-    scene : Scene
-        A loaded scene.
-    seed : int
-        The same seed as `simulate` uses for the same cell (check points); each point's noise is drawn from its
-        own generator seeded by (seed, id) (`measurement.point_seed`), as the app draws it.
-    layout : str, optional
-        A named layout of the scene.
-
-    Returns
-    -------
-    MeasurementSet
-        Registration, fiducial, target and check rows with their times (and joint columns with a kinematic arm);
-        check rows carry the robot-frame truth (the command that reaches the point).
-    """
-    if layout:
-        scene = scene.with_layout(layout)
-    return measured_data(work_cell_from_scene(scene, seed=seed), seed)
-
-
-def measured_data(cell: WorkCell, seed: int, bias_scale: float = 1.0, noise_scale: float = 1.0) -> MeasurementSet:
-    """One measured data set of a cell (module `measurement`: `MeasurementModel.read_each`, each point's noise
-    seeded by (seed, id)) in the measurement-file format (`measurement_set`). The one place a simulated data set
-    is made: `rrbc simulate --out` and the app's data (its Diagnose tab and CSV download) both come from here.
-
-    Parameters
-    ----------
-    cell : WorkCell
-        The points, their roles, times and tool orientations, and the error model.
-    seed : int
-        The data set's seed.
-    bias_scale, noise_scale : float
-        Sizes of the error model's deterministic and random terms (1: as given).
-
-    Returns
-    -------
-    MeasurementSet
-        As `measurement_set`.
-    """
-    model = MeasurementModel(cell.sensor_to_robot, cell.error_model, cell.joint_seed, bias_scale, noise_scale)
-    r = model.read_each(cell.point_set(), cell.ids, seed)
-    return measurement_set(cell, Measured(r.sensor, r.robot, r.truth))

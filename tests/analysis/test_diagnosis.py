@@ -317,7 +317,7 @@ def test_drift_under_anisotropic_noise_gives_both_and_the_rate_from_whitened_res
 def test_loo_equals_the_per_point_loop(seed):
     """The vectorised leave-one-out (rank-one downdates, kd-tree neighbours) gives the numbers of refitting the
     others point by point and weighting the k nearest others by 1/d^2; a coincident pair takes the exact branch."""
-    from rrbc_core.analysis.diagnosis_stats import _loo
+    from rrbc_core.analysis.diagnosis_stats import loo
     from rrbc_core.registration.strategies import kabsch
 
     rng = np.random.default_rng(seed)
@@ -341,25 +341,25 @@ def test_loo_equals_the_per_point_loop(seed):
         c = corr[dj <= 1e-12].mean(0) if np.any(dj <= 1e-12) else (dj**-2.0) @ corr / np.sum(dj**-2.0)
         e_rrbc[i] = e_rigid[i] - c
     rms = lambda e: np.sqrt(np.mean(np.sum(e**2, axis=1)))  # noqa: E731
-    got = _loo(s, r, w)
+    got = loo(s, r, w)
     assert got[0] == pytest.approx(rms(e_rigid), rel=1e-9)
     assert got[1] == pytest.approx(rms(e_rrbc), rel=1e-9)
 
 
 def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
     from rrbc_core.analysis import diagnosis_stats as diagnosis
-    from rrbc_core.analysis.diagnosis_stats import _moran, _moran_bootstrap, _moran_weights, _orth
+    from rrbc_core.analysis.diagnosis_stats import moran, moran_bootstrap, moran_weights, orth
 
-    monkeypatch.setattr(diagnosis, "_BOOTSTRAP_CHUNK_ELEMENTS", 900 * 40)  # chunks of 40 replicates
+    monkeypatch.setattr(diagnosis, "BOOTSTRAP_CHUNK_ELEMENTS", 900 * 40)  # chunks of 40 replicates
 
     rng = np.random.default_rng(11)
     n = 300
     p = rng.uniform(0, 500, (n, 3))
-    nb = _moran_weights(p)
+    nb = moran_weights(p)
     res = rng.normal(size=(5, n, 3)) + np.sin(p / 80.0)
     dense = np.einsum("bic,bikc->b", res, res[:, nb, :]) / nb.shape[1] / np.einsum("bic,bic->b", res, res)
-    assert np.allclose(_moran(res, nb), dense, rtol=1e-12)
-    qa = _orth(rng.normal(size=(3 * n, 7)))
+    assert np.allclose(moran(res, nb), dense, rtol=1e-12)
+    qa = orth(rng.normal(size=(3 * n, 7)))
     eps = np.random.default_rng(3).standard_normal((250, 3 * n))
     eps -= (eps @ qa) @ qa.T
     want = (
@@ -367,4 +367,4 @@ def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
         / nb.shape[1]
         / np.einsum("bi,bi->b", eps, eps)
     )
-    assert np.allclose(_moran_bootstrap(np.random.default_rng(3), qa, nb, replicates=250), want, rtol=1e-10)
+    assert np.allclose(moran_bootstrap(np.random.default_rng(3), qa, nb, replicates=250), want, rtol=1e-10)

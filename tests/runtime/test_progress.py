@@ -3,7 +3,7 @@ piped stderr stay clean."""
 
 import io
 
-from rrbc_core.cli import _advance, main, progress_bar
+from rrbc_core.cli import advance, main, progress_bar
 from tests.paths import DEMO
 
 
@@ -23,7 +23,7 @@ def test_the_bar_is_tqdm_on_stderr_silent_for_a_second_and_off_a_terminal(monkey
     monkeypatch.setattr("sys.stderr", tty)
     bar = progress_bar(4, "simulating")
     assert bar.delay == 1.0 and bar.fp is not None and not bar.disable  # a terminal: enabled, after a second
-    _advance(bar, 2, "half")
+    advance(bar, 2, "half")
     assert bar.n == 2 and bar.desc == "half"
     bar.close()
     monkeypatch.setattr("sys.stderr", io.StringIO())

@@ -9,7 +9,8 @@ from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.models.errormodels import ErrorModel
 from rrbc_core.models.errorterms import AnisotropicNoise, IsotropicNoise
 from rrbc_core.simulation import batch
-from rrbc_core.simulation.montecarlo import WorkCell, measure, measurement_set, monte_carlo, trial_errors
+from rrbc_core.simulation.datasets import measurement_set
+from rrbc_core.simulation.montecarlo import WorkCell, measure, monte_carlo, trial_errors
 
 Z = 4.0  # z-score of the statistical tolerances
 

@@ -14,7 +14,7 @@ from rrbc_core.io.measurements import MeasurementSet, read_measurements
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.session import data_set
-from rrbc_core.simulation.montecarlo import simulated_data
+from rrbc_core.simulation.datasets import simulated_data
 from rrbc_viz.app import serve
 from rrbc_viz.diagnosis_panel import unescape
 from tests.paths import DEMO, EXAMPLE_CSV

@@ -1,0 +1,354 @@
+"""The systematic tests of `rrbc diagnose` (`analysis.diagnosis`): uniform scale, affine terms, drift, the arm's
+kinematic error and a smooth field, judged one after the other on the rigid residuals of the inliers (nested F-tests
+of the linearised residual model, Moran's I with a bootstrap; docs/theory.md §6.1-6.4), and the `Effect` each accepted
+one becomes. Conventions as in `analysis.diagnosis`: residual r_i = robot_i − (R sensor_i + t), robot frame, mm."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import stats
+from scipy.spatial import cKDTree
+
+from rrbc_core.analysis.diagnosis_field import fit_field, gls_whiten
+from rrbc_core.analysis.diagnosis_stats import (
+    BOOTSTRAP,
+    BOOTSTRAP_EXACT_POINTS,
+    BOOTSTRAP_LARGE,
+    DRIFT_KEPT,
+    Geometry,
+    fit,
+    ftest,
+    moran,
+    moran_bootstrap,
+    moran_weights,
+    orth,
+    usable,
+    usable_drift,
+)
+from rrbc_core.registration.strategies import least_squares
+
+_SMALL_N = 40  # below this many paired points the smooth-field test's reach is stated as a limit (power study)
+
+
+@dataclass(frozen=True)
+class Effect:
+    name: str
+    parameters: dict
+    p_value: float
+    evidence: str
+    magnitude_mm: float = 0.0  # RMS of the effect's contribution at the points; orders the list
+
+    def to_json(self) -> dict:
+        return {
+            "name": self.name,
+            "parameters": self.parameters,
+            "p_value": float(self.p_value),
+            "evidence": self.evidence,
+        }
+
+
+def fmt_p(p: float) -> str:
+    return f"{p:.2g}"
+
+
+@dataclass
+class Pass:
+    """One pass of the systematic tests over a set of inliers."""
+
+    inl: np.ndarray
+    reg: object
+    p: np.ndarray  # (n, 3) mapped inliers, robot frame
+    resid: np.ndarray  # (n, 3) rigid residuals, mm
+    effects: dict  # name -> Effect
+    tests: dict
+    limits: list
+    rate: np.ndarray  # drift mm/s (zeros when not accepted)
+    t_mean: float
+    delta: np.ndarray | None  # the arm's scaled parameter errors when kinematic is accepted
+    field: object = None  # diagnosis_field.FieldModel once a smooth field is found
+    moran: tuple = ()  # (I, bootstrap mean, k)
+    rejudged: tuple = ()  # names dropped beside the field or the arm, with their p-values
+
+
+def mm_cols(g: Geometry, cols: np.ndarray) -> np.ndarray:
+    """Undo the weighting and whitening of point-major columns (3n, k): the fields in mm, robot frame."""
+    inv = np.linalg.inv(g.white)
+    c = cols / g.sw[:, None]
+    return np.einsum("ab,nbk->nak", inv, c.reshape(g.n, 3, -1)).reshape(3 * g.n, -1)
+
+
+def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
+    """One pass of the systematic tests (scale, affine, drift, the arm, a smooth field) over the inliers `inl` of
+    the paired data `d`: each accepted effect, the tests' p-values, the limits, and what they leave."""
+    s, r, w = d.sensor[inl], d.robot[inl], d.count[inl]
+    n = len(inl)
+    reg = least_squares(s, r, weights=w)
+    p = reg.mapping.apply(s)
+    resid = r - p
+    g = Geometry(p, d.time[inl] if use_time else None, w, white)
+    y = g.vec(resid)
+    tests: dict[str, float] = {}
+    found: dict[str, Effect] = {}
+    limits: list[str] = []
+    blocks = {"rigid": g.rigid()}
+    x_rigid = blocks["rigid"]
+    if g.planar:
+        limits.append(
+            "the paired points are coplanar (normal " + ", ".join(f"{v:.3f}" for v in g.normal) + "): only the 3 "
+            "in-plane affine terms (two in-plane scales, in-plane shear) are testable; out-of-plane scale, shear and "
+            "errors that depend on the distance from the plane are invisible to these points"
+        )
+    # scale: similarity vs rigid; affine beyond scale
+    x_scale = np.hstack([x_rigid, g.scale_col()])
+    p_sc, _, nu_sc, f_sc, rss0, rss_sc, _ = ftest(y, x_rigid, x_scale)
+    tests["scale"] = p_sc
+    x_aff = np.hstack([x_rigid, g.linear()])
+    p_af, q_af, nu_af, f_af, _, rss_af, _ = ftest(y, x_scale, x_aff)
+    tests["affine"] = p_af
+    del x_scale, x_aff  # (3n, k) each: a million points hold 24 MB a column
+    wsum = float(np.sum(w))
+    if p_af < a_each:
+        found["affine"] = affine_effect(p, resid, w, g, rss0, rss_sc, rss_af, q_af, nu_af, f_af, p_af, wsum)
+        blocks["affine"] = g.linear()
+    elif p_sc < a_each:
+        sim = least_squares(s, r, weights=w, with_scale=True)
+        ppm = (float(sim.details["scale"]) - 1.0) * 1e6
+        se = np.sqrt(rss_sc / max(nu_sc, 1) / float(np.sum(g.scale_col() ** 2))) / g.scale * 1e6
+        found["scale"] = Effect(
+            "scale",
+            {"ppm": ppm, "ppm_standard_error": float(se)},
+            p_sc,
+            f"a uniform scale of {ppm:+.4g} ± {se:.2g} ppm between the frames reduces the residual "
+            f"sum of squares from {rss0:.3g} to {rss_sc:.3g} (F(1, {nu_sc}) = {f_sc:.3g}, "
+            f"p {fmt_p(p_sc)}); no significant non-uniform part (p {fmt_p(p_af)}).",
+            magnitude_mm=float(np.sqrt(max(0.0, rss0 - rss_sc) / wsum)),
+        )
+        blocks["scale"] = g.scale_col()
+    x_of = lambda names: np.hstack([blocks[k] for k in names])  # noqa: E731
+    # drift
+    rate, t_mean = np.zeros(3), float(np.mean(d.time[inl])) if use_time else 0.0
+    if use_time:
+        x_acc = x_of(blocks)
+        dcol_ok, surviving = usable_drift(x_acc, g.drift())  # fraction of drift energy kept per direction
+        p_dr, q_dr, nu_dr, f_dr, rss_a, rss_d, _ = ftest(y, x_acc, np.hstack([x_acc, dcol_ok]))
+        tests["drift"] = p_dr
+        lost = int(np.sum(surviving < DRIFT_KEPT))
+        if lost:
+            limits.append(
+                f"with this measurement order, drift along {lost} of 3 directions is (almost) absorbed by "
+                f"the fitted transform (least fraction kept {max(surviving.min(), 0):.2g}) and cannot be "
+                "detected; randomise the order"
+            )
+        if p_dr < a_each:
+            # the rate from the full drift columns (the absorbed directions are poorly determined: see the limit)
+            rate = fit(y, np.hstack([x_acc, g.drift()]))[0][-3:] / g.tscale  # coefficients are in mm
+            found["drift"] = Effect(
+                "drift",
+                {"rate_mm_per_s": rate.tolist()},
+                p_dr,
+                f"the residuals change linearly with measurement time at {np.linalg.norm(rate):.3g} mm/s "
+                f"(F({q_dr}, {nu_dr}) = {f_dr:.3g}, p {fmt_p(p_dr)}).",
+                magnitude_mm=float(np.sqrt(max(0.0, rss_a - rss_d) / wsum)),
+            )
+            blocks["drift"] = dcol_ok
+    # the arm (joint angles in the file)
+    delta = None
+    rejudged = []
+    if arm is not None:
+        x_acc = x_of(blocks)
+        # the arm's directions beside rigid (+ drift) — kfull = (its columns) @ k_map — and, for the test, beside
+        # everything accepted
+        base = np.hstack([blocks[k] for k in ("rigid", "drift") if k in blocks])
+        # (the arm's columns come from joint angles, not from measured positions: only directions inside the base
+        # up to the noise of its rotation columns are left out, 1e-4 of their energy, 1 % of their length)
+        kfull, _, k_map = usable(base, g._cols(arm.fields[:, inl]), kept=1e-4)
+        ktest = usable(x_acc, kfull)[0]
+        p_k, q_k, nu_k, f_k, rss_a, rss_k, _ = ftest(y, x_acc, np.hstack([x_acc, ktest]))
+        tests["kinematic"] = p_k
+        if p_k < a_each:
+            # a smooth field of position alone could explain what the arm's columns fit: judge the arm beside it
+            q_b = orth(base)
+            fb = fit_field(p, mm_cols(g, (y - q_b @ (q_b.T @ y))[:, None]).reshape(n, 3))
+            xw0 = gls_whiten(fb, mm_cols(g, x_acc))
+            xw1 = np.hstack([xw0, gls_whiten(fb, mm_cols(g, ktest))])
+            p_kf = ftest(gls_whiten(fb, mm_cols(g, y[:, None])[:, 0]), xw0, xw1)[0]
+            tests["kinematic_beside_field"] = p_kf
+        if p_k < a_each and p_kf >= a_each:
+            # the arm explains no more than a field of position does (with one tool orientation per place the arm's
+            # error is a function of position; and the arm's smooth columns can follow a sensor field): the data
+            # cannot tell them apart, and the position effect is the one named
+            limits.append(
+                f"the arm's kinematic error would explain these residuals (p {fmt_p(p_k)}) but no better than a "
+                f"smooth field of position (p {fmt_p(p_kf)} for the arm beside it): reach places in more than one "
+                "configuration (another tool orientation) to tell them apart; `rrbc calibrate` compares VEC and RRBC "
+                "out of sample"
+            )
+        if p_k < a_each and p_kf < a_each:
+            blocks["kinematic"] = kfull
+            rejudged += rejudge(y, blocks, found, a_each, "the arm", tests)
+            delta = k_map @ fit(y, x_of(blocks))[0][-kfull.shape[1] :]
+            rms_k = float(np.sqrt(np.mean(np.sum(np.einsum("knc,k->nc", arm.fields[:, inl], delta) ** 2, axis=1))))
+            found["kinematic"] = Effect(
+                "kinematic",
+                {"robot": arm.robot, "tool_mm": arm.tool_mm, "combinations": int(q_k), "rms_mm": rms_k},
+                p_k,
+                f"the residuals follow the arm's joint configuration: {q_k} combinations of its kinematic (DH) "
+                f"parameters, identifiable at these poses beside the accepted terms, reduce the residual sum of "
+                f"squares from {rss_a:.3g} to {rss_k:.3g} (F({q_k}, {nu_k}) = {f_k:.3g}, p {fmt_p(p_k)}), and "
+                f"more than a smooth field of position alone explains (p {fmt_p(p_kf)}); `rrbc calibrate` "
+                "identifies them and compares model-based correction with RRBC.",
+                magnitude_mm=rms_k,
+            )
+    # smooth field: Moran's I of the residuals after the accepted model, parametric bootstrap under white noise
+    x_acc = x_of(blocks)
+    qa = orth(x_acc)
+    res_acc = y - qa @ (qa.T @ y)
+    nb = moran_weights(p)
+    i_obs = float(moran(res_acc.reshape(n, 3), nb))
+    large = n > BOOTSTRAP_EXACT_POINTS
+    i_boot = moran_bootstrap(rng, qa, nb, BOOTSTRAP_LARGE if large else BOOTSTRAP)
+    exceed = int(np.sum(i_boot >= i_obs))
+    if large:  # Moran's I of many points is close to normal: its null moments from the bootstrap, the tail from z
+        z = (i_obs - i_boot.mean()) / max(float(i_boot.std(ddof=1)), 1e-300)
+        p_sm = float(stats.norm.sf(z))
+    elif exceed:
+        p_sm = (1 + exceed) / (BOOTSTRAP + 1)
+    else:
+        z = (i_obs - i_boot.mean()) / max(float(i_boot.std()), 1e-300)
+        p_sm = float(min(1.0 / (BOOTSTRAP + 1), stats.norm.sf(z)))
+    tests["smooth_field"] = p_sm
+    boot_mean = float(i_boot.mean())
+    del qa, res_acc, i_boot, x_acc
+    field = None
+    if p_sm < a_each:
+        # the field's model from the residuals beside everything but scale and affine (a field has a linear part);
+        # then, twice: the low-order terms judged again and re-estimated by generalised least squares with the field
+        # as part of the error (ordinary least squares lets the field leak into the drift and arm estimates, and
+        # their error into the noise), and the field refitted beside them
+        q_nl = orth(np.hstack([v for k, v in blocks.items() if k not in ("scale", "affine")]))
+        y_mm = mm_cols(g, y[:, None])[:, 0]
+        res_nl = mm_cols(g, (y - q_nl @ (q_nl.T @ y))[:, None])[:, 0]
+        del q_nl
+        mm_blocks = {k: mm_cols(g, v) for k, v in blocks.items()}
+        for _ in range(2):
+            field = fit_field(p, res_nl.reshape(n, 3))
+            y_w = gls_whiten(field, y_mm)
+            wb = {k: gls_whiten(field, v) for k, v in mm_blocks.items()}
+            rejudged += rejudge(y_w, wb, found, a_each, "the field", tests)
+            mm_blocks = {k: v for k, v in mm_blocks.items() if k in wb}
+            del wb
+            cols = {k: (mm_cols(g, g.drift()) if k == "drift" else v) for k, v in mm_blocks.items()}
+            coef = fit(y_w, np.hstack([gls_whiten(field, c) for c in cols.values()]))[0]
+            contrib, pos = np.zeros_like(y_mm), 0
+            for k, c in cols.items():
+                ck = coef[pos : pos + c.shape[1]]
+                pos += c.shape[1]
+                if k not in ("scale", "affine"):
+                    contrib += c @ ck
+                if k == "drift":
+                    rate = ck / g.tscale
+                if k == "kinematic":
+                    delta = k_map @ ck
+            res_nl = y_mm - contrib
+        for k in [k for k in blocks if k not in mm_blocks]:
+            del blocks[k]
+        if "drift" in found:
+            found["drift"] = replace(found["drift"], parameters={"rate_mm_per_s": rate.tolist()})
+    if n < _SMALL_N:
+        # Moran's I only sees a field whose correlation reaches the k-th neighbour; with few points that distance
+        # approaches the extent, and a longer field is mostly absorbed by the rigid/linear fit (power study,
+        # docs/diagnosis_power.md: 12 points found a field of length half the extent in few sets at any size).
+        reach = float(np.median(cKDTree(p).query(p, k=nb.shape[1] + 1)[0][:, -1]))
+        limits.append(
+            f"only {n} paired points: a smooth field with correlation length below about {reach:.0f} mm (the median "
+            f"distance to the {nb.shape[1]}th nearest neighbour) cannot be detected reliably; longer fields are largely "
+            "absorbed by the fitted transform"
+            + ("" if field is not None else "; an empty or low-order verdict does not rule out a smooth field")
+            + (
+                "; the reported affine/scale term may be the linear part of a smooth field"
+                if any(k in ("affine", "scale") for k in found)
+                else ""
+            )
+        )
+    if "drift" not in found:
+        rate = np.zeros(3)
+    if "kinematic" not in found:
+        delta = None
+    return Pass(
+        inl,
+        reg,
+        p,
+        resid,
+        found,
+        tests,
+        limits,
+        rate,
+        t_mean,
+        delta,
+        field,
+        (i_obs, boot_mean, nb.shape[1]),
+        tuple(rejudged),
+    )
+
+
+def rejudge(y, blocks: dict, found: dict, a_each: float, beside: str, tests: dict) -> list:
+    """Drop accepted low-order terms (scale, affine, drift) that are no longer significant beside a newly accepted
+    systematic effect; `blocks` and `found` are updated. Returns [(name, p), ...] of the dropped."""
+    dropped = []
+    for name in ("scale", "affine", "drift"):
+        if name not in blocks:
+            continue
+        others = np.hstack([v for k, v in blocks.items() if k != name])
+        p_b = ftest(y, others, np.hstack([others, usable(others, blocks[name])[0]]))[0]
+        tests[f"{name}_beside_{beside.split()[-1]}"] = p_b
+        if p_b >= a_each:
+            del blocks[name]
+            found.pop(name, None)
+            dropped.append((name, p_b, beside))
+    return dropped
+
+
+def affine_effect(p, resid, w, g, rss0, rss_sc, rss_af, q_af, nu_af, f_af, p_af, wsum) -> Effect:
+    # the linear map in unwhitened coordinates: residual ≈ L (p − p̄)
+    ga = Geometry(p, None, w)
+    coef, *_ = np.linalg.lstsq(np.hstack([ga.rigid(), ga.linear()]), ga.vec(resid), rcond=1e-10)
+    lin = coef[6:].reshape(3, 3) / ga.scale
+    if ga.planar:  # the in-plane part, in-plane coordinates only
+        proj = np.eye(3) - np.outer(ga.normal, ga.normal)
+        lin = lin @ proj
+    gm = 0.5 * (lin + lin.T)
+    if ga.planar:
+        gm = proj @ gm @ proj
+    return Effect(
+        "affine",
+        {"matrix": gm.tolist()},
+        p_af,
+        f"a linear map beyond rigid + uniform scale reduces the residual sum of squares from "
+        f"{rss_sc:.3g} to {rss_af:.3g} (F({q_af}, {nu_af}) = {f_af:.3g}, p {fmt_p(p_af)}); the "
+        f"matrix is its symmetric part (rotations absorb the rest)"
+        + ("; only the in-plane terms are identifiable on these coplanar points" if g.planar else "")
+        + ".",
+        magnitude_mm=float(np.sqrt(max(0.0, rss0 - rss_af) / wsum)),
+    )
+
+
+def systematic_at(d, arm, ps: Pass, idx: np.ndarray) -> np.ndarray:
+    """What the accepted drift and arm predict (mm, (len(idx), 3)) at points idx (all points' indexing)."""
+    out = np.zeros((len(idx), 3))
+    if d.time is not None and np.any(ps.rate):
+        out += np.outer(d.time[idx] - ps.t_mean, ps.rate)
+    if ps.delta is not None:
+        out += np.einsum("knc,k->nc", arm.fields[:, idx], ps.delta)
+    return out
+
+
+def row_systematic(d, arm, ps: Pass) -> np.ndarray:
+    """The same per paired row (R, 3): drift at the row's time, the arm at the row's joints."""
+    out = np.zeros((len(d.row_point), 3))
+    if d.time is not None and np.any(ps.rate):
+        out += np.outer(d.row_time - ps.t_mean, ps.rate)
+    if ps.delta is not None:
+        out += arm.row_fields @ ps.delta
+    return out

@@ -1,0 +1,136 @@
+"""What the `rrbc` subcommands share: the argument parser that reports usage errors in one line, argparse types with
+bounds, the method-option flags derived from the option fields (`methods.method_flags`), the `--scheduler` option and
+the progress bar (tqdm on stderr)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from rrbc_core.errors import InputError
+
+
+class UsageError(Exception):
+    pass
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors as one line (exit 2) instead of a usage block."""
+
+    def error(self, message):
+        raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+def int_at_least(minimum: int):
+    """argparse type: an integer >= minimum."""
+
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not an integer") from None
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {v}")
+        return v
+
+    return parse
+
+
+positive_int = int_at_least(1)
+non_negative_int = int_at_least(0)
+
+
+def positive_float(text):
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not v > 0 or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return v
+
+
+def tool_mm_type(text: str) -> float:
+    try:
+        v = float(text) if text.strip().isascii() else float("nan")
+    except ValueError:
+        v = float("nan")
+    if not (0.0 <= v <= 2000.0):
+        raise argparse.ArgumentTypeError(f"expected a tool length from 0 to 2000 mm, got {text[:20]!r}")
+    return v
+
+
+def progress_bar(total: int, label: str):
+    """A tqdm bar on stderr (so `--json` on stdout stays clean), silent for the first second and off a terminal."""
+    from tqdm import tqdm
+
+    return tqdm(total=max(int(total), 1), desc=label, file=sys.stderr, delay=1.0, disable=None, leave=False)
+
+
+def advance(bar, n: int, label: str | None = None) -> None:
+    """A library progress callback `(n, label)` on a tqdm bar."""
+    if label is not None:
+        bar.set_description_str(label, refresh=False)
+    bar.update(n)
+
+
+def option_dest(flag: str) -> str:
+    return "opt_" + flag.replace("-", "_")
+
+
+def add_method_options(parser) -> None:
+    """One flag per method option, from the option fields' specs (`methods.method_flags`): the same names, bounds
+    and help as the app's widgets; checked against the chosen methods by `MethodOptions.named`."""
+    from rrbc_core.methods import method_flags
+
+    parser.add_argument("--seed", type=int, default=0, help="seed of annealing and clustering (default 0)")
+    for flag, owners in method_flags().items():
+        if flag == "seed":
+            continue
+        spec = owners[0][2]
+        kind = spec.kind if spec.kind in (int, float) else str
+        parser.add_argument(
+            f"--{flag}",
+            dest=option_dest(flag),
+            type=spec_type(spec, kind),
+            default=None,
+            metavar=spec.flag.upper().replace("-", "_") if spec.choices is None else None,
+            choices=list(spec.choices) if spec.choices else None,
+            help=" / ".join(dict.fromkeys(s.help for _, _, s in owners)),
+        )
+
+
+def spec_type(spec, kind):
+    """argparse type: a number of the option's kind within its bounds (else one line, exit 2)."""
+    if kind is str:
+        return str
+
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+        try:
+            return spec.check(value, "")
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).strip()) from None
+
+    return parse
+
+
+def where(arg):
+    from rrbc_core.runtime.tasks import command_scheduler, quiet_dask_logs
+
+    quiet_dask_logs()  # this process is ours: failures are one line, never dask's log lines
+    return command_scheduler(arg)
+
+
+def scheduler_option(parser, what: str) -> None:
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help=f"where {what} run: 'in-process', 'local' (a dask cluster sized to this machine), 'local:N' or a "
+        "scheduler address such as tcp://127.0.0.1:8786 (default: $RRBC_SCHEDULER, else auto: the first task runs "
+        "here and, if the rest would take a minute or more, they go to a local cluster); the numbers do not change",
+    )
