@@ -29,25 +29,25 @@ def _drag(app, kind: str, pid: str, steps: int) -> dict:
     counted — those that refresh the heat map (every app.HEAT_INTERVAL_S) and the Plan tab included."""
     group = app.session.layout[kind]
     start = group.positions[group.index(pid)].copy()
-    app.mc.wait_idle(), app.planning.wait_idle()
-    app.handle_drag(kind, pid, start, phase="start")
+    app.montecarlo.runner.wait_idle(), app.planning.wait_idle()
+    app.evaluate.handle_drag(kind, pid, start, phase="start")
     times, heat = [], []
     due = time.perf_counter()
     p = start
     for k in range(steps):
         due += 1.0 / DRAG_RATE_HZ
         p = start + np.array([0.5 * (k + 1), 0.25 * (k % 3), 0.0])
-        before = app._heat_time
+        before = app.state.heat_time
         t0 = time.perf_counter()
-        assert app.handle_drag(kind, pid, p, phase="update") is not None, "the drag was refused"
+        assert app.evaluate.handle_drag(kind, pid, p, phase="update") is not None, "the drag was refused"
         times.append(time.perf_counter() - t0)
-        heat.append(app._heat_time != before)
+        heat.append(app.state.heat_time != before)
         time.sleep(max(0.0, due - time.perf_counter()))
     t0 = time.perf_counter()
-    app.handle_drag(kind, pid, p, phase="end")
+    app.evaluate.handle_drag(kind, pid, p, phase="end")
     end = time.perf_counter() - t0
-    app.handle_drag(kind, pid, start, phase="end")
-    app.mc.wait_idle(), app.planning.wait_idle()
+    app.evaluate.handle_drag(kind, pid, start, phase="end")
+    app.montecarlo.runner.wait_idle(), app.planning.wait_idle()
     times, heat = np.array(times), np.array(heat)
     return {
         "median": float(np.median(times)),
@@ -69,7 +69,7 @@ def _drag_note(steps, kind, pid, app, idle, loaded, samples) -> str:
 
     return (
         f"{steps} drag updates of {kind[:-1]} {pid} at {DRAG_RATE_HZ:.0f} Hz, every update counted; heat map "
-        f"shown ({samples} samples) and the error slice ({app.error_slice.plane.n}² grid), the arm, sensors, landing "
+        f"shown ({samples} samples) and the error slice ({app.views.error_slice.plane.n}² grid), the arm, sensors, landing "
         f"bullseye and selected point's card live; {len(app.session.layout['fiducials'].ids)} fiducials, "
         f"{len(app.session.layout['targets'].ids)} targets. idle: {fig(idle)}. busy core: {fig(loaded)}"
     )
@@ -83,7 +83,7 @@ def drag_latency(quick: bool) -> list[dict]:
     from stress_scene import HEAT_SAMPLES_PER_TARGET, write_stress_scene
 
     from rrbc_core.io.scene import default_scene_path
-    from rrbc_viz.app import serve
+    from rrbc_viz.serve import serve
 
     rows = []
     steps = 20 if quick else 60
@@ -95,11 +95,11 @@ def drag_latency(quick: bool) -> list[dict]:
             app = serve(str(source))
             try:
                 app.heat_samples_per_target = heat_n
-                app.set_layer("heatmap", True)
-                app.set_layer("slice", True)
-                samples = len(app.heat_map.positions)
+                app.evaluate.set_layer("heatmap", True)
+                app.evaluate.set_layer("slice", True)
+                samples = len(app.present.heat_map.positions)
                 for kind, pid in moves:
-                    app.select(kind, pid)
+                    app.views.select(kind, pid)
                     _drag(app, kind, pid, 5)  # warm-up
                     idle, loaded = both(lambda app=app, kind=kind, pid=pid: _drag(app, kind, pid, steps))
                     rows.append(
@@ -122,12 +122,12 @@ def drag_latency(quick: bool) -> list[dict]:
 def suggest_app(quick: bool) -> list[dict]:
     """The app's Suggest button with K = 4 on the default scene (RunningApp.suggest_fiducials, what the button
     calls: the planner on a snapshot of the session, then the ghosts drawn). Goal: loaded < 5 s. Absolute goal."""
-    from rrbc_viz.app import serve
+    from rrbc_viz.serve import serve
 
     app = serve(str(DEMO))
     try:
-        app.suggest_fiducials(4)  # warm-up (imports, mesh ray-casting structures)
-        idle, loaded = both(lambda: median_time(lambda: app.suggest_fiducials(4), 1 if quick else 3)[0])
+        app.plan.suggest_fiducials(4)  # warm-up (imports, mesh ray-casting structures)
+        idle, loaded = both(lambda: median_time(lambda: app.plan.suggest_fiducials(4), 1 if quick else 3)[0])
     finally:
         app.stop()
     return [

@@ -256,7 +256,7 @@ def _cmd_plan(args) -> str:
 def _cmd_view(args) -> str:
     import signal
 
-    from rrbc_viz.app import serve
+    from rrbc_viz.serve import serve
 
     if args.port > 65535:
         raise InputError(f"--port must be at most 65535, got {args.port}")

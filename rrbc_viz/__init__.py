@@ -1,19 +1,21 @@
-"""rrbc_viz: the browser app (viser) over `rrbc_core.explorer.ExplorerSession`.
+"""rrbc_viz: the browser app (viser 1.1.1) over `rrbc_core.session.explorer.ExplorerSession`.
 
-Modules: `app` (serve, RunningApp: server, wiring, drag handling), `nodes` (3-D scene nodes), `controls` (the
-control panel), `teaching` (the nine-step lesson), `tables` (markdown results), `colors` (palette, heat-map
-scale), `files` (opening sources, exporting CSV), `montecarlo` (background Monte Carlo), `diagnosis_panel` (the
-Diagnose tab), `planning_panel` (the Plan tab: coverage, predicted RMST, suggested fiducials), `worker` (the
-coalescing background worker both use).
-The app is a thin layer: every number it shows comes from the core session.
+Start it with `rrbc_viz.serve.serve(...)` (what `rrbc view` calls). The app is a composition (`app.RunningApp`): a
+shared context (`context`, `state`), one controller per feature (`controllers/`) behind narrow interfaces
+(`actions`), the scene views (`nodes`, `heatmap_nodes`, `slice_nodes`, `robot_nodes`) and the panels (`controls`
+and the panels it builds). Every number it shows comes from the core (docs/architecture.md).
 """
 
 __all__ = ["serve", "RunningApp"]
 
 
 def __getattr__(name):  # lazy: importing rrbc_viz does not start viser
-    if name in __all__:
-        from . import app
+    if name == "serve":
+        from .serve import serve
 
-        return getattr(app, name)
+        return serve
+    if name == "RunningApp":
+        from .app import RunningApp
+
+        return RunningApp
     raise AttributeError(name)

@@ -8,15 +8,25 @@ from typing import TYPE_CHECKING
 
 import viser
 
-from .app_authoring import CLICK_MODES, REGISTRATION_LIFT_MM
 from .syncing import clamped
 
 if TYPE_CHECKING:
-    from .actions import AppActions
+    from .actions import Actions
+
+
+#: What a click on the cell adds: (label, point kind or None for selecting).
+CLICK_MODES = (
+    ("nothing (select)", None),
+    ("registration point", "registration"),
+    ("fiducial", "fiducials"),
+    ("target", "targets"),
+    ("candidate", "candidates"),
+)
+REGISTRATION_LIFT_MM = 100.0  # a registration point goes this far above the clicked surface
 
 
 class AuthoringPanel:
-    def __init__(self, gui, app: AppActions):
+    def __init__(self, gui, app: Actions):
         with gui.add_folder("Edit the cell"):
             self.mode = gui.add_dropdown("Click on the cell adds", tuple(k for k, _ in CLICK_MODES))
             self.region = gui.add_slider("Target region (mm)", 0.5, 50.0, 0.5, 4.0)
@@ -35,22 +45,22 @@ class AuthoringPanel:
             self.slicer = gui.add_button("Slicer markups (2 files)", icon=viser.Icon.DOWNLOAD)
 
         def on_mode(event: viser.GuiEvent) -> None:
-            app.set_click_mode(dict(CLICK_MODES)[self.mode.value], clamped(self.region))
+            app.authoring.set_click_mode(dict(CLICK_MODES)[self.mode.value], clamped(self.region))
 
         self.mode.on_update(on_mode)
         self.region.on_update(on_mode)
-        self.delete.on_click(lambda event: app.delete_selected(client=event.client))
-        self.undo.on_click(lambda event: app.undo(client=event.client))
-        self.redo.on_click(lambda event: app.redo(client=event.client))
-        self.move_sensor.on_click(lambda event: app.move_sensor(self.sensor.value, client=event.client))
-        self.save_scene.on_click(lambda event: app.download_authoring("scene", client=event.client))
-        self.plan.on_click(lambda event: app.download_authoring("plan", client=event.client))
-        self.slicer.on_click(lambda event: app.download_authoring("slicer", client=event.client))
+        self.delete.on_click(lambda event: app.authoring.delete_selected(client=event.client))
+        self.undo.on_click(lambda event: app.authoring.undo(client=event.client))
+        self.redo.on_click(lambda event: app.authoring.redo(client=event.client))
+        self.move_sensor.on_click(lambda event: app.authoring.move_sensor(self.sensor.value, client=event.client))
+        self.save_scene.on_click(lambda event: app.authoring.download_authoring("scene", client=event.client))
+        self.plan.on_click(lambda event: app.authoring.download_authoring("plan", client=event.client))
+        self.slicer.on_click(lambda event: app.authoring.download_authoring("slicer", client=event.client))
 
         @self.mesh.on_upload
         def _(event: viser.GuiEvent) -> None:
             f = self.mesh.value
-            app.upload_mesh(f.name, f.content, client=event.client)
+            app.authoring.upload_mesh(f.name, f.content, client=event.client)
 
     def sync(self, can_undo: bool, can_redo: bool, scene: bool, sensor=None) -> None:
         if sensor is not None:

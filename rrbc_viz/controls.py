@@ -3,7 +3,7 @@
 `ExplorePanel` (results, method, errors), `ViewPanel` (display, layers, heat map), `LearnPanel` (the lesson),
 `MonteCarloPanel`, `DiagnosePanel`, `FilePanel`, and the Plan tab (`planning_panel.PlanningPanel`, built by the app).
 `Controls` lays the tabs out and holds the status line. A panel only forwards user input to the app (through
-`actions.AppActions`) and shows what the app hands back; it holds no RRBC state of its own. Programmatic updates
+`actions.Actions`) and shows what the app hands back; it holds no RRBC state of its own. Programmatic updates
 (`sync_*`) run under the shared `Syncing` flag so that the value callbacks they re-enter (viser runs `on_update`
 when Python assigns `.value`) do nothing.
 """
@@ -32,7 +32,7 @@ from .syncing import Syncing, clamped
 from .vec_panel import VecPanel
 
 if TYPE_CHECKING:
-    from .actions import AppActions
+    from .actions import Actions
     from .planning_panel import PlanningPanel
 
 LAYER_LABELS = {
@@ -88,7 +88,7 @@ def _forward(handle, syncing: Syncing, send, name: str, cast):
 class ExplorePanel:
     """Explore tab: the source, the results (scale line, summary, per-target table), the method and error sizes."""
 
-    def __init__(self, gui, app: AppActions, syncing: Syncing):
+    def __init__(self, gui, app: Actions, syncing: Syncing):
         self.app, self.syncing = app, syncing
         self.source = gui.add_markdown("")
         with gui.add_folder("Results"):
@@ -145,9 +145,11 @@ class ExplorePanel:
                 for flag, widget in self.options.items()
             ),
         ):
-            handle.on_update(_forward(handle, syncing, app.change_settings, name, cast))
-        self.magnification.on_update(_forward(self.magnification, syncing, app.set_display, "magnification", float))
-        self.new_seed.on_click(lambda event: app.new_seed(client=event.client))
+            handle.on_update(_forward(handle, syncing, app.evaluate.change_settings, name, cast))
+        self.magnification.on_update(
+            _forward(self.magnification, syncing, app.evaluate.set_display, "magnification", float)
+        )
+        self.new_seed.on_click(lambda event: app.evaluate.new_seed(client=event.client))
 
     def sync(self, settings: Settings, kind: str, display: Display | None = None) -> None:
         with self.syncing.quiet():
@@ -171,6 +173,16 @@ class ExplorePanel:
                 "seeds annealing and clustering)."
             )
 
+    def show_source(self, markdown: str) -> None:
+        """What is open: the source's name and kind."""
+        self.source.content = markdown
+
+    def show_results(self, scale: str, summary: str, table: str) -> None:
+        """The arrows' scale line, the summary and the per-target table (`tables`)."""
+        for widget, text in ((self.scale, scale), (self.summary, summary), (self.table, table)):
+            if widget.content != text:
+                widget.content = text
+
     @property
     def neighbors(self):
         return self.options["neighbors"]
@@ -187,19 +199,19 @@ class ExplorePanel:
 class ViewPanel:
     """View tab: camera presets, marker size, region zoom, layers, the heat map's value and legend."""
 
-    def __init__(self, gui, app: AppActions, syncing: Syncing):
+    def __init__(self, gui, app: Actions, syncing: Syncing):
         self.app, self.syncing = app, syncing
         self.camera = gui.add_button_group("Camera", PRESETS)
-        self.camera.on_click(lambda event: app.show_camera(self.camera.value, client=event.client))
+        self.camera.on_click(lambda event: app.views.show_camera(self.camera.value, client=event.client))
         self.presentation = gui.add_checkbox(
             "Presentation mode", False, hint="Large text, a collapsible panel, larger markers: for a projector"
         )
         self.presentation.on_update(
-            lambda event: None if self.syncing.on else app.set_presentation(self.presentation.value)
+            lambda event: None if self.syncing.on else app.views.set_presentation(self.presentation.value)
         )
         self.see_through = gui.add_checkbox("See-through cell", False, hint="Show what lies under the cell's surfaces")
         self.see_through.on_update(
-            lambda event: None if self.syncing.on else app.set_see_through(self.see_through.value)
+            lambda event: None if self.syncing.on else app.views.set_see_through(self.see_through.value)
         )
         self.marker = gui.add_slider("Marker radius (mm)", 0.5, 50.0, 0.5, 8.0)
         self.region_zoom = gui.add_slider(
@@ -226,33 +238,35 @@ class ViewPanel:
         @self.slice_value.on_update
         def _(event: viser.GuiEvent) -> None:
             if not self.syncing.on:
-                app.set_display(client=event.client, slice_value=dict(SLICE_CHOICES)[self.slice_value.value])
+                app.evaluate.set_display(client=event.client, slice_value=dict(SLICE_CHOICES)[self.slice_value.value])
 
         @self.slice_axis.on_update
         def _(event: viser.GuiEvent) -> None:
             if not self.syncing.on:
-                app.set_display(
+                app.evaluate.set_display(
                     client=event.client, slice_axis=dict(SLICE_AXES)[self.slice_axis.value], slice_offset=None
                 )
 
-        self.slice_offset.on_update(_forward(self.slice_offset, syncing, app.set_display, "slice_offset", float))
+        self.slice_offset.on_update(
+            _forward(self.slice_offset, syncing, app.evaluate.set_display, "slice_offset", float)
+        )
         for handle, name, cast in (
             (self.marker, "marker_mm", float),
             (self.region_zoom, "region_zoom", float),
         ):
-            handle.on_update(_forward(handle, syncing, app.set_display, name, cast))
+            handle.on_update(_forward(handle, syncing, app.evaluate.set_display, name, cast))
 
         @self.heat_value.on_update
         def _(event: viser.GuiEvent) -> None:
             if not self.syncing.on:
                 choices = dict(HEAT_CHOICES[app.session.kind])
-                app.set_display(client=event.client, heat_value=choices.get(self.heat_value.value, "rrbc"))
+                app.evaluate.set_display(client=event.client, heat_value=choices.get(self.heat_value.value, "rrbc"))
 
         for name, box in self.layers.items():
 
             def on_layer(event: viser.GuiEvent, name=name, box=box) -> None:
                 if not self.syncing.on:
-                    app.set_layer(name, bool(box.value))
+                    app.evaluate.set_layer(name, bool(box.value))
 
             box.on_update(on_layer)
 
@@ -264,6 +278,12 @@ class ViewPanel:
             self.heat_value.options = tuple(k for k, _ in labels)
             self.heat_value.value = next((k for k, v in labels if v == display.heat_value), labels[0][0])
 
+    def show_heat_legend(self, markdown: str) -> None:
+        self.legend.content = markdown
+
+    def show_slice_legend(self, markdown: str) -> None:
+        self.slice_legend.content = markdown
+
     def sync_layers(self, layers: dict[str, bool]) -> None:
         with self.syncing.quiet():
             for name, box in self.layers.items():
@@ -274,23 +294,27 @@ class ViewPanel:
 class LearnPanel:
     """Learn tab: the nine-step lesson's text and its buttons."""
 
-    def __init__(self, gui, app: AppActions):
+    def __init__(self, gui, app: Actions):
         self.lesson = gui.add_markdown(
             "The nine steps of RRBC, one at a time, each shown in the scene with live numbers. Press **Next** to start."
         )
         self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
         self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
         self.lesson_end = gui.add_button("End lesson (restore layers)")
-        self.lesson_next.on_click(lambda event: app.lesson_step(+1))
-        self.lesson_prev.on_click(lambda event: app.lesson_step(-1))
-        self.lesson_end.on_click(lambda event: app.lesson_stop())
+        self.lesson_next.on_click(lambda event: app.views.lesson_step(+1))
+        self.lesson_prev.on_click(lambda event: app.views.lesson_step(-1))
+        self.lesson_end.on_click(lambda event: app.views.lesson_stop())
         self.bullseye = Bullseye(gui)
+
+    def show_text(self, markdown: str) -> None:
+        """The lesson step's text (or the prompt to start)."""
+        self.lesson.content = markdown
 
 
 class MonteCarloPanel:
     """Monte Carlo tab: what ran, the trials, and the two plots."""
 
-    def __init__(self, gui, app: AppActions, syncing: Syncing):
+    def __init__(self, gui, app: Actions, syncing: Syncing):
         self.mc_info = gui.add_markdown("")
         self.mc_trials = gui.add_slider("Trials", 20, 1000, 10, 200)
         self.mc_run = gui.add_button("Run again")
@@ -320,26 +344,41 @@ class MonteCarloPanel:
             axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}),
             aspect=1.4,
         )
-        self.mc_run.on_click(lambda event: app.request_monte_carlo(new_noise=True))
-        self.mc_stop.on_click(lambda event: app.stop_monte_carlo())
+        self.mc_run.on_click(lambda event: app.montecarlo.request(new_noise=True))
+        self.mc_stop.on_click(lambda event: app.montecarlo.stop())
 
         @self.mc_trials.on_update
         def _(event: viser.GuiEvent) -> None:
             if not syncing.on:
-                app.request_monte_carlo()
+                app.montecarlo.request()
+
+    def show_info(self, markdown: str) -> None:
+        """What ran (trials, setup, time) or why nothing did."""
+        self.mc_info.content = markdown
+
+    def set_running(self, running: bool) -> None:
+        """Stop is offered while a run is under way."""
+        self.mc_stop.disabled = not running
 
 
 class DiagnosePanel:
     """Diagnose tab: the button and the verdict."""
 
-    def __init__(self, gui, app: AppActions):
+    def __init__(self, gui, app: Actions):
         self.diagnose = gui.add_button(
             "Diagnose current data",
             icon=viser.Icon.STETHOSCOPE,
             hint="Test the registration points and fiducials (not the targets) for effects a rigid fit misses",
         )
         self.diagnosis = gui.add_markdown(PROMPT)
-        self.diagnose.on_click(lambda event: app.run_diagnosis(client=event.client))
+        self.diagnose.on_click(lambda event: app.diagnose.run(client=event.client))
+
+    def show(self, markdown: str) -> None:
+        """The verdict (`diagnosis_panel.render`), an error, or the verdict marked stale."""
+        self.diagnosis.content = markdown
+
+    def show_prompt(self) -> None:
+        self.diagnosis.content = PROMPT
 
 
 NO_MESH = "(no mesh)"
@@ -349,7 +388,7 @@ class FilePanel:
     """File tab: open one of the files offered (scenes/ and the folders named on the command line: no free-text
     server path), or upload one; download the data or the results."""
 
-    def __init__(self, gui, app: AppActions):
+    def __init__(self, gui, app: Actions):
         self.path = gui.add_dropdown(
             "Scene or data file", ("",), initial_value="", hint="Files in scenes/ and in the folders given by --data"
         )
@@ -367,17 +406,17 @@ class FilePanel:
         @self.load.on_click
         def _(event: viser.GuiEvent) -> None:
             mesh = self.mesh_path.value
-            app.load_offered(self.path.value, None if mesh == NO_MESH else mesh, client=event.client)
+            app.files.load_offered(self.path.value, None if mesh == NO_MESH else mesh, client=event.client)
 
-        self.rescan.on_click(lambda event: app.rescan_files())
+        self.rescan.on_click(lambda event: app.files.rescan_files())
 
         @self.upload.on_upload
         def _(event: viser.GuiEvent) -> None:
             f = self.upload.value
-            app.load_upload(f.name, f.content, client=event.client)
+            app.files.load_upload(f.name, f.content, client=event.client)
 
-        self.download_csv.on_click(lambda event: app.download("csv", client=event.client))
-        self.download_json.on_click(lambda event: app.download("json", client=event.client))
+        self.download_csv.on_click(lambda event: app.files.download("csv", client=event.client))
+        self.download_json.on_click(lambda event: app.files.download("json", client=event.client))
 
     def offer(self, sources: list[str], meshes: list[str]) -> None:
         """The files the tab offers (labels)."""
@@ -390,45 +429,10 @@ class FilePanel:
 
 
 #: The text areas the app writes, and the panel that owns each.
-_TEXT_AREAS = {
-    "status": None,
-    "source": "explore",
-    "scale": "explore",
-    "summary": "explore",
-    "table": "explore",
-    "info": "selection",
-    "legend": "view",
-    "slice_legend": "view",
-    "lesson": "learn",
-    "mc_info": "montecarlo",
-    "diagnosis": "diagnose",
-    "vec_table": "vec",
-}
-
-
-class _TextAreas:
-    """The panels' markdown areas by name (only these: the app writes no other widget)."""
-
-    def __init__(self, controls: Controls):
-        self._controls = controls
-
-    def _widget(self, name: str):
-        if name not in _TEXT_AREAS:
-            raise KeyError(f"no text area {name!r}")
-        owner = _TEXT_AREAS[name]
-        return getattr(self._controls if owner is None else getattr(self._controls, owner), name)
-
-    def __setitem__(self, name: str, markdown: str) -> None:
-        self._widget(name).content = markdown
-
-    def __getitem__(self, name: str) -> str:
-        return self._widget(name).content
-
-
 class Controls:
     """The control panel: the status line and the tabs, one panel each (module docstring)."""
 
-    def __init__(self, server: viser.ViserServer, app: AppActions, plan_tab: Callable[[], PlanningPanel]):
+    def __init__(self, server: viser.ViserServer, app: Actions, plan_tab: Callable[[], PlanningPanel]):
         self.app = app
         self.syncing = Syncing()
         gui = server.gui
@@ -468,12 +472,9 @@ class Controls:
             self.style.content = PRESENTATION_CSS if presentation else ""
 
     # -------------------------------------------------------------------------------- what the app shows here
-    @property
-    def text(self) -> _TextAreas:
-        """The text areas by name (status, source, scale, summary, table, legend, lesson, mc_info, diagnosis,
-        vec_table):
-        ``controls.text["summary"] = markdown`` shows it, ``controls.text["summary"]`` reads it."""
-        return _TextAreas(self)
+    def show_status(self, line: str) -> None:
+        """The status line at the top of the panel (the last message)."""
+        self.status.content = line
 
     def show_monte_carlo_plots(self, visible: bool, histogram=None, by_distance=None) -> None:
         """Show or hide the Monte Carlo tab's plots and controls (hidden for measured data: no error model to

@@ -73,6 +73,8 @@ DragCallback = Callable[..., object]
 ClickCallback = Callable[..., object]
 
 GIZMO_LIMITS = ((-1e7, 1e7),) * 3
+HALO_MARKERS = 1.8  # coverage halo radius, in marker radii (the target sphere is 0.8)
+HALO_OPACITY = 0.45
 
 
 def node_key(pid: str) -> str:
@@ -295,6 +297,7 @@ class SceneNodes(HeatMapNodes):
         self.labels: dict[str, viser.LabelHandle] = {}  # node name of the label -> handle
         self._sent: dict = {}  # (id(handle), attribute) -> the value last assigned by update()
         self.regions: dict[str, viser.SceneNodeHandle] = {}
+        self.halos: dict[str, viser.SceneNodeHandle] = {}  # target id -> coverage halo (paint_regions)
         self.region_kind: dict[str, tuple[str, np.ndarray]] = {}  # id -> (kind, size)
         self.nodes: dict[str, viser.SceneNodeHandle] = {}  # other nodes by name
         self.layers: dict[str, bool] = {name: True for name in LAYERS}
@@ -524,9 +527,36 @@ class SceneNodes(HeatMapNodes):
                 visible=False,
             )
 
+        # coverage halos: one around each target with a region, following its gizmo; hidden until painted
+        self.halos = {}
+        if session.kind == "scene":
+            for pid in session.layout["targets"].ids:
+                if pid in session.regions and ("targets", pid) in self.gizmos:
+                    self.halos[pid] = self.scene.add_icosphere(
+                        f"{gizmo_name('targets', pid)}/coverage",
+                        radius=HALO_MARKERS * self.display.marker_mm,
+                        color=colors.REGION,
+                        subdivisions=2,
+                        opacity=HALO_OPACITY,
+                        visible=False,
+                        cast_shadow=False,
+                        receive_shadow=False,
+                    )
         self.set_selected(self.selected)
         self.set_layer("labels", self.layers["labels"])
         self.update(ev)
+
+    def paint_regions(self, colours: dict | None) -> None:
+        """Colour each target's region of variability and its halo by `colours` (target id -> RGB; the Plan tab's
+        coverage scale), or give the regions their own colour back and hide the halos (None)."""
+        colours = colours or {}
+        for pid, region in self.regions.items():
+            self._assign(region, "color", tuple(colours.get(pid, colors.REGION)))
+        for pid, halo in self.halos.items():
+            self._assign(halo, "visible", pid in colours)
+            if pid in colours:
+                self._assign(halo, "color", tuple(colours[pid]))
+            self._assign(halo, "radius", HALO_MARKERS * self.display.marker_mm)
 
     def add_new_fiducials(self, ev: Evaluation) -> list[str]:
         """Create the nodes of fiducials `ev` has and the scene does not yet (accepted suggestions); returns

@@ -8,7 +8,9 @@ reload is a new tab (viser builds client state anew on every connection).
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import io
 import threading
 import traceback
 
@@ -17,6 +19,8 @@ import viser
 from rrbc_core.session.explorer import ExplorerSession
 
 from . import files
+from .access import AccessGuard
+from .app import RunningApp
 from .stage import ClientStage
 
 
@@ -35,8 +39,9 @@ class PerClientApp:
         self.library = library
         self.port = int(server.get_port())
         self.url = f"http://{host if host not in ('0.0.0.0', '::', '') else 'localhost'}:{self.port}"
-        self.apps: dict[int, object] = {}
+        self.apps: dict[int, RunningApp] = {}
         self.quiet = True
+        self.guard: AccessGuard | None = None  # set by serve: the tabs it refused get no app
         self._lock = threading.Lock()
         self._stopped = False
         server.on_client_connect(self._connect)
@@ -49,9 +54,7 @@ class PerClientApp:
         return files.load_source(self._source, self._mesh)
 
     def _connect(self, client: viser.ClientHandle) -> None:
-        from .app import RunningApp
-
-        guard = getattr(self, "guard", None)
+        guard = self.guard
         if guard is not None and guard.is_refused(client.client_id):
             return  # refused at the handshake (access.AccessGuard): build nothing for it
 
@@ -60,7 +63,7 @@ class PerClientApp:
                 ClientStage(client), self._fresh(), self.host, viser_server=self.server, library=self.library
             )
             if self.present:
-                app.set_presentation(True)
+                app.views.set_presentation(True)
         except Exception:  # noqa: BLE001 - one tab failing must not stop the server
             traceback.print_exc()
             return
@@ -77,9 +80,6 @@ class PerClientApp:
             app.stop()
 
     def stop(self) -> None:
-        import contextlib
-        import io
-
         with self._lock:
             if self._stopped:
                 return

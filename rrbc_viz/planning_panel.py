@@ -27,6 +27,7 @@ import copy
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
@@ -39,22 +40,19 @@ from rrbc_core.session import planning_view
 from rrbc_core.session.results import PlanningState
 
 from . import colors
-from .nodes import gizmo_name
 from .syncing import clamped
 from .worker import CoalescingWorker
 
 if TYPE_CHECKING:
     from rrbc_core.session.explorer import ExplorerSession
 
-    from .actions import AppActions, PlanningView
+    from .actions import Actions, PlanningView
 
 PLAN_INTERVAL_S = 0.25  # least time between planning recomputations while dragging
 PLAN_LIVE_MAX_S = 0.05  # a planning update slower than this runs in the background during drags …
 PLAN_QUIET_S = 0.15  # … once the drag has paused (no update) this long, or ended: computing it while the drag
 #                      goes on would slow every drag update (the worker holds the GIL for much of its time)
 K_MAX = 10
-HALO_MARKERS = 1.8  # halo radius, in marker radii (the target sphere is 0.8)
-HALO_OPACITY = 0.45
 GHOST_MARKERS = 1.4  # ghost sphere radius, in marker radii (a fiducial is 1)
 PROMPT_SUGGEST = (
     "Press **Suggest** for K more fiducials from the scene's candidate locations (those the sensor "
@@ -203,10 +201,17 @@ def render_suggestion(result, current: bool = True) -> str:
 class PlanningPanel:
     """The Plan tab's widgets (built inside the tab by `Controls`) and its scene nodes (`build` per source)."""
 
-    def __init__(self, server: viser.ViserServer, app: AppActions, view: PlanningView):
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        app: Actions,
+        view: PlanningView,
+        paint: Callable[[dict | None], None],
+    ):
         self.server = server
         self.app = app
         self.view = view
+        self._paint = paint  # colours the scene's regions and halos (`nodes.SceneNodes.paint_regions`)
         gui = server.gui
         self.info = gui.add_markdown("")
         self.k = gui.add_slider("Fiducials to add (K)", 1, K_MAX, 1, 4)
@@ -245,7 +250,6 @@ class PlanningPanel:
         self._progress_time = 0.0
         self.ghosts: list = []  # icosphere handles of the suggested fiducials
         self.ghost_labels: list = []
-        self.halos: dict = {}  # target id -> halo handle
         self._sent: dict = {}  # (id(handle), attr) -> value last assigned
         self._group = None
         # background planning (slow scenes, during drags); every synchronous refresh makes its work stale
@@ -256,12 +260,12 @@ class PlanningPanel:
         @self.colour.on_update
         def _(event: viser.GuiEvent) -> None:
             if not self._syncing:
-                self.app.set_coverage_colours(bool(self.colour.value))
+                self.app.plan.set_coverage_colours(bool(self.colour.value))
 
-        self.suggest_button.on_click(lambda event: self.app.suggest_fiducials(client=event.client))
-        self.accept_button.on_click(lambda event: self.app.accept_suggestions(client=event.client))
-        self.clear_button.on_click(lambda event: self.app.clear_suggestions())
-        self.undo_button.on_click(lambda event: self.app.undo(client=event.client))
+        self.suggest_button.on_click(lambda event: self.app.plan.suggest_fiducials(client=event.client))
+        self.accept_button.on_click(lambda event: self.app.plan.accept_suggestions(client=event.client))
+        self.clear_button.on_click(lambda event: self.app.plan.clear_suggestions())
+        self.undo_button.on_click(lambda event: self.app.authoring.undo(client=event.client))
 
     @contextmanager
     def quiet(self):
@@ -286,22 +290,7 @@ class PlanningPanel:
             except Exception:  # noqa: BLE001 - already gone
                 pass
         self._group = self.server.scene.add_frame("/plan", show_axes=False)
-        self.halos = {}
         scene_mode = session.kind == "scene"
-        if scene_mode:
-            r = self.view.marker_mm()
-            for pid in session.layout["targets"].ids:
-                if pid in session.regions:
-                    self.halos[pid] = self.server.scene.add_icosphere(
-                        f"{gizmo_name('targets', pid)}/coverage",
-                        radius=HALO_MARKERS * r,
-                        color=colors.REGION,
-                        subdivisions=2,
-                        opacity=HALO_OPACITY,
-                        visible=bool(self.colour.value),
-                        cast_shadow=False,
-                        receive_shadow=False,
-                    )
         for h in (self.colour, self.accept_button, self.clear_button):
             h.disabled = not scene_mode
             h.visible = scene_mode  # measured data: suggestions are places to measure, not fiducials to add
@@ -437,18 +426,13 @@ class PlanningPanel:
                     self._show_state(snapshot, state)
 
     def apply_colours(self, session: ExplorerSession) -> None:
-        """Regions and halos on the coverage scale when the toggle is on; regions back to their colour when off."""
+        """Regions and halos on the coverage scale when the toggle is on; regions back to their colour when off
+        (the scene's nodes paint them: `nodes.SceneNodes.paint_regions`)."""
         on = bool(self.colour.value) and self.state is not None
-        cov = dict(zip(self.state.target_ids, self.state.coverage)) if self.state is not None else {}
-        r = self.view.marker_mm()
-        for pid, region in self.view.region_nodes().items():
-            c = colors.coverage_color(cov[pid]) if on and pid in cov else colors.REGION
-            self._assign(region, "color", c)
-        for pid, halo in self.halos.items():
-            self._assign(halo, "visible", on and pid in cov)
-            if on and pid in cov:
-                self._assign(halo, "color", colors.coverage_color(cov[pid]))
-            self._assign(halo, "radius", HALO_MARKERS * r)
+        if not on:
+            self._paint(None)
+            return
+        self._paint({pid: colors.coverage_color(c) for pid, c in zip(self.state.target_ids, self.state.coverage)})
 
     # ------------------------------------------------------------------------------------------ suggesting
     def begin(self) -> bool:
@@ -507,6 +491,16 @@ class PlanningPanel:
                     anchor="bottom-left",
                 )
             )
+
+    def sync_colour(self, on: bool) -> None:
+        """The "Colour regions by coverage" box, set without acting on it."""
+        if bool(self.colour.value) != bool(on):
+            with self.quiet():
+                self.colour.value = bool(on)
+
+    def show_refusal(self, message: str) -> None:
+        """Why the last Suggest was refused."""
+        self.suggestion_md.content = f"⚠ Cannot suggest: {' '.join(str(message).split())}"
 
     def sync_undo(self, can_undo: bool) -> None:
         """Enable Undo while the session has an edit to undo."""

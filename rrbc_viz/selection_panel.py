@@ -11,7 +11,7 @@ import viser
 from .selection_card import parse_choice
 
 if TYPE_CHECKING:
-    from .actions import AppActions
+    from .actions import Actions
     from .syncing import Syncing
 
 
@@ -33,7 +33,7 @@ class Bullseye:
 class SelectionPanel:
     """Explore tab, top: pick a point, its numbers, its bullseye."""
 
-    def __init__(self, gui, app: AppActions, syncing: Syncing):
+    def __init__(self, gui, app: Actions, syncing: Syncing):
         self.app, self.syncing = app, syncing
         with gui.add_folder("Selected point"):
             self.choice = gui.add_dropdown("Select", ("none",), initial_value="none")
@@ -45,13 +45,18 @@ class SelectionPanel:
         def _(event: viser.GuiEvent) -> None:
             if not self.syncing.on:
                 sel = parse_choice(self.choice.value)
-                app.select(*(sel or (None, None)), client=event.client)
+                app.views.select(*(sel or (None, None)), client=event.client)
 
         @self.exclude.on_click
         def _(event: viser.GuiEvent) -> None:
             sel = parse_choice(self.choice.value)
             if sel is not None and sel[0] == "fiducials":
-                app.toggle_fiducial(sel[1], client=event.client)
+                app.evaluate.toggle_fiducial(sel[1], client=event.client)
+
+    def show_card(self, markdown: str) -> None:
+        """The selected point's card (`selection_card.info_card`)."""
+        if self.info.content != markdown:
+            self.info.content = markdown
 
     def sync(self, choices: tuple[str, ...], value: str, selected) -> None:
         with self.syncing.quiet():

@@ -16,7 +16,7 @@ from rrbc_core.session.vec_view import VecView
 from .syncing import clamped
 
 if TYPE_CHECKING:
-    from .actions import AppActions
+    from .actions import Actions
     from .syncing import Syncing
 
 INTRO = (
@@ -64,7 +64,7 @@ def render(view: VecView | None, selected: str | None = None) -> str:
 class VecPanel:
     """Arm (VEC) tab: show VEC, the registration points' orientations, a target's tool, and the table."""
 
-    def __init__(self, gui, app: AppActions, syncing: Syncing):
+    def __init__(self, gui, app: Actions, syncing: Syncing):
         self.app, self.syncing = app, syncing
         gui.add_markdown(INTRO)
         self.show = gui.add_checkbox("Compare with VEC", False, hint="Calibrate the arm and predict every target")
@@ -81,16 +81,18 @@ class VecPanel:
         @self.show.on_update
         def _(event: viser.GuiEvent) -> None:
             if not syncing.on:
-                app.set_vec(bool(self.show.value), client=event.client)
+                app.vec.set_vec(bool(self.show.value), client=event.client)
 
         @self.varied.on_update
         def _(event: viser.GuiEvent) -> None:
             if not syncing.on:
-                app.set_varied_registration(bool(self.varied.value), client=event.client)
+                app.vec.set_varied_registration(bool(self.varied.value), client=event.client)
 
         def on_tool(event: viser.GuiEvent) -> None:
             if not syncing.on and self.target.value:
-                app.set_target_tool(self.target.value, clamped(self.tilt), clamped(self.azimuth), client=event.client)
+                app.vec.set_target_tool(
+                    self.target.value, clamped(self.tilt), clamped(self.azimuth), client=event.client
+                )
 
         self.tilt.on_update(on_tool)
         self.azimuth.on_update(on_tool)
@@ -98,7 +100,11 @@ class VecPanel:
         @self.target.on_update
         def _(event: viser.GuiEvent) -> None:
             if not syncing.on:
-                app.sync_vec_target(self.target.value)
+                app.vec.sync_vec_target(self.target.value)
+
+    def show_table(self, markdown: str) -> None:
+        """VEC's table beside rigid and RRBC (`render`), or why there is none."""
+        self.vec_table.content = markdown
 
     def sync(self, targets: tuple, target: str, tool: tuple, on: bool, varied: bool, has_arm: bool) -> None:
         """Show the state the app holds (under the syncing flag: the callbacks do nothing)."""

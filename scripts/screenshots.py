@@ -3,7 +3,7 @@
 
     .venv/bin/python scripts/screenshots.py [--out docs/screenshots] [--mesh-node /mesh/cell] [--only app_default.png]
 
-Starts the real app (``rrbc_viz.app.serve(port=0)``, local only) once per screenshot, so every shot begins from
+Starts the real app (``rrbc_viz.serve.serve(port=0)``, local only) once per screenshot, so every shot begins from
 the same state, opens it at 1280x800 in Debian's /usr/bin/chromium (install it with
 ``bash scripts/setup.sh --browser``; never ``playwright install``), closes viser's "Software WebGL rendering
 detected" notification, runs the shot's GUI actions, waits until the scene has rendered and the page has
@@ -19,7 +19,7 @@ Extend SHOTS below. Each entry is (file name, actions); an action is one of
                             (the app's ``nodes._gizmo_scale()``); waits until the server has the drag's end
     ("zoom", {"look_at": (x, y, z), "factor": f})   every tab's camera looks at (x, y, z) mm from f times its
                             initial distance, along the initial viewing direction (like a user zooming in)
-    ("call", fn)            call fn(app) on the server (e.g. a drag from Python: app.handle_drag(...))
+    ("call", fn)            call fn(app) on the server (e.g. a drag from Python: app.evaluate.handle_drag(...))
     ("wait_text", "Text")   wait until "Text" is visible on the page
     ("wait_node", "/name")  wait until scene node "/name" is mounted in the browser
     ("sleep", 0.5)          pause (seconds); prefer the waits above
@@ -119,8 +119,8 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
             ("tab", "Arm (VEC)"),
             ("click", "Compare with VEC"),
             ("wait_text", "VEC identified"),
-            ("call", lambda app: app.set_varied_registration(True)),
-            ("call", lambda app: app.set_target_tool("H1", 40.0, 0.0)),
+            ("call", lambda app: app.vec.set_varied_registration(True)),
+            ("call", lambda app: app.vec.set_target_tool("H1", 40.0, 0.0)),
             ("wait_text", "40°, 0°"),
             ("tab", "View"),
             ("button", "selected point"),
@@ -139,7 +139,7 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
             ("button", "close-up"),
             ("tab", "Plan"),
             ("click", "Colour regions by coverage"),
-            ("call", lambda app: app.handle_drag("fiducials", "F1", [400.0, -60.0, 0.0], "end")),
+            ("call", lambda app: app.evaluate.handle_drag("fiducials", "F1", [400.0, -60.0, 0.0], "end")),
             ("button", "Suggest"),
             ("wait_text", "Suggested: 4 fiducials"),
         ],
@@ -159,7 +159,7 @@ SHOT_OPTIONS: dict[str, dict] = {
     "presentation_1280x720.png": {"serve": {"present": True}, "viewport": {"width": 1280, "height": 720}},
 }
 
-APP_ENTRY = "rrbc_viz.app:serve"
+APP_ENTRY = "rrbc_viz.serve:serve"
 DEFAULT_MESH_NODE = "/mesh/cell"  # rrbc_viz/nodes.py
 MAX_KB = 400
 CLICK_TIMEOUT_S = 5.0

@@ -69,7 +69,7 @@ def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
     res = json.loads(r.stdout)
     assert res["summary"]["rmst_rrbc_mm"] < res["summary"]["rmst_rigid_mm"]
     # and the app opens it as it is
-    from rrbc_viz.app import serve
+    from rrbc_viz.serve import serve
 
     app = serve(str(out))
     try:

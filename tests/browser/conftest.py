@@ -7,7 +7,7 @@ Chromium comes from `bash scripts/setup.sh --browser` (never `playwright install
     browser         session   playwright Browser (headless, flags from helpers.CHROMIUM_ARGS)
     browser_context function  fresh BrowserContext, 1280x800 viewport; closed (tabs disconnect) at teardown
     viser_app       function  viser_app(factory) -> app: calls factory() (zero-arg, returns an object with .port
-                              and .stop(), e.g. helpers.start_demo_app or lambda: rrbc_viz.app.serve()), waits for
+                              and .stop(), e.g. helpers.start_demo_app or lambda: rrbc_viz.serve.serve()), waits for
                               its port, stops it at teardown
     page_for        function  page_for(url, *, timeout_s=30, dismiss_notification=True, wait=True, init_script=None)
                               -> (page, requests): new tab in browser_context, every request and websocket URL

@@ -1,4 +1,4 @@
-"""The real app (`rrbc_viz.app.serve()` on the bundled default scene) in headless Chromium, as a user sees it:
+"""The real app (`rrbc_viz.serve.serve()` on the bundled default scene) in headless Chromium, as a user sees it:
 the page loads offline and draws the cell, and ticking the heat map changes the 3-D view at the default camera,
 in the legend's colours; a real mouse drag of a target's arrow changes the numbers the page shows (and the
 server's session), far enough marks the target extrapolated; bad files loaded from the File tab give a visible
@@ -18,7 +18,7 @@ import pytest
 
 import rrbc_core
 from rrbc_viz import colors
-from rrbc_viz.app import serve
+from rrbc_viz.serve import serve
 
 from .helpers import (
     UNDRAWN_TAB_SCRIPT,
@@ -176,9 +176,14 @@ def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for
     off = settled_shot(page, clip)
 
     page.get_by_text("Heat map of predicted error", exact=True).click()
-    wait_for(lambda: app.layers.get("heatmap") and app.heat_map is not None, 15, message="the heat map on", page=page)
+    wait_for(
+        lambda: app.state.layers.get("heatmap") and app.present.heat_map is not None,
+        15,
+        message="the heat map on",
+        page=page,
+    )
     # each target's expected colour: the mean predicted error (with RRBC) over its region, on the legend's scale
-    hm = app.heat_map
+    hm = app.present.heat_map
     both = np.concatenate([hm.error_rigid, hm.error_rrbc])
     lo, hi = float(np.nanmin(both)), float(np.nanmax(both))
     owner = np.asarray(hm.target)
@@ -310,7 +315,7 @@ def test_five_tabs_share_one_state(viser_app, page_for):
         page=last,
     )
     # a move made elsewhere (here from Python, as any tab's drag ends up) shows in tab 3's table
-    app.handle_drag("targets", "H2", [420.0, -50.0, 15.0], "end")
+    app.evaluate.handle_drag("targets", "H2", [420.0, -50.0, 15.0], "end")
     wait_for(
         lambda: (target_row(pages[2], "H2") or [])[:4] == expected_row(app, "H2")[:4],
         15,

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rrbc_viz.app import serve
+from rrbc_viz.serve import serve
 
 from .helpers import wait_for
 
@@ -39,11 +39,11 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     with page.expect_file_chooser() as chooser:
         page.get_by_text("Upload cell mesh").click()
     chooser.value.set_files(str(mesh_file))
-    wait_for(lambda: getattr(app, "uploaded_mesh", None) is not None, 30, message="the mesh uploaded", page=page)
+    wait_for(lambda: app.authoring.uploaded_mesh is not None, 30, message="the mesh uploaded", page=page)
     page.get_by_label("Click on the cell adds").click()
     page.get_by_role("option", name="fiducial", exact=True).click()
-    wait_for(lambda: app.click_mode == "fiducials", 10, message="click mode on the server", page=page)
-    app.show_camera("close-up")
+    wait_for(lambda: app.authoring.click_mode == "fiducials", 10, message="click mode on the server", page=page)
+    app.views.show_camera("close-up")
     page.wait_for_timeout(1500)
     n = len(app.session.last.fiducial_ids)
     spot = np.array([560.0, 120.0, 50.0])

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rrbc_viz.app import serve
+from rrbc_viz.serve import serve
 
 from .helpers import UNDRAWN_TAB_SCRIPT, dismiss_software_webgl_notification, wait_for
 

@@ -10,7 +10,7 @@ import re
 import pytest
 
 from rrbc_core.session import planning_view
-from rrbc_viz.app import serve
+from rrbc_viz.serve import serve
 
 from .helpers import canvas_rect, is_local_url, node_exists, node_screen_position, wait_for, wait_until_rendered
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from rrbc_core.session import vec_view
-from rrbc_viz.app import serve
+from rrbc_viz.serve import serve
 
 from .helpers import canvas_rect, node_exists, node_screen_position, wait_for, wait_until_rendered
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from rrbc_viz import teaching
-from rrbc_viz.app import serve
+from rrbc_viz.serve import serve
 
 from .helpers import decode_png, dismiss_software_webgl_notification, drag, node_screen_position, wait_for
 
@@ -54,7 +54,7 @@ _JS_SOLID_CELL = (
 def _wait_camera(page, app) -> None:
     """Wait until the page renders with the camera the server last sent it, and a moment more (a frame)."""
     cid = next(iter(app.server.get_clients()))
-    sent = app.camera.last[cid].position
+    sent = app.ctx.camera.last[cid].position
     wait_for(
         lambda: np.linalg.norm(np.array(page.evaluate(_JS_CAMERA)) - sent) < 1e-3 * np.linalg.norm(sent),
         10.0,
@@ -68,7 +68,7 @@ def _wait_camera(page, app) -> None:
 def _step_objects(app, step) -> dict[str, np.ndarray]:
     """Robot-frame points of what a step talks about, by name (the visible part of each marker: its top)."""
     ev = app.session.last
-    r = app.display.marker_mm
+    r = app.state.display.marker_mm
     up = np.array([0.0, 0.0, 0.9 * r])
     out = {}
     for name in step.focus:
@@ -84,7 +84,7 @@ def _step_objects(app, step) -> dict[str, np.ndarray]:
             out[name] = np.asarray(app.session.sensor_to_robot.translation, float).reshape(1, 3)
         elif name == "corrections":
             inc = np.flatnonzero(ev.included)
-            out[name] = ev.fiducial_positions[inc] + app.display.magnification * ev.corrections_robot[inc]
+            out[name] = ev.fiducial_positions[inc] + app.state.display.magnification * ev.corrections_robot[inc]
         elif name == "landing":
             land = app.nodes.landing
             out[name] = np.array([land.anchor, land.rigid, land.rrbc])
@@ -115,7 +115,7 @@ def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_
     dismiss_software_webgl_notification(page, timeout_s=10.0)
     mesh = app.loaded.mesh
     for i, step in enumerate(teaching.STEPS):
-        app.lesson_go(i)
+        app.views.lesson_go(i)
         _wait_camera(page, app)
         objects = _step_objects(app, step)
         for name, pts in objects.items():
@@ -130,9 +130,9 @@ def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_
                 continue  # the cell is drawn see-through at this step: nothing opaque can hide anything
             if name in ("robot", "sensor"):
                 continue  # frame origins sit inside the robot's base and the sensor head's casing by design
-            hidden = _hidden_by_mesh(mesh, np.array(res["camera"]), pts, slack_mm=0.5 * app.display.marker_mm)
+            hidden = _hidden_by_mesh(mesh, np.array(res["camera"]), pts, slack_mm=0.5 * app.state.display.marker_mm)
             assert not hidden.any(), f"step {i + 1}: {name} {np.flatnonzero(hidden).tolist()} hidden by the mesh"
-    app.lesson_stop()
+    app.views.lesson_stop()
 
 
 # Meshes and lines of a gizmo the user can see (itself and every ancestor visible), outside its own children (the
@@ -149,7 +149,7 @@ _JS_GIZMO_VISIBLE = """(name) => { const m = window.__viserMutable.nodeRefFromNa
 def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser_app, page_for):
     app = viser_app(lambda: serve())
     page, _ = page_for(app.url)
-    app.show_camera("close-up")
+    app.views.show_camera("close-up")
     _wait_camera(page, app)
     wait_for(lambda: page.evaluate(_JS_GIZMO_VISIBLE, "/targets/H1/gizmo"), 10.0, message="H1's gizmo")
     page.wait_for_timeout(500)
@@ -165,7 +165,7 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
                 assert gizmo_meshes(f"/{kind}/{pid}/gizmo") == 0, pid
     # a refused drag: pull H1's z arrow far up, beyond the arm's reach. The session keeps the last place it
     # accepted; the handle in the page must end there, not where the mouse let go
-    app.show_camera("whole cell")
+    app.views.show_camera("whole cell")
     _wait_camera(page, app)
     grip = node_screen_position(page, "/targets/H1/gizmo", (0.0, 0.0, 0.7 * app.nodes._gizmo_scale()))
     drag(page, grip, (grip[0], 5.0), steps=25, step_ms=25)
@@ -174,11 +174,11 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
     refused_z = float(app.last_message.split("point 0 at (")[1].split(")")[0].split(",")[2])
     # the drag's end reaches the server and every drag event is handled (latest wins: no backlog, even on a
     # loaded machine); then the server's handle is where the session kept the point
-    wait_for(lambda: app.drags.ends >= 1, 30.0, message="the drag's end handled")
-    assert app.wait_drags(30.0)
+    wait_for(lambda: app.evaluate.drags.ends >= 1, 30.0, message="the drag's end handled")
+    assert app.evaluate.wait_drags(30.0)
     kept = np.array(app.session.last.targets.positions[0])
     assert kept[2] < refused_z - 10.0
-    np.testing.assert_allclose(app.gizmo("targets", "H1").position, kept)
+    np.testing.assert_allclose(app.evaluate.gizmo("targets", "H1").position, kept)
 
     def page_position():
         return np.array(
@@ -196,19 +196,19 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
 def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_app, page_for):
     app = viser_app(lambda: serve())
     page, _ = page_for(app.url)
-    app.set_layer("slice", True)
-    app.show_camera("close-up")
+    app.evaluate.set_layer("slice", True)
+    app.views.show_camera("close-up")
     _wait_camera(page, app)
-    others = [name for name in app.layers if name != "slice" and app.layers[name]]
+    others = [name for name in app.state.layers if name != "slice" and app.state.layers[name]]
 
     def slice_alone_shot():
         """The view with every layer but the slice hidden: what changes is the slice."""
         for name in others:
-            app.set_layer(name, False)
+            app.evaluate.set_layer(name, False)
         page.wait_for_timeout(600)
         png = page.screenshot(animations="disabled")
         for name in others:
-            app.set_layer(name, True)
+            app.evaluate.set_layer(name, True)
         page.wait_for_timeout(600)
         return decode_png(png).astype(int)
 
@@ -216,17 +216,17 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
     # a real click on fiducial F5's sphere selects it: its gizmo appears, H1's goes
     xy = node_screen_position(page, "/fiducials/F5/gizmo/sphere")
     page.mouse.click(*xy)
-    wait_for(lambda: app.selected == ("fiducials", "F5"), 5.0, message="F5 selected by a click")
+    wait_for(lambda: app.state.selected == ("fiducials", "F5"), 5.0, message="F5 selected by a click")
     wait_for(lambda: page.evaluate(_JS_GIZMO_VISIBLE, "/fiducials/F5/gizmo"), 5.0, message="F5's gizmo shown")
     assert page.evaluate(_JS_GIZMO_VISIBLE, "/targets/H1/gizmo") == 0
     page.wait_for_timeout(300)
     image0 = np.array(app.slice_node.handle.image)
-    f0 = np.array(app.gizmo("fiducials", "F5").position)
+    f0 = np.array(app.evaluate.gizmo("fiducials", "F5").position)
     scale = app.nodes._gizmo_scale()
     a = node_screen_position(page, "/fiducials/F5/gizmo", (0.7 * scale, 0.0, 0.0))
     b = node_screen_position(page, "/fiducials/F5/gizmo", (2.5 * scale, 0.0, 0.0))
     drag(page, a, b, steps=20)
-    wait_for(lambda: not np.allclose(app.gizmo("fiducials", "F5").position, f0), 5.0, message="F5 moved")
+    wait_for(lambda: not np.allclose(app.evaluate.gizmo("fiducials", "F5").position, f0), 5.0, message="F5 moved")
     page.wait_for_timeout(800)  # the drag's end: the slice is recomputed and sent
     assert not np.array_equal(np.array(app.slice_node.handle.image), image0)
     after = slice_alone_shot()

@@ -64,7 +64,7 @@ def test_bad_input_is_refused():
 
 
 def test_correct_diagnose_and_the_app_show_the_same_statistics(capsys):
-    from rrbc_viz.app import serve
+    from rrbc_viz.serve import serve
 
     assert main(["correct", str(EXAMPLE_CSV), "--json"]) == 0
     js = json.loads(capsys.readouterr().out)

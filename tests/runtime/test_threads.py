@@ -80,7 +80,7 @@ def test_app_server_callbacks_run_with_the_documented_pool_size():
         import threading
         from rrbc_core.session import evaluation
         from rrbc_viz import tables
-        from rrbc_viz.app import serve
+        from rrbc_viz.serve import serve
         recording(evaluation, "correct_points")
         recording(tables, "target_table")  # the app's own code, outside the library: the process policy
         app = serve(port=0)

@@ -2,7 +2,7 @@
 
 import pytest
 
-from rrbc_viz.app import serve
+from rrbc_viz.serve import serve
 from tests.paths import EXAMPLE_CSV
 
 

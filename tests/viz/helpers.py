@@ -14,7 +14,7 @@ def _gizmo_drag(app: RunningApp, kind: str, pid: str, positions) -> None:
     (private API of viser 1.1.1, kept in this one helper)."""
     from viser import _messages as msg
 
-    name = app.gizmo_name(kind, pid)
+    name = app.evaluate.gizmo_name(kind, pid)
     scene = app.server.scene
     loop = app.server.get_event_loop()
 
@@ -30,7 +30,7 @@ def _gizmo_drag(app: RunningApp, kind: str, pid: str, positions) -> None:
         await scene._handle_transform_controls_drag_end(0, msg.TransformControlsDragEndMessage(name=name))
 
     asyncio.run_coroutine_threadsafe(run(), loop).result(timeout=20)
-    assert app.wait_drags(20.0), "the drag events were not handled in time"
+    assert app.evaluate.wait_drags(20.0), "the drag events were not handled in time"
 
 
 def _press(button) -> None:

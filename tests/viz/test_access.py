@@ -8,7 +8,7 @@ import pytest
 import websockets
 
 from rrbc_viz.access import TOKEN_PATH_PREFIX, allowed, page_url
-from rrbc_viz.app import serve
+from rrbc_viz.serve import serve
 
 PROTOCOL = "viser-v1.1.1"
 
@@ -116,12 +116,12 @@ def test_the_file_tab_offers_only_the_offered_folders_and_opens_by_label(tmp_pat
         assert "scenes/demo_workcell.toml" in offered and "data/mine.csv" in offered
         assert not any("secret" in o or "link" in o or "notes" in o for o in offered)
         assert "scenes/meshes/demo_workcell.glb" in a.controls.file.mesh_path.options
-        assert a.load_offered("data/mine.csv") is True and a.session.kind == "measurements"
-        assert a.load_offered(str(outside)) is False and "not one of the files offered" in a.last_message
-        assert a.load_offered("data/../secret.csv") is False
+        assert a.files.load_offered("data/mine.csv") is True and a.session.kind == "measurements"
+        assert a.files.load_offered(str(outside)) is False and "not one of the files offered" in a.last_message
+        assert a.files.load_offered("data/../secret.csv") is False
         # a file added later shows after a rescan
         (data / "later.csv").write_bytes(EXAMPLE_CSV.read_bytes())
-        a.rescan_files()
+        a.files.rescan_files()
         assert "data/later.csv" in a.controls.file.path.options
     finally:
         a.stop()

@@ -20,7 +20,7 @@ def test_a_slider_value_a_client_sends_is_clamped_on_the_server(app, value, expe
     _send(app.controls.explore.noise, value)
     assert app.session.settings.noise_scale == expected
     # the session still works for everyone afterwards
-    assert app.handle_drag("targets", "H1", [401.0, -150.0, 15.0], "end") is not None
+    assert app.evaluate.handle_drag("targets", "H1", [401.0, -150.0, 15.0], "end") is not None
 
 
 def test_trials_a_client_sends_are_bounded(app):
@@ -49,4 +49,4 @@ def test_any_failure_of_an_update_rolls_the_session_back(app, monkeypatch):
         session.update(noise_scale=2.0)
     assert session.settings == before
     monkeypatch.undo()
-    assert app.change_settings(noise_scale=2.0) is not None and session.settings.noise_scale == 2.0
+    assert app.evaluate.change_settings(noise_scale=2.0) is not None and session.settings.noise_scale == 2.0

@@ -22,7 +22,8 @@ from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import parse_measurements
 from rrbc_core.session import views
 from rrbc_viz import colors
-from rrbc_viz.app import RunningApp, serve
+from rrbc_viz.app import RunningApp
+from rrbc_viz.serve import serve
 from tests.paths import EXAMPLE_CSV
 from tests.viz.helpers import _gizmo_drag, _press
 
@@ -53,7 +54,7 @@ def _target_arrows(app: RunningApp) -> np.ndarray:
 
 
 def _assert_arrows_match(app: RunningApp, ev) -> None:
-    mag = app.display.magnification
+    mag = app.state.display.magnification
     pts = _target_arrows(app)
     np.testing.assert_allclose(pts[:, 0], ev.targets.positions, atol=1e-3)
     np.testing.assert_allclose(pts[:, 1], ev.targets.positions + mag * ev.targets.correction_robot, atol=1e-2)
@@ -72,8 +73,8 @@ def test_serve_builds_the_scene_and_panel(app):
     ev = app.session.evaluate()
     for pid in ev.targets.ids:
         name = f"/targets/{pid}/gizmo"
-        assert app.gizmo_name("targets", pid) == name
-        assert app.server.scene.get_handle_by_name(name) is app.gizmo("targets", pid)
+        assert app.evaluate.gizmo_name("targets", pid) == name
+        assert app.server.scene.get_handle_by_name(name) is app.evaluate.gizmo("targets", pid)
     for pid in ev.fiducial_ids:
         assert app.server.scene.get_handle_by_name(f"/fiducials/{pid}/gizmo") is not None
     for name in (
@@ -91,7 +92,7 @@ def test_serve_builds_the_scene_and_panel(app):
     assert set(app.nodes.regions) == set(ev.targets.ids)
     _assert_arrows_match(app, ev)
     np.testing.assert_allclose(np.asarray(app.nodes.nodes["/hull/edges"].points), ev.hull_edges, atol=1e-3)
-    mag = app.display.magnification
+    mag = app.state.display.magnification
     assert (
         f"×{mag:g}" in app.controls.explore.scale.content
         and f"drawn as {mag:g} mm" in app.controls.explore.scale.content
@@ -115,11 +116,11 @@ def test_drag_target_recomputes_everything(app):
     label = app.nodes.labels["/targets/H1/gizmo/label"]
     old_label = label.text
     new = np.array([405.0, -140.0, 15.0])
-    assert app.handle_drag("targets", "H1", new, "start") is not None
-    ev = app.handle_drag("targets", "H1", new, "update")
+    assert app.evaluate.handle_drag("targets", "H1", new, "start") is not None
+    ev = app.evaluate.handle_drag("targets", "H1", new, "update")
     assert ev is app.session.last
     np.testing.assert_allclose(ev.targets.positions[0], new)
-    np.testing.assert_allclose(app.gizmo("targets", "H1").position, new)
+    np.testing.assert_allclose(app.evaluate.gizmo("targets", "H1").position, new)
     fresh = app.session.evaluate()
     np.testing.assert_allclose(ev.targets.correction, fresh.targets.correction)
     assert not np.allclose(ev.targets.correction[0], before.targets.correction[0])
@@ -150,7 +151,7 @@ def test_drag_target_recomputes_everything(app):
     dx = float(re.search(r'data-kind="rrbc" data-dx-mm="([^"]+)"', svg).group(1))
     assert dx == pytest.approx(t.robot_rrbc[0, 0] - t.truth[0, 0], rel=1e-5, abs=1e-9)
     np.testing.assert_allclose(app.nodes.regions["H1"].position, new)
-    app.handle_drag("targets", "H1", new, "end")
+    app.evaluate.handle_drag("targets", "H1", new, "end")
 
 
 def test_gizmo_messages_drive_the_drag(app):
@@ -160,30 +161,30 @@ def test_gizmo_messages_drive_the_drag(app):
     i = ev.targets.ids.index("H2")
     np.testing.assert_allclose(ev.targets.positions[i], path[-1])
     _assert_arrows_match(app, app.session.evaluate())
-    assert app.mc.wait_idle(60)  # drag end queued a Monte Carlo run
+    assert app.montecarlo.runner.wait_idle(60)  # drag end queued a Monte Carlo run
 
 
 def test_drag_fiducial_moves_its_correction_and_hull(app):
     ev0 = app.session.last
-    ev = app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "update")
+    ev = app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "update")
     assert ev is not None
     i = ev.fiducial_ids.index("F12")
     assert not np.allclose(ev.corrections[i], ev0.corrections[i])
     np.testing.assert_allclose(np.asarray(app.nodes.nodes["/hull/edges"].points), ev.hull_edges, atol=1e-3)
     _assert_arrows_match(app, app.session.evaluate())
-    app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
+    app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
 
 
 def test_target_outside_the_hull_is_flagged(app):
     sphere = app.nodes.spheres[("targets", "H1")]
     assert tuple(sphere.color) == colors.TARGET
-    ev = app.handle_drag("targets", "H1", [150.0, -150.0, 300.0], "end")
+    ev = app.evaluate.handle_drag("targets", "H1", [150.0, -150.0, 300.0], "end")
     assert "H1" in ev.summary["extrapolated"] and bool(ev.targets.extrapolated[0])
     assert tuple(sphere.color) == colors.TARGET_EXTRAPOLATED
     assert "extrapolated" in app.nodes.labels["/targets/H1/gizmo/label"].text
     assert "| H1 |" in app.controls.explore.table.content and "⚠ extrapolated |" in app.controls.explore.table.content
     assert "Extrapolated" in app.controls.explore.summary.content
-    ev = app.handle_drag("targets", "H1", [400.0, -150.0, 15.0], "end")
+    ev = app.evaluate.handle_drag("targets", "H1", [400.0, -150.0, 15.0], "end")
     assert not ev.targets.extrapolated[0] and tuple(sphere.color) == colors.TARGET
 
 
@@ -192,7 +193,7 @@ def test_selecting_a_fiducial_then_excluding_and_including_it(app):
     sphere = app.nodes.spheres[("fiducials", "F3")]
     n = len(app.session.last.fiducial_ids)
     _click(sphere)  # a click selects: F3 alone carries the drag gizmo, its card shows its numbers
-    assert app.selected == ("fiducials", "F3") and app.controls.selection.choice.value == "fiducial F3"
+    assert app.state.selected == ("fiducials", "F3") and app.controls.selection.choice.value == "fiducial F3"
     assert [key for key, tc in app.nodes.gizmos.items() if not tc.disable_axes] == [("fiducials", "F3")]
     assert "**Fiducial F3**" in app.controls.selection.info.content and app.controls.selection.exclude.visible
     assert app.nodes.labels["/fiducials/F3/gizmo/label"].visible  # its label, with the labels layer off
@@ -209,13 +210,13 @@ def test_selecting_a_fiducial_then_excluding_and_including_it(app):
     _press(app.controls.selection.exclude)
     assert app.session.last.summary["fiducials_used"] == n and tuple(sphere.color) == colors.FIDUCIAL
     app.controls.selection.choice.value = "target H2"  # picking from the list selects too
-    assert app.selected == ("targets", "H2") and not app.gizmo("targets", "H2").disable_axes
-    assert app.gizmo("fiducials", "F3").disable_axes and app.nodes.landing.target == "H2"
+    assert app.state.selected == ("targets", "H2") and not app.evaluate.gizmo("targets", "H2").disable_axes
+    assert app.evaluate.gizmo("fiducials", "F3").disable_axes and app.nodes.landing.target == "H2"
     assert "**Target H2**" in app.controls.selection.info.content and app.controls.selection.bullseye.html.visible
     app.controls.selection.choice.value = "none"
-    assert app.selected is None and all(tc.disable_axes for tc in app.nodes.gizmos.values())
+    assert app.state.selected is None and all(tc.disable_axes for tc in app.nodes.gizmos.values())
     with pytest.raises(InputError, match="no target 'H99'"):
-        app.select("targets", "H99")
+        app.views.select("targets", "H99")
 
 
 def test_method_controls_change_the_numbers(app):
@@ -252,7 +253,7 @@ def test_method_controls_change_the_numbers(app):
 
 def test_refused_setting_keeps_the_session_and_says_why(app):
     for pid in app.session.last.fiducial_ids:
-        app.toggle_fiducial(pid)
+        app.evaluate.toggle_fiducial(pid)
     # the last one cannot be excluded with idw: the core refuses, the app says so and stays consistent
     ev = app.session.last
     assert ev.summary["fiducials_used"] == 1
@@ -266,14 +267,14 @@ def test_layers_lesson_and_heat_map(app):
     assert app.nodes.groups["hull"].visible is False
     c.view.layers["heatmap"].value = True
     node = app.nodes.nodes["/heatmap/points"]
-    hm = app.heat_map
+    hm = app.present.heat_map
     assert node.visible and len(node.points) == len(hm.positions)
     assert f"{float(np.nanmin(np.r_[hm.error_rigid, hm.error_rrbc])):.4f} mm" in c.view.legend.content
     c.view.heat_value.value = "rigid error"
     assert "rigid only" in c.view.legend.content
     # lesson: Next starts at step 1 with its layers; numbers are live
     c.learn.lesson_next.value = True
-    assert app.lesson_index == 0 and "Step 1 of 9" in c.learn.lesson.content
+    assert app.state.lesson_index == 0 and "Step 1 of 9" in c.learn.lesson.content
     assert c.view.layers["registration"].value and not c.view.layers["targets"].value
     assert app.nodes.groups["targets"].visible is False
     for _ in range(5):
@@ -292,50 +293,50 @@ def test_layers_lesson_and_heat_map(app):
         "Step 9 of 9" in c.learn.lesson.content and f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
     )
     assert c.view.layers["landing"].value
-    app.handle_drag("targets", "H3", [410.0, 40.0, 15.0], "end")
+    app.evaluate.handle_drag("targets", "H3", [410.0, 40.0, 15.0], "end")
     sm = app.session.last.summary
     assert f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
     c.learn.lesson_end.value = True
-    assert app.lesson_index is None and c.view.layers["heatmap"].value and not c.view.layers["hull"].value
+    assert app.state.lesson_index is None and c.view.layers["heatmap"].value and not c.view.layers["hull"].value
     assert app.nodes.nodes["/corrections/targets"].visible
 
 
 def test_display_controls_and_heat_map_follow_drags(app):
     c = app.controls
     # the first target starts selected: it alone has a drag handle
-    assert app.selected == ("targets", "H1")
+    assert app.state.selected == ("targets", "H1")
     assert [key for key, tc in app.nodes.gizmos.items() if not tc.disable_axes] == [("targets", "H1")]
     assert all(tc.disable_sliders for key, tc in app.nodes.gizmos.items() if key != ("targets", "H1"))
     c.view.marker.value = 4.0
     assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(4.0)
-    assert app.gizmo("targets", "H1").scale == pytest.approx(app.nodes._gizmo_scale())
+    assert app.evaluate.gizmo("targets", "H1").scale == pytest.approx(app.nodes._gizmo_scale())
     c.view.layers["heatmap"].value = True
-    owner = np.array(app.heat_map.target) == "H1"
+    owner = np.array(app.present.heat_map.target) == "H1"
     centre0 = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner].mean(0)
     c.view.region_zoom.value = 10.0
     assert app.nodes.regions["H1"].scale == pytest.approx(10.0)  # H1's region is a box: uniform zoom
     assert app.nodes.regions["H3"].scale == pytest.approx((6.0, 6.0, 6.0))  # sphere r 0.6 mm, zoomed
     pts = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner]
     np.testing.assert_allclose(pts.mean(0), centre0, atol=2.0)
-    app.handle_drag("targets", "H1", [420.0, -150.0, 15.0], "end")  # the heat map follows at drag end
+    app.evaluate.handle_drag("targets", "H1", [420.0, -150.0, 15.0], "end")  # the heat map follows at drag end
     pts = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner]
     assert abs(pts.mean(0)[0] - 420.0) < 3.0
     hm = views.heat_map(app.session)
-    np.testing.assert_allclose(app.heat_map.error_rrbc, hm.error_rrbc)
+    np.testing.assert_allclose(app.present.heat_map.error_rrbc, hm.error_rrbc)
     with pytest.raises(InputError):
-        app.set_display(handles="both")  # no such option any more: selection decides
+        app.evaluate.set_display(handles="both")  # no such option any more: selection decides
 
 
 def test_monte_carlo_plots_follow_the_setup(app):
-    assert app.mc.wait_idle(60)
-    first = app.mc_plots
+    assert app.montecarlo.runner.wait_idle(60)
+    first = app.montecarlo.mc_plots
     assert first is not None
     centres, rigid, rrbc = first.histogram()
     np.testing.assert_allclose(app.controls.montecarlo.mc_hist.data[1], rigid)
     app.controls.explore.interpolation.value = "tps"
-    assert app.mc.wait_idle(60)
-    assert app.mc_plots is not first
-    d, a, b, ha, hb = app.mc_plots.by_distance()
+    assert app.montecarlo.runner.wait_idle(60)
+    assert app.montecarlo.mc_plots is not first
+    d, a, b, ha, hb = app.montecarlo.mc_plots.by_distance()
     data = app.controls.montecarlo.mc_dist.data
     np.testing.assert_allclose(data[0], d)
     np.testing.assert_allclose(data[2], b)
@@ -345,18 +346,21 @@ def test_monte_carlo_plots_follow_the_setup(app):
 
 
 def test_run_again_draws_new_noise_and_a_setting_change_does_not(app):
-    assert app.mc.wait_idle(60)
-    seeded = app.mc_plots
-    app.request_monte_carlo()  # the same setup, seeded by the session's seed: the same numbers
-    assert app.mc.wait_idle(60)
-    np.testing.assert_array_equal(app.mc_plots.rigid, seeded.rigid)
+    assert app.montecarlo.runner.wait_idle(60)
+    seeded = app.montecarlo.mc_plots
+    app.montecarlo.request()  # the same setup, seeded by the session's seed: the same numbers
+    assert app.montecarlo.runner.wait_idle(60)
+    np.testing.assert_array_equal(app.montecarlo.mc_plots.rigid, seeded.rigid)
     _press(app.controls.montecarlo.mc_run)  # Run again
-    assert app.mc.wait_idle(60)
-    again = app.mc_plots
+    assert app.montecarlo.runner.wait_idle(60)
+    again = app.montecarlo.mc_plots
     assert not np.array_equal(again.rigid, seeded.rigid) and "noise draw 1" in app.controls.montecarlo.mc_info.content
     _press(app.controls.montecarlo.mc_run)
-    assert app.mc.wait_idle(60)
-    assert not np.array_equal(app.mc_plots.rigid, again.rigid) and "noise draw 2" in app.controls.text["mc_info"]
+    assert app.montecarlo.runner.wait_idle(60)
+    assert (
+        not np.array_equal(app.montecarlo.mc_plots.rigid, again.rigid)
+        and "noise draw 2" in app.controls.montecarlo.mc_info.content
+    )
 
 
 def test_stop_ends_a_running_monte_carlo_at_its_next_chunk_and_keeps_the_last_plots(app, monkeypatch):
@@ -366,19 +370,19 @@ def test_stop_ends_a_running_monte_carlo_at_its_next_chunk_and_keeps_the_last_pl
 
     from rrbc_core.session import views
 
-    assert app.mc.wait_idle(60)
-    before = app.mc_plots
+    assert app.montecarlo.runner.wait_idle(60)
+    before = app.montecarlo.mc_plots
     monkeypatch.setattr(views, "MC_CHUNK_TRIALS", 5)
     started = threading.Event()
     real = app.controls.montecarlo.mc_stop
-    app.mc._on_start = lambda: (app._mc_started(), started.set())
+    app.montecarlo.runner._on_start = lambda: (app.montecarlo._mc_started(), started.set())
     app.controls.montecarlo.mc_trials.value = 1000  # queues a run of the new setup
     assert started.wait(30)
     assert real.disabled is False  # Stop is offered while a run is under way
     _press(real)
-    assert app.mc.wait_idle(30)
-    assert app.mc_plots is before and real.disabled is True
-    assert "stopped" in app.controls.text["mc_info"]
+    assert app.montecarlo.runner.wait_idle(30)
+    assert app.montecarlo.mc_plots is before and real.disabled is True
+    assert "stopped" in app.controls.montecarlo.mc_info.content
 
 
 def test_measured_data_hide_the_controls_that_do_not_apply(app, measured):
@@ -393,13 +397,13 @@ def test_measured_data_hide_the_controls_that_do_not_apply(app, measured):
 
 
 def test_exports_come_from_the_session(app):
-    name, content = app.export("csv")
+    name, content = app.files.export("csv")
     assert name.endswith(".csv")
     mset = parse_measurements(content.decode("utf-8"), name)
     ref = views.export_measurements(app.session)
     assert mset.ids == ref.ids and mset.roles == ref.roles
     np.testing.assert_allclose(mset.sensor, ref.sensor)
-    name, content = app.export("json")
+    name, content = app.files.export("json")
     assert json.loads(content) == json.loads(json.dumps(views.export_json(app.session)))
     app.controls.file.download_csv.value = True  # no tab connected: nothing to send, nothing breaks
     app.controls.file.download_json.value = True
@@ -410,24 +414,24 @@ def test_bad_files_leave_the_server_and_session(app, tmp_path):
     session = app.session
     bad_toml = tmp_path / "bad.toml"
     bad_toml.write_text('[scene]\nname = "x"\nunits = "inch"\nmesh = "m.glb"\n', encoding="utf-8")
-    assert app.load(bad_toml) is False
+    assert app.files.load(bad_toml) is False
     assert app.session is session and "bad.toml" in app.last_message
     assert "bad.toml" in app.controls.status.content
     bad_csv = tmp_path / "bad.csv"
     bad_csv.write_text("id,role,sensor_x\nA,fiducial,1\n", encoding="utf-8")
-    assert app.load(bad_csv) is False
+    assert app.files.load(bad_csv) is False
     assert app.session is session and "bad.csv" in app.last_message
     # the File tab opens only what it offers: a label it did not list is refused, nothing is read
-    assert app.load_offered(str(bad_csv)) is False and "not one of the files offered" in app.last_message
-    assert app.load_offered("/etc/passwd") is False and app.session is session
-    assert app.load_upload("junk.csv", b"\xff\xfe not text") is False
-    assert app.load_upload("broken.toml", b"[scene\n") is False
+    assert app.files.load_offered(str(bad_csv)) is False and "not one of the files offered" in app.last_message
+    assert app.files.load_offered("/etc/passwd") is False and app.session is session
+    assert app.files.load_upload("junk.csv", b"\xff\xfe not text") is False
+    assert app.files.load_upload("broken.toml", b"[scene\n") is False
     assert app.session is session and "broken.toml" in app.last_message
     with urllib.request.urlopen(app.url, timeout=10) as r:
         assert r.status == 200
-    assert app.handle_drag("targets", "H1", [401.0, -150.0, 15.0], "end") is not None
+    assert app.evaluate.handle_drag("targets", "H1", [401.0, -150.0, 15.0], "end") is not None
     # a good measurement upload replaces the session
-    assert app.load_upload("example.csv", EXAMPLE_CSV.read_bytes()) is True
+    assert app.files.load_upload("example.csv", EXAMPLE_CSV.read_bytes()) is True
     assert app.session.kind == "measurements"
 
 
@@ -441,7 +445,7 @@ def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
     ev0 = app.session.last
     i = ev0.targets.ids.index("T1")
     p0 = ev0.targets.positions[i].copy()
-    ev = app.handle_drag("targets", "T1", p0 + [60.0, 40.0, 0.0], "end")
+    ev = app.evaluate.handle_drag("targets", "T1", p0 + [60.0, 40.0, 0.0], "end")
     assert ev is not None
     assert not np.allclose(ev.targets.correction[i], ev0.targets.correction[i])
     assert not np.allclose(ev.targets.correction_std[i], ev0.targets.correction_std[i])
@@ -453,13 +457,13 @@ def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
     j = ev.fiducial_ids.index("F22")
     f0 = ev.fiducial_positions[j].copy()
     _gizmo_drag(app, "fiducials", "F22", [f0 + [5.0, 0.0, 0.0], f0 + [9.0, 0.0, 0.0]])
-    np.testing.assert_allclose(app.gizmo("fiducials", "F22").position, f0)
+    np.testing.assert_allclose(app.evaluate.gizmo("fiducials", "F22").position, f0)
     np.testing.assert_allclose(app.session.last.fiducial_positions[j], f0)
     assert "cannot be moved" in app.last_message
-    assert app.handle_drag("fiducials", "F22", f0 + [1.0, 0.0, 0.0], "end") is None
+    assert app.evaluate.handle_drag("fiducials", "F22", f0 + [1.0, 0.0, 0.0], "end") is None
     # heat map in measurement mode: correction size / gp std
     c.view.layers["heatmap"].value = True
-    assert app.heat_map is not None and app.nodes.nodes["/heatmap/points"].visible
+    assert app.present.heat_map is not None and app.nodes.nodes["/heatmap/points"].visible
     c.view.heat_value.value = "correction std (gp)"
     assert "std" in c.view.legend.content
 
@@ -506,7 +510,7 @@ def test_a_quiet_server_prints_nothing_on_stdout_from_start_to_stop(capfd):
     """`serve(quiet=True)` (what the benchmarks and tests use) hides viser's banner and its "Server stopped" line,
     so a caller's stdout (a --json stream) carries only what the caller prints."""
     a = serve(port=0)
-    a.handle_drag("targets", "H1", a.session.layout["targets"].positions[0] + [0.5, 0.0, 0.0], "end")
+    a.evaluate.handle_drag("targets", "H1", a.session.layout["targets"].positions[0] + [0.5, 0.0, 0.0], "end")
     a.stop()
     assert capfd.readouterr().out == ""
 
@@ -515,7 +519,7 @@ def test_the_results_table_keeps_its_columns_apart_with_gp(app):
     """With gp a right-aligned std column stands before the hull column: that one is centred, so the two never
     run together (they did, left-aligned: '0.081inside')."""
     app.controls.explore.interpolation.value = "gp"
-    lines = app.controls.text["table"].splitlines()
+    lines = app.controls.explore.table.content.splitlines()
     assert lines[0].split("|")[-2].strip() == "hull" and lines[1].split("|")[-2] == ":---:"
     cells = [len(re.findall(r"(?<!\\)\|", line)) for line in lines[:3]]  # unescaped separators
     assert cells[0] == cells[1] == cells[2]

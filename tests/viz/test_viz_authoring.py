@@ -28,7 +28,7 @@ def _scene_click(app, origin, direction):
         screen_pos=(0.5, 0.5),
         modifier=None,
     )
-    app._on_scene_click(event)
+    app.authoring.on_scene_click(event)
 
 
 def test_clicks_add_points_where_the_ray_meets_the_mesh_and_edits_undo(app):
@@ -53,9 +53,9 @@ def test_clicks_add_points_where_the_ray_meets_the_mesh_and_edits_undo(app):
     _scene_click(app, [5000, 0, 800], [0, 0, -1])  # misses the mesh
     assert "did not meet the cell" in app.last_message
     assert not panel.undo.disabled and panel.redo.disabled
-    app.select("targets", pid)
+    app.views.select("targets", pid)
     _press(panel.delete)
-    assert pid not in app.session.last.targets.ids and app.selected is None
+    assert pid not in app.session.last.targets.ids and app.state.selected is None
     _press(panel.undo)
     assert pid in app.session.last.targets.ids and not panel.redo.disabled
     _press(panel.redo)
@@ -66,10 +66,10 @@ def test_clicks_add_points_where_the_ray_meets_the_mesh_and_edits_undo(app):
 
 
 def test_downloads_hold_the_session_and_the_scene_reloads_to_the_same_numbers(app, tmp_path):
-    app.set_click_mode("fiducials")
-    app.add_at_ray([520, -60, 800], [0, 0, -1])
-    app.handle_drag("targets", "H3", [430.0, 40.0, 15.0], "end")
-    ((name, content),) = app.export_authoring("scene")
+    app.authoring.set_click_mode("fiducials")
+    app.authoring.add_at_ray([520, -60, 800], [0, 0, -1])
+    app.evaluate.handle_drag("targets", "H3", [430.0, 40.0, 15.0], "end")
+    ((name, content),) = app.authoring.export_authoring("scene")
     assert name.endswith(".toml")
     path = tmp_path / name
     path.write_bytes(content)
@@ -78,9 +78,9 @@ def test_downloads_hold_the_session_and_the_scene_reloads_to_the_same_numbers(ap
     ev = app.session.last
     assert again.fiducial_ids == ev.fiducial_ids
     np.testing.assert_allclose(again.targets.error_rrbc, ev.targets.error_rrbc, rtol=1e-9)
-    ((plan_name, plan),) = app.export_authoring("plan")
+    ((plan_name, plan),) = app.authoring.export_authoring("plan")
     assert plan_name.endswith(".csv") and b"planned_x" in plan
-    docs = app.export_authoring("slicer")
+    docs = app.authoring.export_authoring("slicer")
     assert [n.rsplit("_", 1)[1] for n, _ in docs] == ["sensor.mrk.json", "robot.mrk.json"]
     assert json.loads(docs[0][1])["markups"][0]["controlPoints"][0]["label"]
 
@@ -92,20 +92,20 @@ def test_an_uploaded_mesh_becomes_the_cells(app, tmp_path):
     box.apply_translation((450, 0, 40))  # a slab over the plate: clicks now land on its top (z = 50)
     stl = tmp_path / "slab.stl"
     box.export(stl)
-    assert app.upload_mesh("slab.stl", stl.read_bytes())
-    app.set_click_mode("fiducials")
-    app.add_at_ray([450, 0, 800], [0, 0, -1])
+    assert app.authoring.upload_mesh("slab.stl", stl.read_bytes())
+    app.authoring.set_click_mode("fiducials")
+    app.authoring.add_at_ray([450, 0, 800], [0, 0, -1])
     np.testing.assert_allclose(app.session.last.fiducial_positions[-1], [450, 0, 50], atol=1e-3)
-    assert not app.upload_mesh("notes.txt", b"hello")
-    assert not app.upload_mesh("bad.stl", b"\x00" * 10)
-    ((_, content),) = app.export_authoring("scene")
+    assert not app.authoring.upload_mesh("notes.txt", b"hello")
+    assert not app.authoring.upload_mesh("bad.stl", b"\x00" * 10)
+    ((_, content),) = app.authoring.export_authoring("scene")
     assert b'mesh = "cell.stl"' in content  # saved beside the scene by the user
     with pytest.raises(InputError, match="unknown export"):
-        app.export_authoring("zip")
+        app.authoring.export_authoring("zip")
 
 
 def test_the_plan_tab_suggests_where_to_measure_for_measured_data():
-    from rrbc_viz.app import serve
+    from rrbc_viz.serve import serve
     from tests.paths import EXAMPLE_CSV
 
     app = serve(str(EXAMPLE_CSV))
@@ -115,7 +115,7 @@ def test_the_plan_tab_suggests_where_to_measure_for_measured_data():
         assert f"**{int(ev.coverage.inside.sum())} of {len(ev.targets.ids)} targets** inside" in info
         assert "regions**" in info and "fully inside" in info
         assert app.planning.suggest_button.visible and not app.planning.suggest_button.disabled
-        plan = app.suggest_fiducials(3)
+        plan = app.plan.suggest_fiducials(3)
         assert plan is not None and len(app.planning.ghosts) == 3
         np.testing.assert_allclose(app.planning.ghosts[0].position, plan.suggested[0])
         assert "Measure 3 more fiducials here" in app.planning.suggestion_md.content

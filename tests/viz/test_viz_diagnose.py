@@ -15,8 +15,8 @@ from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.session import data_set
 from rrbc_core.simulation.datasets import simulated_data
-from rrbc_viz.app import serve
 from rrbc_viz.diagnosis_panel import unescape
+from rrbc_viz.serve import serve
 from tests.paths import DEMO, EXAMPLE_CSV
 from tests.support.joint_data import joint_file
 from tests.viz.helpers import _press
@@ -43,10 +43,10 @@ def _tab_lines(app) -> list[str]:
 
 def _assert_tab_is_cli(app, capsys, path, *options) -> None:
     _press(app.controls.diagnose.diagnose)
-    assert app.diagnosis is not None, app.controls.diagnose.diagnosis.content
+    assert app.diagnose.diagnosis is not None, app.controls.diagnose.diagnosis.content
     text = _cli(capsys, path, *options)
     assert _tab_lines(app) == text.rstrip("\n").split("\n")
-    assert app.diagnosis.to_json() == json.loads(_cli(capsys, path, *options, "--json"))
+    assert app.diagnose.diagnosis.to_json() == json.loads(_cli(capsys, path, *options, "--json"))
 
 
 def _repeats_time_checks(path, seed: int = 3):
@@ -95,12 +95,12 @@ def test_the_tab_shows_what_rrbc_diagnose_prints_for_a_file_as_opened(which, tmp
     app = serve(path, port=0)
     try:
         _assert_tab_is_cli(app, capsys, path)
-        assert app.diagnosis_data.measurements is app.session.mset  # the file as opened, every row
+        assert app.diagnose.diagnosis_data.measurements is app.session.mset  # the file as opened, every row
         head = app.controls.diagnose.diagnosis.content.split("\n\n")[0]
         assert "as opened" in head and "Edited" not in head
         if which == "example":
             # the numbers the issue measured on the CLI, now in the tab: noise from the repeats, the field, checks
-            dg = app.diagnosis
+            dg = app.diagnose.diagnosis
             assert dg.noise_source == "repeats" and "smooth_field" in dg.names and dg.basis == "checks"
             assert dg.bias_rms_mm > 5 * max(dg.noise_sigma_mm)
     finally:
@@ -111,13 +111,13 @@ def test_edited_measured_data_are_diagnosed_as_edited_and_the_download_reproduce
     app = serve(EXAMPLE_CSV, port=0)
     try:
         fid = app.session.last.fiducial_ids
-        app.toggle_fiducial(fid[5])  # exclude one fiducial
+        app.evaluate.toggle_fiducial(fid[5])  # exclude one fiducial
         _press(app.controls.diagnose.diagnose)
         head = unescape(app.controls.diagnose.diagnosis.content.split("\n\n")[0])
         assert head.startswith("**Edited data.**") and fid[5] in head
-        rows = app.diagnosis_data.measurements
+        rows = app.diagnose.diagnosis_data.measurements
         assert fid[5] not in rows.ids and len(rows) < len(app.session.mset)
-        name, content = app.export("csv")
+        name, content = app.files.export("csv")
         path = tmp_path / name
         path.write_bytes(content)
         _assert_tab_is_cli(app, capsys, path)
@@ -128,7 +128,7 @@ def test_edited_measured_data_are_diagnosed_as_edited_and_the_download_reproduce
 def test_a_scenes_tab_is_rrbc_diagnose_of_its_download_which_is_what_rrbc_simulate_writes(tmp_path, capsys):
     app = serve(port=0)
     try:
-        name, content = app.export("csv")
+        name, content = app.files.export("csv")
         download = tmp_path / name
         download.write_bytes(content)
         # the scene as loaded: the download's rows are those of `rrbc simulate --out` with the scene's seed
@@ -145,9 +145,9 @@ def test_a_scenes_tab_is_rrbc_diagnose_of_its_download_which_is_what_rrbc_simula
         _assert_tab_is_cli(app, capsys, download, "--robot", "ur5", "--tool", "100")
         assert "rrbc diagnose DATA.csv --tool 100" in app.controls.diagnose.diagnosis.content
         # after edits and new settings the tab diagnoses the data as they are now, and the download follows
-        app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
-        app.change_settings(bias_scale=0.5, seed=11)
-        name, content = app.export("csv")
+        app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
+        app.evaluate.change_settings(bias_scale=0.5, seed=11)
+        name, content = app.files.export("csv")
         download.write_bytes(content)
         _assert_tab_is_cli(app, capsys, download, "--tool", "100")
         assert "seed 11, noise x1, bias x0.5" in unescape(app.controls.diagnose.diagnosis.content)
@@ -159,17 +159,17 @@ def test_the_verdict_goes_stale_when_its_data_change_not_when_the_method_does(ap
     panel = app.controls.diagnose.diagnosis
     _press(app.controls.diagnose.diagnose)
     fresh = panel.content
-    app.set_display(magnification=50.0)
-    app.change_settings(interpolation="tps")
-    assert panel.content == fresh and not app.diagnosis_stale
-    verdict = app.diagnosis
-    ev = app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "update")  # marked at once, not recomputed
-    assert ev is not None and app.diagnosis_stale and app.diagnosis is verdict
+    app.evaluate.set_display(magnification=50.0)
+    app.evaluate.change_settings(interpolation="tps")
+    assert panel.content == fresh and not app.diagnose.diagnosis_stale
+    verdict = app.diagnose.diagnosis
+    ev = app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "update")  # marked at once, not recomputed
+    assert ev is not None and app.diagnose.diagnosis_stale and app.diagnose.diagnosis is verdict
     assert panel.content == "**(data changed since — press again)**\n\n" + fresh
-    app.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
+    app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
     assert panel.content.count("data changed since") == 1
     _press(app.controls.diagnose.diagnose)
-    assert "data changed since" not in panel.content and not app.diagnosis_stale
+    assert "data changed since" not in panel.content and not app.diagnose.diagnosis_stale
 
 
 def test_the_tab_says_why_it_cannot_diagnose_and_a_new_file_clears_it(tmp_path, capsys):
@@ -183,19 +183,19 @@ def test_the_tab_says_why_it_cannot_diagnose_and_a_new_file_clears_it(tmp_path, 
     app = serve(small, port=0)
     try:
         panel = app.controls.diagnose.diagnosis
-        app.toggle_fiducial("P4")
-        app.toggle_fiducial("P5")  # 4 paired points left: too few
+        app.evaluate.toggle_fiducial("P4")
+        app.evaluate.toggle_fiducial("P5")  # 4 paired points left: too few
         _press(app.controls.diagnose.diagnose)
-        assert app.diagnosis is None and panel.content.startswith("⚠ Cannot diagnose:")
+        assert app.diagnose.diagnosis is None and panel.content.startswith("⚠ Cannot diagnose:")
         # the command line refuses the same download with the same words
-        name, content = app.export("csv")
+        name, content = app.files.export("csv")
         path = tmp_path / name
         path.write_bytes(content)
         capsys.readouterr()
         assert main(["diagnose", str(path)]) == 2
         err = capsys.readouterr().err.strip().removeprefix("rrbc: error: ")
         assert "at least 5" in err and err.split(": ", 1)[-1] in " ".join(panel.content.split())
-        app.load(EXAMPLE_CSV)
-        assert panel.content.startswith("Tests the session's data") and app.diagnosis is None
+        app.files.load(EXAMPLE_CSV)
+        assert panel.content.startswith("Tests the session's data") and app.diagnose.diagnosis is None
     finally:
         app.stop()

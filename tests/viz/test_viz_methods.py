@@ -16,7 +16,7 @@ def test_the_apps_widgets_are_the_specs(app):
             assert spec.bounds[0] <= lo and hi <= spec.bounds[1]
     assert {"neighbors", "power", "smoothing", "clusters", "average", "kernel"} <= set(explore.options)
     # a registration option the app could not express before: clustering's clusters
-    app.change_settings(registration="clustering")
+    app.evaluate.change_settings(registration="clustering")
     assert explore.options["clusters"].visible and not explore.options["smoothing"].visible
     explore.options["clusters"].value = 3
     assert app.session.settings.method.registration == registration.Clustering(

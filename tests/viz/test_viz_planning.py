@@ -15,8 +15,8 @@ import pytest
 
 from rrbc_core.session import planning_view
 from rrbc_viz import colors
-from rrbc_viz.app import serve
 from rrbc_viz.planning_panel import PLAN_INTERVAL_S, rmst_line
+from rrbc_viz.serve import serve
 from tests.paths import EXAMPLE_CSV, ROOT
 from tests.viz.helpers import _gizmo_drag, _press
 
@@ -59,35 +59,35 @@ def test_plan_tab_shows_the_sessions_planning(app):
 def test_coverage_colours_follow_a_fiducial_drag_out_of_the_hull(app):
     panel = app.planning
     regions = app.nodes.regions
-    assert tuple(regions["H1"].color) == colors.REGION and not panel.halos["H1"].visible  # toggle off
+    assert tuple(regions["H1"].color) == colors.REGION and not app.nodes.halos["H1"].visible  # toggle off
     panel.colour.value = True  # the user ticks "Colour regions by coverage"
     full = colors.coverage_color(1.0)
     for pid in app.session.last.targets.ids:
-        assert tuple(regions[pid].color) == full and tuple(panel.halos[pid].color) == full
-        assert panel.halos[pid].visible
+        assert tuple(regions[pid].color) == full and tuple(app.nodes.halos[pid].color) == full
+        assert app.nodes.halos[pid].visible
     # drag F1 away (start, updates, end through viser's gizmo handlers): H1's region leaves the hull
-    p0 = np.array(app.gizmo("fiducials", "F1").position, float)
+    p0 = np.array(app.evaluate.gizmo("fiducials", "F1").position, float)
     _gizmo_drag(app, "fiducials", "F1", [p0 + (np.asarray(F1_AWAY) - p0) * f for f in (0.3, 0.7, 1.0)])
     settled(app)
     st = planning_view.planning_state(app.session)
     assert st.coverage_of("H1") < 1.0
     c = colors.coverage_color(st.coverage_of("H1"))
     assert c != full
-    assert tuple(regions["H1"].color) == c and tuple(panel.halos["H1"].color) == c
+    assert tuple(regions["H1"].color) == c and tuple(app.nodes.halos["H1"].color) == c
     assert tuple(regions["H5"].color) == full  # far from F1: still covered
     assert shown_coverage(app)["H1"] != "100 %" and f"⚠ H1 {shown_coverage(app)['H1']}" in panel.info.content
     assert "⚠" in panel.coverage_md.content.split("| H1 |")[1].split("\n")[0]
     # toggle off: the regions get their own colour back, the halos go
     panel.colour.value = False
-    assert tuple(regions["H1"].color) == colors.REGION and not panel.halos["H1"].visible
+    assert tuple(regions["H1"].color) == colors.REGION and not app.nodes.halos["H1"].visible
 
 
 def test_predicted_rmst_text_changes_while_dragging(app):
     before = app.planning.info.content
     rmst0 = shown_rmst(app)
-    app.handle_drag("fiducials", "F1", app.gizmo("fiducials", "F1").position, "start")
+    app.evaluate.handle_drag("fiducials", "F1", app.evaluate.gizmo("fiducials", "F1").position, "start")
     time.sleep(PLAN_INTERVAL_S + 0.05)  # a refresh is due: the next drag update recomputes (no drag end needed)
-    ev = app.handle_drag("fiducials", "F1", F1_AWAY, "update")
+    ev = app.evaluate.handle_drag("fiducials", "F1", F1_AWAY, "update")
     assert ev is not None
     settled(app)
     st = planning_view.planning_state(app.session)
@@ -96,15 +96,15 @@ def test_predicted_rmst_text_changes_while_dragging(app):
     p = st.predicted
     assert shown_rmst(app) == pytest.approx((p.rigid_mm, p.rigid_std_mm, p.rrbc_mm, p.rrbc_std_mm), abs=5e-4)
     # an update right after is throttled (marked stale), the drag's end always refreshes
-    app.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "update")
-    app.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "end")
+    app.evaluate.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "update")
+    app.evaluate.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "end")
     settled(app)
     assert app.planning.state is planning_view.planning_state(app.session) and not app.planning.stale
 
 
 def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(app):
     panel = app.planning
-    app.handle_drag("fiducials", "F1", F1_AWAY, "end")
+    app.evaluate.handle_drag("fiducials", "F1", F1_AWAY, "end")
     settled(app)
     cov0 = planning_view.planning_state(app.session).coverage
     rmst0 = shown_rmst(app)
@@ -131,7 +131,7 @@ def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(ap
     ev = app.session.last
     assert ev.fiducial_ids[n:] == tuple(result.suggested_ids)
     for cid, p in zip(result.suggested_ids, result.suggested):  # real, draggable fiducials now
-        np.testing.assert_allclose(app.gizmo("fiducials", cid).position, p)
+        np.testing.assert_allclose(app.evaluate.gizmo("fiducials", cid).position, p)
         assert app.server.scene.get_handle_by_name(f"/fiducials/{cid}/gizmo/sphere") is not None
     assert not panel.ghosts and app.server.scene.get_handle_by_name("/plan/ghosts/0") is None
     assert panel.accept_button.disabled
@@ -146,10 +146,10 @@ def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(ap
     assert rmst1[2] < rmst0[2], (rmst0, rmst1)  # predicted RMST with RRBC, as the tab says it, went down
     assert f"{rmst0[2]:.3f} → {rmst1[2]:.3f} mm" in app.last_message
     assert f"over {len(ev.fiducial_ids)} of {len(ev.fiducial_ids)} fiducials" in app.controls.explore.summary.content
-    assert app.mc.wait_idle(60)  # accepting queued a Monte Carlo run of the new layout
+    assert app.montecarlo.runner.wait_idle(60)  # accepting queued a Monte Carlo run of the new layout
     # an accepted fiducial drags like any other
     cid = result.suggested_ids[0]
-    assert app.handle_drag("fiducials", cid, np.add(result.suggested[0], [0.0, 0.0, 5.0]), "end") is not None
+    assert app.evaluate.handle_drag("fiducials", cid, np.add(result.suggested[0], [0.0, 0.0, 5.0]), "end") is not None
 
 
 def test_accept_is_undone_by_the_plan_tabs_undo(app):
@@ -181,7 +181,7 @@ def test_a_stale_suggestion_cannot_be_accepted(app):
     panel.k.value = 2
     _press(panel.suggest_button)
     assert not panel.accept_button.disabled
-    app.handle_drag("fiducials", "F2", [300.0, 230.0, 10.0], "end")
+    app.evaluate.handle_drag("fiducials", "F2", [300.0, 230.0, 10.0], "end")
     settled(app)
     assert panel.accept_button.disabled and "press Suggest again" in panel.suggestion_md.content
     _press(panel.suggest_button)
@@ -190,7 +190,7 @@ def test_a_stale_suggestion_cannot_be_accepted(app):
 
 def test_clear_and_refusals_are_visible(app):
     panel = app.planning
-    assert app.accept_suggestions() is None and "Suggest first" in app.last_message  # nothing to accept
+    assert app.plan.accept_suggestions() is None and "Suggest first" in app.last_message  # nothing to accept
     panel.k.value = 2
     _press(panel.suggest_button)
     assert len(panel.ghosts) == 2 and not panel.clear_button.disabled
@@ -200,7 +200,7 @@ def test_clear_and_refusals_are_visible(app):
     assert "Press **Suggest**" in panel.suggestion_md.content
     # a suggestion made before a drag says so
     _press(panel.suggest_button)
-    app.handle_drag("fiducials", "F2", [300.0, 230.0, 10.0], "end")
+    app.evaluate.handle_drag("fiducials", "F2", [300.0, 230.0, 10.0], "end")
     settled(app)
     assert "press Suggest again" in panel.suggestion_md.content
 
@@ -211,11 +211,11 @@ def test_measured_data_get_coverage_planning_and_a_scene_brings_the_full_plan_ba
         panel = app.planning
         assert "no error model" in panel.info.content and "Predicted RMST" not in panel.info.content
         assert panel.accept_button.disabled and panel.colour.disabled and not panel.suggest_button.disabled
-        assert app.suggest_fiducials(2) is not None and len(panel.ghosts) == 2
+        assert app.plan.suggest_fiducials(2) is not None and len(panel.ghosts) == 2
         # loading a scene brings planning with an error model back
-        assert app.load(ROOT / "scenes" / "peg_in_hole_cell.toml")
+        assert app.files.load(ROOT / "scenes" / "peg_in_hole_cell.toml")
         assert not panel.suggest_button.disabled and "Predicted RMST" in panel.info.content
-        assert set(panel.halos) == set(app.session.layout["targets"].ids)
+        assert set(app.nodes.halos) == set(app.session.layout["targets"].ids)
     finally:
         app.stop()
 
@@ -225,10 +225,10 @@ def test_a_slow_scene_plans_in_the_background_during_drags(app):
     rmst0 = shown_rmst(app)
     panel.cost_s = 10.0  # as if each planning update took 10 s (a large scene): drags must not wait for it
     assert panel.slow and not panel.live_due()
-    p0 = np.array(app.gizmo("fiducials", "F1").position, float)
-    app.handle_drag("fiducials", "F1", p0, "start")
+    p0 = np.array(app.evaluate.gizmo("fiducials", "F1").position, float)
+    app.evaluate.handle_drag("fiducials", "F1", p0, "start")
     t0 = time.perf_counter()
-    assert app.handle_drag("fiducials", "F1", F1_AWAY, "update") is not None
+    assert app.evaluate.handle_drag("fiducials", "F1", F1_AWAY, "update") is not None
     assert panel.stale  # the tab still shows the old numbers, marked as following
     assert panel.wait_idle(30)
     st = planning_view.planning_state(app.session)
@@ -236,7 +236,7 @@ def test_a_slow_scene_plans_in_the_background_during_drags(app):
     assert shown_rmst(app) != rmst0 and shown_coverage(app)["H1"] != "100 %"
     assert panel.cost_s < 10.0  # the worker measured the real cost
     panel.cost_s = 10.0
-    app.handle_drag("fiducials", "F1", p0, "end")  # the end too goes to the background
+    app.evaluate.handle_drag("fiducials", "F1", p0, "end")  # the end too goes to the background
     assert panel.wait_idle(30)
     assert shown_rmst(app) == rmst0 and shown_coverage(app)["H1"] == "100 %"
     assert time.perf_counter() - t0 < 30
@@ -244,15 +244,15 @@ def test_a_slow_scene_plans_in_the_background_during_drags(app):
 
 def test_a_layout_the_planner_refuses_gives_a_message_not_a_crash(app):
     panel = app.planning
-    f1 = np.array(app.gizmo("fiducials", "F1").position, float)
-    assert app.handle_drag("fiducials", "F2", f1, "end") is not None  # two fiducials at one place
+    f1 = np.array(app.evaluate.gizmo("fiducials", "F1").position, float)
+    assert app.evaluate.handle_drag("fiducials", "F2", f1, "end") is not None  # two fiducials at one place
     settled(app)
     assert panel.info.content.startswith("⚠ Cannot plan:") and "coincide" in panel.info.content
     assert panel.state is None and panel.coverage_md.content == ""
-    assert app.suggest_fiducials(2) is None
+    assert app.plan.suggest_fiducials(2) is None
     assert "coincide" in app.last_message and panel.suggestion_md.content.startswith("⚠ Cannot suggest:")
     assert not panel.ghosts and not panel.suggest_button.disabled  # the user can fix it and try again
-    app.handle_drag("fiducials", "F2", [300.0, 230.0, 0.0], "end")
+    app.evaluate.handle_drag("fiducials", "F2", [300.0, 230.0, 0.0], "end")
     settled(app)
     assert "Predicted RMST: rigid" in panel.info.content and panel.state is not None
     assert len(shown_coverage(app)) == 8

@@ -14,24 +14,24 @@ def _row(text: str, pid: str) -> list[str]:
 
 def test_vec_tab_shows_the_sessions_vec_and_follows_a_leaned_tool(app):
     panel = app.controls.vec
-    assert "Compare with VEC" in app.controls.text["vec_table"]  # off until asked: nothing computed
-    app.set_vec(True)
-    assert app.vec_view is not None
+    assert "Compare with VEC" in app.controls.vec.vec_table.content  # off until asked: nothing computed
+    app.vec.set_vec(True)
+    assert app.vec.vec_view is not None
     pid = app.session.layout["targets"].ids[0]
     view = vec_view.vec_view(app.session)
-    row = _row(app.controls.text["vec_table"], pid)
+    row = _row(app.controls.vec.vec_table.content, pid)
     assert row[1] == "down" and [float(x) for x in row[2:]] == [
         round(float(view.error_rigid[0]), 3),
         round(float(view.error_rrbc[0]), 3),
         round(float(view.error_vec[0]), 3),
     ]
-    app.set_varied_registration(True)
+    app.vec.set_varied_registration(True)
     assert panel.varied.value and app.session.varied_registration
     before = vec_view.vec_view(app.session)
     truth_before = app.session.last.targets.truth[0].copy()
-    app.set_target_tool(pid, 40.0, 0.0)
+    app.vec.set_target_tool(pid, 40.0, 0.0)
     after = vec_view.vec_view(app.session)
-    row = _row(app.controls.text["vec_table"], pid)
+    row = _row(app.controls.vec.vec_table.content, pid)
     assert row[1] == "40°, 0°" and float(row[3]) == round(float(after.error_rrbc[0]), 3)
     assert after.error_rrbc[0] > before.error_rrbc[0] and after.error_vec[0] < after.error_rrbc[0]
     assert panel.tilt.value == 40.0 and panel.target.value == pid
@@ -40,32 +40,32 @@ def test_vec_tab_shows_the_sessions_vec_and_follows_a_leaned_tool(app):
 
 
 def test_a_tilt_out_of_range_is_refused_with_a_message_and_changes_nothing(app):
-    app.set_vec(True)
+    app.vec.set_vec(True)
     pid = app.session.layout["targets"].ids[0]
     truth = app.session.last.targets.truth.copy()
-    assert app.set_target_tool(pid, TILT_MAX_DEG + 5, 0.0) is None
+    assert app.vec.set_target_tool(pid, TILT_MAX_DEG + 5, 0.0) is None
     assert "tilt" in app.last_message
     assert np.array_equal(app.session.last.targets.truth, truth) and app.session.target_tools == {}
 
 
 def test_measured_data_have_no_arm_and_say_so(measured):
-    measured.set_vec(True)
-    assert not measured.vec_on and measured.vec_view is None
-    assert "no kinematic arm error" in measured.controls.text["vec_table"]
+    measured.vec.set_vec(True)
+    assert not measured.vec.vec_on and measured.vec.vec_view is None
+    assert "no kinematic arm error" in measured.controls.vec.vec_table.content
     assert measured.controls.vec.tilt.disabled
 
 
 def test_the_bullseye_shows_vecs_landing_while_the_comparison_is_on(app):
     node = app.nodes.nodes["/landing/vec"]
     assert not node.visible and app.nodes.landing.vec is None
-    app.set_vec(True)
+    app.vec.set_vec(True)
     land = app.nodes.landing
     i = app.session.last.targets.ids.index(land.target)
-    view = app.vec_view
+    view = app.vec.vec_view
     # drawn like the other landings: its offset from the truth, times the bullseye's scale
     expected = land.anchor + land.scale * (view.robot_vec[i] - app.session.last.targets.truth[i])
     assert node.visible and np.allclose(node.position, expected) and np.allclose(land.vec, expected)
-    app.set_vec(False)
+    app.vec.set_vec(False)
     assert not node.visible
 
 
@@ -74,8 +74,8 @@ def test_the_panel_bullseye_draws_vec_at_true_size(app):
 
     from rrbc_viz.selection_card import bullseye_svg
 
-    app.set_vec(True)
-    ev, view = app.session.last, app.vec_view
+    app.vec.set_vec(True)
+    ev, view = app.session.last, app.vec.vec_view
     pid = ev.targets.ids[0]
     svg, caption, key = bullseye_svg(ev, pid, view.robot_vec[0])
     dx = float(re.search(r'data-kind="vec" data-dx-mm="([^"]+)"', svg).group(1))
@@ -86,4 +86,4 @@ def test_the_panel_bullseye_draws_vec_at_true_size(app):
 
 def test_a_refused_comparison_unticks_the_box(measured):
     measured.controls.vec.show.value = True  # the user ticks it; there is no arm
-    assert not measured.vec_on and measured.controls.vec.show.value is False
+    assert not measured.vec.vec_on and measured.controls.vec.show.value is False

@@ -95,17 +95,17 @@ def test_camera_presets_show_what_they_name():
 
 def test_lesson_steps_frame_their_focus_and_switch_the_see_through_cell(app):
     for i, step in enumerate(teaching.STEPS):
-        app.lesson_go(i)
+        app.views.lesson_go(i)
         assert app.nodes.see_through == step.see_through
         assert app.nodes.nodes["/mesh/cell"].visible == (not step.see_through)
         assert app.nodes.nodes["/mesh/ghost"].visible == step.see_through
         assert app.controls.view.see_through.value == step.see_through
-        view = app.current_view()
+        view = app.views.current_view()
         if "sensor" in step.focus:
             d = np.linalg.norm(view.points - app.session.sensor_to_robot.translation, axis=1)
-            assert d.min() <= 2 * app.display.marker_mm * 1.001
+            assert d.min() <= 2 * app.state.display.marker_mm * 1.001
     assert app.controls.learn.bullseye.html.visible  # step 9 shows the bullseye in the Learn tab
-    app.lesson_stop()
+    app.views.lesson_stop()
     assert not app.nodes.see_through and app.nodes.nodes["/mesh/cell"].visible
 
 
@@ -113,22 +113,24 @@ def test_the_error_slice_follows_drags_and_its_controls(app):
     c = app.controls
     assert app.slice_node.handle is None  # off by default
     c.view.layers["slice"].value = True
-    sl = app.error_slice
+    sl = app.views.error_slice
     assert sl is not None and sl.plane.axis == "z"
     img0 = np.array(app.slice_node.handle.image)
     assert img0.shape[2] == 4 and "RRBC error" in c.view.slice_legend.content
     np.testing.assert_allclose(app.slice_node.handle.position[2], sl.plane.offset_mm)
-    app.handle_drag("fiducials", "F5", [475.0, -100.0, 45.0], "end")
+    app.evaluate.handle_drag("fiducials", "F5", [475.0, -100.0, 45.0], "end")
     assert not np.array_equal(np.array(app.slice_node.handle.image), img0)  # the field follows the drag
-    np.testing.assert_allclose(app.error_slice.values["rrbc"], views.error_slice(app.session, sl.plane).values["rrbc"])
+    np.testing.assert_allclose(
+        app.views.error_slice.values["rrbc"], views.error_slice(app.session, sl.plane).values["rrbc"]
+    )
     c.view.slice_axis.value = "vertical, along x (y)"
-    assert app.error_slice.plane.axis == "y" and c.view.slice_offset.min < 0 < c.view.slice_offset.max
+    assert app.views.error_slice.plane.axis == "y" and c.view.slice_offset.min < 0 < c.view.slice_offset.max
     c.view.slice_offset.value = 50.0
-    assert app.error_slice.plane.offset_mm == 50.0
+    assert app.views.error_slice.plane.offset_mm == 50.0
     c.view.slice_value.value = "rigid error"
-    assert app.display.slice_value == "rigid" and "rigid error" in c.view.slice_legend.content
+    assert app.state.display.slice_value == "rigid" and "rigid error" in c.view.slice_legend.content
     with pytest.raises(InputError):
-        app.set_display(slice_axis="w")
+        app.evaluate.set_display(slice_axis="w")
 
 
 def test_the_arm_reaches_the_selected_target_and_sensors_are_drawn_as_what_they_are(app):
@@ -141,7 +143,7 @@ def test_the_arm_reaches_the_selected_target_and_sensors_are_drawn_as_what_they_
     np.testing.assert_allclose(arm.pose.commanded, t.positions[0])
     tip = np.asarray(arm.stylus.position) + 0.5 * arm.stylus.height * np.array([0, 0, -1.0])
     np.testing.assert_allclose(tip, t.positions[0], atol=1e-6)  # the stylus ends at the target
-    app.select("targets", "H4")
+    app.views.select("targets", "H4")
     np.testing.assert_allclose(app.nodes.arm.pose.commanded, t.positions[3])
     # the default scene's stereo head: two cameras a baseline apart, looking along the sensor's +z
     T = app.session.sensor_to_robot
@@ -163,19 +165,19 @@ def test_the_arm_reaches_the_selected_target_and_sensors_are_drawn_as_what_they_
 
 
 def test_presentation_mode_enlarges_text_markers_and_labels_and_goes_back(app):
-    from rrbc_viz.app_views import PRESENTATION_LABEL_SCALE, PRESENTATION_MARKERS
+    from rrbc_viz.controllers.views import PRESENTATION_LABEL_SCALE, PRESENTATION_MARKERS
     from rrbc_viz.controls import PRESENTATION_CSS
 
-    marker = app.display.marker_mm
+    marker = app.state.display.marker_mm
     label = app.nodes.labels["/targets/H1/gizmo/label"]
     scale0 = label.font_screen_scale
     app.controls.view.presentation.value = True
-    assert app.presentation and app.controls.style.content == PRESENTATION_CSS
-    assert app.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
+    assert app.state.presentation and app.controls.style.content == PRESENTATION_CSS
+    assert app.state.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
     assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(marker * PRESENTATION_MARKERS)
     assert label.font_screen_scale == pytest.approx(scale0 * PRESENTATION_LABEL_SCALE)
-    app.set_presentation(True)  # idempotent
-    assert app.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
+    app.views.set_presentation(True)  # idempotent
+    assert app.state.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
     app.controls.view.presentation.value = False
-    assert not app.presentation and app.controls.style.content == ""
-    assert app.display.marker_mm == pytest.approx(marker) and label.font_screen_scale == pytest.approx(scale0)
+    assert not app.state.presentation and app.controls.style.content == ""
+    assert app.state.display.marker_mm == pytest.approx(marker) and label.font_screen_scale == pytest.approx(scale0)

@@ -1,56 +1,63 @@
-"""The Arm (VEC) tab's actions: VEC on or off, the registration points' tool orientations, a target's leaned tool.
-Part of `RunningApp`; every number comes from `rrbc_core.session.vec_view`."""
+"""The Arm (VEC) tab's actions (`VecController`): VEC on or off, the registration points' tool orientations, a
+target's leaned tool. Every number comes from `rrbc_core.session.vec_view`."""
 
 from __future__ import annotations
 
 import traceback
+from typing import TYPE_CHECKING
 
 from rrbc_core.errors import InputError
 from rrbc_core.session import vec_view
 
-from . import vec_panel
+from .. import vec_panel
+
+if TYPE_CHECKING:
+    from ..context import AppContext
 
 
-class VecActions:
-    """Part of `RunningApp` (see there); split out to keep modules short."""
+class VecController:
+    """`actions.VecActions`. ``vec_on``: VEC compared (the box ticked, and the scene has an arm); ``vec_target``: the
+    target whose tool the tab shows; ``vec_view``: the last VecView shown (None: off, no arm, or refused)."""
 
-    vec_on: bool = False
-    vec_target: str = ""
-    vec_view = None  # the last VecView shown (None: off, no arm, or refused)
-    _vec_panel_state = None  # what the tab's widgets last showed
+    def __init__(self, ctx: AppContext):
+        self.ctx = ctx
+        self.vec_on = False
+        self.vec_target = ""
+        self.vec_view = None
+        self._vec_panel_state: tuple | None = None  # what the tab's widgets last showed
 
     def set_vec(self, on: bool, client=None) -> None:
         """Compare with VEC (calibrate the arm on the current data) or stop."""
-        with self._lock:
-            self.vec_on = bool(on) and self.session.has_arm
-            if on and not self.session.has_arm:
-                self._message(vec_panel.NO_ARM, client, title="No arm to calibrate")
+        with self.ctx.lock:
+            self.vec_on = bool(on) and self.ctx.session.has_arm
+            if on and not self.ctx.session.has_arm:
+                self.ctx.message(vec_panel.NO_ARM, client, title="No arm to calibrate")
             self._vec_panel_state = None  # the box the user ticked may have to be unticked again
-            with self.server.atomic():
-                self._show_vec(client)
-                self.nodes.update(self.session.last)  # the bullseyes show (or drop) VEC's landing
-                self._show_selection(self.session.last)
+            with self.ctx.server.atomic():
+                self.show(client)
+                self.ctx.nodes.update(self.ctx.session.last)  # the bullseyes show (or drop) VEC's landing
+                self.ctx.views.show_selection(self.ctx.session.last)
 
     def set_varied_registration(self, varied: bool, client=None):
         """Measure the registration points with leaned tools (True) or tool down."""
-        with self._lock:
-            return self._apply(lambda s: vec_view.set_varied_registration(s, varied), client)
+        with self.ctx.lock:
+            return self.ctx.evaluate.apply(lambda s: vec_view.set_varied_registration(s, varied), client)
 
     def set_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0, client=None):
         """Reach target `pid` with its tool leaned tilt_deg towards azimuth_deg (degrees)."""
-        with self._lock:
+        with self.ctx.lock:
             self.vec_target = pid
-            return self._apply(lambda s: vec_view.set_target_tool(s, pid, tilt_deg, azimuth_deg), client)
+            return self.ctx.evaluate.apply(lambda s: vec_view.set_target_tool(s, pid, tilt_deg, azimuth_deg), client)
 
     def sync_vec_target(self, pid: str) -> None:
         """The tab's target choice changed: show that target's tool on the sliders."""
-        with self._lock:
+        with self.ctx.lock:
             self.vec_target = pid
-            with self.server.atomic():
-                self._sync_vec_panel()
+            with self.ctx.server.atomic():
+                self._sync_panel()
 
-    def _sync_vec_panel(self) -> None:
-        s = self.session
+    def _sync_panel(self) -> None:
+        s = self.ctx.session
         targets = tuple(s.layout["targets"].ids)
         if self.vec_target not in targets:
             self.vec_target = targets[0] if targets else ""
@@ -58,25 +65,25 @@ class VecActions:
         state = (targets, self.vec_target, tool, self.vec_on, getattr(s, "varied_registration", False), s.has_arm)
         if state != self._vec_panel_state:  # a drag re-shows every frame: send the widgets only what changed
             self._vec_panel_state = state
-            self.controls.vec.sync(*state)
+            self.ctx.controls.vec.sync(*state)
 
-    def _show_vec(self, client=None) -> None:
+    def show(self, client=None) -> None:
         """Refresh the tab (caller holds the lock, inside server.atomic()): VEC is computed only when on."""
-        self.vec_on = self.vec_on and self.session.has_arm
-        self._sync_vec_panel()
-        if not self.session.has_arm:
+        self.vec_on = self.vec_on and self.ctx.session.has_arm
+        self._sync_panel()
+        if not self.ctx.session.has_arm:
             self.vec_view, text = None, vec_panel.NO_ARM
         elif not self.vec_on:
             self.vec_view, text = None, "Tick **Compare with VEC** to calibrate the arm on the current data."
         else:
             try:
-                self.vec_view = vec_view.vec_view(self.session)
+                self.vec_view = vec_view.vec_view(self.ctx.session)
                 text = vec_panel.render(self.vec_view, self.vec_target)
             except InputError as exc:
                 self.vec_view, text = None, f"VEC not computed: {exc}"
             except Exception as exc:  # noqa: BLE001 - keep serving
                 traceback.print_exc()
                 self.vec_view, text = None, f"VEC failed (internal error: {type(exc).__name__}: {exc})"
-        self.controls.text["vec_table"] = text
+        self.ctx.controls.vec.show_table(text)
         v = self.vec_view
-        self.nodes.vec_landings = None if v is None else {pid: v.robot_vec[i] for i, pid in enumerate(v.ids)}
+        self.ctx.nodes.vec_landings = None if v is None else {pid: v.robot_vec[i] for i, pid in enumerate(v.ids)}

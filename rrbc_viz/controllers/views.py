@@ -1,8 +1,10 @@
-"""What the app does for what a user looks at: the camera (presets, per-step framing, framing new tabs for their
-window), the selected point (its drag gizmo, info card and landing bullseye) and the lesson. Part of `RunningApp`
-(`app.py`)."""
+"""What a user looks at (`ViewController`): the camera (presets, per-step framing, framing new tabs for their window),
+presentation mode, the see-through cell, the error slice, the selected point (its drag gizmo, info card and landing
+bullseye) and the lesson."""
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,11 +14,14 @@ from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import default_plane
 
-from . import selection_card, teaching
-from .camera import OBLIQUE, PRESETS, CellGeometry, View, preset_view
-from .colors import legend_markdown
-from .nodes import LAYERS
-from .slice_nodes import SLICE_CHOICES
+from .. import selection_card, teaching
+from ..camera import OBLIQUE, PRESETS, CellGeometry, View, preset_view
+from ..colors import legend_markdown
+from ..nodes import LAYERS
+from ..slice_nodes import SLICE_CHOICES
+
+if TYPE_CHECKING:
+    from ..context import AppContext
 
 SLICE_NOTE = (
     "The plane is sampled on a grid; each point is measured without noise and corrected with the current "
@@ -29,15 +34,24 @@ PRESENTATION_LABEL_SCALE = 1.6  # labels' screen size in presentation mode
 PRESENTATION_MARKERS = 1.5  # markers' size in presentation mode
 
 
-class ViewActions:
-    """Part of `RunningApp` (see there); split out to keep modules short."""
+class ViewController:
+    """`actions.ViewActions`: the camera, presentation mode, the see-through cell, the error slice, the selection and
+    the lesson (module docstring). `error_slice`: the last ErrorSlice shown."""
+
+    def __init__(self, ctx: AppContext):
+        self.ctx = ctx
+        self.error_slice = None
 
     # --------------------------------------------------------------------------------------------- camera
     def cell_geometry(self) -> CellGeometry:
-        ev = self.session.last
-        mesh = self.loaded.mesh
-        scene = getattr(self.session, "scene", None)
-        sensor = None if self.session.sensor_to_robot is None else np.asarray(self.session.sensor_to_robot.translation)
+        ev = self.ctx.session.last
+        mesh = self.ctx.loaded.mesh
+        scene = getattr(self.ctx.session, "scene", None)
+        sensor = (
+            None
+            if self.ctx.session.sensor_to_robot is None
+            else np.asarray(self.ctx.session.sensor_to_robot.translation)
+        )
         return CellGeometry(
             registration=ev.registration_positions.reshape(-1, 3),
             fiducials=ev.fiducial_positions.reshape(-1, 3),
@@ -52,26 +66,26 @@ class ViewActions:
         cell = self.cell_geometry()
         plain = [n for n in names if n not in ("corrections", "landing")]
         parts = [cell.points(*plain)] if plain else []
-        ev = self.session.last
-        r = self.display.marker_mm
+        ev = self.ctx.session.last
+        r = self.ctx.state.display.marker_mm
         if "corrections" in names:
             inc = np.flatnonzero(ev.included)
-            mag = self.display.magnification
+            mag = self.ctx.state.display.magnification
             parts.append(ev.fiducial_positions[inc] + mag * ev.corrections_robot[inc])
-            if self.nodes.target_arrows:
+            if self.ctx.nodes.target_arrows:
                 parts.append(ev.targets.positions + mag * ev.targets.correction_robot)
-        if "sensor" in names and "/frames/sensor_registered" in self.nodes.nodes:
+        if "sensor" in names and "/frames/sensor_registered" in self.ctx.nodes.nodes:
             # both sensor frames with their axes (a sphere of one axis length around each origin)
-            axes = 0.12 * self.nodes.extent_mm * 1.3
+            axes = 0.12 * self.ctx.nodes.extent_mm * 1.3
             d = np.vstack([np.eye(3), -np.eye(3)]) * axes
             for origin in (
-                np.asarray(self.nodes.nodes["/frames/sensor_registered"].position, float),
+                np.asarray(self.ctx.nodes.nodes["/frames/sensor_registered"].position, float),
                 cell.sensor_position,
             ):
                 if origin is not None:
                     parts.append(origin + d)
-        if "landing" in names and getattr(self.nodes, "landing", None) is not None:
-            land = self.nodes.landing
+        if "landing" in names and getattr(self.ctx.nodes, "landing", None) is not None:
+            land = self.ctx.nodes.landing
             ring = land.ring_mm * land.scale
             parts += [land.anchor, land.rigid, land.rrbc, land.position]
             parts += [land.anchor + d for d in ([ring, 0, 0], [-ring, 0, 0], [0, ring, 0], [0, -ring, 0])]
@@ -82,41 +96,41 @@ class ViewActions:
 
     def current_view(self) -> View:
         """What the camera should show now: the lesson step's focus, else the last preset."""
-        if self.lesson_index is not None:
-            step = teaching.STEPS[self.lesson_index]
+        if self.ctx.state.lesson_index is not None:
+            step = teaching.STEPS[self.ctx.state.lesson_index]
             direction = OBLIQUE if step.direction is None else np.asarray(step.direction, float)
             return View(self.focus_points(step.focus), direction)
-        return self._preset_view(self.camera_preset)
+        return self.preset_view(self.ctx.state.camera_preset)
 
-    def _preset_view(self, name: str) -> View:
+    def preset_view(self, name: str) -> View:
         selected = None
-        if self.selected is not None:
-            kind, pid = self.selected
-            ev = self.session.last
+        if self.ctx.state.selected is not None:
+            kind, pid = self.ctx.state.selected
+            ev = self.ctx.session.last
             if kind == "targets":
                 i = ev.targets.ids.index(pid)
                 selected = [ev.targets.positions[i]]
-                land = getattr(self.nodes, "landing", None)
-                if land is not None and self.layers.get("landing") and land.target == pid:
+                land = getattr(self.ctx.nodes, "landing", None)
+                if land is not None and self.ctx.state.layers.get("landing") and land.target == pid:
                     ring = land.ring_mm * land.scale
                     selected += [land.anchor, land.rigid, land.rrbc]
                     selected += [land.anchor + d for d in ([ring, 0, 0], [-ring, 0, 0], [0, ring, 0], [0, -ring, 0])]
             else:
                 selected = [ev.fiducial_positions[ev.fiducial_ids.index(pid)]]
-        return preset_view(name, self.cell_geometry(), selected=selected, marker_mm=self.display.marker_mm)
+        return preset_view(name, self.cell_geometry(), selected=selected, marker_mm=self.ctx.state.display.marker_mm)
 
     def show_camera(self, preset: str, client=None) -> dict:
         """Move the camera to a preset (camera.PRESETS): of `client`'s tab, or of every tab (client None).
         Returns the poses sent, by client id."""
         if preset not in PRESETS:
             raise InputError(f"unknown camera preset '{preset}': {', '.join(PRESETS)}")
-        with self._lock:
-            self.camera_preset = preset
-            return self.camera.show(self._preset_view(preset), None if client is None else [client])
+        with self.ctx.lock:
+            self.ctx.state.camera_preset = preset
+            return self.ctx.camera.show(self.preset_view(preset), None if client is None else [client])
 
-    def _frame_new_client(self, client) -> None:
+    def frame_new_client(self, client) -> None:
         """A tab connected: once it reports its camera (window size), frame the current view for it."""
-        guard = getattr(self, "guard", None)
+        guard = self.ctx.guard
         if guard is not None and guard.is_refused(client.client_id):
             return  # refused at the handshake (access.AccessGuard)
         done = {"flag": False}
@@ -126,8 +140,8 @@ class ViewActions:
                 return
             done["flag"] = True
             try:
-                with self._lock:
-                    self.camera.show(self.current_view(), [client])
+                with self.ctx.lock:
+                    self.ctx.camera.show(self.current_view(), [client])
             except Exception:  # noqa: BLE001 - a closing tab must not break the app
                 pass
 
@@ -136,24 +150,24 @@ class ViewActions:
     def set_presentation(self, on: bool) -> None:
         """Presentation mode (a projector at 1280x720): large panel text, a collapsible panel, larger markers and
         labels; the camera reframes for the new panel."""
-        with self._lock:
+        with self.ctx.lock:
             on = bool(on)
-            if on == self.presentation:
+            if on == self.ctx.state.presentation:
                 return
-            self.presentation = on
-            with self.server.atomic():
-                self.controls.apply_theme(on)
-                self.controls.sync_presentation(on)
-                self.nodes.set_label_scale(PRESENTATION_LABEL_SCALE if on else 1.0)
-                marker = self.display.marker_mm * (PRESENTATION_MARKERS if on else 1 / PRESENTATION_MARKERS)
-                self.set_display(marker_mm=float(marker))
-                self.camera.show(self.current_view())
+            self.ctx.state.presentation = on
+            with self.ctx.server.atomic():
+                self.ctx.controls.apply_theme(on)
+                self.ctx.controls.sync_presentation(on)
+                self.ctx.nodes.set_label_scale(PRESENTATION_LABEL_SCALE if on else 1.0)
+                marker = self.ctx.state.display.marker_mm * (PRESENTATION_MARKERS if on else 1 / PRESENTATION_MARKERS)
+                self.ctx.evaluate.set_display(marker_mm=float(marker))
+                self.ctx.camera.show(self.current_view())
 
     def set_see_through(self, on: bool) -> None:
         """Draw the work cell see-through (View tab checkbox; lesson steps whose arrows point into surfaces)."""
-        with self._lock:
-            self.nodes.set_see_through(on)
-            self.controls.sync_see_through(on)
+        with self.ctx.lock:
+            self.ctx.nodes.set_see_through(on)
+            self.ctx.controls.sync_see_through(on)
 
     # ---------------------------------------------------------------------------------------------- slice
     def slice_plane(self):
@@ -161,17 +175,17 @@ class ViewActions:
         spanning the point sets widened by 35 % on each side (slices.default_plane)."""
         cell = self.cell_geometry()
         pts = cell.points("registration", "fiducials", "targets")
-        return default_plane(pts, self.display.slice_axis, self.display.slice_offset)
+        return default_plane(pts, self.ctx.state.display.slice_axis, self.ctx.state.display.slice_offset)
 
     def slice_range(self) -> tuple[float, float]:
         """Offsets (mm) the slice can take along its axis: the point sets' extent, widened like the plane."""
         pts = self.cell_geometry().points("registration", "fiducials", "targets")
-        k = "xyz".index(self.display.slice_axis)
+        k = "xyz".index(self.ctx.state.display.slice_axis)
         lo, hi = float(pts[:, k].min()), float(pts[:, k].max())
         pad = 0.35 * max(hi - lo, 10.0)
         return lo - pad, hi + pad
 
-    def _check_slice_display(self, new) -> None:
+    def check_slice_display(self, new) -> None:
         if new.slice_axis not in ("x", "y", "z"):
             raise InputError(f"slice_axis must be x, y or z, got {new.slice_axis!r}")
         if new.slice_value not in SLICE_VALUES:
@@ -179,28 +193,30 @@ class ViewActions:
         if new.slice_offset is not None and not np.isfinite(new.slice_offset):
             raise InputError("slice_offset must be a finite number of mm")
 
-    def _update_slice(self) -> None:
+    def update_slice(self) -> None:
         """Recompute and redraw the error slice if its layer is on (caller holds the lock)."""
-        if not self.layers.get("slice"):
+        if not self.ctx.state.layers.get("slice"):
             return
-        self.error_slice = views.error_slice(self.session, self.slice_plane())
-        value = self.display.slice_value
+        self.error_slice = views.error_slice(self.ctx.session, self.slice_plane())
+        value = self.ctx.state.display.slice_value
         values = self.error_slice.values[value]
         if not np.any(np.isfinite(values)):
             note = "Nothing to show for this value here (no truth, or not gp)."
-            self.controls.text["slice_legend"] = note
+            self.ctx.controls.view.show_slice_legend(note)
         else:
-            lo, hi = self.slice_node.show(self.error_slice, value)
+            lo, hi = self.ctx.slice_node.show(self.error_slice, value)
             name = dict((v, k) for k, v in SLICE_CHOICES)[value]
-            self.controls.text["slice_legend"] = legend_markdown(name, lo, hi, note=SLICE_NOTE)
-        self.controls.sync_slice(self.display, self.slice_range(), self.session.kind, self.error_slice.plane.offset_mm)
+            self.ctx.controls.view.show_slice_legend(legend_markdown(name, lo, hi, note=SLICE_NOTE))
+        self.ctx.controls.sync_slice(
+            self.ctx.state.display, self.slice_range(), self.ctx.session.kind, self.error_slice.plane.offset_mm
+        )
 
     # ------------------------------------------------------------------------------------------ selection
     def select(self, kind: str | None, pid: str | None = None, client=None) -> None:
         """Select a point (kind "targets"/"fiducials", id) or none (kind None): it alone carries the drag gizmo;
         the info card and the bullseye show its numbers."""
-        with self._lock:
-            ev = self.session.last
+        with self.ctx.lock:
+            ev = self.ctx.session.last
             if kind is None:
                 sel = None
             else:
@@ -209,33 +225,33 @@ class ViewActions:
                 if pid not in ids:
                     raise InputError(f"there is no {kind[:-1] if kind.endswith('s') else kind} '{pid}' to select")
                 sel = (kind, pid)
-            self.selected = sel
-            with self.server.atomic():
-                self.nodes.set_selected(sel)
-                self.nodes.update(ev)  # the landing bullseye follows the selected target
-                self._show_selection(ev)
+            self.ctx.state.selected = sel
+            with self.ctx.server.atomic():
+                self.ctx.nodes.set_selected(sel)
+                self.ctx.nodes.update(ev)  # the landing bullseye follows the selected target
+                self.show_selection(ev)
 
-    def _on_point_click(self, kind: str, pid: str, client=None) -> None:
+    def on_point_click(self, kind: str, pid: str, client=None) -> None:
         try:
             self.select(kind, pid, client=client)
         except Exception as exc:  # noqa: BLE001 - keep serving
-            self._message(str(exc), client)
+            self.ctx.message(str(exc), client)
 
-    def _show_selection(self, ev: Evaluation) -> None:
+    def show_selection(self, ev: Evaluation) -> None:
         """Refresh the info card, the bullseye and the selection dropdown (caller holds the lock)."""
-        c = self.controls
-        sel = self.selected
+        c = self.ctx.controls
+        sel = self.ctx.state.selected
         c.sync_selection(selection_card.point_names(ev), selection_card.choice_of(sel), sel)
-        state = self.planning.state if self.planning is not None else None
+        state = self.ctx.planning.state if self.ctx.planning is not None else None
         fraction = None
         if sel is not None and sel[0] == "targets" and state is not None and sel[1] in state.target_ids:
             fraction = state.coverage_of(sel[1])  # the Plan tab's own number for this target's region
-        c.text["info"] = selection_card.info_card(ev, sel, fraction)
-        land = getattr(self.nodes, "landing", None)
+        c.selection.show_card(selection_card.info_card(ev, sel, fraction))
+        land = getattr(self.ctx.nodes, "landing", None)
         target = land.target if land is not None else None  # the target whose bullseye the scene shows
         explore = sel[1] if sel is not None and sel[0] == "targets" else None
-        last_step = self.lesson_index == len(teaching.STEPS) - 1
-        vec = (self.nodes.vec_landings or {}).get(explore) if explore else None
+        last_step = self.ctx.state.lesson_index == len(teaching.STEPS) - 1
+        vec = (self.ctx.nodes.vec_landings or {}).get(explore) if explore else None
         c.show_bullseye(*(selection_card.bullseye_svg(ev, explore, vec) if explore else (None,)), where="explore")
         c.show_bullseye(*(selection_card.bullseye_svg(ev, target) if target and last_step else (None,)), where="learn")
 
@@ -243,39 +259,39 @@ class ViewActions:
     def lesson_go(self, index: int) -> str:
         """Show lesson step `index` (0-based, clamped): its layers, its text, and every tab's camera framed on
         what the step talks about. Returns the text."""
-        with self._lock:
+        with self.ctx.lock:
             index = int(np.clip(index, 0, len(teaching.STEPS) - 1))
-            if self.lesson_index is None:
-                self._lesson_saved_layers = dict(self.layers)
-            self.lesson_index = index
+            if self.ctx.state.lesson_index is None:
+                self.ctx.state.lesson_saved_layers = dict(self.ctx.state.layers)
+            self.ctx.state.lesson_index = index
             step = teaching.STEPS[index]
-            with self.server.atomic():
+            with self.ctx.server.atomic():
                 for name in LAYERS:
-                    self.set_layer(name, name in step.layers)
-                self.nodes.target_arrows = step.target_arrows
+                    self.ctx.evaluate.set_layer(name, name in step.layers)
+                self.ctx.nodes.target_arrows = step.target_arrows
                 self.set_see_through(step.see_through)
-                self.nodes.update(self.session.last)
-                text = teaching.render(index, self.session.last, self._lesson_context())
-                self.controls.text["lesson"] = text
-                self._show_selection(self.session.last)
-                self.camera.show(self.current_view())
+                self.ctx.nodes.update(self.ctx.session.last)
+                text = teaching.render(index, self.ctx.session.last, self.ctx.present.lesson_context())
+                self.ctx.controls.learn.show_text(text)
+                self.show_selection(self.ctx.session.last)
+                self.ctx.camera.show(self.current_view())
             return text
 
     def lesson_step(self, delta: int) -> str:
         """Next (+1) or previous (-1) step; the first press of either starts the lesson at step 1."""
-        return self.lesson_go(0 if self.lesson_index is None else self.lesson_index + delta)
+        return self.lesson_go(0 if self.ctx.state.lesson_index is None else self.ctx.state.lesson_index + delta)
 
     def lesson_stop(self) -> None:
-        with self._lock:
-            saved = self._lesson_saved_layers
-            self.lesson_index = None
-            self._lesson_saved_layers = None
-            with self.server.atomic():
+        with self.ctx.lock:
+            saved = self.ctx.state.lesson_saved_layers
+            self.ctx.state.lesson_index = None
+            self.ctx.state.lesson_saved_layers = None
+            with self.ctx.server.atomic():
                 for name, visible in (saved or {}).items():
-                    self.set_layer(name, visible)
-                self.nodes.target_arrows = True
+                    self.ctx.evaluate.set_layer(name, visible)
+                self.ctx.nodes.target_arrows = True
                 self.set_see_through(False)
-                self.nodes.update(self.session.last)
-                self.controls.text["lesson"] = "Lesson ended. Press **Next** to start again."
-                self._show_selection(self.session.last)
-                self.camera.show(self.current_view())
+                self.ctx.nodes.update(self.ctx.session.last)
+                self.ctx.controls.learn.show_text("Lesson ended. Press **Next** to start again.")
+                self.show_selection(self.ctx.session.last)
+                self.ctx.camera.show(self.current_view())

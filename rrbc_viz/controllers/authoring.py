@@ -1,7 +1,7 @@
 """Authoring a cell in the app: a click on the cell adds the chosen kind of point where the click's ray meets the
 mesh; delete the selected point; undo/redo; move the sensor; upload a mesh; download the scene, the measurement
 plan and Slicer markups. The session does the editing (`rrbc_core.session.authoring`); here the click becomes a
-point and the scene is redrawn. Part of `RunningApp` (`app.py`).
+point and the scene is redrawn (`AuthoringController`).
 
 Frames and units: robot frame, mm. A registration point goes `REGISTRATION_LIFT_MM` above the clicked surface
 (registration points are held in free space); the others sit on it.
@@ -13,6 +13,7 @@ import json
 import tempfile
 import traceback
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,16 +21,11 @@ from rrbc_core.errors import InputError
 from rrbc_core.models.visibility import cast_from
 from rrbc_core.session import authoring, views
 
-from . import files
+from .. import files
+from ..authoring_panel import CLICK_MODES, REGISTRATION_LIFT_MM
 
-CLICK_MODES = (
-    ("nothing (select)", None),
-    ("registration point", "registration"),
-    ("fiducial", "fiducials"),
-    ("target", "targets"),
-    ("candidate", "candidates"),
-)
-REGISTRATION_LIFT_MM = 100.0
+if TYPE_CHECKING:
+    from ..context import AppContext
 
 
 def surface_hit(mesh, origin, direction) -> np.ndarray | None:
@@ -43,11 +39,15 @@ def surface_hit(mesh, origin, direction) -> np.ndarray | None:
     return None if not np.isfinite(t[0]) else np.asarray(origin, float) + float(t[0]) * d
 
 
-class AuthoringActions:
-    """Part of `RunningApp` (see there); split out to keep modules short."""
+class AuthoringController:
+    """`actions.AuthoringActions` (module docstring). ``click_mode``: what a click on the cell adds (None: clicks
+    select); ``target_region_mm``: the cube edge of an added target's region."""
 
-    click_mode: str | None = None
-    target_region_mm: float = 4.0
+    def __init__(self, ctx: AppContext):
+        self.ctx = ctx
+        self.click_mode: str | None = None
+        self.target_region_mm = 4.0
+        self.uploaded_mesh: Path | None = None  # the mesh uploaded in this session (a saved scene refers to it)
 
     def set_click_mode(self, kind: str | None, region_mm: float | None = None) -> None:
         """What a click on the cell adds: None (clicks select), "registration", "fiducials", "targets",
@@ -58,23 +58,25 @@ class AuthoringActions:
         if region_mm is not None:
             self.target_region_mm = float(region_mm)
 
-    def _on_scene_click(self, event) -> None:
+    def on_scene_click(self, event) -> None:
         if self.click_mode is None:
             return
         try:
             self.add_at_ray(event.ray_origin, event.ray_direction, client=event.client)
         except Exception:  # noqa: BLE001 - keep serving
             traceback.print_exc()
-            self._message("internal error while adding a point (see the server log)", event.client)
+            self.ctx.message("internal error while adding a point (see the server log)", event.client)
 
     def add_at_ray(self, origin, direction, kind: str | None = None, client=None):
         """Add a point of `kind` (default: the click mode) where the ray meets the cell; returns the Evaluation
         or None (a message says why)."""
         kind = kind or self.click_mode
-        with self._lock:
-            hit = surface_hit(self.loaded.mesh, origin, direction)
+        with self.ctx.lock:
+            hit = surface_hit(self.ctx.loaded.mesh, origin, direction)
             if hit is None:
-                self._message("the click did not meet the cell's mesh: click on a surface", client, title="Not added")
+                self.ctx.message(
+                    "the click did not meet the cell's mesh: click on a surface", client, title="Not added"
+                )
                 return None
             if kind == "registration":
                 hit = hit + [0.0, 0.0, REGISTRATION_LIFT_MM]
@@ -82,12 +84,12 @@ class AuthoringActions:
 
     def delete_selected(self, client=None):
         """Delete the selected point."""
-        with self._lock:
-            if self.selected is None:
-                self._message("select a point first (click it)", client, title="Nothing deleted")
+        with self.ctx.lock:
+            if self.ctx.state.selected is None:
+                self.ctx.message("select a point first (click it)", client, title="Nothing deleted")
                 return None
-            kind, pid = self.selected
-            self.selected = None
+            kind, pid = self.ctx.state.selected
+            self.ctx.state.selected = None
             return self._author(lambda s: authoring.remove_point(s, kind, pid), client)
 
     def undo(self, client=None):
@@ -101,31 +103,38 @@ class AuthoringActions:
 
     def _author(self, change, client):
         """Apply a structural edit to the session and redraw the scene (points were added or removed)."""
-        with self._lock:
+        with self.ctx.lock:
             try:
-                ev = change(self.session)
+                ev = change(self.ctx.session)
             except InputError as exc:
-                self._message(str(exc), client, title="Not done")
+                self.ctx.message(str(exc), client, title="Not done")
                 return None
-            if self.selected is not None:
-                kind, pid = self.selected
+            if self.ctx.state.selected is not None:
+                kind, pid = self.ctx.state.selected
                 ids = ev.targets.ids if kind == "targets" else ev.fiducial_ids if kind == "fiducials" else ()
                 if pid not in ids:
-                    self.selected = None
-            self._redraw(ev)
-        self.request_monte_carlo()
+                    self.ctx.state.selected = None
+            self.redraw(ev)
+        self.ctx.montecarlo.request()
         return ev
 
-    def _redraw(self, ev) -> None:
+    def redraw(self, ev) -> None:
         """Rebuild the scene's nodes for the session as it is now (caller holds the lock)."""
-        with self.server.atomic():
-            self.nodes.selected = self.selected
-            self.nodes.build(self.session, ev, self.loaded.mesh, self.display, self.layers)
-            self.slice_node.clear()
-            self.planning.build(self.session)
-            self._show(ev, heat=True)
-            self.controls.sync_authoring(authoring.can_undo(self.session), authoring.can_redo(self.session))
-            self.planning.sync_undo(authoring.can_undo(self.session))
+        with self.ctx.server.atomic():
+            self.ctx.nodes.selected = self.ctx.state.selected
+            self.ctx.nodes.build(
+                self.ctx.session, ev, self.ctx.loaded.mesh, self.ctx.state.display, self.ctx.state.layers
+            )
+            self.ctx.slice_node.clear()
+            self.ctx.planning.build(self.ctx.session)
+            self.ctx.present.show(ev, heat=True)
+            self.sync_history()
+
+    def sync_history(self) -> None:
+        """Undo and Redo (File tab) and the Plan tab's Undo offered as the session's edit history allows."""
+        session = self.ctx.session
+        self.ctx.controls.sync_authoring(authoring.can_undo(session), authoring.can_redo(session))
+        self.ctx.planning.sync_undo(authoring.can_undo(session))
 
     def upload_mesh(self, name: str, content: bytes, client=None) -> bool:
         """Use an uploaded mesh (any format trimesh reads; robot frame, mm) as the cell's mesh: it is drawn, clicks
@@ -135,21 +144,21 @@ class AuthoringActions:
 
         suffix = Path(str(name)).suffix.lower()
         if suffix not in (".stl", ".obj", ".ply", ".glb", ".gltf", ".3mf", ".off"):
-            self._message(f"{name}: not a mesh file (STL, OBJ, PLY, GLB, 3MF)", client, title="Upload refused")
+            self.ctx.message(f"{name}: not a mesh file (STL, OBJ, PLY, GLB, 3MF)", client, title="Upload refused")
             return False
-        with self._lock:
+        with self.ctx.lock:
             d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
             path = d / ("cell" + suffix)
             path.write_bytes(content)
             try:
                 mesh = load_cell_mesh(path)
             except InputError as exc:
-                self._message(str(exc).replace(str(path), str(name)), client, title="Upload refused")
+                self.ctx.message(str(exc).replace(str(path), str(name)), client, title="Upload refused")
                 return False
-            self.loaded = files.Loaded(self.loaded.session, mesh, self.loaded.label)
+            self.ctx.loaded = files.Loaded(self.ctx.loaded.session, mesh, self.ctx.loaded.label)
             self.uploaded_mesh = path
-            self._redraw(self.session.last)
-        self._message(f"{name}: the cell's mesh now ({len(mesh.faces)} triangles)", client, error=False)
+            self.redraw(self.ctx.session.last)
+        self.ctx.message(f"{name}: the cell's mesh now ({len(mesh.faces)} triangles)", client, error=False)
         return True
 
     def export_authoring(self, what: str) -> list[tuple[str, bytes]]:
@@ -157,16 +166,16 @@ class AuthoringActions:
         markups files of the current data)."""
         from rrbc_core.io.slicer_markups import to_markups
 
-        with self._lock:
-            slug = files.slug(self.session.name)
+        with self.ctx.lock:
+            slug = files.slug(self.ctx.session.name)
             if what == "scene":
-                mesh = getattr(self, "uploaded_mesh", None)
-                text = authoring.scene_toml(self.session, mesh=mesh.name if mesh is not None else None)
+                mesh = self.uploaded_mesh
+                text = authoring.scene_toml(self.ctx.session, mesh=mesh.name if mesh is not None else None)
                 return [(f"{slug}.toml", text.encode("utf-8"))]
             if what == "plan":
-                return [(f"{slug}-measurement-plan.csv", authoring.measurement_plan(self.session).encode("utf-8"))]
+                return [(f"{slug}-measurement-plan.csv", authoring.measurement_plan(self.ctx.session).encode("utf-8"))]
             if what == "slicer":
-                sensor, robot = to_markups(views.export_measurements(self.session))
+                sensor, robot = to_markups(views.export_measurements(self.ctx.session))
                 return [
                     (f"{slug}_sensor.mrk.json", (json.dumps(sensor, indent=1) + "\n").encode("utf-8")),
                     (f"{slug}_robot.mrk.json", (json.dumps(robot, indent=1) + "\n").encode("utf-8")),
@@ -177,8 +186,8 @@ class AuthoringActions:
         try:
             out = self.export_authoring(what)
         except (InputError, ValueError) as exc:
-            self._message(str(exc), client, title="Export failed")
+            self.ctx.message(str(exc), client, title="Export failed")
             return None
         for name, content in out:
-            (client or self.server).send_file_download(name, content)
+            (client or self.ctx.server).send_file_download(name, content)
         return out

@@ -1,0 +1,86 @@
+"""The Diagnose tab (`DiagnoseController`): `rrbc diagnose` on the session's data set (`session.data_set`: the file as
+opened or edited, or the scene's simulated data set as the CSV download writes it), run outside the app's lock, its
+lines shown as the command prints them (`diagnosis_panel`), and marked stale when the data change."""
+
+from __future__ import annotations
+
+import traceback
+from typing import TYPE_CHECKING
+
+from rrbc_core.analysis.diagnosis import Diagnosis
+from rrbc_core.errors import InputError
+from rrbc_core.session import data_set
+from rrbc_core.session.data_set import SessionData, data_key
+
+from .. import diagnosis_panel
+
+if TYPE_CHECKING:
+    from ..context import AppContext
+
+
+class DiagnoseController:
+    """`actions.DiagnoseActions`. ``diagnosis``: the last verdict shown (None: none or an error); ``diagnosis_stale``:
+    the data changed since; ``diagnosis_data``: the data set it was computed from."""
+
+    def __init__(self, ctx: AppContext):
+        self.ctx = ctx
+        self.reset()
+
+    def reset(self) -> None:
+        """Nothing diagnosed (a new source)."""
+        self.diagnosis: Diagnosis | None = None
+        self.diagnosis_stale = False
+        self.diagnosis_data: SessionData | None = None
+        self._diagnosis_key: tuple | None = None
+        self._diagnosis_text = ""
+
+    # ------------------------------------------------------------------------------------------ diagnosis
+    def run(self, client=None) -> Diagnosis | None:
+        """Diagnose the session's data set (`ExplorerSession.data()`: the file as opened or edited, or the scene's
+        simulated data set as the CSV download writes it) and show, in the Diagnose tab, exactly the lines
+        `rrbc diagnose` prints for it. The data are taken under the lock; the diagnosis (seconds on a scene with
+        an arm) runs outside it, so drags go on. Returns None (and says why in the tab) on InputError."""
+        with self.ctx.lock:
+            session = self.ctx.session
+            key = data_key(session)
+            try:
+                data = data_set.session_data(session)
+            except InputError as exc:
+                data, error = None, str(exc)
+        result, text = None, ""
+        if data is not None:
+            try:
+                result = data.diagnose()
+            except InputError as exc:
+                text = diagnosis_panel.render_error(str(exc))
+            except Exception as exc:  # noqa: BLE001 - keep serving
+                traceback.print_exc()
+                text = diagnosis_panel.render_error(f"internal error: {type(exc).__name__}: {exc}")
+            else:
+                text = diagnosis_panel.render(result, data)
+        else:
+            text = diagnosis_panel.render_error(error)
+        with self.ctx.lock:
+            if self.ctx.session is not session:  # another source was loaded meanwhile
+                return None
+            self.diagnosis = result
+            self.diagnosis_data = data
+            self._diagnosis_key = key
+            self._diagnosis_text = text
+            self.diagnosis_stale = False
+            with self.ctx.server.atomic():
+                self.ctx.controls.diagnose.show(text)
+            self.check_stale()  # the data changed while it ran: say so at once
+        if result is None:
+            self.ctx.message("diagnosis failed: see the Diagnose tab", client, title="Not diagnosed")
+        return result
+
+    def check_stale(self) -> None:
+        """Mark the Diagnose tab's content stale once the data set it was computed from changed (caller holds the
+        lock): a change of its key (`data_set.data_key`) — a moved or excluded point, a new seed or size — not a
+        method change, which leaves the data as they are."""
+        if self._diagnosis_key is None or self.diagnosis_stale:
+            return
+        if data_key(self.ctx.session) != self._diagnosis_key:
+            self.diagnosis_stale = True
+            self.ctx.controls.diagnose.show(diagnosis_panel.STALE + "\n\n" + self._diagnosis_text)

@@ -1,0 +1,102 @@
+"""The File tab's actions (`FileController`): open a scene or measurement file (one the tab offers, or an upload),
+and export the session's data (the CSV that `rrbc diagnose` and `rrbc correct` read) and results (the JSON of
+`rrbc correct`). A file that does not load leaves the current session and says why."""
+
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING
+
+from rrbc_core.errors import InputError
+from rrbc_core.session import views
+
+from .. import files
+
+if TYPE_CHECKING:
+    from ..context import AppContext
+
+
+class FileController:
+    """`actions.FileActions` (module docstring)."""
+
+    def __init__(self, ctx: AppContext):
+        self.ctx = ctx
+
+    # --------------------------------------------------------------------------------------------- files
+    def load(self, source=None, mesh=None, client=None) -> bool:
+        """Open a scene (.toml) or measurement file (.csv; optional mesh). On bad input the current session
+        stays and a message says why; returns whether the file was loaded."""
+        try:
+            loaded = files.load_source(source, mesh)
+        except InputError as exc:
+            self.ctx.message(str(exc), client, title="File not loaded")
+            return False
+        except Exception as exc:  # noqa: BLE001 - e.g. OSError: keep serving
+            self.ctx.message(f"{source}: cannot open: {type(exc).__name__}: {exc}", client, title="File not loaded")
+            return False
+        self.ctx.install(loaded)
+        return True
+
+    def load_offered(self, label: str, mesh_label: str | None = None, client=None) -> bool:
+        """Open one of the files the File tab offers (`files.Library`), by its label; anything else is refused."""
+        try:
+            path = self.ctx.library.pick(label)
+            mesh = None if mesh_label is None else self.ctx.library.pick(mesh_label, meshes=True)
+        except InputError as exc:
+            self.ctx.message(str(exc), client, title="File not loaded")
+            return False
+        return self.load(path, mesh=mesh, client=client)
+
+    def rescan_files(self) -> None:
+        """List the offered folders' files again in the File tab."""
+        with self.ctx.lock:
+            self.ctx.controls.file.offer(
+                [name for name, _ in self.ctx.library.sources()], [name for name, _ in self.ctx.library.meshes()]
+            )
+
+    def load_upload(self, name: str, content: bytes, client=None) -> bool:
+        try:
+            loaded = files.load_upload(name, content)
+        except InputError as exc:
+            self.ctx.message(str(exc), client, title="Upload not loaded")
+            return False
+        except Exception as exc:  # noqa: BLE001
+            self.ctx.message(f"{name}: cannot open: {type(exc).__name__}: {exc}", client, title="Upload not loaded")
+            return False
+        self.ctx.install(loaded)
+        return True
+
+    def export(self, what: str) -> tuple[str, bytes]:
+        """(file name, content) of "csv" (views.export_measurements(session) as a measurement file) or "json"
+        (views.export_json(session))."""
+        with self.ctx.lock:
+            slug = files.slug(self.ctx.session.name)
+            if what == "csv":
+                s = self.ctx.session.settings
+                text = files.measurements_csv(
+                    views.export_measurements(self.ctx.session),
+                    comments=[
+                        f"exported by the rrbc browser app from {self.ctx.session.name}",
+                        f"settings: registration {s.registration}, interpolation {s.interpolation}, noise x{s.noise_scale:g}, "
+                        f"bias x{s.bias_scale:g}, seed {s.seed}",
+                    ],
+                )
+                return f"rrbc-{slug}.csv", text.encode("utf-8")
+            if what == "json":
+                return f"rrbc-{slug}-results.json", (
+                    json.dumps(views.export_json(self.ctx.session), indent=2) + "\n"
+                ).encode("utf-8")
+        raise InputError(f"unknown export '{what}': csv or json")
+
+    def download(self, what: str, client=None) -> tuple[str, bytes] | None:
+        """Send an export to `client` (every tab if None) as a file download."""
+        try:
+            name, content = self.export(what)
+        except (InputError, ValueError) as exc:
+            self.ctx.message(str(exc), client, title="Export failed")
+            return None
+        if client is not None:
+            client.send_file_download(name, content)
+        else:
+            self.ctx.server.send_file_download(name, content)
+        return name, content

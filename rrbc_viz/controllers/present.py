@@ -1,0 +1,85 @@
+"""The presenter: pushes an `Evaluation` to every scene view and panel (`Presenter.show`), the one place a change
+of the session becomes pixels — the scene nodes (points, arrows, hull, regions, bullseye), the Explore tab's results,
+the lesson's text, the selected point's card, the Diagnose tab's stale mark, the Plan tab, the heat map, the error
+slice and the check statistics. Callers hold the app's lock and an open `server.atomic()` block."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+from rrbc_core.errors import InputError
+from rrbc_core.session import views
+from rrbc_core.session.data_set import check_statistics
+from rrbc_core.session.evaluation import Evaluation
+
+from .. import tables, teaching
+from ..colors import legend_markdown
+
+if TYPE_CHECKING:
+    from ..context import AppContext
+
+
+class Presenter:
+    """`actions.PresentActions`: shows an evaluation everywhere (module docstring). `heat_map`: the last HeatMap
+    shown (None until the heat map layer is first on)."""
+
+    def __init__(self, ctx: AppContext):
+        self.ctx = ctx
+        self.heat_map = None
+
+    def show(self, ev: Evaluation, heat: bool = False, plan: bool = True) -> None:
+        """Push `ev` to the scene and the panels. heat: refresh the heat map, the slice and the check statistics now
+        (a drag's end, a setting); plan: recompute the Plan tab now (else it is marked stale until its next due
+        refresh)."""
+        ctx = self.ctx
+        session = ctx.session
+        ctx.nodes.bias_scale = float(session.settings.bias_scale) if session.kind == "scene" else 1.0
+        ctx.vec.show()  # the Arm tab, and VEC's landings for the bullseye
+        ctx.nodes.target_tools = dict(session.target_tools)
+        ctx.nodes.update(ev)
+        ctx.controls.explore.show_results(
+            tables.scale_line(ctx.state.display.magnification),
+            tables.summary(ev, session.kind),
+            tables.target_table(ev),
+        )
+        if ctx.state.lesson_index is not None:
+            ctx.controls.learn.show_text(teaching.render(ctx.state.lesson_index, ev, self.lesson_context()))
+        ctx.state.heat_stale = True
+        ctx.diagnose.check_stale()
+        ctx.planning.refresh(session, due=plan)
+        ctx.views.show_selection(ev)  # after the Plan tab: the card shows its coverage of the selected target
+        if heat:
+            self.update_heat()
+            ctx.views.update_slice()
+            self.update_checks()
+
+    def update_checks(self) -> None:
+        """The Explore tab's check statistics and histogram (`data_set.check_statistics`: rrbc correct on the CSV
+        download), refreshed when the heat map is (a drag's end, a setting, a load), not on every drag update."""
+        session = self.ctx.session
+        try:
+            stats = check_statistics(session)
+        except InputError:
+            stats = None
+        self.ctx.controls.checks.show(stats, session.settings.method.describe())
+
+    def update_heat(self) -> None:
+        """Recompute the heat map now if its layer is on (else leave it stale until shown)."""
+        ctx = self.ctx
+        st = ctx.state
+        if not st.layers.get("heatmap"):
+            return
+        start = time.perf_counter()
+        self.heat_map = views.heat_map(ctx.session, ctx.heat_samples_per_target)
+        st.heat_cost = time.perf_counter() - start
+        st.heat_time = time.monotonic()
+        st.heat_stale = False
+        legend = ctx.nodes.update_heatmap(self.heat_map, ctx.session.last)
+        ctx.controls.view.show_heat_legend("Nothing to show." if legend is None else legend_markdown(*legend))
+
+    def lesson_context(self) -> teaching.LessonContext:
+        ctx = self.ctx
+        return teaching.LessonContext(
+            ctx.session.kind, ctx.state.display.magnification, dict(ctx.session.regions), ctx.nodes.frame_mag
+        )

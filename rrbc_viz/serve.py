@@ -1,0 +1,78 @@
+"""Starting the app: `serve(...)` opens a viser server on a free port, loads the source and returns the running app
+(one shared `app.RunningApp`, or a `per_client.PerClientApp` that gives every browser tab its own). What `rrbc view`
+and the tests call."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import socket
+
+import viser
+
+from rrbc_core.errors import InputError
+from rrbc_core.runtime.threads import apply_process_policy
+from rrbc_core.session.explorer import ExplorerSession
+
+from . import files
+from .access import AccessGuard, new_token, page_url
+from .app import RunningApp
+from .per_client import PerClientApp
+
+
+def _check_host(host: str) -> None:
+    """Fail early on an address this machine cannot listen on (viser 1.1.1 would wait forever)."""
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as probe:
+            probe.bind(address)
+    except OSError as exc:
+        raise InputError(f"cannot listen on host {host!r}: {exc.strerror or exc}") from None
+
+
+def serve(
+    source=None,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    mesh=None,
+    quiet: bool = True,
+    per_client: bool = False,
+    present: bool = False,
+    token: str | bool | None = True,
+    data_dirs=(),
+):
+    """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
+    .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
+    raises InputError before any server starts. `quiet` hides viser's start-up banner and its "Server stopped"
+    line. `per_client`: one independent session per browser tab (per_client.PerClientApp) instead of one shared
+    by all; `present`: start in presentation mode (large text, collapsible panel; View → Presentation mode). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
+    server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
+    apply_process_policy()
+    if isinstance(source, ExplorerSession):
+        loaded = files.Loaded(source, files.load_mesh(mesh) if mesh else None, f"session {source.name}")
+        source.evaluate()
+    else:
+        loaded = files.load_source(source, mesh)
+    _check_host(host)
+    library = files.Library.of(data_dirs, source)
+    out = io.StringIO() if quiet else None
+    with contextlib.redirect_stdout(out) if quiet else contextlib.nullcontext():
+        server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)
+    try:
+        guard = AccessGuard(server, new_token() if token is True else (token or None))
+        server.scene.set_up_direction("+z")
+        app: RunningApp | PerClientApp
+        if per_client:
+            server.gui.configure_theme(show_share_button=False)
+            app = PerClientApp(server, loaded, source, mesh, host, present, library)
+        else:
+            app = RunningApp(server, loaded, host, library=library)
+            if present:
+                app.views.set_presentation(True)
+        app.quiet = quiet
+        app.guard = guard
+        app.url = page_url(app.url, guard.token)
+        return app
+    except BaseException:
+        server.stop()
+        raise
