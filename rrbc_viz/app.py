@@ -56,7 +56,8 @@ from .controllers.present import Presenter
 from .controllers.vec import VecController
 from .controllers.views import PRESENTATION_MARKERS, ViewController
 from .controls import Controls
-from .nodes import Display, SceneNodes, nice_down
+from .node_values import Display, nice_down
+from .nodes import SceneNodes
 from .planning_panel import PlanningPanel
 from .slice_nodes import SliceNode
 from .state import AppState

@@ -25,7 +25,7 @@ from .camera import PRESETS
 from .checks_panel import ChecksPanel
 from .colors import legend_html
 from .diagnosis_panel import PROMPT
-from .nodes import LAYERS, Display
+from .node_values import LAYERS, Display
 from .selection_panel import Bullseye, SelectionPanel
 from .slice_nodes import SLICE_AXES, SLICE_CHOICES
 from .syncing import Syncing, clamped

@@ -1,5 +1,6 @@
-"""The heat map in the scene: its samples coloured by the chosen value, and a ring around each target with the mean
-over its region. Part of `SceneNodes` (`nodes.py`)."""
+"""The heat map in the scene (`HeatMapNodes`, held by `nodes.SceneNodes`): its samples coloured by the chosen value,
+and a ring around each target with the mean over its region. It owns its two point clouds (/heatmap/points,
+/heatmap/rings) and is handed values: a `HeatMap`, the Evaluation and the display options."""
 
 from __future__ import annotations
 
@@ -29,15 +30,62 @@ def _ring_dots(inner: float, width: float, rows: int = RING_ROWS) -> np.ndarray:
 
 
 class HeatMapNodes:
-    """Part of `SceneNodes` (see there); split out to keep modules short."""
+    """The heat map's nodes (module docstring)."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.points = None  # the samples' point cloud
+        self.rings = None  # the rings' point cloud (None without targets)
+        self.display = None  # the display options the map was last drawn with
+        self._rings_args: tuple | None = None  # what the rings were last drawn from (redrawn on a resize)
+
+    def build(self, with_rings: bool) -> dict:
+        """Create the two point clouds (hidden until `show`); returns them by name."""
+        self._rings_args = None
+        self.points = self.scene.add_point_cloud(
+            "/heatmap/points",
+            np.zeros((1, 3), np.float32),
+            np.zeros((1, 3), np.uint8),
+            point_size=0.5,
+            point_shape="circle",
+            precision="float32",
+            visible=False,
+        )
+        self.rings = None
+        if with_rings:  # unlit (flat shading): the ring shows the legend's colours, whatever the light
+            self.rings = self.scene.add_point_cloud(
+                "/heatmap/rings",
+                np.zeros((1, 3), np.float32),
+                np.zeros((1, 3), np.uint8),
+                point_size=1.0,
+                point_shape="circle",
+                point_shading="flat",
+                precision="float32",
+                visible=False,
+            )
+        out = {"/heatmap/points": self.points}
+        if self.rings is not None:
+            out["/heatmap/rings"] = self.rings
+        return out
+
+    def clear(self) -> None:
+        self.points = self.rings = None
+        self._rings_args = None
+
+    def resize(self, display) -> None:
+        """Redraw the rings for new marker sizes or region zoom."""
+        self.display = display
+        if self.rings is not None and self._rings_args is not None:
+            self._update_heat_rings(self.rings, *self._rings_args)
 
     # ------------------------------------------------------------------------------------------ heat map
-    def update_heatmap(self, hm, ev: Evaluation) -> tuple[str, float, float] | None:
+    def show(self, hm, ev: Evaluation, display) -> tuple[str, float, float] | None:
         """Show a `HeatMap` (from views.heat_map(session)) coloured by the chosen value; returns (title, lo, hi) for
         the legend, or None if there is nothing to show. Samples are drawn `region_zoom` times farther from
         their target than they are."""
-        node = self.nodes["/heatmap/points"]
-        rings = self.nodes.get("/heatmap/rings")
+        self.display = display
+        node = self.points
+        rings = self.rings
         if hm is None or len(hm.positions) == 0:
             node.visible = False
             if rings is not None:
@@ -71,8 +119,8 @@ class HeatMapNodes:
         node.point_size = max(0.05, 0.6 * spread * self.display.region_zoom)
         node.visible = True
         if rings is not None:
-            self._heat_rings_args = (hm, ev, values, lo, hi, offsets)
-            self._update_heat_rings(rings, *self._heat_rings_args)
+            self._rings_args = (hm, ev, values, lo, hi, offsets)
+            self._update_heat_rings(rings, *self._rings_args)
         return title, lo, hi
 
     def _update_heat_rings(self, rings, hm, ev: Evaluation, values, lo: float, hi: float, offsets) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 from rrbc_core.session.evaluation import Evaluation
 
 from . import colors
-from .nodes import landing_offsets, nice_up
+from .node_values import landing_offsets, nice_up
 
 SIZE_PX = 220  # the bullseye's drawing, square
 BAR_PX = 34  # the z bar at its right

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .camera import OPENING
-from .nodes import LAYERS, Display
+from .node_values import LAYERS, Display
 
 #: Layers shown when a source is loaded: all but labels, the heat map and the error slice.
 DEFAULT_LAYERS = {name: name not in ("labels", "heatmap", "slice") for name in LAYERS}

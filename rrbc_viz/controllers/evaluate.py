@@ -25,7 +25,7 @@ from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
 from ..drag_queue import DragQueue
-from ..nodes import LAYERS, Display, gizmo_name
+from ..node_values import LAYERS, Display, gizmo_name
 
 if TYPE_CHECKING:
     from ..context import AppContext

@@ -17,7 +17,7 @@ from rrbc_core.session.slices import default_plane
 from .. import selection_card, teaching
 from ..camera import OBLIQUE, PRESETS, CellGeometry, View, preset_view
 from ..colors import legend_markdown
-from ..nodes import LAYERS
+from ..node_values import LAYERS
 from ..slice_nodes import SLICE_CHOICES
 
 if TYPE_CHECKING:

@@ -10,7 +10,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session import views
 from rrbc_viz import colors, selection_card, teaching
 from rrbc_viz.camera import PRESETS, CellGeometry, preset_view
-from rrbc_viz.nodes import landing_display, nice_up
+from rrbc_viz.node_values import landing_display, nice_up
 
 
 def test_delta_e_is_cie76_and_every_data_colour_stands_apart_from_the_gizmo_axes():
