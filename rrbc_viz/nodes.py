@@ -45,9 +45,9 @@ from rrbc_core.session.tools import tool_rotation
 
 from . import colors
 from .heatmap_nodes import HeatMapNodes
+from .landing_nodes import LandingNodes
 from .node_values import (
     LAYERS,
-    RING_SEGMENTS,
     Display,
     fiducial_label,
     fiducial_labels,
@@ -112,6 +112,7 @@ class SceneNodes:
         self.extent_mm = 1000.0
         self.target_arrows = True  # the lesson hides the targets' arrows while it shows the fiducials' only
         self.heat = HeatMapNodes(self.scene)  # the heat map's samples and rings
+        self.bullseye = LandingNodes(self.scene)  # the selected target's landing bullseye
 
     # ------------------------------------------------------------------------------------------ building
     def clear(self) -> None:
@@ -123,6 +124,7 @@ class SceneNodes:
         self.groups.clear(), self.gizmos.clear(), self.spheres.clear(), self.labels.clear()
         self.regions.clear(), self.region_kind.clear(), self.nodes.clear(), self.halos.clear()
         self.heat.clear()
+        self.bullseye.clear()
         self._sent.clear()  # new handles may reuse ids of removed ones
 
     def build(self, session: ExplorerSession, ev: Evaluation, mesh, display: Display, layers: dict[str, bool]) -> None:
@@ -282,34 +284,7 @@ class SceneNodes:
         # landing bullseye of one target (filled by update) --------------------------------------------------
         self.landing = None
         if len(ev.targets.ids):
-            for key, color, f in (
-                ("anchor", colors.LAND_ANCHOR, 0.45),
-                ("rigid", colors.LAND_RIGID, 0.6),
-                ("rrbc", colors.LAND_RRBC, 0.6),
-                ("vec", colors.LAND_VEC, 0.6),
-            ):
-                self.nodes[f"/landing/{key}"] = sc.add_icosphere(
-                    f"/landing/{key}",
-                    radius=f * r,
-                    color=color,
-                    subdivisions=2,
-                    cast_shadow=False,
-                    receive_shadow=False,
-                )
-            z = np.zeros((3, 2, 3), np.float32)
-            self.nodes["/landing/lines"] = sc.add_line_segments(
-                "/landing/lines", z, self._landing_line_colors(), thickness=2.5, thickness_units="screen"
-            )
-            self.nodes["/landing/rings"] = sc.add_line_segments(
-                "/landing/rings",
-                np.zeros((2 * RING_SEGMENTS, 2, 3), np.float32),
-                np.array(colors.LAND_RING, np.uint8),
-                thickness=1.5,
-                thickness_units="screen",
-            )
-            self.nodes["/landing/scale"] = sc.add_label(
-                "/landing/scale", "", font_size_mode="screen", font_screen_scale=0.8, anchor="bottom-left"
-            )
+            self.nodes.update(self.bullseye.build(r))
 
         # heat map (filled by update_heatmap) ------------------------------------------------------------
         self.nodes.update(self.heat.build(with_rings=len(ev.targets.ids) > 0))
@@ -415,12 +390,6 @@ class SceneNodes:
         r = self.display.marker_mm
         return {"shaft_radius": 0.22 * r, "head_radius": 0.55 * r, "head_length": 1.4 * r}
 
-    @staticmethod
-    def _landing_line_colors() -> np.ndarray:
-        c = np.empty((3, 2, 3), np.uint8)
-        c[0], c[1], c[2] = colors.LAND_STALK, colors.LAND_RIGID, colors.LAND_RRBC
-        return c
-
     # ------------------------------------------------------------------------------------------ updating
     def update(self, ev: Evaluation) -> None:
         """Refresh every node that depends on the Evaluation (call inside `server.atomic()`). Only changed
@@ -490,21 +459,8 @@ class SceneNodes:
             i = t.ids.index(sel[1]) if sel is not None and sel[0] == "targets" else 0
             land = landing_display(t, i, self.display.marker_mm, (self.vec_landings or {}).get(t.ids[i]))
             self.landing = land
-            self.nodes["/landing/anchor"].position = land.anchor
-            self.nodes["/landing/rigid"].position = land.rigid
-            self.nodes["/landing/rrbc"].position = land.rrbc
-            vec_node = self.nodes["/landing/vec"]
-            if land.vec is not None:
-                vec_node.position = land.vec
-            self._assign(vec_node, "visible", land.vec is not None)  # (the landing layer's frame hides it too)
-            self.nodes["/landing/lines"].points = np.array(
-                [[land.position, land.anchor], [land.anchor, land.rigid], [land.anchor, land.rrbc]], np.float32
-            )
-            self.nodes["/landing/rings"].points = land.rings().astype(np.float32)
+            self.bullseye.show(land, self._assign)
             self._update_arm(land.position, mag, self.target_tools.get(land.target))
-            scale = self.nodes["/landing/scale"]
-            scale.position = land.anchor + np.array([0.71, -0.71, 0.0]) * land.ring_mm * land.scale
-            self._assign(scale, "text", f"{land.target}: ring {land.ring_mm:g} mm")
 
     def _update_arm(self, position, magnification: float, tool=None) -> None:
         """Pose the arm to reach `position` (the bullseye's target) with the tool down or leaned (tool: (tilt,
@@ -609,10 +565,7 @@ class SceneNodes:
         reg = self.nodes.get("/registration/points")
         if reg is not None:
             reg.batched_scales = np.full(len(reg.batched_positions), 0.8 * r, np.float32)
-        for key, f in (("anchor", 0.45), ("rigid", 0.6), ("rrbc", 0.6), ("vec", 0.6)):
-            h = self.nodes.get(f"/landing/{key}")
-            if h is not None:
-                h.radius = f * r
+        self.bullseye.resize(r)
         for pid, h in self.regions.items():
             kind, size = self.region_kind[pid]
             h.scale = float(self.display.region_zoom) if kind == "box" else tuple(size * self.display.region_zoom)

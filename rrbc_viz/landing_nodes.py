@@ -1,0 +1,95 @@
+"""The landing bullseye in the scene (`LandingNodes`, held by `nodes.SceneNodes`): for the selected target, where the
+robot lands rigid-only and with RRBC (and with VEC when the Arm tab compares it), as offsets from the truth drawn
+around an anchor floating above the target, with scale rings and a label. It owns its nodes (/landing/…) and is
+handed a `node_values.LandingDisplay`. Robot frame, mm."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import colors
+from .node_values import RING_SEGMENTS, LandingDisplay
+
+#: Sphere radii of the bullseye's points, in marker radii.
+RADII = {"anchor": 0.45, "rigid": 0.6, "rrbc": 0.6, "vec": 0.6}
+
+
+def _line_colors() -> np.ndarray:
+    c = np.empty((3, 2, 3), np.uint8)
+    c[0], c[1], c[2] = colors.LAND_STALK, colors.LAND_RIGID, colors.LAND_RRBC
+    return c
+
+
+class LandingNodes:
+    """The bullseye's nodes (module docstring). `build` returns them by name (SceneNodes keeps the registry)."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.handles: dict = {}
+
+    def build(self, marker_mm: float) -> dict:
+        sc = self.scene
+        h = {}
+        for key, color in (
+            ("anchor", colors.LAND_ANCHOR),
+            ("rigid", colors.LAND_RIGID),
+            ("rrbc", colors.LAND_RRBC),
+            ("vec", colors.LAND_VEC),
+        ):
+            h[f"/landing/{key}"] = sc.add_icosphere(
+                f"/landing/{key}",
+                radius=RADII[key] * marker_mm,
+                color=color,
+                subdivisions=2,
+                cast_shadow=False,
+                receive_shadow=False,
+            )
+        h["/landing/lines"] = sc.add_line_segments(
+            "/landing/lines", np.zeros((3, 2, 3), np.float32), _line_colors(), thickness=2.5, thickness_units="screen"
+        )
+        h["/landing/rings"] = sc.add_line_segments(
+            "/landing/rings",
+            np.zeros((2 * RING_SEGMENTS, 2, 3), np.float32),
+            np.array(colors.LAND_RING, np.uint8),
+            thickness=1.5,
+            thickness_units="screen",
+        )
+        h["/landing/scale"] = sc.add_label(
+            "/landing/scale", "", font_size_mode="screen", font_screen_scale=0.8, anchor="bottom-left"
+        )
+        self.handles = h
+        return h
+
+    def clear(self) -> None:
+        self.handles = {}
+
+    def show(self, land: LandingDisplay, assign) -> None:
+        """Place the bullseye for `land`; `assign(handle, attr, value)` sets a property only when it changed."""
+        h = self.handles
+        if not h:
+            return
+        h["/landing/anchor"].position = land.anchor
+        h["/landing/rigid"].position = land.rigid
+        h["/landing/rrbc"].position = land.rrbc
+        vec_node = h["/landing/vec"]
+        if land.vec is not None:
+            vec_node.position = land.vec
+        assign(vec_node, "visible", land.vec is not None)  # (the landing layer's frame hides it too)
+        h["/landing/lines"].points = np.array(
+            [[land.position, land.anchor], [land.anchor, land.rigid], [land.anchor, land.rrbc]], np.float32
+        )
+        h["/landing/rings"].points = land.rings().astype(np.float32)
+        scale = h["/landing/scale"]
+        scale.position = land.anchor + np.array([0.71, -0.71, 0.0]) * land.ring_mm * land.scale
+        assign(scale, "text", f"{land.target}: ring {land.ring_mm:g} mm")
+
+    def resize(self, marker_mm: float) -> None:
+        for key, f in RADII.items():
+            node = self.handles.get(f"/landing/{key}")
+            if node is not None:
+                node.radius = f * marker_mm
+
+    def set_label_scale(self, factor: float) -> None:
+        node = self.handles.get("/landing/scale")
+        if node is not None:
+            node.font_screen_scale = 0.8 * factor
