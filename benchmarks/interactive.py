@@ -25,7 +25,7 @@ def _drag(app, kind: str, pid: str, steps: int) -> dict:
     """One drag of `pid` as the browser sends it: "start", `steps` "update" events DRAG_RATE_HZ apart, moving it
     by 0.5 mm each, then "end"; then back to where it was (a second drag, not timed), waiting for the background
     Monte Carlo and planning so each measured drag starts from a quiet app. Times are server-side seconds from
-    the event to all scene updates sent (RunningApp.handle_drag, as the gizmo callback calls it), every update
+    the event to all scene updates sent (EvaluateController.handle_drag, as the gizmo callback calls it), every update
     counted — those that refresh the heat map (every app.HEAT_INTERVAL_S) and the Plan tab included."""
     group = app.session.layout[kind]
     start = group.positions[group.index(pid)].copy()
@@ -120,7 +120,7 @@ def drag_latency(quick: bool) -> list[dict]:
 
 # ---------------------------------------------------------------------------------------------------- planning
 def suggest_app(quick: bool) -> list[dict]:
-    """The app's Suggest button with K = 4 on the default scene (RunningApp.suggest_fiducials, what the button
+    """The app's Suggest button with K = 4 on the default scene (PlanController.suggest_fiducials, what the button
     calls: the planner on a snapshot of the session, then the ghosts drawn). Goal: loaded < 5 s. Absolute goal."""
     from rrbc_viz.serve import serve
 
@@ -138,7 +138,7 @@ def suggest_app(quick: bool) -> list[dict]:
             loaded=loaded,
             goal="loaded < 5 s",
             met=bool(loaded < 5.0),
-            note="RunningApp.suggest_fiducials(4) on the default scene (264 candidates), median of "
+            note="PlanController.suggest_fiducials(4) on the default scene (264 candidates), median of "
             f"{1 if quick else 3}",
         )
     ]

@@ -1,4 +1,4 @@
-"""Monte Carlo throughput rows: the vectorised kernels of `rrbc_core.batch` against the per-trial loop a competent
+"""Monte Carlo throughput rows: the vectorised kernels of `rrbc_core.simulation.batch` against the per-trial loop a competent
 numpy user would write, on the same simulated trials; both must give the same corrected targets.
 
 Not interactive (a sweep, not a click), so measured on an idle machine only.

@@ -75,19 +75,20 @@ class OptionSpec:
                 return None
             raise InputError(f"{what} must be given")
         if self.kind is str:
-            v = str(value)
-            if self.choices is not None and v not in self.choices:
+            text = str(value)
+            if self.choices is not None and text not in self.choices:
                 raise InputError(f"{what} must be one of {', '.join(self.choices)}, got {value!r}")
-            return v
+            return text
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
             raise InputError(f"{what} must be a number, got {value!r}")
-        v = float(value)
-        if not math.isfinite(v):
+        x = float(value)
+        if not math.isfinite(x):
             raise InputError(f"{what} must be finite, got {value!r}")
+        v: int | float = x
         if self.kind is int:
-            if v != int(v):
+            if x != int(x):
                 raise InputError(f"{what} must be a whole number, got {value!r}")
-            v = int(v)
+            v = int(x)
         if self.bounds is not None:
             lo, hi = self.bounds
             if v < lo or v > hi or (self.lo_open and v == lo):

@@ -75,6 +75,8 @@ class AccessGuard:
         if ws is None:
             return
         req = ws.request
+        if req is None:
+            return
         ok, why = allowed(req.headers.get("Origin"), req.headers.get("Host"), req.path, self.token)
         if not ok:
             self.refused.add(int(conn.client_id))

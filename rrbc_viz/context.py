@@ -68,7 +68,7 @@ class AppContext:
     authoring: AuthoringActions = None  # type: ignore[assignment]
     files: FileActions = None  # type: ignore[assignment]
     #: make a loaded source the current one (the app's `install`)
-    install: Callable[[files.Loaded], None] = None  # type: ignore[assignment]
+    install: Callable[..., None] = None  # type: ignore[assignment]
 
     @property
     def session(self) -> ExplorerSession:

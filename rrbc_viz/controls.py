@@ -118,6 +118,7 @@ class ExplorePanel:
                 if spec.choices:
                     widget = gui.add_dropdown(spec.label, spec.choices, initial_value=spec.default, hint=spec.help)
                 else:
+                    assert spec.ui is not None
                     lo, hi, step = spec.ui
                     widget = gui.add_slider(spec.label, lo, hi, step, spec.default, hint=spec.help)
                 self.options[flag] = widget
@@ -151,11 +152,12 @@ class ExplorePanel:
         )
         self.new_seed.on_click(lambda event: app.evaluate.new_seed(client=event.client))
 
-    def sync(self, settings: Settings, kind: str, display: Display | None = None) -> None:
+    def sync(self, settings: Settings | None, kind: str, display: Display | None = None) -> None:
         with self.syncing.quiet():
             if display is not None:
                 self.magnification.value = float(min(max(display.magnification, 1), MAG_MAX))
                 return
+            assert settings is not None
             self.registration.value = settings.registration
             self.interpolation.value = settings.interpolation
             chosen = {settings.registration, settings.interpolation}

@@ -9,6 +9,7 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet, parse_measurements, read_measurements
@@ -16,6 +17,9 @@ from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.session.explorer import ExplorerSession
+
+if TYPE_CHECKING:
+    import trimesh
 
 SCENE_SUFFIXES = (".toml",)
 
@@ -25,7 +29,7 @@ class Loaded:
     """A freshly opened source: its session, the cell mesh (robot frame, mm; None if there is none) and a label."""
 
     session: ExplorerSession
-    mesh: object | None  # trimesh.Trimesh
+    mesh: trimesh.Trimesh | None
     label: str
 
 
@@ -95,7 +99,7 @@ class Library:
         raise InputError(f"{str(label)[:80]!r} is not one of the files offered (folders: scenes/ and --data)")
 
 
-def load_mesh(path) -> object:
+def load_mesh(path) -> trimesh.Trimesh:
     """A mesh file (any format trimesh reads) as one trimesh.Trimesh, robot frame, mm."""
     import trimesh
 

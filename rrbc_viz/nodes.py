@@ -33,6 +33,7 @@ Ids are used in node names with "/" replaced by "_" (`node_key`).
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import viser
@@ -49,6 +50,7 @@ from .landing_nodes import LandingNodes
 from .node_values import (
     LAYERS,
     Display,
+    LandingDisplay,
     fiducial_label,
     fiducial_labels,
     frame_magnification,
@@ -90,9 +92,9 @@ class SceneNodes:
         self.label_scale = 1.0  # labels' screen size factor (presentation mode)
         self.true_pose = None  # the sensor's true pose (scene mode), for the magnified registered frame
         self.frame_mag = 1.0  # the registered frame's error is drawn this many times larger
-        self.arm = None  # ArmNodes (scenes with a UR5)
+        self.arm: ArmNodes | None = None  # scenes with a UR5
         self.scene_model = None
-        self._arm_key = None
+        self._arm_key: tuple | None = None
         self.bias_scale = 1.0  # the session's bias size (the real arm's landing scales with it)
         self.vec_landings: dict | None = None  # target id -> VEC's landing (3,), robot frame mm (Arm tab on)
         self.target_tools: dict = {}  # target id -> (tilt, azimuth) degrees of its leaned tool (the arm is drawn so)
@@ -102,10 +104,10 @@ class SceneNodes:
         self.spheres: dict[tuple[str, str], viser.IcosphereHandle] = {}
         self.labels: dict[str, viser.LabelHandle] = {}  # node name of the label -> handle
         self._sent: dict = {}  # (id(handle), attribute) -> the value last assigned by update()
-        self.regions: dict[str, viser.SceneNodeHandle] = {}
+        self.regions: dict[str, Any] = {}  # box or icosphere handles
         self.halos: dict[str, viser.SceneNodeHandle] = {}  # target id -> coverage halo (paint_regions)
         self.region_kind: dict[str, tuple[str, np.ndarray]] = {}  # id -> (kind, size)
-        self.nodes: dict[str, viser.SceneNodeHandle] = {}  # other nodes by name
+        self.nodes: dict[str, Any] = {}  # other nodes by name (their handle types vary)
         self.layers: dict[str, bool] = {name: True for name in LAYERS}
         self.display = Display()
         self.kind = "scene"
@@ -121,8 +123,14 @@ class SceneNodes:
                 h.remove()
             except Exception:  # noqa: BLE001 - already gone
                 pass
-        self.groups.clear(), self.gizmos.clear(), self.spheres.clear(), self.labels.clear()
-        self.regions.clear(), self.region_kind.clear(), self.nodes.clear(), self.halos.clear()
+        self.groups.clear()
+        self.gizmos.clear()
+        self.spheres.clear()
+        self.labels.clear()
+        self.regions.clear()
+        self.region_kind.clear()
+        self.nodes.clear()
+        self.halos.clear()
         self.heat.clear()
         self.bullseye.clear()
         self._sent.clear()  # new handles may reuse ids of removed ones
@@ -252,6 +260,7 @@ class SceneNodes:
             region = session.regions.get(pid)
             if region is None:
                 continue
+            h: Any
             name = f"/regions/{node_key(pid)}"
             size = np.asarray(region.size, float)
             zoom = display.region_zoom
@@ -282,7 +291,7 @@ class SceneNodes:
             self.region_kind[pid] = (region.kind, size)
 
         # landing bullseye of one target (filled by update) --------------------------------------------------
-        self.landing = None
+        self.landing: LandingDisplay | None = None
         if len(ev.targets.ids):
             self.nodes.update(self.bullseye.build(r))
 
@@ -421,12 +430,12 @@ class SceneNodes:
             )
             self._assign(self.gizmos[("fiducials", pid)], "position", tuple(ev.fiducial_positions[i]))
             self._assign(self.labels[f"{gizmo_name('fiducials', pid)}/label"], "text", texts[i])
-        inc = np.flatnonzero(ev.included)
+        inc_idx = np.flatnonzero(ev.included)
         arrows = self.nodes["/corrections/fiducials"]
-        if len(inc):
-            start = ev.fiducial_positions[inc]
-            arrows.points = np.stack([start, start + mag * ev.corrections_robot[inc]], axis=1).astype(np.float32)
-        arrows.visible = bool(len(inc))
+        if len(inc_idx):
+            start = ev.fiducial_positions[inc_idx]
+            arrows.points = np.stack([start, start + mag * ev.corrections_robot[inc_idx]], axis=1).astype(np.float32)
+        arrows.visible = bool(len(inc_idx))
 
         # hull
         hull = self.nodes["/hull/edges"]
@@ -566,7 +575,7 @@ class SceneNodes:
         if reg is not None:
             reg.batched_scales = np.full(len(reg.batched_positions), 0.8 * r, np.float32)
         self.bullseye.resize(r)
-        for pid, h in self.regions.items():
+        for pid, region in self.regions.items():
             kind, size = self.region_kind[pid]
-            h.scale = float(self.display.region_zoom) if kind == "box" else tuple(size * self.display.region_zoom)
+            region.scale = float(self.display.region_zoom) if kind == "box" else tuple(size * self.display.region_zoom)
         self.heat.resize(self.display)

@@ -1,4 +1,4 @@
-"""The Plan tab: fiducial placement (issue 7) shown over the core's planning (`rrbc_core.planning` through the
+"""The Plan tab: fiducial placement (issue 7) shown over the core's planning (`rrbc_core.analysis.planning` through the
 session's `planning_state`, `suggest_fiducials` and `accept_suggestions`).
 
 What the user sees:
@@ -107,6 +107,8 @@ def render_state(state: PlanningState, excluded: int = 0, settings=None, centres
     session's method differs from the planner's). `centres`: the Evaluation's `coverage` (each target inside the
     fiducials' hull or not, as the Explore card and RRBC's extrapolation flag say)."""
     pred = state.predicted
+    if pred is None:
+        raise ValueError("render_state needs a predicted RMST (scene mode); measured data use render_coverage")
     n_full = int(np.sum(state.coverage >= 1.0))
     short = [f"{pid} {pct(c)}" for pid, c in zip(state.target_ids, state.coverage) if c < 1.0]
     cover = f"**{n_full} of {len(state.target_ids)} regions** fully inside the fiducials' hull"
@@ -251,7 +253,7 @@ class PlanningPanel:
         self.ghosts: list = []  # icosphere handles of the suggested fiducials
         self.ghost_labels: list = []
         self._sent: dict = {}  # (id(handle), attr) -> value last assigned
-        self._group = None
+        self._group: viser.FrameHandle | None = None
         # background planning (slow scenes, during drags); every synchronous refresh makes its work stale
         self._worker = CoalescingWorker(self._background, PLAN_QUIET_S, name="rrbc-planning")
 
@@ -262,10 +264,21 @@ class PlanningPanel:
             if not self._syncing:
                 self.app.plan.set_coverage_colours(bool(self.colour.value))
 
-        self.suggest_button.on_click(lambda event: self.app.plan.suggest_fiducials(client=event.client))
-        self.accept_button.on_click(lambda event: self.app.plan.accept_suggestions(client=event.client))
-        self.clear_button.on_click(lambda event: self.app.plan.clear_suggestions())
-        self.undo_button.on_click(lambda event: self.app.authoring.undo(client=event.client))
+        @self.suggest_button.on_click
+        def _suggest(event: viser.GuiEvent) -> None:
+            self.app.plan.suggest_fiducials(client=event.client)
+
+        @self.accept_button.on_click
+        def _accept(event: viser.GuiEvent) -> None:
+            self.app.plan.accept_suggestions(client=event.client)
+
+        @self.clear_button.on_click
+        def _clear(event: viser.GuiEvent) -> None:
+            self.app.plan.clear_suggestions()
+
+        @self.undo_button.on_click
+        def _undo(event: viser.GuiEvent) -> None:
+            self.app.authoring.undo(client=event.client)
 
     @contextmanager
     def quiet(self):
@@ -432,7 +445,9 @@ class PlanningPanel:
         if not on:
             self._paint(None)
             return
-        self._paint({pid: colors.coverage_color(c) for pid, c in zip(self.state.target_ids, self.state.coverage)})
+        state = self.state
+        assert state is not None  # `on` says so
+        self._paint({pid: colors.coverage_color(c) for pid, c in zip(state.target_ids, state.coverage)})
 
     # ------------------------------------------------------------------------------------------ suggesting
     def begin(self) -> bool:
@@ -496,7 +511,7 @@ class PlanningPanel:
         """The "Colour regions by coverage" box, set without acting on it."""
         if bool(self.colour.value) != bool(on):
             with self.quiet():
-                self.colour.value = bool(on)
+                self.colour.value = bool(on)  # type: ignore[misc]  # viser's stub: a checkbox's value is settable
 
     def show_refusal(self, message: str) -> None:
         """Why the last Suggest was refused."""

@@ -57,7 +57,7 @@ class ArmNodes:
         self.scene = scene
         self.links: list = []
         self.joints: list = []
-        self.stylus = None
+        self.stylus: viser.CylinderHandle | None = None
         self.marks: dict = {}
         self.pose = None
 
@@ -100,6 +100,7 @@ class ArmNodes:
             joint.position = f[i, :3, 3]
             joint.wxyz = _z_to(f[i, :3, 2])
         a, b = f[6, :3, 3], f[7, :3, 3]
+        assert self.stylus is not None  # built with the arm
         self.stylus.position = 0.5 * (a + b)
         self.stylus.wxyz = _z_to(b - a)
         self.stylus.height = max(float(np.linalg.norm(b - a)), 1.0)

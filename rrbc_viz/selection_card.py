@@ -95,7 +95,7 @@ def bullseye_svg(ev: Evaluation, pid: str, vec=None) -> tuple[str, str, str]:
     i = t.ids.index(pid)
     rigid, rrbc, known = landing_offsets(t, i)
     off_vec = None if vec is None or not known else np.asarray(vec, float) - t.truth[i]
-    biggest = float(max(np.linalg.norm(rigid), np.linalg.norm(rrbc), 1e-6))
+    biggest = max(float(np.linalg.norm(rigid)), float(np.linalg.norm(rrbc)), 1e-6)
     if off_vec is not None:
         biggest = max(biggest, float(np.linalg.norm(off_vec)))
     ring = nice_up(biggest)

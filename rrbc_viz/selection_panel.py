@@ -45,7 +45,10 @@ class SelectionPanel:
         def _(event: viser.GuiEvent) -> None:
             if not self.syncing.on:
                 sel = parse_choice(self.choice.value)
-                app.views.select(*(sel or (None, None)), client=event.client)
+                if sel is None:
+                    app.views.select(None, client=event.client)
+                else:
+                    app.views.select(sel[0], sel[1], client=event.client)
 
         @self.exclude.on_click
         def _(event: viser.GuiEvent) -> None:

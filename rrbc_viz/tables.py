@@ -55,12 +55,12 @@ def target_table(ev: Evaluation) -> str:
     sep = "|---|---:|---:|---:|" + ("---:|" if has_std else "") + ":---:|"  # centred: never runs into the number
     rows = [head, sep]
     corr = np.linalg.norm(t.correction.reshape(-1, 3), axis=1)
-    std = np.linalg.norm(t.correction_std.reshape(-1, 3), axis=1) if has_std else None
+    std = np.linalg.norm(t.correction_std.reshape(-1, 3), axis=1) if t.correction_std is not None else None
     for i, pid in enumerate(t.ids):
         flag = "⚠ extrapolated" if bool(t.extrapolated[i]) else "inside"
         row = f"| {pid} | {_mm(t.error_rigid[i])} | {_mm(t.error_rrbc[i])} | {corr[i]:.3f} | "
         if has_std:
-            row += f"{std[i]:.3f} | "
+            row += f"{std[i]:.3f} | " if std is not None else ""
         rows.append(row + f"{flag} |")
     return "\n".join(rows) + (
         "\n\nmm. *rigid*, *RRBC*: target error against the truth (— where there is none); |ê|: interpolated "

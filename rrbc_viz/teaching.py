@@ -22,7 +22,7 @@ class LessonContext:
 
     kind: str  # "scene" or "measurements"
     magnification: float  # arrows and landing offsets are drawn this many times longer
-    regions: dict = field(default_factory=dict)  # target id -> rrbc_core.scene.Region (scene mode)
+    regions: dict = field(default_factory=dict)  # target id -> rrbc_core.io.scene.Region (scene mode)
     frame_magnification: float = 1.0  # the registered sensor frame's error is drawn this many times larger
 
 

@@ -123,6 +123,7 @@ class CoalescingWorker:
                     self._cond.wait(self._delay_s - quiet_for)
                 if self._stopped:
                     return
+                assert self._pending is not None  # the wait loop ends only with a pending job (or stopped)
                 generation, job = self._pending
                 self._pending = None
                 self._busy = True

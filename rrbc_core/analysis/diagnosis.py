@@ -309,7 +309,7 @@ def diagnose(
     ordered = sorted(effects.values(), key=lambda e: -e.magnitude_mm)
     return Diagnosis(
         tuple(ordered),
-        tuple(float(v) for v in sigma),
+        (float(sigma[0]), float(sigma[1]), float(sigma[2])),
         noise_source,
         bias,
         verdict.recommended,

@@ -93,6 +93,7 @@ def fit_field(points: np.ndarray, residuals: np.ndarray) -> FieldModel:
         nll, s2 = _nll(z2, d, lam)
         if best is None or nll < best[0]:
             best = (nll, ell, lam.copy(), s2, u, d, z)
+    assert best is not None  # the loop over length scales ran at least once
     _, ell, lam, s2, u, d, z = best
     return FieldModel(p, float(ell), lam, float(s2), u, d, z, idx)
 

@@ -56,10 +56,7 @@ def paired(mset) -> Data:
         if role != "target" and np.all(np.isfinite(robot[i])) and np.all(np.isfinite(sensor[i]))
     ]
     order: dict[str, int] = {}
-    row_point = []
-    for i in rows:
-        row_point.append(order.setdefault(mset.ids[i], len(order)))
-    row_point = np.asarray(row_point, int)
+    row_point = np.asarray([order.setdefault(mset.ids[i], len(order)) for i in rows], int)
     n = len(order)
     if n > MAX_POINTS:
         raise InputError(
@@ -228,7 +225,7 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
         idx = np.flatnonzero(active)
         reg = least_squares(d.sensor[idx], d.robot[idx], weights=d.count[idx])
         p = reg.mapping.apply(d.sensor[idx])
-        g = Geometry(p, d.time[idx] if use_time else None, d.count[idx], white)
+        g = Geometry(p, d.time[idx] if use_time and d.time is not None else None, d.count[idx], white)
         x = np.hstack([g.rigid(), g.linear()])
         if use_time:
             x = np.hstack([x, usable_drift(x, g.drift())[0]])
@@ -263,8 +260,8 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
         if padj < alpha:
             found = i + 1
     out = [s[0] for s in steps[:found]]
-    p = max([s[1] for s in steps[:found]]) if found else (steps[0][1] if steps else 1.0)
-    return out, p
+    p_value = max(float(s[1]) for s in steps[:found]) if found else (float(steps[0][1]) if steps else 1.0)
+    return out, p_value
 
 
 # ---------------------------------------------------------------------------------------------- Moran's I
@@ -420,7 +417,7 @@ def noise_cov(
         nu = float(np.sum(d.count - 1))
         return e.T @ e / nu, nu, "repeats"
     p = reg.mapping.apply(s)
-    g = Geometry(p, d.time[inl] if use_time else None, w)
+    g = Geometry(p, d.time[inl] if use_time and d.time is not None else None, w)
     x = np.hstack([g.rigid(), g.linear()])
     if use_time:
         x = np.hstack([x, usable_drift(x, g.drift())[0]])

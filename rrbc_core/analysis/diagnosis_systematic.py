@@ -11,7 +11,7 @@ import numpy as np
 from scipy import stats
 from scipy.spatial import cKDTree
 
-from rrbc_core.analysis.diagnosis_field import fit_field, gls_whiten
+from rrbc_core.analysis.diagnosis_field import FieldModel, fit_field, gls_whiten
 from rrbc_core.analysis.diagnosis_stats import (
     BOOTSTRAP,
     BOOTSTRAP_EXACT_POINTS,
@@ -27,7 +27,7 @@ from rrbc_core.analysis.diagnosis_stats import (
     usable,
     usable_drift,
 )
-from rrbc_core.registration.strategies import least_squares
+from rrbc_core.registration.strategies import Registration, least_squares
 
 _SMALL_N = 40  # below this many paired points the smooth-field test's reach is stated as a limit (power study)
 
@@ -58,7 +58,7 @@ class Pass:
     """One pass of the systematic tests over a set of inliers."""
 
     inl: np.ndarray
-    reg: object
+    reg: Registration
     p: np.ndarray  # (n, 3) mapped inliers, robot frame
     resid: np.ndarray  # (n, 3) rigid residuals, mm
     effects: dict  # name -> Effect
@@ -67,7 +67,7 @@ class Pass:
     rate: np.ndarray  # drift mm/s (zeros when not accepted)
     t_mean: float
     delta: np.ndarray | None  # the arm's scaled parameter errors when kinematic is accepted
-    field: object = None  # diagnosis_field.FieldModel once a smooth field is found
+    field: FieldModel | None = None  # once a smooth field is found
     moran: tuple = ()  # (I, bootstrap mean, k)
     rejudged: tuple = ()  # names dropped beside the field or the arm, with their p-values
 

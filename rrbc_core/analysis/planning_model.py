@@ -237,7 +237,7 @@ class _Model:
 
     def rmst(self, sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """RMST and its sampling std from squared errors (..., M) with M = n_targets x n per target."""
-        per = sq.reshape(sq.shape[:-1] + (self.n_targets, -1))
+        per: np.ndarray = sq.reshape(sq.shape[:-1] + (self.n_targets, -1))
         n = per.shape[-1]
         mse = per.mean(axis=(-1, -2))
         var_mse = (per.var(axis=-1, ddof=1) / n).sum(axis=-1) / self.n_targets**2 if n > 1 else 0 * mse

@@ -129,21 +129,25 @@ def compare(mset: MeasurementSet, robot: str = "ur5", tool_mm: float = 0.0) -> d
         rmst = {m: _rms(pred[m], b[rows_chk]) for m in METHODS}
     # cross-validation over the fiducials (no check rows used)
     folds = np.array_split(np.arange(len(rows_fid)), min(CV_FOLDS, len(rows_fid))) if len(rows_fid) >= 2 else []
-    errs = {m: [] for m in METHODS}
+    errs: dict[str, list] = {m: [] for m in METHODS}
     for held in folds:
         keep = np.setdiff1d(np.arange(len(rows_fid)), held)
         f = fit_methods(np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, nominal)
         pred = predict_methods(f, nominal, s[rows_fid[held]], q[rows_fid[held]])
         for m in METHODS:
             errs[m].append(np.sum((pred[m] - b[rows_fid[held]]) ** 2, axis=1))
-    cv = {m: float(np.sqrt(np.mean(np.concatenate(errs[m])))) if folds else None for m in METHODS}
-    recommended = min(METHODS, key=lambda m: cv[m]) if folds else "rigid"
+    cv_values = {m: float(np.sqrt(np.mean(np.concatenate(errs[m])))) for m in METHODS} if folds else {}
+    cv: dict[str, float | None] = {m: cv_values.get(m) for m in METHODS}
+    recommended = min(METHODS, key=lambda m: cv_values[m]) if folds else "rigid"
     cal = fit.cal
     # a kinematic error is claimed only when the arm's identified errors are significant against their stated
     # uncertainty AND the arm model beats a model-free correction out of sample: a smooth sensor field leaks into
     # the DH fit (its χ² alone would call it kinematic), but then RRBC does as well as VEC without an arm model
-    best_vec = min(cv["vec"], cv["vec_rrbc"]) if folds else None
-    claimed = bool(folds and cal.kinematic_p_value < KINEMATIC_ALPHA and best_vec < KINEMATIC_MARGIN * cv["rrbc"])
+    claimed = bool(
+        folds
+        and cal.kinematic_p_value < KINEMATIC_ALPHA
+        and min(cv_values["vec"], cv_values["vec_rrbc"]) < KINEMATIC_MARGIN * cv_values["rrbc"]
+    )
     targets = []
     if len(rows_tgt):
         pred = predict_methods(fit, nominal, s[rows_tgt], q[rows_tgt])

@@ -84,7 +84,7 @@ class CorrectionResult:
 
 
 def _points_json(group: PointGroup, corrected: CorrectedPoints | None, err_rigid=None, err_rrbc=None) -> list:
-    rows = []
+    rows: list[dict] = []
     if corrected is None:
         return rows
     for k, pid in enumerate(group.ids):

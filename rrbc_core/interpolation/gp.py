@@ -170,6 +170,7 @@ class _FittedGP(Fitted):
                     "check for duplicated fiducials or use method 'idw'"
                 )
 
+        assert best_theta is not None  # at least one start converged (else InputError above)
         ell, h = np.exp(best_theta)
         if noise_mm is None:
             g = h

@@ -300,12 +300,13 @@ def _records(text: str, source: str) -> Iterator[tuple[int, list[str]]]:
 
 def _number(cell: str, source: str, line: int, column: str, limit: float = COORDINATE_LIMIT_MM) -> float:
     if _NUMBER.fullmatch(cell):
-        value = float(cell)
-        if math.isfinite(value) and abs(value) <= limit:
-            return value
-        if not math.isfinite(value):
+        number = float(cell)
+        if math.isfinite(number) and abs(number) <= limit:
+            return number
+        if not math.isfinite(number):
             raise _error(source, line, column, f"{excerpt(cell)!r} is out of range (not a finite number)")
         raise _error(source, line, column, f"{excerpt(cell)!r} is out of range (at most {limit:g} in size)")
+    value: float | None
     try:
         value = float(cell)
     except ValueError:

@@ -43,6 +43,10 @@ def write_measurements(path: str | PathLike, mset: MeasurementSet, comments: Seq
     InputError
         The set is invalid or the file cannot be written (one line).
     """
+    if not isinstance(mset, MeasurementSet):
+        raise InputError(
+            f"write_measurements(path, mset) needs a MeasurementSet as its second argument, got {type(mset).__name__}"
+        )
     validate(mset)
     write_time = bool(np.any(np.isfinite(mset.time)))
     header = ["id", "role", *SENSOR_COLUMNS, *ROBOT_COLUMNS] + (["time"] if write_time else []) + list(mset.extra)

@@ -23,11 +23,13 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
+from rrbc_core.models.errormodels import ErrorModel
 
 #: Robot models the scene format accepts: arms the kinematics module implements (kinematics.ROBOT_DH), and "none",
 #: a robot without kinematics (its bias is then given as a field, e.g. smooth_field; no kinematic term allowed).
@@ -169,7 +171,8 @@ class NamedPoints:
 
     def subset(self, ids) -> NamedPoints:
         idx = [self.index(i) for i in ids]
-        return NamedPoints(tuple(self.ids[i] for i in idx), self.positions[idx], self.tool_yaw_deg[idx])
+        yaw = None if self.tool_yaw_deg is None else self.tool_yaw_deg[idx]
+        return NamedPoints(tuple(self.ids[i] for i in idx), self.positions[idx], yaw)
 
     def as_dict(self) -> dict:
         return {"ids": list(self.ids), "positions": self.positions.tolist()}
@@ -208,7 +211,7 @@ class Scene:
     sites: NamedPoints
     targets: tuple
     layouts: dict
-    error_model: object
+    error_model: ErrorModel
     error_model_table: dict
     seed: int = 0
     check_points_per_target: int = DEFAULT_CHECK_POINTS_PER_TARGET
@@ -336,7 +339,7 @@ def _load_mesh_file(path: Path):
     Raises ValueError/OSError-derived exceptions from trimesh; the loader wraps them."""
     import trimesh
 
-    loaded = trimesh.load(str(path), force="scene")
+    loaded: Any = trimesh.load(str(path), force="scene")  # a trimesh.Scene (force="scene")
     parts, meshes = [], []
     start = 0
     graph = loaded.graph

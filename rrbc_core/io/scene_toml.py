@@ -298,7 +298,8 @@ def _points(c: Checker, doc: dict, kind: str, default_yaw: float, site_pos: dict
         + (("region",) if with_region else ())
     )
     required = ("id",) + (("region",) if with_region else ())
-    out, seen = [], {}
+    out: list = []
+    seen: dict = {}
     for i, b in enumerate(blocks):
         key = f"{kind}[{i}]"
         c.keys(b, key, allowed, required, where=f"[[{kind}]]")
@@ -386,7 +387,8 @@ def _layouts(c: Checker, doc: dict, pool: dict) -> tuple[dict, dict]:
     if "layouts" not in doc:
         return {}, {}
     lt = c.table(doc["layouts"], "layouts")
-    layouts, points = {}, {}
+    layouts: dict = {}
+    points: dict = {}
     for name, body in lt.items():
         key = f"layouts.{name}"
         b = c.table(body, key)

@@ -67,7 +67,8 @@ def _document(name: str, points: list[dict]) -> dict:
 
 def to_markups(mset: MeasurementSet) -> tuple[dict, dict]:
     """(sensor document, robot document) for a measurement set."""
-    sensor, robot = [], []
+    sensor: list[dict] = []
+    robot: list[dict] = []
     for i, (pid, role) in enumerate(zip(mset.ids, mset.roles)):
         t = float(mset.time[i])
         sensor.append(_point(len(sensor), pid, mset.sensor[i], role, t))

@@ -160,7 +160,7 @@ def _refine_on_mesh(src, vertices, faces, mapping: RigidTransform, max_distance_
         d_rot = rotation_from_rotvec(x[:3])
         rot, trans = d_rot @ rot, d_rot @ trans + x[3:]
         used += 1
-        if min(motion, 1.0) < 1e-4:  # no cloud point moved by more than 0.1 µm
+        if float(motion) < 1e-4:  # no cloud point moved by more than 0.1 µm
             converged = True
             break
     p, q, n, ok = closest(rot, trans)
@@ -312,6 +312,6 @@ def icp_registration(
         "cloud_points": int(len(src)),
         "target_points": int(len(tgt_pts)),
         "max_distance_mm": float(max_distance_mm),
-        "inlier_rmse_point_to_point_mm": float(result.inlier_rmse),
+        "inlier_rmse_point_to_point_mm": float(result.inlier_rmse) if result is not None else float("nan"),
     }
     return Registration("icp", mapping, residuals, fre, details)

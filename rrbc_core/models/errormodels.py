@@ -145,15 +145,15 @@ class ErrorTerm(Protocol):
     """One error source. `sample` returns displacements (trials, P, 3) mm (deterministic terms may return
     (1, P, 3)) in the frame of `side`, to be added to that side's reading."""
 
-    kind: str
-    random: bool
+    kind: ClassVar[str]
+    random: ClassVar[bool]
 
     def sample(self, points: PointSet, side: str, rng: np.random.Generator, trials: int) -> np.ndarray: ...
 
 
 #: kind string -> term class (the `type` names of `errorterms.error_model_from_dict`): every `_Term` subclass with
 #: a `kind` registers itself here when it is defined (the terms live in `errorterms`).
-TERM_TYPES: dict[str, type] = {}
+TERM_TYPES: dict[str, type[_Term]] = {}
 
 
 class _Term:

@@ -247,6 +247,10 @@ class SmoothField(_Term):
     features: int = 256
     kind: ClassVar[str] = "smooth_field"
     random: ClassVar[bool] = False
+    # the random Fourier features, drawn in __post_init__ from `seed` (not fields: derived, read-only)
+    _omega: np.ndarray = field(init=False, repr=False, compare=False)
+    _phase: np.ndarray = field(init=False, repr=False, compare=False)
+    _weights: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         _set(self, "rms_mm", _number("rms_mm", self.rms_mm, minimum=0, unit="mm"))
@@ -405,7 +409,7 @@ class WarmUp(_Term):
 
 # --- tables ------------------------------------------------------------------------------------------------
 def _term_fields(cls) -> list[dataclasses.Field]:
-    return [f for f in dataclasses.fields(cls)]
+    return [f for f in dataclasses.fields(cls) if f.init]  # the options, not what __post_init__ derives
 
 
 def _term_from_dict(entry, loc: str, side: str) -> ErrorTerm:
@@ -434,7 +438,8 @@ def _term_from_dict(entry, loc: str, side: str) -> ErrorTerm:
         if name not in entry:
             raise InputError(f"{loc}: missing key {name!r}; required keys: {', '.join(required)}")
     try:
-        return cls(**{k: v for k, v in entry.items() if k != "type"})
+        term: Any = cls(**{k: v for k, v in entry.items() if k != "type"})  # a concrete term (`_Term` subclass)
+        return term
     except InputError as e:
         raise InputError(f"{loc}: {e}") from None
     except (TypeError, ValueError) as e:  # defensive: a value the validators did not anticipate

@@ -466,7 +466,12 @@ def perturbed(
     Draw order from `rng` (fixed): theta_offset (6), a (6), d (6), alpha (6). Zero sigmas give `dh` exactly.
     """
     for name, v in (("joint_offset_deg", joint_offset_deg), ("link_mm", link_mm), ("twist_deg", twist_deg)):
-        if isinstance(v, bool) or not np.isscalar(v) or not np.isfinite(v) or v < 0:
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, (int, float, np.integer, np.floating))
+            or not np.isfinite(v)
+            or v < 0
+        ):
             raise InputError(f"{name} must be a finite number >= 0, got {v!r}")
     d_theta = rng.normal(0.0, 1.0, 6) * np.radians(joint_offset_deg)
     d_a = rng.normal(0.0, 1.0, 6) * link_mm

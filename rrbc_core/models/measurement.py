@@ -98,8 +98,9 @@ class MeasurementModel:
         """(β_s (P, 3) sensor frame, β_r (P, 3) robot frame), mm, unscaled. Draws nothing."""
         det = self.error_model.deterministic()
         n = len(pts)
-        sensor = det.sample(pts, "sensor", None, 1)[0] if det.sensor else np.zeros((n, 3))
-        robot = det.sample(pts, "robot", None, 1)[0] if det.robot else np.zeros((n, 3))
+        unused = np.random.default_rng(0)  # deterministic terms draw nothing
+        sensor = det.sample(pts, "sensor", unused, 1)[0] if det.sensor else np.zeros((n, 3))
+        robot = det.sample(pts, "robot", unused, 1)[0] if det.robot else np.zeros((n, 3))
         return sensor, robot
 
     def noise(self, pts: PointSet, rng: np.random.Generator, trials: int = 1) -> tuple[np.ndarray, np.ndarray]:

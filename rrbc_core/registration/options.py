@@ -9,8 +9,8 @@ are the functions of `strategies.py`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import ClassVar
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol
 
 from numpy.typing import ArrayLike
 
@@ -33,13 +33,30 @@ __all__ = [
     "register",
 ]
 
-_AVERAGE = dict(
-    label="Averaging",
-    help="combinatorial and clustering: average the 3-point registrations element by element (as published) or by "
-    "the chordal mean of their rotations",
-    choices=("elementwise", "chordal"),
-)
-_SEED = dict(label="Seed", help="seed of annealing and clustering (default 0)", bounds=(-(2**63), 2**63 - 1))
+
+def _average() -> Any:
+    return option(
+        "elementwise",
+        label="Averaging",
+        help="combinatorial and clustering: average the 3-point registrations element by element (as published) or by "
+        "the chordal mean of their rotations",
+        choices=("elementwise", "chordal"),
+    )
+
+
+def _seed() -> Any:
+    return option(0, label="Seed", help="seed of annealing and clustering (default 0)", bounds=(-(2**63), 2**63 - 1))
+
+
+class StrategyObject(Protocol):
+    """What every strategy class offers: its name, whether it is seeded, the per-call data it accepts, and
+    `register`."""
+
+    name: ClassVar[str]
+    seeded: ClassVar[bool]
+    extras: ClassVar[tuple]
+
+    def register(self, sensor: ArrayLike, robot: ArrayLike) -> Registration: ...
 
 
 @dataclass(frozen=True)
@@ -73,7 +90,7 @@ class Combinatorial:
     name: ClassVar[str] = "combinatorial"
     seeded: ClassVar[bool] = False
     extras: ClassVar[tuple] = ()
-    average: str = option("elementwise", **_AVERAGE)
+    average: str = _average()
     degeneracy_ratio: float = option(
         geometry.SUBSET_DEGENERACY_RATIO,
         flag="degeneracy-ratio",
@@ -97,7 +114,7 @@ class Annealing:
     name: ClassVar[str] = "annealing"
     seeded: ClassVar[bool] = True
     extras: ClassVar[tuple] = ()
-    seed: int = option(0, **_SEED)
+    seed: int = _seed()
     iterations: int = option(
         5000, label="Annealing iterations", help="annealing: steps of the chain (default 5000)", bounds=(1, 1_000_000)
     )
@@ -129,8 +146,8 @@ class Clustering:
     clusters: int = option(
         2, label="Clusters", help="clustering: number of clusters (default 2)", bounds=(1, 50), ui=(1, 8, 1)
     )
-    seed: int = option(0, **_SEED)
-    average: str = option("elementwise", **_AVERAGE)
+    seed: int = _seed()
+    average: str = _average()
 
     def __post_init__(self):
         check_options(self, "clustering")
@@ -142,7 +159,9 @@ class Clustering:
 Strategy = LeastSquares | ThreePoint | Combinatorial | Annealing | Clustering
 
 #: The registry of registration strategies: command-line name -> option class.
-STRATEGIES: dict[str, type] = {c.name: c for c in (LeastSquares, ThreePoint, Combinatorial, Annealing, Clustering)}
+STRATEGIES: dict[str, type[StrategyObject]] = {
+    c.name: c for c in (LeastSquares, ThreePoint, Combinatorial, Annealing, Clustering)
+}
 
 #: The options each strategy takes by name besides its seed, in `register` and in the batch kernels
 #: (`simulation.batch.rrbc_batch`): its option fields and the per-call data it accepts (least squares' weights).
@@ -151,7 +170,7 @@ STRATEGY_OPTIONS: dict[str, tuple] = {
 }
 
 
-def make_strategy(name: str, **options) -> Strategy:
+def make_strategy(name: str, **options) -> StrategyObject:
     """The strategy object for a command-line name with its options (None: the default). InputError for an unknown
     name or an option the strategy does not take or that is out of range."""
     key = str(name).strip().lower()
@@ -159,7 +178,7 @@ def make_strategy(name: str, **options) -> Strategy:
         raise InputError(f"unknown registration '{name}': choose one of {', '.join(STRATEGIES)}")
     cls = STRATEGIES[key]
     given = {k: v for k, v in options.items() if v is not None}
-    allowed = {f.name for f in fields(cls)}
+    allowed = {spec.name for spec in option_specs(cls)}
     unknown = sorted(set(given) - allowed)
     if unknown:
         takes = ", ".join(sorted(allowed)) or "no options"

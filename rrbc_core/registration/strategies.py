@@ -340,7 +340,7 @@ def combinatorial(
 # ------------------------------------------------------------------------------------------------------
 def _modifier(theta) -> RigidTransform:
     x, y, z, a, b, g = theta
-    return RigidTransform(rotation_from_euler_zyx(a, b, g), [x, y, z])
+    return RigidTransform(rotation_from_euler_zyx(a, b, g), np.array([x, y, z], float))
 
 
 def _compose_modifier(mod: RigidTransform, mapping):
@@ -471,7 +471,7 @@ def clustering(sensor, robot, clusters: int = 2, seed: int = 0, average: str = "
     members = []
     for j in range(clusters):
         order = np.argsort(np.linalg.norm(s - kernels[j], axis=1), kind="stable")
-        chosen = list(np.flatnonzero(labels == j))
+        chosen = [int(i) for i in np.flatnonzero(labels == j)]
         for i in order:
             if len(chosen) >= 3 and geometry.spread_ratios(s[chosen])[0] >= geometry.SUBSET_DEGENERACY_RATIO:
                 break

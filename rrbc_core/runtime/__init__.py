@@ -1,1 +1,1 @@
-"""How rrbc runs: BLAS/OpenMP thread pools (`threads`, docs/threads.md) and the terminal progress bar (`progress`)."""
+"""How rrbc runs: BLAS/OpenMP thread pools (`threads`, docs/threads.md) and where independent tasks run (`tasks`)."""

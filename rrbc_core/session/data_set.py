@@ -126,8 +126,12 @@ def _file_data(session: ExplorerSession) -> SessionData:
     lines = [mset.lines[i] if i < len(mset.lines) else 0 for i in keep]
     extra = {k: [v[i] for i in keep] for k, v in mset.extra.items()}
     for pid, s in moved.items():
-        ids.append(pid), roles.append("target"), sensor.append(s), robot.append(np.full(3, np.nan))
-        time.append(np.nan), lines.append(0)
+        ids.append(pid)
+        roles.append("target")
+        sensor.append(s)
+        robot.append(np.full(3, np.nan))
+        time.append(np.nan)
+        lines.append(0)
         for v in extra.values():
             v.append("")
     n = len(ids)
@@ -151,7 +155,7 @@ def _file_data(session: ExplorerSession) -> SessionData:
 
 def _moved_points(session: ExplorerSession) -> dict:
     """{id: new sensor reading (3,)} of the file's target and check points the user moved."""
-    original = {}
+    original: dict[str, np.ndarray] = {}
     for role in ("target", "check"):
         g = session.mset.points(role)
         for pid, s in zip(g.ids, g.sensor):
@@ -182,7 +186,10 @@ def _scene_data(session: ExplorerSession) -> SessionData:
         reg = session.layout["registration"]
 
         def add(kind, pid, role, p, of=""):
-            ids.append(pid), roles.append(role), pos.append(np.asarray(p, float)), owner.append(of)
+            ids.append(pid)
+            roles.append(role)
+            pos.append(np.asarray(p, float))
+            owner.append(of)
             rot.append(session.tool_rotations(kind, [pid])[0])
             time.append(session.row_times(kind, [pid])[0])
 
@@ -205,8 +212,12 @@ def _scene_data(session: ExplorerSession) -> SessionData:
         for pid, region in zip(t_ids, regions):
             tool = session.tool_rotations("targets", [pid])[0]
             for k, p in enumerate(region.sample(rng, n_checks)):
-                ids.append(f"{pid}.c{k:02d}"), roles.append("check"), pos.append(p), owner.append(pid)
-                rot.append(tool), time.append(row * dt)
+                ids.append(f"{pid}.c{k:02d}")
+                roles.append("check")
+                pos.append(p)
+                owner.append(pid)
+                rot.append(tool)
+                time.append(row * dt)
                 row += 1
         n = len(ids)
         cell = WorkCell(

@@ -6,6 +6,7 @@ measurement model (scene) or the file (measured data) give them."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -79,7 +80,7 @@ class Settings:
 
     def replace(self, **changes) -> Settings:
         """A copy with fields or flag-named options changed (what `ExplorerSession.update` applies)."""
-        base = {
+        base: dict[str, Any] = {
             "registration": self.registration,
             "interpolation": self.interpolation,
             "noise_scale": self.noise_scale,

@@ -229,7 +229,9 @@ class ExplorerSession:
                 )
         for pid in g.ids:
             _, a, b, c = self._readings[(kind, pid)]
-            out_s.append(a), out_r.append(b), out_t.append(c)
+            out_s.append(a)
+            out_r.append(b)
+            out_t.append(c)
         n = len(g.ids)
         return Readings(np.array(out_s).reshape(n, 3), np.array(out_r).reshape(n, 3), np.array(out_t).reshape(n, 3))
 

@@ -4,9 +4,14 @@ noise and bias sizes applied (`scaled`)."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from dataclasses import dataclass, field
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from rrbc_core.analysis.planning_model import RmstPrediction
 
 
 @dataclass(frozen=True, eq=False)
@@ -27,11 +32,11 @@ class HeatMap:
 class PlanningState:
     """Planning for the fiducials as the session has them: per target (M,) the fraction of its region of
     variability inside the included fiducials' hull; the fast predicted RMST (planning.RmstPrediction: rigid_mm,
-    rigid_std_mm, rrbc_mm, rrbc_std_mm, method) over the regions; the number of fiducials it counts."""
+    rigid_std_mm, rrbc_mm, rrbc_std_mm, method) over the regions, None for measured data (no error model); the number of fiducials it counts."""
 
     target_ids: tuple
     coverage: np.ndarray
-    predicted: object
+    predicted: RmstPrediction | None
     fiducials_used: int
 
     def coverage_of(self, pid: str) -> float:

@@ -3,7 +3,7 @@ every grid point (rigid, RRBC, the interpolated correction's size, its gp standa
 
 Frames and units: robot frame, mm. A `SlicePlane` is normal to one robot axis ("x", "y" or "z") at `offset_mm`
 along it, spanning [lo, hi] on the two other axes in their order (x, y for a "z" plane; x, z for "y"; y, z for
-"x"); `n` grid points per side. `ExplorerSession.error_slice(plane)` (views) fills an `ErrorSlice`: in scene mode
+"x"); `n` grid points per side. `views.error_slice(session, plane)` fills an `ErrorSlice`: in scene mode
 each grid point is measured noise-free through the scene's measurement model (expected sensor reading, bias
 included) and corrected with the current fiducials, errors against its truth; points the arm cannot reach have
 NaN values. In measurement mode (no truth) only the correction's size and, for gp, its std are known.
@@ -93,5 +93,5 @@ def default_plane(points, axis: str = "z", offset_mm: float | None = None, margi
     lo, hi = p.min(0), p.max(0)
     size = np.maximum(hi - lo, 10.0)
     lo, hi = lo - margin * size, hi + margin * size
-    off = float(np.median(p[:, AXES.index(axis)])) if offset_mm is None and axis in AXES else offset_mm
+    off = float(np.median(p[:, AXES.index(axis)])) if offset_mm is None and axis in AXES else float(offset_mm or 0.0)
     return SlicePlane(axis, off, (lo[a], lo[b]), (hi[a], hi[b]), n)

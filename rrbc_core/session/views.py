@@ -63,7 +63,9 @@ def heat_map(session: ExplorerSession, samples_per_target: int = 200) -> HeatMap
         _, p, sensor_i, truth_i = cached
         if sensor_i is None:  # measurement mode: the sample's sensor position under the current registration
             sensor_i = ev.registration.mapping.apply_inverse(p)
-        pos.append(p), sens.append(sensor_i), truth.append(truth_i)
+        pos.append(p)
+        sens.append(sensor_i)
+        truth.append(truth_i)
         owner += [pid] * len(p)
     pos = np.vstack(pos) if pos else np.zeros((0, 3))
     sensor = np.vstack(sens) if sens else np.zeros((0, 3))
@@ -182,15 +184,21 @@ def monte_carlo(
     fid = session.layout["fiducials"]
     for pid, p in zip(session.layout["registration"].ids, session.layout["registration"].positions):
         both = pid in fid.ids and pid not in s.excluded
-        ids.append(pid), roles.append("both" if both else "registration"), pos.append(p)
+        ids.append(pid)
+        roles.append("both" if both else "registration")
+        pos.append(p)
     for pid, p in zip(fid.ids, fid.positions):
         if pid not in reg_ids and pid not in s.excluded:
-            ids.append(pid), roles.append("fiducial"), pos.append(p)
+            ids.append(pid)
+            roles.append("fiducial")
+            pos.append(p)
     for pid, p in zip(session.layout["targets"].ids, session.layout["targets"].positions):
         region = session.regions.get(pid)
         for k in range(checks_per_target):
             q = p if region is None else p + region.sample(rng, 1)[0] - region.center
-            ids.append(f"{pid}.c{k}"), roles.append("check"), pos.append(q)
+            ids.append(f"{pid}.c{k}")
+            roles.append("check")
+            pos.append(q)
     robot = np.array(pos, float).reshape(-1, 3)
     cell = WorkCell(
         name=sc.name,
@@ -214,7 +222,8 @@ def monte_carlo(
         b = min(trials, a + MC_CHUNK_TRIALS)
         part = Measured(m.sensor[a:b], m.robot[a:b], m.truth)
         e = trial_errors(cell, part, s.registration, s.interpolation, seeds=seeds[a:b], **opts)
-        rigid.append(e.rigid), rrbc.append(e.rrbc)
+        rigid.append(e.rigid)
+        rrbc.append(e.rrbc)
     chk = cell.index("check")
     dist = np.linalg.norm(cell.robot[chk] - cell.distance_origin, axis=1)
     return MonteCarloPlots(np.concatenate(rigid), np.concatenate(rrbc), dist, trials)

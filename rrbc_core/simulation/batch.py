@@ -57,6 +57,8 @@ problem raises `InputError`, naming the trial where it is a per-trial problem.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rrbc_core import interpolation as interp_mod
@@ -278,7 +280,7 @@ def rrbc_batch(
     if reg_name not in STRATEGY_OPTIONS:
         raise InputError(f"unknown registration '{registration}': choose one of {', '.join(STRATEGY_OPTIONS)}")
     interp_name = str(interpolation).strip().lower()
-    method = interp_mod.make_interpolator(interp_name, **interp_options)  # validates name and options
+    method: Any = interp_mod.make_interpolator(interp_name, **interp_options)  # validates name and options
     options = dict(registration_options or {})
     unknown = sorted(set(options) - set(STRATEGY_OPTIONS[reg_name]))
     if unknown:
@@ -416,6 +418,7 @@ def _rrbc_per_trial(s, r, fs, fb, q, seeds, options, method, hull, hull_points) 
             fitted = interp_mod.NoCorrection().fit(s[k], np.zeros_like(s[k]))
         out = correct_points(reg.mapping, fitted, q[k])
         rigid_out[k], rrbc_out[k], ehat[k], flags[k] = out.robot_rigid, out.robot_rrbc, out.correction, out.extrapolated
+    extrapolated: np.ndarray | None
     if hull == "mean":
         extrapolated = interp_mod.hull_flags(hull_points.mean(axis=0), q.mean(axis=0))[0]
     else:

@@ -302,6 +302,6 @@ def ls_idw(reg_s, reg_b, fid_s, fid_b, query, k: int, power: float, exact_mm: fl
             out["fiducial_mean"],
             out["query_mean"],
         )
-    out["fiducial_mean"] /= n_t
-    out["query_mean"] /= n_t
+    out["fiducial_mean"] = out["fiducial_mean"] / n_t
+    out["query_mean"] = out["query_mean"] / n_t
     return out

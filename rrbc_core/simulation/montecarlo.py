@@ -114,7 +114,7 @@ def work_cell_from_scene(
         for k, p in enumerate(tgt.region.sample(rng, n_checks)):
             add(f"{tgt.id}.c{k:02d}", "check", p, tgt.tool_yaw_deg, tgt.id)
     robot = np.array(pos, dtype=float).reshape(-1, 3)
-    yaw = np.array(yaw, dtype=float)
+    yaws = np.array(yaw, dtype=float)
     occluded: tuple[str, ...] = ()
     if visibility and scene.line_of_sight:
         from rrbc_core.models.visibility import visible_points
@@ -125,9 +125,9 @@ def work_cell_from_scene(
         ids = [ids[i] for i in keep]
         roles = [roles[i] for i in keep]
         owner = [owner[i] for i in keep]
-        robot, yaw = robot[keep], yaw[keep]
+        robot, yaws = robot[keep], yaws[keep]
     times = np.arange(len(ids)) * float(scene.measurement_interval_s)
-    rot = np.array([tool_down(y) for y in yaw]).reshape(-1, 3, 3)
+    rot = np.array([tool_down(y) for y in yaws]).reshape(-1, 3, 3)
     cell = WorkCell(
         name=scene.name,
         sensor_to_robot=scene.sensor_to_robot,

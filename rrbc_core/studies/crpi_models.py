@@ -79,7 +79,8 @@ def _kernel(lay: Layout, component: str, length_mm: float | None = None) -> np.n
         return np.eye(3 * s)
     if component == "smooth":
         d2 = np.sum((lay.truth[:, None] - lay.truth[None]) ** 2, axis=-1)
-        return np.kron(np.exp(-d2 / (2 * length_mm**2)), np.eye(3))
+        assert length_mm is not None  # a smooth component has a length
+        return np.kron(np.exp(-d2 / (2 * length_mm**2)), np.eye(3, dtype=float))
     if component == "flatness":
         b = _flatness_basis(lay.truth)  # (S, 6), unit RMS columns
         kz = b @ b.T / b.shape[1]  # per-site z variance averaging 1 mm²
@@ -207,6 +208,7 @@ def _fit_sizes(y, lay: Layout, kernels) -> tuple[np.ndarray, float]:
         res = minimize(f, np.full(len(kernels), start), method="L-BFGS-B", bounds=[(lo, hi)] * len(kernels))
         if best is None or res.fun < best.fun:
             best = res
+    assert best is not None  # four starts were tried
     return np.exp(best.x), -float(best.fun)
 
 

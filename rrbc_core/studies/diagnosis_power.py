@@ -59,6 +59,7 @@ def geometry(name: str) -> np.ndarray:
     """True robot points (mm): a grid on a 500 x 500 mm plate at z = 300 ("planar AxB") or in a 500 x 500 x 400 mm
     block ("volumetric AxBxC"); the grid size is read from the name (the main panels: 6x6 and 4x3x3, 36 points)."""
     dims = [int(v) for v in name.split()[1].split("x")]
+    g: tuple
     if name.startswith("planar"):
         g = np.meshgrid(np.linspace(0, 500, dims[0]), np.linspace(0, 500, dims[1]), [0.0], indexing="ij")
     else:
@@ -90,6 +91,7 @@ def make_set(effect: str, geom: str, size: float, seed: int, order: str = "rando
     disp = np.zeros((n, 3))
     outlier = None
     if effect in ("scale", "affine", "drift", "smooth_field"):
+        term: Scale | Affine | Drift | SmoothField
         if effect == "scale":
             term = Scale(float(rng.choice([-1.0, 1.0])) * 1000.0, center_mm=tuple(rng.uniform(-99, 99, 3)))
         elif effect == "affine":
@@ -116,7 +118,7 @@ def make_set(effect: str, geom: str, size: float, seed: int, order: str = "rando
         v = rng.normal(size=3)
         disp[i] = v / np.linalg.norm(v) * size * SIGMA
         outlier = f"P{i}"
-    m = MeasurementSet([f"P{i}" for i in range(n)], ["both"] * n, sensor + e, robot + disp, t, [0] * n)
+    m = MeasurementSet(tuple(f"P{i}" for i in range(n)), ("both",) * n, sensor + e, robot + disp, t, (0,) * n)
     return m, outlier
 
 

@@ -163,7 +163,7 @@ class Geometry:
 
 
 def geometry_for(layout: Layout) -> Geometry:
-    slots = []
+    slots: list = []
     reg_slots = {}
     g = layout.registrations
     for name in ("small3", "large3", "large5", "cluster"):
@@ -292,7 +292,7 @@ def method_errors(geo: Geometry, perturbation: np.ndarray, seed: int = 0, sa_see
         )
         return sa[0], sa[1] * SA_COST_UNIT_MM
 
-    maps = {}
+    maps: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for k, data in enumerate(("small3", "large3")):
         s, r = stacked(data)
         a, t = batch.three_point_batch(s, r)

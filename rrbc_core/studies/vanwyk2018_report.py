@@ -190,7 +190,7 @@ def markdown(rep: Reproduction, command: str) -> str:
     base, ex = a["baseline"], a[ext]
     rows = _rows(rep)
     _, per = reference_data.samples_per_method(rep.measured)
-    L = []
+    L: list[str] = []
     w = L.append
     w("# Holding the simulation against measured data: Van Wyk & Marvel (2018)")
     w("")
@@ -239,7 +239,7 @@ def markdown(rep: Reproduction, command: str) -> str:
     w("## 2. Baseline: rigid truth + isotropic Gaussian robot noise, σ fitted")
     w("")
     w(
-        "All seven methods are simulated as the paper describes them (`rrbc_core/reproduction.py`): 3-point frame "
+        "All seven methods are simulated as the paper describes them (`rrbc_core/studies/reproduction.py`): 3-point frame "
         "registration (eqs. 1–5), element-wise averaging of the 4×4 matrices of all non-degenerate triples (eqs. 6–7), "
         "simulated annealing with the published cooling schedule refining its base registration (eqs. 8–15), and "
         "clustering (k-means, 2 clusters, nearest kernel; eqs. 16–17 plus our stated reading). One simulated experiment = "
@@ -279,7 +279,7 @@ def markdown(rep: Reproduction, command: str) -> str:
     w(
         "Each extension adds ONE physically meaningful component to the noise (`reproduction.MODELS`); its two "
         "weights are shared by all seven methods. Fits use the deviance (y − m)ᵀΣ⁻¹(y − m) + ln det Σ of the 28 "
-        "statistics, with their full covariance over simulated experiments (`rrbc_core/model_fit.py`). "
+        "statistics, with their full covariance over simulated experiments (`rrbc_core/studies/model_fit.py`). "
         "Cross-validation: fit on six methods, score the seventh given the other six, sum over the seven. An extension is claimed only if it "
         f"beats the baseline in sample by more than {sel.threshold:.1f} (χ²₁ at 0.01/6) and also cross-validated."
     )

@@ -71,6 +71,8 @@ class AuthoringController:
         """Add a point of `kind` (default: the click mode) where the ray meets the cell; returns the Evaluation
         or None (a message says why)."""
         kind = kind or self.click_mode
+        if kind is None:
+            return None  # clicks select: nothing to add
         with self.ctx.lock:
             hit = surface_hit(self.ctx.loaded.mesh, origin, direction)
             if hit is None:

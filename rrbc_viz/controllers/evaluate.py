@@ -148,7 +148,7 @@ class EvaluateController:
             seed = int(np.random.default_rng().integers(1, 2**31 - 1))
             return self.apply(lambda s: s.update(seed=seed), client)
 
-    def apply(self, change: Callable[[ExplorerSession], Evaluation], client) -> Evaluation | None:
+    def apply(self, change: Callable[[ExplorerSession], Evaluation], client=None) -> Evaluation | None:
         """Run a change of the session; show the new evaluation (or say why it was refused) and queue the Monte
         Carlo."""
         ctx = self.ctx

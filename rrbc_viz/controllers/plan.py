@@ -93,7 +93,7 @@ class PlanController:
                 self.ctx.authoring.sync_history()
             after = self.ctx.planning.state
             text = f"Added {len(new)} fiducial{'s' if len(new) != 1 else ''}: {', '.join(new)} (Undo takes them away)."
-            if before is not None and after is not None:
+            if before is not None and after is not None and before.predicted and after.predicted:
                 text += (
                     f" Predicted RMST with RRBC {before.predicted.rrbc_mm:.3f} → {after.predicted.rrbc_mm:.3f} mm, "
                     f"rigid {before.predicted.rigid_mm:.3f} → {after.predicted.rigid_mm:.3f} mm."

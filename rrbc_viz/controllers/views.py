@@ -21,6 +21,8 @@ from ..node_values import LAYERS
 from ..slice_nodes import SLICE_CHOICES
 
 if TYPE_CHECKING:
+    from rrbc_core.session.slices import ErrorSlice
+
     from ..context import AppContext
 
 SLICE_NOTE = (
@@ -40,7 +42,7 @@ class ViewController:
 
     def __init__(self, ctx: AppContext):
         self.ctx = ctx
-        self.error_slice = None
+        self.error_slice: ErrorSlice | None = None
 
     # --------------------------------------------------------------------------------------------- camera
     def cell_geometry(self) -> CellGeometry:
@@ -84,8 +86,8 @@ class ViewController:
             ):
                 if origin is not None:
                     parts.append(origin + d)
-        if "landing" in names and getattr(self.ctx.nodes, "landing", None) is not None:
-            land = self.ctx.nodes.landing
+        land = getattr(self.ctx.nodes, "landing", None)
+        if "landing" in names and land is not None:
             ring = land.ring_mm * land.scale
             parts += [land.anchor, land.rigid, land.rrbc, land.position]
             parts += [land.anchor + d for d in ([ring, 0, 0], [-ring, 0, 0], [0, ring, 0], [0, -ring, 0])]
@@ -197,18 +199,18 @@ class ViewController:
         """Recompute and redraw the error slice if its layer is on (caller holds the lock)."""
         if not self.ctx.state.layers.get("slice"):
             return
-        self.error_slice = views.error_slice(self.ctx.session, self.slice_plane())
+        shown = self.error_slice = views.error_slice(self.ctx.session, self.slice_plane())
         value = self.ctx.state.display.slice_value
-        values = self.error_slice.values[value]
+        values = shown.values[value]
         if not np.any(np.isfinite(values)):
             note = "Nothing to show for this value here (no truth, or not gp)."
             self.ctx.controls.view.show_slice_legend(note)
         else:
-            lo, hi = self.ctx.slice_node.show(self.error_slice, value)
+            lo, hi = self.ctx.slice_node.show(shown, value)
             name = dict((v, k) for k, v in SLICE_CHOICES)[value]
             self.ctx.controls.view.show_slice_legend(legend_markdown(name, lo, hi, note=SLICE_NOTE))
         self.ctx.controls.sync_slice(
-            self.ctx.state.display, self.slice_range(), self.ctx.session.kind, self.error_slice.plane.offset_mm
+            self.ctx.state.display, self.slice_range(), self.ctx.session.kind, shown.plane.offset_mm
         )
 
     # ------------------------------------------------------------------------------------------ selection
@@ -217,12 +219,11 @@ class ViewController:
         the info card and the bullseye show its numbers."""
         with self.ctx.lock:
             ev = self.ctx.session.last
-            if kind is None:
-                sel = None
-            else:
+            sel: tuple[str, str] | None = None
+            if kind is not None:
                 kind = {"target": "targets", "fiducial": "fiducials"}.get(kind, kind)
                 ids = ev.targets.ids if kind == "targets" else ev.fiducial_ids if kind == "fiducials" else ()
-                if pid not in ids:
+                if pid is None or pid not in ids:
                     raise InputError(f"there is no {kind[:-1] if kind.endswith('s') else kind} '{pid}' to select")
                 sel = (kind, pid)
             self.ctx.state.selected = sel
@@ -252,8 +253,14 @@ class ViewController:
         explore = sel[1] if sel is not None and sel[0] == "targets" else None
         last_step = self.ctx.state.lesson_index == len(teaching.STEPS) - 1
         vec = (self.ctx.nodes.vec_landings or {}).get(explore) if explore else None
-        c.show_bullseye(*(selection_card.bullseye_svg(ev, explore, vec) if explore else (None,)), where="explore")
-        c.show_bullseye(*(selection_card.bullseye_svg(ev, target) if target and last_step else (None,)), where="learn")
+        if explore:
+            c.show_bullseye(*selection_card.bullseye_svg(ev, explore, vec), where="explore")
+        else:
+            c.show_bullseye(None, where="explore")
+        if target and last_step:
+            c.show_bullseye(*selection_card.bullseye_svg(ev, target), where="learn")
+        else:
+            c.show_bullseye(None, where="learn")
 
     # --------------------------------------------------------------------------------------------- lesson
     def lesson_go(self, index: int) -> str:

@@ -1,6 +1,6 @@
 """`rrbc diagnose` (issue 6): effects hidden in synthetic measured data must be named, estimated and located.
 
-Effects are planted with rrbc_core.errormodels terms at seeded random size (clearly detectable: signal several
+Effects are planted with rrbc_core.models.errormodels terms at seeded random size (clearly detectable: signal several
 noise standard errors above the detection limit), direction, point count (12-200), geometry (planar or volumetric)
 and noise. Parameter tolerances are multiples of the estimate's standard error.
 """

@@ -1,4 +1,4 @@
-"""Tests for rrbc_core.metrics.
+"""Tests for rrbc_core.correction.metrics.
 
 Monte Carlo checks use the project's own least-squares registration (rrbc_core.registration.least_squares)
 on seeded noise applied to BOTH frames, with a non-identity sensor→robot rotation, so the net FLE in the robot

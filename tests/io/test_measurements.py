@@ -1,4 +1,4 @@
-"""Tests for rrbc_core.measurements: reading, validation, aggregation and atomic writing of measurement files."""
+"""Tests for rrbc_core.io.measurements: reading, validation, aggregation and atomic writing of measurement files."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests for rrbc_core.scene: the shipped scenes, regions, the sensor pose, layouts, reach, and one-line errors for
+"""Tests for rrbc_core.io.scene: the shipped scenes, regions, the sensor pose, layouts, reach, and one-line errors for
 malformed scene files."""
 
 from __future__ import annotations

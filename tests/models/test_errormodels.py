@@ -1,4 +1,4 @@
-"""Error terms and error models (rrbc_core.errormodels): each term planted alone shows its signature.
+"""Error terms and error models (rrbc_core.models.errormodels): each term planted alone shows its signature.
 
 Tolerances are either numerical (deterministic terms: exact formulas, 1e-9 relative) or derived from the
 sampling distribution of the statistic (random terms), with the bound stated next to each test.

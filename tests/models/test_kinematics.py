@@ -1,4 +1,4 @@
-"""UR5-like forward/inverse kinematics (rrbc_core.kinematics). Positions mm, angles rad unless named _deg."""
+"""UR5-like forward/inverse kinematics (rrbc_core.models.kinematics). Positions mm, angles rad unless named _deg."""
 
 import numpy as np
 import pytest

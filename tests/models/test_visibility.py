@@ -1,4 +1,4 @@
-"""Tests for rrbc_core.visibility (open3d ray casting) and rrbc_core.cloud_registration (simulated depth clouds and
+"""Tests for rrbc_core.models.visibility (open3d ray casting) and rrbc_core.models.cloud_registration (simulated depth clouds and
 ICP against the scene mesh)."""
 
 from __future__ import annotations

@@ -87,7 +87,7 @@ def test_app_server_callbacks_run_with_the_documented_pool_size():
         try:
             g = app.session.layout["fiducials"]
             p = g.positions[0] + [1.0, 0.0, 0.0]
-            t = threading.Thread(target=app.handle_drag, args=("fiducials", g.ids[0], p, "end"))
+            t = threading.Thread(target=app.evaluate.handle_drag, args=("fiducials", g.ids[0], p, "end"))
             t.start(); t.join()
         finally:
             app.stop()

@@ -1,4 +1,4 @@
-"""The session behind the browser app (rrbc_core.explorer), tested without a browser."""
+"""The session behind the browser app (rrbc_core.session.explorer), tested without a browser."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Planning in the explorer session (rrbc_core.explorer over rrbc_core.planning), without a browser: coverage and
+"""Planning in the explorer session (rrbc_core.session.explorer over rrbc_core.analysis.planning), without a browser: coverage and
 predicted RMST for the fiducials as the session has them (dragged, excluded, accepted), suggestions, accepting
 them, and the message measured data get instead."""
 

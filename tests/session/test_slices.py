@@ -1,4 +1,4 @@
-"""The error slice (rrbc_core.session.slices, ExplorerSession.error_slice): the plane's grid in the robot frame,
+"""The error slice (rrbc_core.session.slices, rrbc_core.session.views.error_slice): the plane's grid in the robot frame,
 values that mean what they say (no bias and no noise: no error anywhere; at a fiducial: only that fiducial's own
 noise is left), clear where the arm cannot reach, the hull flag against an independent hull test, and the story
 it tells on the default scene (error grows outside the fiducials' hull)."""

@@ -427,7 +427,7 @@ def test_registration_points_near_the_collinearity_limit():
 
 
 # ------------------------------------------------------------------------------------------------------
-# The compiled least-squares + IDW kernel (rrbc_core/compiled.py): what rrbc_batch runs for the default chain
+# The compiled least-squares + IDW kernel (rrbc_core/simulation/compiled.py): what rrbc_batch runs for the default chain
 # ------------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("layout", LAYOUTS)
 @pytest.mark.parametrize("k, power", [(4, 2.0), (3, 2.5), (1, 1.0), (50, 0.5)])

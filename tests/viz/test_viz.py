@@ -1,6 +1,6 @@
 """In-process tests of the browser app (rrbc_viz): a real viser server on a free port, no browser.
 
-Drags are driven through `RunningApp.handle_drag` (what the gizmo callback calls) and through viser's own
+Drags are driven through `EvaluateController.handle_drag` (what the gizmo callback calls) and through viser's own
 transform-controls handlers (private API, wrapped in `_gizmo_drag`); GUI handles are driven by assigning
 `.value` (viser runs the callbacks synchronously) and fiducial clicks by calling the sphere's click callback.
 Every server is stopped at the end of its test.
