@@ -144,9 +144,10 @@ def test_the_import_checks_see_lazy_and_type_only_imports():
     assert "rrbc_core.cli_reproduce" not in _import_graph("rrbc_core", type_only=False, lazy=False)["rrbc_core.cli"]
     viz = _import_graph("rrbc_viz")
     assert "rrbc_viz.context" in viz["rrbc_viz.controllers.evaluate"]
-    assert "rrbc_viz.context" not in _import_graph("rrbc_viz", type_only=False, lazy=False)[
-        "rrbc_viz.controllers.evaluate"
-    ]
+    assert (
+        "rrbc_viz.context"
+        not in _import_graph("rrbc_viz", type_only=False, lazy=False)["rrbc_viz.controllers.evaluate"]
+    )
 
 
 def _layer_table(package: str) -> list:

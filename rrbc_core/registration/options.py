@@ -56,7 +56,7 @@ class StrategyObject(Protocol):
     seeded: ClassVar[bool]
     extras: ClassVar[tuple]
 
-    def register(self, sensor: ArrayLike, robot: ArrayLike) -> Registration: ...
+    def register(self, p_sensor: ArrayLike, b_robot: ArrayLike) -> Registration: ...
 
 
 @dataclass(frozen=True)
@@ -67,8 +67,8 @@ class LeastSquares:
     seeded: ClassVar[bool] = False
     extras: ClassVar[tuple] = ("weights",)  # data passed per call, not an option
 
-    def register(self, sensor: ArrayLike, robot: ArrayLike, weights: ArrayLike | None = None) -> Registration:
-        return st.least_squares(sensor, robot, weights=weights)
+    def register(self, p_sensor: ArrayLike, b_robot: ArrayLike, weights: ArrayLike | None = None) -> Registration:
+        return st.least_squares(p_sensor, b_robot, weights=weights)
 
 
 @dataclass(frozen=True)
@@ -79,8 +79,8 @@ class ThreePoint:
     seeded: ClassVar[bool] = False
     extras: ClassVar[tuple] = ()
 
-    def register(self, sensor: ArrayLike, robot: ArrayLike) -> Registration:
-        return st.three_point(sensor, robot)
+    def register(self, p_sensor: ArrayLike, b_robot: ArrayLike) -> Registration:
+        return st.three_point(p_sensor, b_robot)
 
 
 @dataclass(frozen=True)
@@ -103,8 +103,8 @@ class Combinatorial:
     def __post_init__(self):
         check_options(self, "combinatorial")
 
-    def register(self, sensor: ArrayLike, robot: ArrayLike) -> Registration:
-        return st.combinatorial(sensor, robot, average=self.average, degeneracy_ratio=self.degeneracy_ratio)
+    def register(self, p_sensor: ArrayLike, b_robot: ArrayLike) -> Registration:
+        return st.combinatorial(p_sensor, b_robot, average=self.average, degeneracy_ratio=self.degeneracy_ratio)
 
 
 @dataclass(frozen=True)
@@ -130,9 +130,9 @@ class Annealing:
     def __post_init__(self):
         check_options(self, "annealing")
 
-    def register(self, sensor: ArrayLike, robot: ArrayLike, initial: Registration | None = None) -> Registration:
+    def register(self, p_sensor: ArrayLike, b_robot: ArrayLike, initial: Registration | None = None) -> Registration:
         return st.annealing(
-            sensor, robot, initial=initial, seed=self.seed, iterations=self.iterations, cooling_c=self.cooling_c
+            p_sensor, b_robot, initial=initial, seed=self.seed, iterations=self.iterations, cooling_c=self.cooling_c
         )
 
 
@@ -152,8 +152,8 @@ class Clustering:
     def __post_init__(self):
         check_options(self, "clustering")
 
-    def register(self, sensor: ArrayLike, robot: ArrayLike) -> Registration:
-        return st.clustering(sensor, robot, clusters=self.clusters, seed=self.seed, average=self.average)
+    def register(self, p_sensor: ArrayLike, b_robot: ArrayLike) -> Registration:
+        return st.clustering(p_sensor, b_robot, clusters=self.clusters, seed=self.seed, average=self.average)
 
 
 Strategy = LeastSquares | ThreePoint | Combinatorial | Annealing | Clustering
@@ -187,7 +187,7 @@ def make_strategy(name: str, **options) -> StrategyObject:
 
 
 @thread_limited
-def register(method: str, sensor: ArrayLike, robot: ArrayLike, **options) -> Registration:
+def register(method: str, p_sensor: ArrayLike, b_robot: ArrayLike, **options) -> Registration:
     """Register paired points with a named strategy: the sensor→robot mapping and its residuals.
 
     Parameters
@@ -215,4 +215,4 @@ def register(method: str, sensor: ArrayLike, robot: ArrayLike, **options) -> Reg
     for extra in ("weights", "initial"):
         if extra in options and cls is not None and (extra in cls.extras or extra == "initial" and cls is Annealing):
             call[extra] = options.pop(extra)
-    return make_strategy(method, **options).register(sensor, robot, **call)
+    return make_strategy(method, **options).register(p_sensor, b_robot, **call)

@@ -1,9 +1,10 @@
 """Registration strategies: from paired sensor/robot points to a sensor→robot mapping.
 
-Every strategy has the same call shape, `strategy(sensor, robot, **options) -> Registration`, where
-`sensor` and `robot` are (N, 3) arrays of the same physical points measured in each frame (mm), and the
-returned `Registration` holds the mapping (robot = mapping.apply(sensor)) and the fit residuals
-`robot - mapping.apply(sensor)` (robot frame, mm).
+Every strategy has the same call shape, `strategy(p_sensor, b_robot, **options) -> Registration`, where
+`p_sensor` and `b_robot` are (N, 3) arrays of the same physical points measured in each frame (mm), and the
+returned `Registration` holds the mapping `T_robot_sensor` (`b_robot ≈ T_robot_sensor.apply(p_sensor)`) as
+`mapping`, and the fit residuals `b_robot - mapping.apply(p_sensor)` (robot frame, mm). Names of frames:
+docs/architecture.md ("Frames in names"); inside a function `s` and `b` are the checked sensor and robot points.
 
 Mappings:
 - `RigidTransform` (least squares, three-point, combinatorial with chordal averaging, annealing from a rigid
@@ -168,34 +169,34 @@ class Registration:
         return bool(self.mapping.piecewise)
 
 
-def _finish(method, mapping, sensor, robot, **details) -> Registration:
-    res = robot - mapping.apply(sensor)
+def _finish(method, T_robot_sensor, p_sensor, b_robot, **details) -> Registration:
+    res = b_robot - T_robot_sensor.apply(p_sensor)
     if not np.all(np.isfinite(res)):
         raise InputError(f"{method}: the registration is numerically degenerate for these points")
     fre = float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
-    return Registration(method, mapping, res, fre, details)
+    return Registration(method, T_robot_sensor, res, fre, details)
 
 
-def _check_pair(sensor, robot, minimum=3):
-    s = geometry.check_registration_points(sensor, "sensor registration points", minimum)
-    r = geometry.check_registration_points(robot, "robot registration points", minimum)
-    if s.shape != r.shape:
-        raise InputError(f"sensor and robot registration points must pair up: {len(s)} sensor vs {len(r)} robot points")
-    return s, r
+def _check_pair(p_sensor, b_robot, minimum=3):
+    s = geometry.check_registration_points(p_sensor, "sensor registration points", minimum)
+    b = geometry.check_registration_points(b_robot, "robot registration points", minimum)
+    if s.shape != b.shape:
+        raise InputError(f"sensor and robot registration points must pair up: {len(s)} sensor vs {len(b)} robot points")
+    return s, b
 
 
 # ------------------------------------------------------------------------------------------------------
 # Least squares (Arun/Kabsch/Umeyama)
 # ------------------------------------------------------------------------------------------------------
-def kabsch(sensor, robot, weights=None, with_scale=False):
+def kabsch(p_sensor, b_robot, weights=None, with_scale=False):
     """Weighted Kabsch/Umeyama. Returns (R, t, scale). Theory docs/theory.md §1.2 and §1.4."""
-    w = np.ones(len(sensor)) if weights is None else np.asarray(weights, dtype=float)
+    w = np.ones(len(p_sensor)) if weights is None else np.asarray(weights, dtype=float)
     w = w / w.sum()
-    ps = w @ sensor
-    pr = w @ robot
-    sc = sensor - ps
-    rc = robot - pr
-    h = (sc * w[:, None]).T @ rc  # H = Σ w p' q'^T
+    ps = w @ p_sensor
+    pb = w @ b_robot
+    sc = p_sensor - ps
+    bc = b_robot - pb
+    h = (sc * w[:, None]).T @ bc  # H = Σ w p' q'^T
     u, s, vt = np.linalg.svd(h)
     d = np.ones(3)
     d[2] = 1.0 if np.linalg.det(vt.T @ u.T) >= 0 else -1.0
@@ -204,26 +205,26 @@ def kabsch(sensor, robot, weights=None, with_scale=False):
     if with_scale:
         var = np.sum(w * np.sum(sc**2, axis=1))
         scale = float(np.sum(s * d) / var)
-    t = pr - scale * rot @ ps
+    t = pb - scale * rot @ ps
     return rot, t, scale
 
 
-def least_squares(sensor, robot, weights=None, with_scale: bool = False) -> Registration:
+def least_squares(p_sensor, b_robot, weights=None, with_scale: bool = False) -> Registration:
     """Least-squares rigid registration (Kabsch/Umeyama with the reflection fix).
 
     weights: optional (N,) non-negative per-point weights (ideally 1/σ_i²).
     with_scale: also fit a uniform scale (similarity transform, Umeyama's least-squares scale); the mapping
     is then a LinearMap (scale·R, t) and details['scale'] holds the scale. For diagnostics, not registration.
     """
-    s, r = _check_pair(sensor, robot)
+    s, b = _check_pair(p_sensor, b_robot)
     if weights is not None:
         w = np.asarray(weights, dtype=float)
         if w.shape != (len(s),) or not np.all(np.isfinite(w)) or np.any(w < 0) or np.count_nonzero(w) < 3:
             raise InputError("weights must be one finite non-negative number per point, at least 3 positive")
-    rot, t, scale = kabsch(s, r, weights, with_scale)
+    rot, t, scale = kabsch(s, b, weights, with_scale)
     if with_scale:
-        return _finish("least-squares", LinearMap(scale * rot, t), s, r, scale=scale, rotation=rot)
-    return _finish("least-squares", RigidTransform(project_to_so3(rot), t), s, r)
+        return _finish("least-squares", LinearMap(scale * rot, t), s, b, scale=scale, rotation=rot)
+    return _finish("least-squares", RigidTransform(project_to_so3(rot), t), s, b)
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -246,29 +247,29 @@ def _frames(p1, p2, p3):
     return h
 
 
-def three_point_matrices(sensor_triples, robot_triples) -> np.ndarray:
+def three_point_matrices(p_sensor_triples, b_robot_triples) -> np.ndarray:
     """4x4 registrations H = H_O(robot) · H_O(sensor)⁻¹ for stacks of triples (K, 3, 3) (eq. 5)."""
-    hs = _frames(sensor_triples[:, 0], sensor_triples[:, 1], sensor_triples[:, 2])
-    hr = _frames(robot_triples[:, 0], robot_triples[:, 1], robot_triples[:, 2])
+    hs = _frames(p_sensor_triples[:, 0], p_sensor_triples[:, 1], p_sensor_triples[:, 2])
+    hb = _frames(b_robot_triples[:, 0], b_robot_triples[:, 1], b_robot_triples[:, 2])
     hs_inv = np.zeros_like(hs)
     rt = np.swapaxes(hs[:, :3, :3], -1, -2)
     hs_inv[:, :3, :3] = rt
     hs_inv[:, :3, 3] = -np.einsum("kij,kj->ki", rt, hs[:, :3, 3])
     hs_inv[:, 3, 3] = 1.0
-    return hr @ hs_inv
+    return hb @ hs_inv
 
 
-def three_point(sensor, robot) -> Registration:
+def three_point(p_sensor, b_robot) -> Registration:
     """3-point frame registration (Van Wyk & Marvel 2018, eqs. 1–5) on the FIRST three points.
 
     Point 1 is the frame origin and 1→2 the x-axis: all the error lands on point 1 and that direction
     (it is not a least-squares fit). Extra points are ignored for the fit but still get residuals.
     """
-    s, r = _check_pair(sensor, robot)
+    s, b = _check_pair(p_sensor, b_robot)
     geometry.check_registration_points(s[:3], "the first three sensor registration points")
-    geometry.check_registration_points(r[:3], "the first three robot registration points")
-    h = three_point_matrices(s[None, :3], r[None, :3])[0]
-    return _finish("three-point", RigidTransform(project_to_so3(h[:3, :3]), h[:3, 3]), s, r, points_used=[0, 1, 2])
+    geometry.check_registration_points(b[:3], "the first three robot registration points")
+    h = three_point_matrices(s[None, :3], b[None, :3])[0]
+    return _finish("three-point", RigidTransform(project_to_so3(h[:3, :3]), h[:3, 3]), s, b, points_used=[0, 1, 2])
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -291,19 +292,19 @@ def check_subset_count(n: int, method: str = "combinatorial") -> None:
         )
 
 
-def _subset_registrations(s, r, degeneracy_ratio, method: str = "combinatorial"):
+def _subset_registrations(s, b, degeneracy_ratio, method: str = "combinatorial"):
     check_subset_count(len(s), method)
     combos = np.array(list(combinations(range(len(s)), 3)))
-    st, rt = s[combos], r[combos]
+    st, bt = s[combos], b[combos]
     ok = (geometry.collinear_ratio_batch(st) >= degeneracy_ratio) & (
-        geometry.collinear_ratio_batch(rt) >= degeneracy_ratio
+        geometry.collinear_ratio_batch(bt) >= degeneracy_ratio
     )
     if not np.any(ok):
         raise InputError(
             f"combinatorial registration: every 3-point subset is nearly collinear "
             f"(sigma2/sigma1 < {degeneracy_ratio}); spread the registration points"
         )
-    return combos[ok], three_point_matrices(st[ok], rt[ok]), int(np.count_nonzero(~ok))
+    return combos[ok], three_point_matrices(st[ok], bt[ok]), int(np.count_nonzero(~ok))
 
 
 def _average(mats, average, origin):
@@ -318,7 +319,7 @@ def _average(mats, average, origin):
 
 
 def combinatorial(
-    sensor, robot, average: str = "elementwise", degeneracy_ratio: float = geometry.SUBSET_DEGENERACY_RATIO
+    p_sensor, b_robot, average: str = "elementwise", degeneracy_ratio: float = geometry.SUBSET_DEGENERACY_RATIO
 ) -> Registration:
     """Average of the 3-point frame registrations of every non-degenerate 3-point subset (eqs. 6–7).
 
@@ -329,10 +330,12 @@ def combinatorial(
     Subsets whose sigma2/sigma1 (in either frame) is below `degeneracy_ratio` are rejected (default
     geometry.SUBSET_DEGENERACY_RATIO = 0.05). Within a subset, the lowest-index point is the frame origin.
     """
-    s, r = _check_pair(sensor, robot)
-    combos, mats, rejected = _subset_registrations(s, r, degeneracy_ratio)
-    mapping = _average(mats, average, s.mean(axis=0))
-    return _finish("combinatorial", mapping, s, r, average=average, subsets_used=len(combos), subsets_rejected=rejected)
+    s, b = _check_pair(p_sensor, b_robot)
+    combos, mats, rejected = _subset_registrations(s, b, degeneracy_ratio)
+    T_robot_sensor = _average(mats, average, s.mean(axis=0))
+    return _finish(
+        "combinatorial", T_robot_sensor, s, b, average=average, subsets_used=len(combos), subsets_rejected=rejected
+    )
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -343,16 +346,16 @@ def _modifier(theta) -> RigidTransform:
     return RigidTransform(rotation_from_euler_zyx(a, b, g), np.array([x, y, z], float))
 
 
-def _compose_modifier(mod: RigidTransform, mapping):
+def _compose_modifier(mod: RigidTransform, T_robot_sensor):
     """mod ∘ mapping (the modifier acts in the robot frame after the initial registration)."""
-    if isinstance(mapping, RigidTransform):
-        return mod.compose(mapping)
-    return LinearMap(mod.rotation @ mapping.matrix, mod.rotation @ mapping.translation + mod.translation)
+    if isinstance(T_robot_sensor, RigidTransform):
+        return mod.compose(T_robot_sensor)
+    return LinearMap(mod.rotation @ T_robot_sensor.matrix, mod.rotation @ T_robot_sensor.translation + mod.translation)
 
 
 def annealing(
-    sensor,
-    robot,
+    p_sensor,
+    b_robot,
     initial: Registration | None = None,
     seed: int = 0,
     iterations: int = 5000,
@@ -372,18 +375,18 @@ def annealing(
     initial: the registration to refine; default `combinatorial` (element-wise), which for 3 points is the
     3-point frame method. Seeded: same seed, same result.
     """
-    s, r = _check_pair(sensor, robot)
+    s, b = _check_pair(p_sensor, b_robot)
     if iterations < 1 or cooling_c <= 0:
         raise InputError("annealing needs iterations >= 1 and cooling constant C > 0")
     if initial is None:
         check_subset_count(len(s), "annealing (from the combinatorial average)")
-    init = initial if initial is not None else combinatorial(s, r)
+    init = initial if initial is not None else combinatorial(s, b)
     mapped = init.mapping.apply(s)
     rng = np.random.default_rng(seed)
 
     def cost(theta):
         mod = _modifier(theta)
-        return float(np.sum((r - mod.apply(mapped)) ** 2))
+        return float(np.sum((b - mod.apply(mapped)) ** 2))
 
     radius = float(np.sqrt(np.mean(np.sum((s - s.mean(0)) ** 2, axis=1))))
     fre0 = max(init.fre_rms_mm, 1e-6)
@@ -412,12 +415,12 @@ def annealing(
         res = minimize(cost, best, method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-12, "maxiter": 4000})
         if res.fun < c_best:
             best, c_best = res.x, float(res.fun)
-    mapping = _compose_modifier(_modifier(best), init.mapping)
+    T_robot_sensor = _compose_modifier(_modifier(best), init.mapping)
     return _finish(
         "annealing",
-        mapping,
+        T_robot_sensor,
         s,
-        r,
+        b,
         initial=init.method,
         theta=best.tolist(),
         cost_initial_mm2=c0,
@@ -450,7 +453,7 @@ def kmeans(points, k: int, seed: int = 0, iterations: int = 100) -> tuple[np.nda
     return c, labels
 
 
-def clustering(sensor, robot, clusters: int = 2, seed: int = 0, average: str = "elementwise") -> Registration:
+def clustering(p_sensor, b_robot, clusters: int = 2, seed: int = 0, average: str = "elementwise") -> Registration:
     """Clustered registration (our reading of Van Wyk & Marvel 2018, eqs. 16–17): piecewise, not rigid.
 
     1. k-means (seeded) on the sensor registration points gives `clusters` kernels.
@@ -463,7 +466,7 @@ def clustering(sensor, robot, clusters: int = 2, seed: int = 0, average: str = "
     4. A query point uses the registration of the nearest kernel (sensor frame).
     The paper's text gives steps 1 and 4; steps 2–3 are the project's stated assumptions.
     """
-    s, r = _check_pair(sensor, robot)
+    s, b = _check_pair(p_sensor, b_robot)
     if not 1 <= clusters <= len(s):
         raise InputError(f"clustering needs 1 <= clusters <= number of registration points ({len(s)})")
     kernels, labels = kmeans(s, clusters, seed)
@@ -478,11 +481,11 @@ def clustering(sensor, robot, clusters: int = 2, seed: int = 0, average: str = "
             if i not in chosen:
                 chosen.append(int(i))
         chosen = sorted(chosen)
-        _, mats, _ = _subset_registrations(s[chosen], r[chosen], geometry.SUBSET_DEGENERACY_RATIO, "clustering")
+        _, mats, _ = _subset_registrations(s[chosen], b[chosen], geometry.SUBSET_DEGENERACY_RATIO, "clustering")
         pieces.append(_average_rooted(mats, average, kernels[j]))
         members.append([int(i) for i in chosen])
-    mapping = PiecewiseMap(kernels, tuple(pieces))
-    return _finish("clustering", mapping, s, r, clusters=clusters, members=members, labels=labels.tolist())
+    T_robot_sensor = PiecewiseMap(kernels, tuple(pieces))
+    return _finish("clustering", T_robot_sensor, s, b, clusters=clusters, members=members, labels=labels.tolist())
 
 
 def _average_rooted(mats, average, kernel):

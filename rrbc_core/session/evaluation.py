@@ -275,22 +275,23 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         (s.method.registration, reg_r.sensor.tobytes(), reg_r.robot.tobytes()),
         lambda: s.method.register(reg_r.sensor, reg_r.robot),
     )
+    T_robot_sensor = reg.mapping  # frames in names: docs/architecture.md
     fids = layout["fiducials"]
     included = np.array([pid not in s.excluded for pid in fids.ids], dtype=bool)
-    corr = np.full((len(fids.ids), 3), np.nan)
+    e_sensor = np.full((len(fids.ids), 3), np.nan)
     if np.any(included):
-        corr[included] = fiducial_corrections(reg.mapping, fid_r.sensor[included], fid_r.robot[included])
-        key = (s.interpolator(), fid_r.sensor[included].tobytes(), corr[included].tobytes())
-        fitted = cached("fitted", key, lambda: s.interpolator().fit(fid_r.sensor[included], corr[included]))
+        e_sensor[included] = fiducial_corrections(T_robot_sensor, fid_r.sensor[included], fid_r.robot[included])
+        key = (s.interpolator(), fid_r.sensor[included].tobytes(), e_sensor[included].tobytes())
+        fitted = cached("fitted", key, lambda: s.interpolator().fit(fid_r.sensor[included], e_sensor[included]))
     elif s.interpolation != "none":
         raise InputError("every fiducial is excluded: include at least one, or choose interpolation 'none'")
     else:
         fitted = interpolation.NoCorrection().fit(reg_r.sensor, np.zeros_like(reg_r.sensor))
-    rot = _display_rotation(reg.mapping)
-    corr_robot = corr @ rot.T
+    R_robot_sensor = _display_rotation(T_robot_sensor)
+    e_robot = e_sensor @ R_robot_sensor.T
     tg = layout["targets"]
     if len(tg.ids):
-        cp = correct_points(reg.mapping, fitted, tgt_r.sensor)
+        cp = correct_points(T_robot_sensor, fitted, tgt_r.sensor)
         err_rigid = np.linalg.norm(cp.robot_rigid - tgt_r.truth, axis=1)
         err_rrbc = np.linalg.norm(cp.robot_rrbc - tgt_r.truth, axis=1)
         targets = TargetResult(
@@ -298,7 +299,7 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
             tg.positions,
             tgt_r.sensor,
             cp.correction,
-            cp.correction @ rot.T,
+            cp.correction @ R_robot_sensor.T,
             cp.correction_std,
             cp.robot_rigid,
             cp.robot_rrbc,
@@ -334,8 +335,8 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         fids.positions,
         fid_r,
         included,
-        corr,
-        corr_robot,
+        e_sensor,
+        e_robot,
         targets,
         hull,
         summary,

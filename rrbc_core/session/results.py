@@ -4,9 +4,8 @@ noise and bias sizes applied (`scaled`)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
