@@ -17,14 +17,15 @@ from rrbc_core.cli_options import (
     Parser,
     UsageError,
     add_method_options,
+    add_robot_model_options,
     advance,
     non_negative_int,
     option_dest,
     positive_float,
     positive_int,
     progress_bar,
+    robot_model_args,
     scheduler_option,
-    tool_mm_type,
     where,
 )
 from rrbc_core.cli_text import correct_text, plan_text, simulate_text
@@ -58,15 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--alpha", type=positive_float, default=0.01, help="family-wise false-alarm rate over all tests (default 0.01)"
     )
     g.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
-    g.add_argument(
-        "--robot", default="ur5", choices=("ur5", "ur10"), help="with joint columns: the arm's model (default ur5)"
-    )
-    g.add_argument(
-        "--tool",
-        type=tool_mm_type,
-        default=0.0,
-        help="with joint columns: tool length along the flange axis, mm (default 0)",
-    )
+    add_robot_model_options(g, "with joint columns")
     g.add_argument("--json", action="store_true", help="print one JSON object")
     g.set_defaults(run=_cmd_diagnose)
 
@@ -184,7 +177,7 @@ def _cmd_diagnose(args) -> str:
     if not args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
     mset = read_measurements(args.measurements)
-    dg = diagnose(mset, alpha=args.alpha, seed=args.seed, robot=args.robot, tool_mm=args.tool)
+    dg = diagnose(mset, alpha=args.alpha, seed=args.seed, tool_mm=args.tool, **robot_model_args(args))
     if args.json:
         return json.dumps(dg.to_json(), allow_nan=False) + "\n"
     return diagnosis_text(dg)

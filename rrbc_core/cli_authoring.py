@@ -9,6 +9,7 @@ import argparse
 import json
 from pathlib import Path
 
+from rrbc_core.cli_options import add_robot_model_options, robot_model_args
 from rrbc_core.errors import InputError
 
 
@@ -57,12 +58,12 @@ def add_parsers(sub) -> None:
         "calibrate",
         help="RRBC against model-based calibration (VEC) on a file with joint angles",
         description="Identify the arm's kinematic errors and the sensor-to-robot transform from the registration "
-        "and fiducial rows (joint angles q1..q6 in degrees), then predict every check and target four ways: rigid, "
+        "and fiducial rows (joint values: a URDF's joints in radians and metres, or q1..q6 in degrees for --robot), "
+        "after checking the model against the robot columns, then predict every check and target four ways: rigid, "
         "RRBC, VEC, VEC + RRBC (docs/calibration.md).",
     )
-    k.add_argument("measurements", help="measurement CSV with columns q1..q6 (degrees)")
-    k.add_argument("--robot", default="ur5", choices=("ur5", "ur10"), help="the arm's nominal model (default ur5)")
-    k.add_argument("--tool", type=_xyz, default=None, help="tool point X,Y,Z in the flange frame, mm (default 0,0,0)")
+    k.add_argument("measurements", help="measurement CSV with joint columns")
+    add_robot_model_options(k, "the arm's model")
     k.add_argument("--json", action="store_true", help="print one JSON object")
     k.set_defaults(run=_cmd_calibrate)
 
@@ -121,19 +122,20 @@ def _cmd_calibrate(args) -> str:
     from rrbc_core.analysis.vec_compare import METHODS, compare
     from rrbc_core.io.measurements import read_measurements
 
-    tool = args.tool or (0.0, 0.0, 0.0)
-    if abs(tool[0]) > 1e-9 or abs(tool[1]) > 1e-9:
-        raise InputError("--tool: only a tool along the flange's z axis is modelled (X and Y must be 0)")
-    result = compare(read_measurements(args.measurements), args.robot, float(tool[2]))
+    result = compare(read_measurements(args.measurements), tool=args.tool, **robot_model_args(args))
     if args.json:
         return json.dumps(result) + "\n"
 
     def mm(v):
         return "-" if v is None else f"{v:.4f}"
 
+    model = result["model"]
+    tool = ", ".join(f"{v:g}" for v in model["tool_mm"])
     lines = [
-        f"{args.robot.upper()}, tool {tool[2]:g} mm: {result['poses']} poses identify {result['identifiable']['rank']} "
-        f"parameter combinations; residual noise {result['residual_sigma_mm']:.4f} mm per axis",
+        f"{result['robot']} ({model['base']} → {model['tip']}, tool ({tool}) mm): the model lies "
+        f"{model['check']['rms_mm']:.2f} mm RMS from the robot columns (at most {model['check']['threshold_mm']:g})",
+        f"{result['poses']} poses identify {result['identifiable']['rank']} parameter combinations; residual noise "
+        f"{result['residual_sigma_mm']:.4f} mm per axis",
         "method      RMST over checks   cross-validated (fiducials)",
     ]
     for m in METHODS:
@@ -148,6 +150,6 @@ def _cmd_calibrate(args) -> str:
     lines.append(
         "identified errors: "
         + ", ".join(f"{p['name']} {p['error']:+.4g} ± {p['std_error']:.2g}" for p in ident)
-        + " (theta/alpha rad, a/d/tool mm)"
+        + " (angles rad, lengths mm)"
     )
     return "\n".join(lines) + "\n"

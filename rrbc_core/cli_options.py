@@ -50,14 +50,52 @@ def positive_float(text):
     return v
 
 
-def tool_mm_type(text: str) -> float:
+def tool_type(text: str) -> float | tuple[float, float, float]:
+    """`--tool`: a length Z (mm along the DH flange's z axis) or a point X,Y,Z in the tip link's frame (mm); each
+    value within ±2000 mm."""
+    parts = text.split(",")
     try:
-        v = float(text) if text.strip().isascii() else float("nan")
+        values = [float(p) if p.strip().isascii() else float("nan") for p in parts]
     except ValueError:
-        v = float("nan")
-    if not (0.0 <= v <= 2000.0):
-        raise argparse.ArgumentTypeError(f"expected a tool length from 0 to 2000 mm, got {text[:20]!r}")
-    return v
+        values = [float("nan")]
+    if len(values) not in (1, 3) or not all(abs(v) <= 2000.0 for v in values):
+        raise argparse.ArgumentTypeError(
+            f"expected a tool length Z or a point X,Y,Z in mm (each within ±2000), got {text[:40]!r}"
+        )
+    return values[0] if len(values) == 1 else (values[0], values[1], values[2])
+
+
+def add_robot_model_options(parser, what: str) -> None:
+    """--robot, --urdf, --tip, --base, --tool: the arm's model (`analysis.robot_model.robot_chain`)."""
+    parser.add_argument(
+        "--robot",
+        default=None,
+        choices=("ur5", "ur10"),
+        help=f"{what}: a DH arm, joint columns q1..q6 in degrees (default ur5 unless --urdf)",
+    )
+    parser.add_argument(
+        "--urdf",
+        default=None,
+        help=f"{what}: the robot's URDF (or a packaged one: ur5, ur10, panda); joint columns named after its "
+        "actuated joints, radians and metres",
+    )
+    parser.add_argument(
+        "--tip", default=None, help="with --urdf: the measured link (default: end of the longest chain)"
+    )
+    parser.add_argument("--base", default=None, help="with --urdf: the base link (default: the root link)")
+    parser.add_argument(
+        "--tool",
+        type=tool_type,
+        default=None,
+        help="tool length Z along the flange axis, or point X,Y,Z in the tip link's frame, mm (default none)",
+    )
+
+
+def robot_model_args(args) -> dict:
+    """The robot model's keyword arguments from parsed options; --robot and --urdf together are refused."""
+    if args.robot is not None and args.urdf is not None:
+        raise InputError("give --robot or --urdf, not both")
+    return {"robot": args.robot, "urdf": args.urdf, "tip": args.tip, "base": args.base}
 
 
 def progress_bar(total: int, label: str):

@@ -1,16 +1,18 @@
 """Model-based calibration (volumetric error compensation, VEC) of a serial arm together with the sensor-to-robot
-transform, from measured poses with joint angles (docs/calibration.md).
+transform, from measured poses with joint values (docs/calibration.md).
 
-Model. A row measured with joint angles q (rad; the file gives degrees) has its physical point at FK(θ, q), the
-arm's forward kinematics with the TRUE parameters θ = θ₀ + δ (θ₀ nominal: standard DH a, d, α, joint offsets,
-and the tool length); the sensor reads it at s = T⁻¹(FK(θ, q)) + noise. Identification minimises
-Σ |T(s_i) − FK(θ₀ + δ, q_i)|² (robot frame, mm) over δ and T (robot = R @ sensor + t).
+Model. A row measured with joint values q has its physical point at FK(δ, q), the forward kinematics of the arm's
+chain (`models.chain.Chain`: from a URDF or a DH table) with the TRUE parameter errors δ (joint zero offsets, errors
+of the joints' origins, the tool point); the sensor reads it at s = T⁻¹(FK(δ, q)) + noise. Identification minimises
+Σ |T(s_i) − FK(δ, q_i)|² (robot frame, mm) over δ and T (robot = R @ sensor + t), by Gauss–Newton with the chain's
+analytic Jacobians (every pose at once).
 
 Identifiability. Not every parameter can be told apart from these data: an error of the base is absorbed by T,
-some link errors act alike at the data's poses. At the solution's linearisation (parameters scaled to mm: angles
-× `ANGLE_SCALE_MM`), the singular value decomposition of the residuals' Jacobian gives the combinations the data
+some errors act alike at the data's poses. At each step (parameters scaled to mm: angles × `angle_scale`, half the
+chain's reach), the singular value decomposition of the residuals' Jacobian gives the combinations the data
 determine (singular value above `RANK_TOL` of the largest); the fit moves only along those, the others stay at
-their nominal values. Uncertainty: σ̂² (JᵀJ)⁺ in the identified subspace, σ̂² = RSS / (3N − r).
+their nominal values. Uncertainty: σ̂² (JᵀJ)⁺ in the identified subspace, σ̂² = RSS / (3N − r). A parameter is
+identifiable on its own when its unit change lies in that subspace; the others are reported in combinations.
 """
 
 from __future__ import annotations
@@ -18,45 +20,45 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from rrbc_core.errors import InputError
-from rrbc_core.models.kinematics import DHParameters, forward
+from rrbc_core.models.chain import Chain, rotation
 
-ANGLE_SCALE_MM = 500.0  # an angle error of 1 rad moves a point ~500 mm at a UR5's reach: parameters compared in mm
 RANK_TOL = 1e-4  # singular values below this fraction of the largest: a combination the data do not determine
-PARAM_NAMES = (
-    tuple(f"theta{i + 1}" for i in range(6))
-    + tuple(f"a{i + 1}" for i in range(6))
-    + tuple(f"d{i + 1}" for i in range(6))
-    + tuple(f"alpha{i + 1}" for i in range(6))
-    + ("tool",)
-)
-ANGULAR = np.array([n.startswith(("theta", "alpha")) for n in PARAM_NAMES])
-N_DH = len(PARAM_NAMES)  # 25; then 6 for T (rotation vector rad, translation mm)
+MAX_STEPS = 30  # Gauss–Newton steps at most (it converges in a few on data the model describes)
+STEP_TOL_MM = 1e-9  # a step that moves no scaled parameter by more than this (mm) ends the iteration
+MIN_POSES = 6
 
 
-def dh_vector(dh: DHParameters) -> np.ndarray:
-    return np.concatenate([dh.theta_offset, dh.a, dh.d, dh.alpha, [dh.tool_mm]]).astype(float)
+def angle_scale(chain: Chain) -> float:
+    """mm per rad used to compare angles with lengths: half the chain's reach (an angle error of 1 rad moves a point
+    about that far)."""
+    return 0.5 * chain.reach_mm()
 
 
-def dh_from(v: np.ndarray) -> DHParameters:
-    v = np.asarray(v, float)
-    return DHParameters(a=v[6:12], d=v[12:18], alpha=v[18:24], theta_offset=v[0:6], tool_mm=float(v[24]))
+def _skew(v: np.ndarray) -> np.ndarray:
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
+
+
+def _exp(w: np.ndarray) -> np.ndarray:
+    a = float(np.linalg.norm(w))
+    return np.eye(3) if a == 0.0 else rotation(w / a, np.array(a))
 
 
 @dataclass(frozen=True, eq=False)
 class Calibration:
     """An identified arm and registration.
 
-    `nominal` and `identified` DHParameters; `delta` (25,) identified errors (rad for theta/alpha, mm otherwise)
-    with `delta_se` (25,) standard errors (NaN where a parameter is not identifiable on its own); `rotation`
-    (3, 3), `translation` (3,) mm: sensor → robot; `rank` the number of identified combinations, `combinations`
-    their descriptions (the largest loadings), `sigma_mm` the residual noise per axis, `residuals` (N, 3) mm."""
+    `chain` the nominal model; `delta` (P,) identified errors in `chain.param_names` order (rad for angles, mm
+    otherwise) with `delta_se` (P,) standard errors (NaN where a parameter is not identifiable on its own) and
+    `identifiable` (P,) bool; `rotation` (3, 3), `translation` (3,) mm: sensor → robot; `rank` the number of
+    identified combinations, `combinations` their descriptions (the largest loadings), `sigma_mm` the residual noise
+    per axis, `residuals` (N, 3) mm; `chi2`, `chi2_dof`: the identified arm errors against their uncertainty."""
 
-    nominal: DHParameters
-    identified: DHParameters
+    chain: Chain
     delta: np.ndarray
     delta_se: np.ndarray
     identifiable: np.ndarray
@@ -70,6 +72,10 @@ class Calibration:
     chi2_dof: int = 0
 
     @property
+    def names(self) -> tuple[str, ...]:
+        return self.chain.param_names
+
+    @property
     def kinematic_p_value(self) -> float:
         """P-value of "no kinematic error" (χ² of the identified arm errors against their uncertainty)."""
         from scipy.stats import chi2
@@ -79,121 +85,151 @@ class Calibration:
     def sensor_to_robot(self, s) -> np.ndarray:
         return np.asarray(s, float).reshape(-1, 3) @ self.rotation.T + self.translation
 
-
-def _residuals(x: np.ndarray, theta0: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:
-    theta = theta0 + x[:N_DH]
-    r = Rotation.from_rotvec(x[N_DH : N_DH + 3]).as_matrix()
-    t = x[N_DH + 3 :]
-    p, _ = forward(dh_from(theta), q)
-    return ((s @ r.T + t) - p).reshape(-1)
+    def forward(self, q) -> np.ndarray:
+        """Where the identified arm's tool point is at inputs q (N, I), robot frame, mm."""
+        return self.chain.forward(q, self.delta)
 
 
-def _jacobian(x, theta0, q, s) -> np.ndarray:
-    """Central differences (N·3, 31) in the parameters' own units."""
-    out = np.empty((3 * len(q), len(x)))
-    for k in range(len(x)):
-        h = 1e-7 if (k < N_DH and ANGULAR[k]) or N_DH <= k < N_DH + 3 else 1e-4
-        e = np.zeros(len(x))
-        e[k] = h
-        out[:, k] = (_residuals(x + e, theta0, q, s) - _residuals(x - e, theta0, q, s)) / (2 * h)
-    return out
-
-
-def position_jacobian(dh: DHParameters, q_rad) -> np.ndarray:
-    """∂FK/∂θ (N, 3, 25): how the tool point (robot frame, mm) of `dh` at joints q (N, 6) rad moves per unit of each
-    parameter in `PARAM_NAMES`, angles scaled by `ANGLE_SCALE_MM` (so every column is in mm per mm-equivalent).
-    Central differences."""
-    q = np.asarray(q_rad, float).reshape(-1, 6)
-    theta0 = dh_vector(dh)
-    sc = _scales()[:N_DH]
-    out = np.empty((len(q), 3, N_DH))
-    for k in range(N_DH):
-        h = 1e-7 if ANGULAR[k] else 1e-4
-        e = np.zeros(N_DH)
-        e[k] = h
-        plus, _ = forward(dh_from(theta0 + e), q)
-        minus, _ = forward(dh_from(theta0 - e), q)
-        out[:, :, k] = (np.asarray(plus) - np.asarray(minus)).reshape(-1, 3) / (2 * h) / sc[k]
-    return out
-
-
-def _scales() -> np.ndarray:
-    """Per parameter, mm per unit (angles × ANGLE_SCALE_MM): the columns are compared in mm."""
-    sc = np.ones(N_DH + 6)
-    sc[:N_DH][ANGULAR] = ANGLE_SCALE_MM
-    sc[N_DH : N_DH + 3] = ANGLE_SCALE_MM
+def _scales(chain: Chain) -> np.ndarray:
+    """Per parameter (P + 6: the chain's, then T's rotation vector and translation), mm per unit."""
+    a = angle_scale(chain)
+    sc = np.ones(chain.n_params + 6)
+    sc[: chain.n_params][chain.angular] = a
+    sc[chain.n_params : chain.n_params + 3] = a
     return sc
 
 
-def _describe(v: np.ndarray, k: int = 3) -> str:
-    names = PARAM_NAMES + ("T.rx", "T.ry", "T.rz", "T.x", "T.y", "T.z")
+def _system(chain: Chain, q, s, delta, rot, t) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals (3N,) = T(s) − FK(δ, q) and their Jacobian (3N, P + 6) in the parameters' own units."""
+    p, jp, _ = chain.kinematics(q, delta)
+    assert jp is not None
+    rs = s @ rot.T
+    res = rs + t - p
+    n = len(q)
+    j = np.concatenate([-jp, -_skew(rs), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
+    return res.reshape(-1), j.reshape(3 * n, -1)
+
+
+def _describe(names: tuple, v: np.ndarray, k: int = 3) -> str:
     top = np.argsort(-np.abs(v))[:k]
     return " ".join(f"{'+' if v[i] >= 0 else '-'}{abs(v[i]):.2f}·{names[i]}" for i in top)
 
 
-def calibrate(q_rad, sensor, nominal: DHParameters, rotation0=None, translation0=None) -> Calibration:
+def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None) -> Calibration:
     """Identify the arm's errors and the sensor-to-robot transform from N poses (module docstring).
 
     Parameters
     ----------
-    q_rad : (N, 6) joint angles, rad.
-    sensor : (N, 3) the sensor's readings of the tool point, sensor frame, mm.
-    nominal : the controller's DH parameters (with its tool).
-    rotation0, translation0 : a starting registration (default: the identity; pass the rigid fit).
+    chain : Chain
+        The arm's nominal model, its tool point included.
+    q : array_like, (N, I)
+        Joint values per pose, rad or mm (`io.joints.joint_values`).
+    sensor : array_like, (N, 3)
+        The sensor's readings of the tool point, sensor frame, mm.
+    rotation0, translation0 : array_like, optional
+        A starting registration (default: the least-squares fit of the readings to the nominal arm).
+
+    Raises
+    ------
+    InputError
+        Fewer than `MIN_POSES` poses, or mismatched shapes.
     """
-    q = np.asarray(q_rad, float).reshape(-1, 6)
+    qa = np.asarray(q, float)
     s = np.asarray(sensor, float).reshape(-1, 3)
-    if len(q) != len(s):
-        raise InputError(f"{len(q)} joint configurations for {len(s)} sensor readings")
-    if len(q) < 6:
-        raise InputError(f"calibration needs at least 6 poses with joint angles, got {len(q)}")
-    theta0 = dh_vector(nominal)
-    x0 = np.zeros(N_DH + 6)
-    if rotation0 is not None:
-        x0[N_DH : N_DH + 3] = Rotation.from_matrix(np.asarray(rotation0, float)).as_rotvec()
-        x0[N_DH + 3 :] = np.asarray(translation0, float)
-    # the transform alone first (the arm nominal), then the identifiable subspace at that point
-    fit_t = least_squares(lambda z: _residuals(np.concatenate([np.zeros(N_DH), z]), theta0, q, s), x0[N_DH:])
-    x0[N_DH:] = fit_t.x
-    sc = _scales()
-    for _ in range(2):  # re-linearise once at the solution
-        j = _jacobian(x0, theta0, q, s) / sc  # columns per mm of effect
-        _, sv, vt = np.linalg.svd(j, full_matrices=False)
+    if qa.ndim != 2 or len(qa) != len(s):
+        raise InputError(f"{len(qa)} joint configurations for {len(s)} sensor readings")
+    if len(qa) < MIN_POSES:
+        raise InputError(f"calibration needs at least {MIN_POSES} poses with joint values, got {len(qa)}")
+    p_nominal = chain.forward(qa)
+    if rotation0 is None:
+        from rrbc_core.registration import register
+
+        m = register("least-squares", s, p_nominal).mapping
+        rotation0, translation0 = m.rotation, m.translation
+    rot = np.asarray(rotation0, float).copy()
+    t = np.asarray(translation0, float).copy()
+    n_p = chain.n_params
+    delta = np.zeros(n_p)
+    sc = _scales(chain)
+    basis = np.zeros((n_p + 6, 0))
+    for _ in range(MAX_STEPS):
+        res, j = _system(chain, qa, s, delta, rot, t)
+        js = j / sc
+        _, sv, vt = np.linalg.svd(js, full_matrices=False)
         rank = int(np.sum(sv > RANK_TOL * sv[0]))
-        basis = vt[:rank].T  # (31, r) in scaled units
-        fit = least_squares(lambda z, x0=x0, b=basis: _residuals(x0 + (b @ z) / sc, theta0, q, s), np.zeros(rank))
-        x0 = x0 + (basis @ fit.x) / sc
-    res = _residuals(x0, theta0, q, s).reshape(-1, 3)
-    dof = max(3 * len(q) - rank, 1)
+        basis = vt[:rank].T
+        z, *_ = np.linalg.lstsq(js @ basis, -res, rcond=None)
+        step_scaled = basis @ z
+        step = step_scaled / sc
+        delta = delta + step[:n_p]
+        rot = _exp(step[n_p : n_p + 3]) @ rot
+        t = t + step[n_p + 3 :]
+        if np.max(np.abs(step_scaled)) < STEP_TOL_MM:
+            break
+    res, j = _system(chain, qa, s, delta, rot, t)
+    js = j / sc
+    _, sv, vt = np.linalg.svd(js, full_matrices=False)
+    rank = int(np.sum(sv > RANK_TOL * sv[0]))
+    basis = vt[:rank].T
+    dof = max(3 * len(qa) - rank, 1)
     sigma2 = float(np.sum(res**2) / dof)
-    j = _jacobian(x0, theta0, q, s) / sc
-    jr = j @ basis
+    jr = js @ basis
     cov_z = sigma2 * np.linalg.pinv(jr.T @ jr)
     cov = (basis @ cov_z @ basis.T) / np.outer(sc, sc)
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
     # is there a kinematic error at all? H0: the arm's identified combinations are zero (δ = 0 up to what the
     # transform absorbs). χ² = δᵀ Cov(δ)⁺ δ with its rank as the degrees of freedom, δ in the scaled units.
-    cov_dh = (basis @ cov_z @ basis.T)[:N_DH, :N_DH]
-    d_scaled = x0[:N_DH] * sc[:N_DH]
-    w, v = np.linalg.eigh(cov_dh)
-    keep = w > w.max() * 1e-9
-    chi2 = float(np.sum((v[:, keep].T @ d_scaled) ** 2 / w[keep]))
-    chi2_dof = int(keep.sum())
-    null = np.eye(len(x0)) - basis @ basis.T
+    cov_arm = (basis @ cov_z @ basis.T)[:n_p, :n_p]
+    d_scaled = delta * sc[:n_p]
+    w, v = np.linalg.eigh(cov_arm)
+    keep = w > w.max() * 1e-9 if w.max() > 0 else np.zeros(len(w), bool)
+    chi2 = float(np.sum((v[:, keep].T @ d_scaled) ** 2 / w[keep])) if keep.any() else 0.0
+    null = np.eye(n_p + 6) - basis @ basis.T
     alone = np.linalg.norm(null, axis=0) < 1e-3  # a unit change of this parameter lies in the identified space
-    delta = x0[:N_DH]
+    names = chain.param_names + ("T.rx", "T.ry", "T.rz", "T.x", "T.y", "T.z")
     return Calibration(
-        nominal=nominal,
-        identified=dh_from(theta0 + delta),
+        chain=chain,
         delta=delta,
-        delta_se=np.where(alone[:N_DH], se[:N_DH], np.nan),
-        identifiable=alone[:N_DH],
-        rotation=Rotation.from_rotvec(x0[N_DH : N_DH + 3]).as_matrix(),
-        translation=x0[N_DH + 3 :].copy(),
+        delta_se=np.where(alone[:n_p], se[:n_p], np.nan),
+        identifiable=alone[:n_p],
+        rotation=rot,
+        translation=t,
         rank=rank,
-        combinations=tuple(_describe(basis[:, k]) for k in range(rank)),
+        combinations=tuple(_describe(names, basis[:, k]) for k in range(rank)),
         sigma_mm=float(np.sqrt(sigma2)),
-        residuals=res,
+        residuals=res.reshape(-1, 3),
         chi2=chi2,
-        chi2_dof=chi2_dof,
+        chi2_dof=int(keep.sum()),
     )
+
+
+def position_jacobian(chain: Chain, q) -> np.ndarray:
+    """∂FK/∂δ (N, 3, P) of the nominal chain at inputs q (N, I): how the tool point (robot frame, mm) moves per unit
+    of each parameter in `chain.param_names`, angles scaled by `angle_scale` (every column in mm per mm-equivalent)."""
+    _, jp, _ = chain.kinematics(q)
+    assert jp is not None
+    return jp / _scales(chain)[: chain.n_params]
+
+
+def vec_commands(cal: Calibration, s_rows, q_rows) -> np.ndarray:
+    """VEC's robot commands (D, 3) for rows with sensor readings s_rows (D, 3) and joint values q_rows (D, I).
+
+    The point p = T(s); the joints q* that put the IDENTIFIED arm's tool point there (two damped least-squares steps
+    of position-only inverse kinematics from the row's joints, every row at once); the command the NOMINAL
+    controller needs to reach q*: b̂ = p + FK(0, q*) − FK(δ̂, q*) — exact to first order in δ̂ times the step, which
+    is far below the noise where the row's joints are the ones that reach the point."""
+    chain = cal.chain
+    q = np.asarray(q_rows, float).copy()
+    p = cal.sensor_to_robot(s_rows)
+    if len(q) == 0:
+        return np.zeros((0, 3))
+    a = angle_scale(chain)
+    w = np.array([1.0 if i.kind == "prismatic" else a for i in chain.inputs])  # joint units -> mm-equivalent
+    for _ in range(2):
+        pid, _, jq = chain.kinematics(q, cal.delta)
+        assert jq is not None
+        js = jq / w  # mm per mm-equivalent
+        m = js @ np.swapaxes(js, 1, 2) + (1e-9 * a * a) * np.eye(3)
+        step = np.einsum("nji,nj->ni", js, np.linalg.solve(m, (p - pid)[..., None])[..., 0])
+        q = q + step / w
+    return p + chain.forward(q) - chain.forward(q, cal.delta)

@@ -3,7 +3,7 @@
 Starting from a rigid sensor→robot fit plus isotropic noise, the diagnosis tests, in this order:
 outliers (generalised ESD on deleted studentised residuals of a rigid+affine(+drift)(+arm) model), uniform scale
 (similarity vs rigid), affine beyond scale (full linear map vs similarity; only the identifiable terms), drift
-(residuals vs time), with joint angles in the file the arm's kinematic error (its DH Jacobian's columns beyond the
+(residuals vs time), with joint values in the file the arm's kinematic error (its chain's Jacobian columns beyond the
 accepted terms, `diagnosis_arm`), smooth field (Moran's I of the residuals, k-nearest-neighbour weights, parametric
 bootstrap) and anisotropic noise (sphericity likelihood ratio of the noise covariance). All model tests are nested
 F-tests of the linearised residual model (docs/theory.md §6.1). False alarms are controlled family-wise: each of
@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rrbc_core.analysis.diagnosis_arm import MIN_POINTS as ARM_MIN_POINTS
-from rrbc_core.analysis.diagnosis_arm import arm_columns
+from rrbc_core.analysis.diagnosis_arm import ArmModel, arm_columns
 from rrbc_core.analysis.diagnosis_field import fit_field, krige_outliers, noise_beside_field
 from rrbc_core.analysis.diagnosis_stats import (
     noise_cov,
@@ -141,7 +141,14 @@ class Diagnosis:
 # --------------------------------------------------------------------------------------------- diagnose
 @thread_limited
 def diagnose(
-    mset: MeasurementSet, alpha: float = 0.01, seed: int = 0, robot: str = "ur5", tool_mm: float = 0.0
+    mset: MeasurementSet,
+    alpha: float = 0.01,
+    seed: int = 0,
+    robot: str | None = None,
+    tool_mm=None,
+    urdf=None,
+    tip: str | None = None,
+    base: str | None = None,
 ) -> Diagnosis:
     """What, beyond a rigid transform plus isotropic noise, is in measured point pairs; and whether RRBC will help.
 
@@ -149,14 +156,16 @@ def diagnose(
     ----------
     mset : MeasurementSet
         Rows with both readings (roles registration, fiducial, both, check); repeated ids are repeats. With joint
-        columns q1..q6 (degrees) the arm's kinematic error is tested too.
+        columns (the robot model's, `io.joints`) the arm's kinematic error is tested too.
     alpha : float
         Family-wise false-alarm rate over all tests (0 < alpha < 1).
     seed : int
         Seed of the bootstraps.
-    robot, tool_mm : str, float
-        The arm's nominal model ("ur5" or "ur10") and tool length along the flange axis (mm), used only with
-        joint columns.
+    robot, urdf, tip, base, tool_mm : optional
+        The arm's model (`diagnosis_arm.ArmModel`): "ur5" or "ur10" (columns q1..q6, degrees), or a URDF with its
+        tip and base links (columns named after its joints); a tool length along the DH flange's z axis or a point
+        (3,) in the tip link's frame (mm). Without robot or urdf, q1..q6 columns are tried as a UR5 and skipped with
+        a limit if it does not describe them.
 
     Returns
     -------
@@ -168,14 +177,16 @@ def diagnose(
     Raises
     ------
     InputError
-        Fewer than 5 distinct points with both readings, alpha out of range, bad joint columns or robot name.
+        Fewer than 5 distinct points with both readings, alpha out of range, bad joint columns or robot model, or
+        a chosen robot model that does not describe the robot (`robot_model.check_model`).
     """
     if not (0 < float(alpha) < 1):
         raise InputError(f"alpha must be between 0 and 1, got {alpha!r}")
     d = paired(mset)
     n_all = len(d.ids)
-    arm = arm_columns(mset, d.rows, d.row_point, n_all, robot, tool_mm)
     limits: list[str] = []
+    model = ArmModel(robot, None if urdf is None else str(urdf), tip, base, tool_mm if tool_mm else None)
+    arm = arm_columns(mset, d.rows, d.row_point, n_all, model, limits)
     if arm is not None and n_all < ARM_MIN_POINTS:
         limits.append(f"only {n_all} paired points with joint angles: the arm's kinematic error was not tested")
         arm = None

@@ -192,9 +192,15 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             rms_k = float(np.sqrt(np.mean(np.sum(np.einsum("knc,k->nc", arm.fields[:, inl], delta) ** 2, axis=1))))
             found["kinematic"] = Effect(
                 "kinematic",
-                {"robot": arm.robot, "tool_mm": arm.tool_mm, "combinations": int(q_k), "rms_mm": rms_k},
+                {
+                    "robot": arm.robot,
+                    "tip": arm.tip,
+                    "tool_mm": list(arm.tool_mm),
+                    "combinations": int(q_k),
+                    "rms_mm": rms_k,
+                },
                 p_k,
-                f"the residuals follow the arm's joint configuration: {q_k} combinations of its kinematic (DH) "
+                f"the residuals follow the arm's joint configuration: {q_k} combinations of its kinematic "
                 f"parameters, identifiable at these poses beside the accepted terms, reduce the residual sum of "
                 f"squares from {rss_a:.3g} to {rss_k:.3g} (F({q_k}, {nu_k}) = {f_k:.3g}, p {fmt_p(p_k)}), and "
                 f"more than a smooth field of position alone explains (p {fmt_p(p_kf)}); `rrbc calibrate` "

@@ -1,21 +1,24 @@
 """`rrbc calibrate`: RRBC against volumetric error compensation (VEC) on the same measurement file
 (docs/calibration.md).
 
-From the registration and fiducial rows (with joint angles) it identifies the arm's kinematic errors and the
-sensor-to-robot transform (`calibration.calibrate`), then predicts, for every check and target row, the robot
-command four ways (robot frame, mm):
+The robot model is a chain (`analysis.robot_model.robot_chain`: a URDF, or the UR5/UR10 DH tables), checked against
+the file's robot columns before anything is fitted (`robot_model.require_model`). From the registration and fiducial
+rows (with joint values) it identifies the arm's kinematic errors and the sensor-to-robot transform
+(`calibration.calibrate`), then predicts, for every check and target row, the robot command four ways (robot frame,
+mm):
 
 - rigid: least-squares registration of the registration rows, b̂ = R s + t;
 - rrbc: RRBC over the fiducials (IDW k = 4, p = 2), as `rrbc correct`;
-- vec: the point p = T_vec(s); the joints that put the IDENTIFIED arm's tool there, q* = IK(θ̂, p, the row's tool
-  orientation, seeded with the row's joints); the command the NOMINAL controller needs to go to q*,
-  b̂ = FK(θ₀, q*);
+- vec: the point p = T_vec(s); the joints q* that put the IDENTIFIED arm's tool there, from the row's joints; the
+  command the NOMINAL controller needs to go to q* (`calibration.vec_commands`);
 - vec_rrbc: vec, then RRBC on vec's residuals at the fiducials (e_i = b_i − b̂_vec(s_i), IDW to the row).
 
-Check rows carry the robot's reading of the point (its truth); RMS errors over them give `rmst_mm`. Without check
-rows, `cv_rmst_mm` does the same over the fiducials by cross-validation (each fiducial held out: the other
-fiducials and the registration rows fit; at most `CV_FOLDS` folds), and `recommended` is the method with the
-smallest cross-validated error — chosen without the check rows.
+Check rows carry the robot's reading of the point (its truth); RMS errors over them give `rmst_mm`. `cv_rmst_mm` does
+the same over the fiducials by cross-validation (at most `CV_FOLDS` folds; fiducial i in fold i mod folds: the other
+fiducials and the registration rows fit), and `recommended` is the simplest method whose cross-validated error is
+within one standard error of the smallest (`one_standard_error_choice`) — chosen without the check rows. A fiducial row that is also a registration row (role `both`) is held out only when at
+least `MIN_REGISTRATION` registration rows remain (else it stays in every fit and is not scored): a file whose
+registration rows are `both` and listed first works.
 """
 
 from __future__ import annotations
@@ -24,14 +27,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rrbc_core.analysis.calibration import PARAM_NAMES, Calibration, calibrate
+from rrbc_core.analysis.calibration import Calibration, calibrate, vec_commands
+from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.errors import InputError
-from rrbc_core.io.joints import joint_angles
+from rrbc_core.io.joints import joint_values
 from rrbc_core.io.measurements import MeasurementSet
-from rrbc_core.models.kinematics import ROBOT_DH, forward, inverse
+from rrbc_core.models.chain import Chain
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
 CV_FOLDS = 10
+MIN_REGISTRATION = 3
 KINEMATIC_ALPHA = 1e-3
 KINEMATIC_MARGIN = 0.8
 
@@ -60,85 +65,107 @@ class MethodsFit:
     vec_fid: np.ndarray  # VEC's commands for the fiducials' sensor readings
 
 
-def _vec_command(cal: Calibration, nominal, s, q_row) -> np.ndarray:
-    """b̂_vec for one row (module docstring). Where the identified arm's inverse kinematics does not converge on
-    the row's branch (a model stretched by errors it does not describe), the first-order command is used instead:
-    p + FK(θ₀, q_row) − FK(θ̂, q_row), the identified error at the row's configuration."""
-    p = cal.sensor_to_robot(s)[0]
-    b_row, rot = forward(nominal, q_row)
-    try:
-        q_star = inverse(cal.identified, p, rot, q_row)
-    except InputError:
-        p_id, _ = forward(cal.identified, q_row)
-        return p + np.asarray(b_row, float) - np.asarray(p_id, float)
-    b, _ = forward(nominal, q_star)
-    return np.asarray(b, float)
-
-
-def fit_methods(rows_reg, rows_fid, s, b, q, nominal) -> MethodsFit:
+def fit_methods(rows_reg, rows_fid, s, b, q, chain: Chain) -> MethodsFit:
     """The rigid registration (rows_reg), the calibration (rows_reg and rows_fid) and VEC's commands at the fiducials,
-    from sensor readings s (R, 3), robot readings b (R, 3) and joints q (R, 6) rad; `predict_methods` uses it."""
+    from sensor readings s (R, 3), robot readings b (R, 3) and joint values q (R, I) (rad or mm) of `chain`;
+    `predict_methods` uses it."""
     rot, t = _kabsch(s[rows_reg], b[rows_reg])
-    rows = np.concatenate([rows_reg, rows_fid])
-    cal = calibrate(q[rows], s[rows], nominal, rot, t)  # started from the rigid registration (sensor -> robot)
-    vec_fid = np.array([_vec_command(cal, nominal, s[i], q[i]) for i in rows_fid]).reshape(-1, 3)
+    rows = np.union1d(rows_reg, rows_fid)
+    cal = calibrate(chain, q[rows], s[rows], rot, t)  # started from the rigid registration (sensor -> robot)
+    vec_fid = vec_commands(cal, s[rows_fid], q[rows_fid])
     return MethodsFit(rot, t, cal, s[rows_fid], b[rows_fid], vec_fid)
 
 
-def predict_methods(f: MethodsFit, nominal, s_rows, q_rows) -> dict:
-    """The four commands (D, 3) for rows with sensor readings s_rows and joints q_rows."""
+def predict_methods(f: MethodsFit, s_rows, q_rows) -> dict:
+    """The four commands (D, 3) for rows with sensor readings s_rows and joint values q_rows."""
     rigid = s_rows @ f.rot.T + f.t
     fid_rigid = f.fid_sensor @ f.rot.T + f.t
     rrbc = rigid + _idw(fid_rigid, f.fid_robot - fid_rigid, rigid) if len(f.fid_sensor) else rigid
-    vec = np.array([_vec_command(f.cal, nominal, s_rows[i], q_rows[i]) for i in range(len(s_rows))]).reshape(-1, 3)
+    vec = vec_commands(f.cal, s_rows, q_rows)
     vec_rrbc = vec + _idw(f.vec_fid, f.fid_robot - f.vec_fid, vec) if len(f.fid_sensor) else vec
     return {"rigid": rigid, "rrbc": rrbc, "vec": vec, "vec_rrbc": vec_rrbc}
+
+
+def one_standard_error_choice(squared: dict) -> str:
+    """The recommended method from held-out squared errors (method -> (H,) mm², the same held-out points): the
+    simplest method (`METHODS` order: rigid, rrbc, vec, vec_rrbc) whose mean squared error exceeds the smallest by no
+    more than one standard error of their paired difference — the one-standard-error rule of cross-validation, so a
+    difference the held-out points cannot resolve does not decide."""
+    best = min(METHODS, key=lambda m: float(np.mean(squared[m])))
+    for m in METHODS:
+        d = squared[m] - squared[best]
+        se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
+        if float(np.mean(d)) <= se:
+            return m
+    return best
+
+
+def cv_folds(rows_reg: np.ndarray, rows_fid: np.ndarray) -> list[np.ndarray]:
+    """Cross-validation folds over the fiducials (indices into rows_fid; module docstring): fiducial i in fold
+    i mod k, k = min(CV_FOLDS, fiducials); a fiducial that is also a registration row is held out only where at
+    least MIN_REGISTRATION registration rows remain."""
+    if len(rows_fid) < 2:
+        return []
+    k = min(CV_FOLDS, len(rows_fid))
+    folds = []
+    for f in range(k):
+        held = np.arange(f, len(rows_fid), k)
+        both = held[np.isin(rows_fid[held], rows_reg)]
+        if len(np.setdiff1d(rows_reg, rows_fid[both])) < MIN_REGISTRATION:
+            held = np.setdiff1d(held, both)
+        if len(held):
+            folds.append(held)
+    return folds
 
 
 def _rms(a, b) -> float:
     return float(np.sqrt(np.mean(np.sum((np.asarray(a) - np.asarray(b)) ** 2, axis=1))))
 
 
-def compare(mset: MeasurementSet, robot: str = "ur5", tool_mm: float = 0.0) -> dict:
-    """The JSON object of `rrbc calibrate` (docs/cli.md) for a measurement file with joint angles."""
-    if robot not in ROBOT_DH:
-        raise InputError(f"--robot must be one of {', '.join(ROBOT_DH)}, got {robot!r}")
-    q = joint_angles(mset)
+def compare(
+    mset: MeasurementSet, robot: str | None = "ur5", tool=None, urdf=None, tip: str | None = None, base=None
+) -> dict:
+    """The JSON object of `rrbc calibrate` (docs/cli.md) for a measurement file with joint values. The model:
+    `robot` (ur5, ur10) or `urdf` with `tip` and `base` (`robot_model.robot_chain`); `tool`: a length along the DH
+    flange's z axis or a point (3,) in the tip link's frame, mm."""
+    chain = robot_chain(None if urdf is not None else robot, urdf, tip, base, tool)
+    q = joint_values(mset, chain)
     if q is None:
         raise InputError(
-            f"{mset.source}: no joint columns q1..q6 (degrees): calibration needs the arm's configurations"
+            f"{mset.source}: no joint columns ({', '.join(chain.columns)}): calibration needs the arm's configurations"
         )
-    nominal = ROBOT_DH[robot].with_tool(tool_mm)
     s, b = np.asarray(mset.sensor, float), np.asarray(mset.robot, float)
     roles = np.array(mset.roles)
     rows_reg = np.flatnonzero(np.isin(roles, ("registration", "both")))
     rows_fid = np.flatnonzero(np.isin(roles, ("fiducial", "both")))
     rows_chk = np.flatnonzero(roles == "check")
     rows_tgt = np.flatnonzero(roles == "target")
-    if len(rows_reg) < 3:
+    if len(rows_reg) < MIN_REGISTRATION:
         raise InputError(f"{mset.source}: at least 3 registration rows are needed, got {len(rows_reg)}")
     if len(np.union1d(rows_reg, rows_fid)) < 8:
         raise InputError(
             f"{mset.source}: {len(np.union1d(rows_reg, rows_fid))} registration and fiducial rows: too few poses to "
             "identify the arm (at least 8; more, in varied configurations, identify more)"
         )
-    fit = fit_methods(rows_reg, rows_fid, s, b, q, nominal)
+    known = np.union1d(rows_reg, rows_fid)
+    model = require_model(chain, q[known], b[known], mset.source)
+    fit = fit_methods(rows_reg, rows_fid, s, b, q, chain)
     rmst = dict.fromkeys(METHODS)
     if len(rows_chk):
-        pred = predict_methods(fit, nominal, s[rows_chk], q[rows_chk])
+        pred = predict_methods(fit, s[rows_chk], q[rows_chk])
         rmst = {m: _rms(pred[m], b[rows_chk]) for m in METHODS}
     # cross-validation over the fiducials (no check rows used)
-    folds = np.array_split(np.arange(len(rows_fid)), min(CV_FOLDS, len(rows_fid))) if len(rows_fid) >= 2 else []
+    folds = cv_folds(rows_reg, rows_fid)
     errs: dict[str, list] = {m: [] for m in METHODS}
     for held in folds:
         keep = np.setdiff1d(np.arange(len(rows_fid)), held)
-        f = fit_methods(np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, nominal)
-        pred = predict_methods(f, nominal, s[rows_fid[held]], q[rows_fid[held]])
+        f = fit_methods(np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, chain)
+        pred = predict_methods(f, s[rows_fid[held]], q[rows_fid[held]])
         for m in METHODS:
             errs[m].append(np.sum((pred[m] - b[rows_fid[held]]) ** 2, axis=1))
     cv_values = {m: float(np.sqrt(np.mean(np.concatenate(errs[m])))) for m in METHODS} if folds else {}
     cv: dict[str, float | None] = {m: cv_values.get(m) for m in METHODS}
-    recommended = min(METHODS, key=lambda m: cv_values[m]) if folds else "rigid"
+    recommended = one_standard_error_choice({m: np.concatenate(errs[m]) for m in METHODS}) if folds else "rigid"
     cal = fit.cal
     # a kinematic error is claimed only when the arm's identified errors are significant against their stated
     # uncertainty AND the arm model beats a model-free correction out of sample: a smooth sensor field leaks into
@@ -150,27 +177,42 @@ def compare(mset: MeasurementSet, robot: str = "ur5", tool_mm: float = 0.0) -> d
     )
     targets = []
     if len(rows_tgt):
-        pred = predict_methods(fit, nominal, s[rows_tgt], q[rows_tgt])
+        pred = predict_methods(fit, s[rows_tgt], q[rows_tgt])
         for k, i in enumerate(rows_tgt):
             targets.append({"id": mset.ids[i], **{m: pred[m][k].tolist() for m in METHODS}})
+    angular = chain.angular
     return {
-        "robot": robot,
-        "tool_mm": float(tool_mm),
-        "poses": int(len(np.union1d(rows_reg, rows_fid))),
+        "robot": chain.name,
+        "model": {
+            "source": chain.source,
+            "base": chain.base,
+            "tip": chain.tip,
+            "joints": [{"column": i.column, "unit": i.unit} for i in chain.inputs],
+            "tool_mm": chain.tool.tolist(),
+            "check": model.to_json(),
+        },
+        "tool_mm": chain.tool.tolist(),
+        "poses": int(len(known)),
         "checks": int(len(rows_chk)),
         "rmst_mm": rmst,
         "cv_rmst_mm": cv,
         "recommended": recommended,
         "identifiable": {
             "rank": cal.rank,
-            "parameters": [n for n, ok in zip(PARAM_NAMES, cal.identifiable) if ok],
+            "parameters": [n for n, ok in zip(cal.names, cal.identifiable) if ok],
             "combinations": list(cal.combinations),
         },
         "parameters": [
-            {"name": n, "error": float(d), "std_error": None if not ok else float(se), "identifiable": bool(ok)}
-            for n, d, se, ok in zip(PARAM_NAMES, cal.delta, cal.delta_se, cal.identifiable)
+            {
+                "name": n,
+                "error": float(d),
+                "std_error": None if not ok else float(se),
+                "identifiable": bool(ok),
+                "unit": "rad" if ang else "mm",
+            }
+            for n, d, se, ok, ang in zip(cal.names, cal.delta, cal.delta_se, cal.identifiable, angular)
         ],
-        "units": "theta/alpha rad, a/d/tool mm",
+        "units": "per parameter (unit): angles rad, lengths mm",
         "sensor_to_robot": {"rotation": cal.rotation.tolist(), "translation": cal.translation.tolist()},
         "residual_sigma_mm": cal.sigma_mm,
         "kinematic_error": {

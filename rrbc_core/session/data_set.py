@@ -49,21 +49,22 @@ class SessionData:
         scenes (whose data are always simulated for the layout as it is).
     what : str
         One sentence saying which data these are.
-    robot, tool_mm : str, float
-        The arm's model and tool length (mm) that read the joint columns (a scene's kinematic arm); "ur5" and 0
-        (`rrbc diagnose`'s defaults) otherwise.
+    robot, tool_mm : str or None, float
+        The arm's model and tool length (mm) that read the joint columns (a scene's kinematic arm); None and 0
+        otherwise (`rrbc diagnose`'s defaults: q1..q6 columns are tried as a UR5 and left untested if it does not
+        describe them).
     """
 
     measurements: MeasurementSet
     edited: bool
     what: str
-    robot: str = "ur5"
+    robot: str | None = None
     tool_mm: float = 0.0
 
     def diagnose_command(self, path: str) -> str:
         """The command line that diagnoses these data, written to `path`, as the app does."""
         opts = ""
-        if self.robot != "ur5":
+        if self.robot not in (None, "ur5"):
             opts += f" --robot {self.robot}"
         if self.tool_mm:
             opts += f" --tool {self.tool_mm:g}"
@@ -73,7 +74,8 @@ class SessionData:
         """`analysis.diagnosis.diagnose` of these data with the arm's model: what `diagnose_command` prints."""
         from rrbc_core.analysis.diagnosis import diagnose
 
-        return diagnose(self.measurements, alpha=alpha, seed=seed, robot=self.robot, tool_mm=self.tool_mm)
+        robot = None if self.robot == "ur5" else self.robot  # as the printed command says it (ur5 is the default)
+        return diagnose(self.measurements, alpha=alpha, seed=seed, robot=robot, tool_mm=self.tool_mm)
 
 
 def session_data(session: ExplorerSession) -> SessionData:

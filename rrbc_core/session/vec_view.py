@@ -3,7 +3,7 @@
 Scene mode, a scene whose robot error model has a kinematic term: the arm reaches every point in a joint
 configuration (the true arm's inverse kinematics at the point with its tool orientation). From the registration
 points and the included fiducials — their readings and those configurations — `analysis.vec_compare.fit_methods`
-identifies the arm's DH errors and the sensor-to-robot transform (what `rrbc calibrate` does), and each target gets
+identifies the arm's kinematic errors (its chain, `models.chain.Chain.from_dh`) and the sensor-to-robot transform (what `rrbc calibrate` does), and each target gets
 VEC's command: the joints that put the identified arm's tool on the target, sent through the nominal controller.
 
 Tool orientation. Every point is reached with the tool pointing down (turned by the scene's tool yaw), unless a
@@ -106,6 +106,7 @@ def set_target_tool(session: ExplorerSession, pid: str, tilt_deg: float, azimuth
 def vec_view(session: ExplorerSession) -> VecView | None:
     """VEC beside rigid and RRBC for the current layout (module docstring); None without a kinematic arm."""
     from rrbc_core.analysis.vec_compare import fit_methods, predict_methods
+    from rrbc_core.models.chain import Chain
 
     term = session.arm_term()
     if term is None:
@@ -122,13 +123,13 @@ def vec_view(session: ExplorerSession) -> VecView | None:
     if len(s) < 8:
         raise InputError(f"VEC needs at least 8 registration points and fiducials, got {len(s)}")
     key = (s.tobytes(), b.tobytes(), q.tobytes())
-    nominal = term.dh
-    fit = session.cached("vec", key, lambda: fit_methods(np.arange(nr), np.arange(nr, len(s)), s, b, q, nominal))
+    chain = Chain.from_dh(term.dh, "arm")
+    fit = session.cached("vec", key, lambda: fit_methods(np.arange(nr), np.arange(nr, len(s)), s, b, q, chain))
     t = ev.targets
     m = len(t.ids)
     if m:
         q_t = joints(session, "targets", t.ids, t.positions)
-        vec = predict_methods(fit, nominal, t.sensor, q_t)["vec"]
+        vec = predict_methods(fit, t.sensor, q_t)["vec"]
         err_vec = np.linalg.norm(vec - t.truth, axis=1)
     else:
         vec, err_vec = np.zeros((0, 3)), np.zeros(0)

@@ -1,6 +1,7 @@
-"""Model-based calibration (rrbc_core.analysis.calibration) on planted DH errors of random size (seeded): the
-identifiable parameters come back within their stated uncertainty, the unidentifiable ones are said to be so, and
-predictions at new poses reach the noise floor."""
+"""Model-based calibration (rrbc_core.analysis.calibration) on planted kinematic errors of random size (seeded), on
+the UR5's DH chain and on URDF arms (a packaged Panda, our lift-column arm with a mimic joint): the identifiable
+parameters come back within their stated uncertainty, the unidentifiable ones are said to be so, and predictions at
+new poses reach the noise floor."""
 
 from __future__ import annotations
 
@@ -8,46 +9,71 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rrbc_core.analysis.calibration import PARAM_NAMES, calibrate, dh_vector
+from rrbc_core.analysis.calibration import calibrate, vec_commands
 from rrbc_core.errors import InputError
-from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, perturbed
+from rrbc_core.models.chain import Chain
+from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED
+from tests.support.urdf_arms import LIFT_ARM, random_errors, random_poses
 
 
-def _poses(rng, n):
+def _ur5_poses(rng, n):
     return UR5_TOOL_DOWN_SEED + rng.uniform(-0.8, 0.8, (n, 6))
 
 
-@pytest.mark.parametrize("seed", [11, 12, 13])
-def test_pure_dh_errors_are_recovered_within_their_uncertainty_and_predictions_reach_the_noise_floor(seed):
+def _chains():
+    from rrbc_core.models.urdf import load_urdf
+
+    return {
+        "ur5-dh": (Chain.from_dh(UR5, "ur5", tool_mm=[0.0, 0.0, 100.0]), _ur5_poses),
+        "panda": (load_urdf("panda", tip="panda_hand_tcp"), None),
+        "lift": (load_urdf(LIFT_ARM, tool_mm=[0.0, 0.0, 80.0]), None),
+    }
+
+
+@pytest.mark.parametrize("arm,seed", [("ur5-dh", 11), ("ur5-dh", 12), ("panda", 13), ("lift", 14)])
+def test_planted_errors_are_recovered_within_their_uncertainty_and_predictions_reach_the_noise_floor(arm, seed):
+    chain, poses = _chains()[arm]
     rng = np.random.default_rng(seed)
-    nominal = UR5.with_tool(100.0)
-    size = rng.uniform(0.5, 2.0)
-    true = perturbed(nominal, rng, 0.1 * size, 0.2 * size, 0.05 * size)
+    draw = poses or (lambda r, n: random_poses(chain, r, n))
+    truth = random_errors(chain, rng, size=rng.uniform(0.5, 2.0))
     sigma = rng.uniform(0.01, 0.04)  # sensor noise per axis, mm
     rot = Rotation.from_rotvec(rng.normal(size=3) * 0.5).as_matrix()
     t = rng.uniform(-1500, 1500, 3)
-    q = _poses(rng, 60)
-    p, _ = forward(true, q)
+    q = draw(rng, 80)
+    p = chain.forward(q, truth)
     s = (p - t) @ rot + rng.normal(0, sigma, p.shape)
-    cal = calibrate(q, s, nominal, rot, t)
-    truth = dh_vector(true) - dh_vector(nominal)
+    cal = calibrate(chain, q, s)
     ok = cal.identifiable
-    # sanity, not theory: from positions alone some parameters (and combinations with the base) cannot be separated
-    assert 0 < ok.sum() < len(PARAM_NAMES) and cal.rank < len(PARAM_NAMES) + 6
+    # from positions alone some parameters (and combinations with the base) cannot be separated
+    assert 0 < ok.sum() < chain.n_params and cal.rank < chain.n_params + 6
     z = (cal.delta[ok] - truth[ok]) / cal.delta_se[ok]
-    assert np.all(np.abs(z) < 4.5), dict(zip(np.array(PARAM_NAMES)[ok], np.round(z, 2)))
+    assert np.all(np.abs(z) < 4.5), dict(zip(np.array(chain.param_names)[ok], np.round(z, 2)))
     assert 0.2 < np.mean(z**2) < 3.0  # the stated uncertainties are of the right size (chi-square per parameter ~ 1)
     assert abs(cal.sigma_mm / sigma - 1) < 0.35  # the residual noise estimate
     # new poses, noise-free: the identified arm predicts where the real one goes to within the noise floor
-    qc = _poses(rng, 40)
-    pc, _ = forward(true, qc)
+    qc = draw(rng, 40)
+    pc = chain.forward(qc, truth)
     sc = (pc - t) @ rot
-    pred, _ = forward(cal.identified, qc)
-    err = np.sqrt(np.mean(np.sum((cal.sensor_to_robot(sc) - pred) ** 2, axis=1)))
-    nominal_err = np.sqrt(np.mean(np.sum((pc - forward(nominal, qc)[0]) ** 2, axis=1)))
+    err = np.sqrt(np.mean(np.sum((cal.sensor_to_robot(sc) - cal.forward(qc)) ** 2, axis=1)))
+    nominal_err = np.sqrt(np.mean(np.sum((pc - chain.forward(qc)) ** 2, axis=1)))
     assert err < np.sqrt(3) * sigma and err < 0.1 * nominal_err
+    # VEC's command: the nominal controller, sent it, puts the real arm's tool on the point
+    cmd = vec_commands(cal, sc, qc)
+    reached = _reached_by_command(chain, truth, cmd, qc)
+    assert np.sqrt(np.mean(np.sum((reached - pc) ** 2, axis=1))) < np.sqrt(3) * sigma
+
+
+def _reached_by_command(chain, truth, cmd, q0):
+    """Where the true arm goes when the nominal controller is sent `cmd`: the nominal IK of cmd near q0 (Gauss–Newton,
+    position only), then the true forward kinematics."""
+    q = q0.copy()
+    for _ in range(20):
+        p, _, jq = chain.kinematics(q)
+        q = q + np.einsum("nij,nj->ni", np.linalg.pinv(jq), cmd - p)
+    return chain.forward(q, truth)
 
 
 def test_too_few_poses_are_refused():
+    chain = Chain.from_dh(UR5, "ur5")
     with pytest.raises(InputError, match="at least 6 poses"):
-        calibrate(np.zeros((3, 6)), np.zeros((3, 3)), UR5)
+        calibrate(chain, np.zeros((3, 6)), np.zeros((3, 3)))
