@@ -272,3 +272,29 @@ def diagnose_command(quick: bool) -> list[dict]:
             )
         )
     return rows
+
+
+def calibrate_urdf(quick: bool) -> list[dict]:
+    """`rrbc calibrate FILE --urdf lift_arm --tip flange --json` on 500 poses of a 7-joint URDF arm (six revolute
+    joints on a prismatic lift column; rrbc_core/data/robots/lift_arm.urdf) as a user runs it: a fresh process
+    (start-up, URDF parsing, the model check, the calibration, ten cross-validation folds, VEC commands). The file:
+    `simulation.arm_data.chain_measurements` (kinematic errors of calibration size, noise 0.02 mm; 40 registration,
+    260 fiducial, 197 check and 3 target rows). Goal (issue 27): loaded < 3 s."""
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.models.urdf import load_urdf
+    from rrbc_core.simulation.arm_data import chain_measurements
+
+    chain = load_urdf("lift_arm", tip="flange")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "lift500.csv"
+        m = chain_measurements(chain, 27, n_reg=40, n_fid=260, n_chk=197, n_tgt=3, source=str(path))
+        write_measurements(path, m)
+        return [
+            _command_row(
+                "calibrate_urdf_500_poses",
+                [RRBC, "calibrate", path, "--urdf", "lift_arm", "--tip", "flange", "--json"],
+                3.0,
+                "`rrbc calibrate FILE --urdf lift_arm --tip flange --json` on 500 poses of a 7-joint arm",
+                1 if quick else 3,
+            )
+        ]

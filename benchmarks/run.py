@@ -38,6 +38,7 @@ BENCHMARKS = [
     interactive.plan_command,
     interactive.plan_optimiser,
     interactive.diagnose_command,
+    interactive.calibrate_urdf,
     big_inputs.big_inputs,
     reproduce_speed.reproduce_speed,
 ]

@@ -26,6 +26,7 @@ the residual (robot frame); `anisotropic_noise.axis` is in the sensor frame; `no
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -145,8 +146,8 @@ def diagnose(
     alpha: float = 0.01,
     seed: int = 0,
     robot: str | None = None,
-    tool_mm=None,
-    urdf=None,
+    tool_mm: float | tuple[float, float, float] | None = None,
+    urdf: str | Path | None = None,
     tip: str | None = None,
     base: str | None = None,
 ) -> Diagnosis:

@@ -9,7 +9,8 @@ converted from metres to millimetres.
 Which chain: `tip` names the measured link (default: the end of the longest chain — the leaf link with the most
 joints above it, the first in the file on a tie); `base` the link whose frame the robot columns are in (default:
 the root of the tree). `PACKAGED` names robot descriptions that ship with the `example-robot-data` package
-(`packaged_urdf`): `--urdf ur5` uses that file when no file of that name exists.
+(`packaged_urdf`): `--urdf ur5` uses that file when no file of that name exists; `BUNDLED` names the ones rrbc
+ships itself (`--urdf lift_arm`: a six-axis arm on a lift column, with a mimic joint).
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ PACKAGED = {
     "ur10": "robots/ur_description/urdf/ur10_robot.urdf",
     "panda": "robots/panda_description/urdf/panda.urdf",
 }
+#: Robot descriptions bundled with rrbc (rrbc_core/data/robots/), by name: examples, tests and benchmarks.
+BUNDLED = ("lift_arm",)
 _SCALE = {"revolute": 1.0, "continuous": 1.0, "prismatic": 1000.0}  # SI value × scale = rad or mm
 _UNIT = {"revolute": "rad", "continuous": "rad", "prismatic": "m"}
 
@@ -44,6 +47,13 @@ def packaged_urdf(name: str) -> Path:
         if str(f).endswith(PACKAGED[name]):
             return Path(str(f.locate()))
     raise InputError(f"example-robot-data has no {PACKAGED[name]}")
+
+
+def bundled_urdf(name: str) -> Path:
+    """The path of a robot description bundled with rrbc (`BUNDLED`)."""
+    if name not in BUNDLED:
+        raise InputError(f"no bundled robot {name!r}: bundled are {', '.join(BUNDLED)}")
+    return Path(__file__).resolve().parents[1] / "data" / "robots" / f"{name}.urdf"
 
 
 def _parse(path: Path):
@@ -67,7 +77,9 @@ def _resolve(urdf) -> Path:
         return p
     if str(urdf) in PACKAGED:
         return packaged_urdf(str(urdf))
-    raise InputError(f"{urdf}: no such URDF file (packaged robots: {', '.join(PACKAGED)})")
+    if str(urdf) in BUNDLED:
+        return bundled_urdf(str(urdf))
+    raise InputError(f"{urdf}: no such URDF file (packaged robots: {', '.join((*PACKAGED, *BUNDLED))})")
 
 
 def _matrix(joint) -> np.ndarray:
@@ -202,15 +214,4 @@ def describe(chain: Chain) -> str:
     return f"{chain.name}: {chain.base} → {chain.tip}, {len(chain.joints)} moving joints; joint columns {cols}"
 
 
-def within_limits(chain: Chain, q: np.ndarray, tol: float = 1e-6) -> np.ndarray:
-    """(N, I) bool: each input value (rad or mm) inside its limits (+ `tol`; an unbounded joint always is)."""
-    ok = np.ones(q.shape, bool)
-    for i, inp in enumerate(chain.inputs):
-        if inp.lower is not None and inp.upper is not None:
-            ok[:, i] = (q[:, i] >= inp.lower - tol * max(1.0, abs(inp.lower))) & (
-                q[:, i] <= inp.upper + tol * max(1.0, abs(inp.upper))
-            )
-    return ok
-
-
-__all__ = ["PACKAGED", "describe", "load_urdf", "packaged_urdf", "within_limits"]
+__all__ = ["BUNDLED", "PACKAGED", "bundled_urdf", "describe", "load_urdf", "packaged_urdf"]

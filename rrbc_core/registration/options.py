@@ -187,7 +187,7 @@ def make_strategy(name: str, **options) -> StrategyObject:
 
 
 @thread_limited
-def register(method: str, p_sensor: ArrayLike, b_robot: ArrayLike, **options) -> Registration:
+def register(method: str, sensor: ArrayLike, robot: ArrayLike, **options) -> Registration:
     """Register paired points with a named strategy: the sensor→robot mapping and its residuals.
 
     Parameters
@@ -195,7 +195,8 @@ def register(method: str, p_sensor: ArrayLike, b_robot: ArrayLike, **options) ->
     method : str
         A name in `STRATEGIES`: "least-squares", "three-point", "combinatorial", "annealing", "clustering".
     sensor, robot : (N, 3) array_like
-        The same N physical points measured in the sensor frame and in the robot frame, mm.
+        The same N physical points measured in the sensor frame and in the robot frame, mm (`p_sensor`, `b_robot`
+        in the strategies; the public call keeps its published names).
     **options
         The strategy's options (its fields, e.g. ``seed`` for annealing and clustering) and per-call data
         (least squares' ``weights``, annealing's ``initial`` registration).
@@ -215,4 +216,4 @@ def register(method: str, p_sensor: ArrayLike, b_robot: ArrayLike, **options) ->
     for extra in ("weights", "initial"):
         if extra in options and cls is not None and (extra in cls.extras or extra == "initial" and cls is Annealing):
             call[extra] = options.pop(extra)
-    return make_strategy(method, **options).register(p_sensor, b_robot, **call)
+    return make_strategy(method, **options).register(sensor, robot, **call)
