@@ -68,7 +68,12 @@ def chain_measurements(
     s = (p - t) @ rot
     if field_mm > 0:
         pts = PointSet(robot=s, sensor=s, time=np.zeros(len(s)), tool_rotation=None, joint_seed=None)
-        s = s + SmoothField(rms_mm=field_mm, length_mm=300.0, seed=seed).sample(pts, "sensor", np.random.default_rng(seed), 1)[0]
+        s = (
+            s
+            + SmoothField(rms_mm=field_mm, length_mm=300.0, seed=seed).sample(
+                pts, "sensor", np.random.default_rng(seed), 1
+            )[0]
+        )
     s = s + rng.normal(0, noise_mm, s.shape)
     b = chain.forward(q) + rng.normal(0, noise_mm, p.shape)
     roles = ["registration"] * n_reg + ["fiducial"] * n_fid + ["check"] * n_chk + ["target"] * n_tgt
