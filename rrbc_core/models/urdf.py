@@ -68,7 +68,10 @@ def _parse(path: Path):
             load_collision_meshes=False,
         )
     except Exception as exc:  # noqa: BLE001 - lxml, yourdfpy and OS errors alike: one line for the user
-        raise InputError(f"{path}: cannot read as a URDF: {' '.join(str(exc).split())[:200]}") from None
+        hint = (
+            " (a xacro file: expand it first, `xacro robot.urdf.xacro > robot.urdf`)" if ".xacro" in path.name else ""
+        )
+        raise InputError(f"{path}: cannot read as a URDF{hint}: {' '.join(str(exc).split())[:200]}") from None
 
 
 def _resolve(urdf) -> Path:
