@@ -10,15 +10,14 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from rrbc_core.errors import InputError
-from rrbc_core.geometry.points import COINCIDENT_MM
 from rrbc_core.interpolation.base import (
     CHUNK_ELEMENTS,
     Fitted,
     FittedInterpolator,
     Hull,
     check_data,
-    coincident_groups,
     group_mean,
+    near_groups,
     too_few,
 )
 
@@ -49,8 +48,9 @@ class _FittedLinear(Fitted):
         dim = self.hull.frame.dim
         if dim == 0:
             raise too_few("linear", 2, 0, len(points))
-        # Fiducials that coincide in the interpolation coordinates share their mean correction.
-        labels = coincident_groups(self.hull.local, COINCIDENT_MM / self.hull.frame.scale)
+        # Fiducials that (nearly) coincide in the interpolation coordinates share their mean correction
+        # (`base.NEAR_FRACTION`): no sliver simplex between two readings of one place.
+        labels = near_groups(self.hull.local, self.hull.frame.scale)
         means = group_mean(labels, values)
         if dim == 1:
             t = group_mean(labels, self.hull.local)[:, 0]
