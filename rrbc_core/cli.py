@@ -28,7 +28,7 @@ from rrbc_core.cli_options import (
     scheduler_option,
     where,
 )
-from rrbc_core.cli_text import correct_text, plan_text, simulate_text
+from rrbc_core.cli_text import correct_text, plan_text, simulate_text, stations_text
 from rrbc_core.errors import InputError, one_line, printable
 
 __all__ = ["build_parser", "main"]
@@ -156,17 +156,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_correct(args) -> str:
-    from rrbc_core.correction.pipeline import correct_measurements
+    from rrbc_core.correction.stations import StationsResult, correct_stations
     from rrbc_core.io.measurements import read_measurements
     from rrbc_core.methods import MethodOptions, method_flags
 
     mset = read_measurements(args.measurements)
     flags = {flag: getattr(args, option_dest(flag)) for flag in method_flags() if flag != "seed"}
     opts = MethodOptions.named(args.registration, args.interpolation, seed=args.seed, **flags)
-    result = correct_measurements(mset, opts)
+    result = correct_stations(mset, opts)
     if args.json:
         return json.dumps(result.to_json(), allow_nan=False) + "\n"
-    return correct_text(result)
+    return stations_text(result) if isinstance(result, StationsResult) else correct_text(result)
 
 
 def _cmd_diagnose(args) -> str:

@@ -67,7 +67,40 @@ def correct_text(result) -> str:
             f"RRBC {s['max_rrbc_mm']:.4f} mm"
         )
         lines += result.statistics().lines()
+    lines += warning_lines(result.warnings())
     return "\n".join(lines) + "\n"
+
+
+def stations_text(result) -> str:
+    """The text of `rrbc correct` on a file with groups: each station's text under a header, then the pooled
+    summary, statistics and warnings."""
+    lines: list[str] = []
+    for g, r in zip(result.groups, result.stations):
+        lines.append(f"=== group {g!r} ===")
+        lines += correct_text(r).rstrip("\n").split("\n")
+        lines.append("")
+    s = result.summary()
+    lines.append(f"=== all {s['stations']} groups, each registered and corrected on its own ===")
+    fre = s.get("fre_rms_mm_per_station")
+    if fre:
+        lines.append(f"FRE per station: {fre['min']:.4f}-{fre['max']:.4f} mm (median {fre['median']:.4f} mm)")
+    if s["rmst_rigid_mm"] is None:
+        lines.append("summary: no check points, so no error can be scored")
+    else:
+        change = (s["rmst_rrbc_mm"] / s["rmst_rigid_mm"] - 1) * 100 if s["rmst_rigid_mm"] > 0 else 0.0
+        lines.append(
+            f"summary over {s['checks']} check points: RMST rigid {s['rmst_rigid_mm']:.4f} mm, "
+            f"RRBC {s['rmst_rrbc_mm']:.4f} mm ({change:+.1f} %); max rigid {s['max_rigid_mm']:.4f} mm, "
+            f"RRBC {s['max_rrbc_mm']:.4f} mm"
+        )
+        lines += result.statistics().lines()
+    lines += warning_lines(result.warnings())
+    return "\n".join(lines) + "\n"
+
+
+def warning_lines(warnings) -> list[str]:
+    """The text form of a `warnings` list: a blank line and one "warning: ..." line each (none when empty)."""
+    return ([""] if warnings else []) + [f"warning: {w}" for w in warnings]
 
 
 def simulate_text(res) -> str:

@@ -14,6 +14,7 @@ from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
 from rrbc_core.correction.check_statistics import CheckStatistics, check_statistics
 from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
+from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
@@ -64,6 +65,19 @@ class CorrectionResult:
         c = self.checks_corrected
         return check_statistics(self.checks.ids, c.robot_rigid, c.robot_rrbc, self.checks.robot)
 
+    def warnings(self) -> tuple[str, ...]:
+        """One-line warnings on this correction (`correction.warnings.correction_warnings`: wild corrections,
+        conflicting nearly coincident fiducials, extrapolated targets and checks)."""
+        points = [
+            Corrected(kind, group.ids, cp.correction, cov)
+            for kind, group, cp, cov in (
+                ("target", self.targets, self.targets_corrected, self.targets_coverage),
+                ("check", self.checks, self.checks_corrected, self.checks_coverage),
+            )
+            if cp is not None
+        ]
+        return correction_warnings(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points)
+
     def to_json(self) -> dict:
         """The JSON object of `rrbc correct --json` (docs/cli.md)."""
         reg = self.registration
@@ -80,6 +94,7 @@ class CorrectionResult:
             "checks": _points_json(self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc),
             "summary": self.summary(),
             "check_statistics": None if (st := self.statistics()) is None else st.to_json(),
+            "warnings": list(self.warnings()),
         }
 
 

@@ -64,6 +64,8 @@ SENSOR_COLUMNS = ("sensor_x", "sensor_y", "sensor_z")
 ROBOT_COLUMNS = ("robot_x", "robot_y", "robot_z")
 REQUIRED_COLUMNS = ("id", "role") + SENSOR_COLUMNS + ROBOT_COLUMNS
 STANDARD_COLUMNS = REQUIRED_COLUMNS + ("time",)
+#: the optional column naming each row's station (io.groups): rows with one value are registered and corrected apart
+GROUP_COLUMN = "group"
 
 # A plain decimal number (what `repr(float)` and spreadsheets write); stricter than float(), which would also
 # take '1_000', 'nan', 'infinity' and non-ASCII digits.
@@ -522,6 +524,9 @@ def _validate(mset: MeasurementSet, header_line: int) -> None:
         if len(values) != n:
             raise _error(source, None, name, f"extra column has {len(values)} values, expected {n} (one per row)")
 
+    if GROUP_COLUMN in mset.extra:  # stations (io.groups): each is validated as a file of its own, named in messages
+        _validate_groups(mset, header_line)
+        return
     seen: dict[str, tuple[str, int]] = {}
     for i in range(n):
         line = mset.lines[i]
@@ -553,6 +558,31 @@ def _validate(mset: MeasurementSet, header_line: int) -> None:
             check_registration_points(pts, what=f"registration points ({frame} frame)")
         except InputError as exc:
             raise _registration_error(source, frame, reg, pts, last_line, exc) from None
+
+
+def _validate_groups(mset: MeasurementSet, header_line: int) -> None:
+    for i, value in enumerate(mset.extra[GROUP_COLUMN]):
+        if value.strip() == "":
+            raise _error(
+                mset.source,
+                mset.lines[i],
+                GROUP_COLUMN,
+                "empty group; with a group column every row names its station (docs/formats/measurement-file.md)",
+            )
+    values = mset.extra[GROUP_COLUMN]
+    for name in dict.fromkeys(values):
+        rows = [i for i, v in enumerate(values) if v == name]
+        pick = lambda seq: tuple(seq[i] for i in rows)  # noqa: B023, E731
+        station = MeasurementSet(
+            pick(mset.ids),
+            pick(mset.roles),
+            mset.sensor[rows],
+            mset.robot[rows],
+            mset.time[rows],
+            pick(mset.lines),
+            f"{mset.source}, group {name!r}",  # as io.groups.group_label names a station
+        )
+        _validate(station, header_line)
 
 
 def _registration_error(source, frame, reg: PointGroup, pts, last_line, exc) -> InputError:

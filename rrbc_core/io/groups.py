@@ -1,0 +1,59 @@
+"""Stations in one measurement file: the optional `group` column (issue 28).
+
+Real files hold several stationings — the robot re-registered at each height and arm configuration. Rows with the
+same `group` value form one station: its own registration, fiducials, corrections; its targets and checks belong to
+it. Format: docs/formats/measurement-file.md, "Stations".
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rrbc_core.io.measurements import GROUP_COLUMN, MeasurementSet
+
+__all__ = ["GROUP_COLUMN", "group_label", "group_names", "has_groups", "select_rows", "split_groups"]
+
+
+def has_groups(mset: MeasurementSet) -> bool:
+    """Whether the set has a `group` column."""
+    return GROUP_COLUMN in mset.extra
+
+
+def group_names(mset: MeasurementSet) -> tuple[str, ...]:
+    """The distinct `group` values in order of first appearance (empty without the column)."""
+    return tuple(dict.fromkeys(mset.extra.get(GROUP_COLUMN, ())))
+
+
+def group_label(source: str, name: str) -> str:
+    """How messages name a station: ``data.csv, group 'station3'``."""
+    return f"{source}, group {name!r}"
+
+
+def select_rows(mset: MeasurementSet, rows, source: str | None = None) -> MeasurementSet:
+    """The rows `rows` (indices, file order kept) of a set as a set of their own; extra columns follow the rows."""
+    rows = np.asarray(rows, dtype=int)
+    take = lambda seq: tuple(seq[i] for i in rows.tolist())  # noqa: E731
+    return MeasurementSet(
+        ids=take(mset.ids),
+        roles=take(mset.roles),
+        sensor=mset.sensor[rows],
+        robot=mset.robot[rows],
+        time=mset.time[rows],
+        lines=take(mset.lines) if len(mset.lines) == len(mset.ids) else tuple(0 for _ in rows),
+        source=mset.source if source is None else source,
+        extra={k: take(v) for k, v in mset.extra.items()},
+    )
+
+
+def split_groups(mset: MeasurementSet) -> tuple[tuple[str, MeasurementSet], ...]:
+    """The stations of a set: (group value, its rows as a set) in order of first appearance. Each station's set keeps
+    the `group` column and is named ``file, group 'g'`` in messages. A set without the column is one station
+    named ""."""
+    if not has_groups(mset):
+        return (("", mset),)
+    values = mset.extra[GROUP_COLUMN]
+    out = []
+    for name in group_names(mset):
+        rows = [i for i, v in enumerate(values) if v == name]
+        out.append((name, select_rows(mset, rows, group_label(mset.source, name))))
+    return tuple(out)
