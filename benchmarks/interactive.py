@@ -298,3 +298,30 @@ def calibrate_urdf(quick: bool) -> list[dict]:
                 1 if quick else 3,
             )
         ]
+
+
+def auto_interpolation(quick: bool) -> list[dict]:
+    """`--interpolation auto` (`interpolation.auto.choose`: K-fold cross-validation of every candidate over the
+    fiducials) on 30, 150 and 1000 fiducials with a smooth correction field and noise, in this process, idle and with
+    a busy core beside it. What the choice costs the app on each change of the fiducials: goal loaded < 1 s for 30
+    fiducials (a cell's worth); the larger rows state the cost (gp leaves the candidates above 150 fiducials)."""
+    from rrbc_core.interpolation.auto import choose
+
+    rows = []
+    for n in (30, 150, 1000):
+        rng = np.random.default_rng(n)
+        p = rng.uniform(-300, 300, (n, 3))
+        v = np.sin(p / 200) + rng.normal(0, 0.05, (n, 3))
+        idle, loaded = both(lambda p=p, v=v: median_time(lambda: choose(p, v), 1 if quick else 3)[0])
+        rows.append(
+            row(
+                f"auto_interpolation_{n}_fiducials",
+                idle,
+                "s",
+                loaded=loaded,
+                goal="loaded < 1 s" if n == 30 else None,
+                met=bool(loaded < 1.0) if n == 30 else None,
+                note=f"cross-validated choice of the interpolation over {n} fiducials, median of {1 if quick else 3}",
+            )
+        )
+    return rows

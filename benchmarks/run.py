@@ -39,6 +39,7 @@ BENCHMARKS = [
     interactive.plan_optimiser,
     interactive.diagnose_command,
     interactive.calibrate_urdf,
+    interactive.auto_interpolation,
     big_inputs.big_inputs,
     reproduce_speed.reproduce_speed,
 ]

@@ -26,9 +26,12 @@ def correct_text(result) -> str:
             label = "  rotation    " if k == 0 else "              "
             lines.append(f"{label}[{fmt_vec(m['rotation'][k], 10, 7)}]")
         lines.append(f"  translation [{fmt_vec(m['translation'], 10, 4)}] mm")
-    interp = result.to_json()["interpolation"]
-    opts = ", ".join(f"{k}={v}" for k, v in interp.items() if k != "method")
-    lines.append(f"interpolation: {interp['method']}" + (f" ({opts})" if opts else ""))
+    if result.choice is not None:
+        lines.append(f"interpolation: {result.choice.describe()}")
+    else:
+        interp = result.interpolation_json()
+        opts = ", ".join(f"{k}={v}" for k, v in interp.items() if k != "method")
+        lines.append(f"interpolation: {interp['method']}" + (f" ({opts})" if opts else ""))
     lines.append("")
     lines.append(f"fiducials ({len(result.fiducials.ids)}): correction e = R^T(b - t) - s, sensor frame, mm")
     lines.append(f"  {'id':<12} {'e_x':>9} {'e_y':>9} {'e_z':>9} {'|e|':>9}")

@@ -42,8 +42,11 @@ def summary(ev: Evaluation, kind: str) -> str:
         )
     elif kind == "measurements":
         lines.append("No target carries a truth: errors cannot be scored (check rows would be).")
+    if ev.choice is not None:
+        lines.append(f"Interpolation: {ev.choice.describe()}.")
     if sm.get("extrapolated"):
         lines.append(f"⚠ **Extrapolated** (outside the fiducials' hull): {', '.join(sm['extrapolated'])}.")
+    lines += [f"⚠ {w}." for w in ev.warnings]
     return "\n\n".join(lines)
 
 

@@ -16,6 +16,7 @@ from rrbc_core.correction.check_statistics import CheckStatistics, check_statist
 from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
+from rrbc_core.interpolation.auto import AutoChoice
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
 from rrbc_core.methods import MethodOptions
@@ -47,6 +48,13 @@ class CorrectionResult:
     #: same test as the extrapolation flags, with the distance from the fiducials' plane); None without fiducials
     targets_coverage: Coverage | None = None
     checks_coverage: Coverage | None = None
+    #: with `--interpolation auto`: what cross-validation over the fiducials chose (`interpolation.auto.AutoChoice`)
+    choice: AutoChoice | None = None
+
+    def interpolation_json(self) -> dict:
+        """The ``interpolation`` JSON: the method and its options; with ``auto`` the method chosen, ``selected_by``,
+        ``folds`` and the ``cv`` table."""
+        return self.choice.to_json() if self.choice is not None else self.options.interpolation_json()
 
     def summary(self) -> dict:
         if len(self.error_rigid) == 0:
@@ -85,7 +93,7 @@ class CorrectionResult:
         reg_json.update(self.options.registration_json())  # the strategy's options (a seeded one's seed)
         return {
             "registration": reg_json,
-            "interpolation": self.options.interpolation_json(),
+            "interpolation": self.interpolation_json(),
             "fiducials": [
                 {"id": i, "sensor": s.tolist(), "correction_mm": e.tolist()}
                 for i, s, e in zip(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections)
@@ -173,4 +181,7 @@ def correct_measurements(mset: MeasurementSet, options: MethodOptions | None = N
         err_rigid = err_rrbc = np.zeros(0)
     t_cov = assess_coverage(fid.sensor, targets.sensor) if len(fid.ids) and len(targets.ids) else None
     c_cov = assess_coverage(fid.sensor, checks.sensor) if len(fid.ids) and len(checks.ids) else None
-    return CorrectionResult(options, reg, fid, corr, targets, t_corr, checks, c_corr, err_rigid, err_rrbc, t_cov, c_cov)
+    choice = getattr(fitted, "choice", None)
+    return CorrectionResult(
+        options, reg, fid, corr, targets, t_corr, checks, c_corr, err_rigid, err_rrbc, t_cov, c_cov, choice
+    )

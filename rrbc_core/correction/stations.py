@@ -78,9 +78,8 @@ class StationsResult:
         the keys of a file without groups), pooled ``summary``, ``check_statistics`` and ``warnings``, and the
         ``interpolation`` used."""
         stations = [{"group": g, **r.to_json()} for g, r in zip(self.groups, self.stations)]
-        interp = stations[0]["interpolation"] if stations else self.options.interpolation_json()
         return {
-            "interpolation": interp,
+            "interpolation": self.options.interpolation_json(),
             "groups": stations,
             "summary": self.summary(),
             "check_statistics": None if (st := self.statistics()) is None else st.to_json(),

@@ -49,6 +49,7 @@ Methods (docs/theory.md §4.1-4.4):
   components and fitted by restricted maximum likelihood (REML). Returns the predictive standard deviation of
   the latent correction (mm), including the trend-uncertainty term of universal kriging.
 - `NoCorrection()`: predicts zero corrections (std None); the baseline.
+- `Auto()`: one of the above with its options, chosen by cross-validation over the fiducials (`interpolation.auto`).
 
 All errors in user input raise `errors.InputError`.
 """
@@ -58,6 +59,7 @@ from __future__ import annotations
 from dataclasses import fields
 
 from rrbc_core.errors import InputError
+from rrbc_core.interpolation.auto import Auto
 from rrbc_core.interpolation.base import EXACT_MM, FittedInterpolator, Prediction
 from rrbc_core.interpolation.gp import GP
 from rrbc_core.interpolation.hull import HULL_TOL, hull_flags
@@ -77,20 +79,22 @@ __all__ = [
     "TPS",
     "GP",
     "NoCorrection",
+    "Auto",
     "hull_flags",
     "make_interpolator",
 ]
 
-METHODS = {"idw": IDW, "linear": Linear, "tps": TPS, "gp": GP, "none": NoCorrection}
+METHODS = {"idw": IDW, "linear": Linear, "tps": TPS, "gp": GP, "none": NoCorrection, "auto": Auto}
 
 
-def make_interpolator(name: str, **options) -> IDW | Linear | TPS | GP | NoCorrection:
+def make_interpolator(name: str, **options) -> IDW | Linear | TPS | GP | NoCorrection | Auto:
     """The interpolation method object for a command-line name, ready to ``fit(points, values)``.
 
     Parameters
     ----------
     name : str
-        A name in `METHODS`: "idw", "linear", "tps", "gp", "none".
+        A name in `METHODS`: "idw", "linear", "tps", "gp", "none", "auto" (chosen by cross-validation over the
+        fiducials, `interpolation.auto`).
     **options
         The method's options (idw: ``k``, ``power``; tps: ``smoothing``; gp: ``kernel``, ``noise_mm``); None means
         the default.

@@ -13,7 +13,9 @@ import numpy as np
 from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
+from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
+from rrbc_core.interpolation.auto import AutoChoice
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
 from rrbc_core.methods import MethodOptions, method_flags
 
@@ -195,6 +197,10 @@ class Evaluation:
     #: each target inside the included fiducials' hull or not, and how far from their plane (sensor readings, as
     #: RRBC sees them; `interpolation.hull.assess_coverage`, the one coverage); None without included fiducials
     coverage: Coverage | None = None
+    #: one-line warnings (`correction.warnings.correction_warnings`, as `rrbc correct` prints them)
+    warnings: tuple[str, ...] = ()
+    #: with interpolation "auto": what cross-validation over the fiducials chose (`interpolation.auto.AutoChoice`)
+    choice: AutoChoice | None = None
 
 
 def hull_edges(points) -> np.ndarray:
@@ -251,7 +257,9 @@ def _display_rotation(mapping) -> np.ndarray:
     return np.asarray(mapping.rotation, float)
 
 
-def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> Evaluation:
+def evaluate(
+    settings: Settings, layout: dict, readings: dict, cached=None, check_ids: frozenset = frozenset()
+) -> Evaluation:
     """The nine RRBC steps on a layout: register, correct the included fiducials, interpolate, correct the targets,
     score them against their truth where known. A pure function of its inputs.
 
@@ -266,6 +274,8 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
     cached : callable, optional
         ``cached(name, key, compute)`` returns a stored value for an unchanged key (the session's one-entry
         caches for the registration and the fitted interpolator); default: compute every time.
+    check_ids : frozenset of str, optional
+        The targets that are a file's check rows: the warnings call them checks, as `rrbc correct` does.
     """
     cached = cached or (lambda name, key, compute: compute())
     s = settings
@@ -325,6 +335,7 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         "fiducials_used": int(np.count_nonzero(included)),
     }
     coverage = assess_coverage(fid_r.sensor[included], tgt_r.sensor) if np.any(included) else None
+    warnings = _warnings(layout, fids.ids, fid_r.sensor, e_sensor, included, targets, coverage, check_ids)
     return Evaluation(
         s,
         reg,
@@ -341,4 +352,28 @@ def evaluate(settings: Settings, layout: dict, readings: dict, cached=None) -> E
         hull,
         summary,
         coverage,
+        warnings,
+        getattr(fitted, "choice", None),
     )
+
+
+def _warnings(layout, fid_ids, fid_sensor, e_sensor, included, targets: TargetResult, coverage, check_ids):
+    """`correction_warnings` on the included fiducials and the targets, split into targets and checks as a file
+    has them."""
+    ids = [pid for pid, keep in zip(fid_ids, included) if keep]
+    points = []
+    for kind, wanted in (("target", False), ("check", True)):
+        rows = [i for i, pid in enumerate(targets.ids) if (pid in check_ids) == wanted]
+        if not rows:
+            continue
+        cov = None
+        if coverage is not None:
+            cov = Coverage(
+                coverage.inside[rows],
+                coverage.off_plane_mm[rows],
+                coverage.plane_tol_mm,
+                None if coverage.fraction is None else coverage.fraction[rows],
+                coverage.dim,
+            )
+        points.append(Corrected(kind, [targets.ids[i] for i in rows], targets.correction[rows], cov))
+    return correction_warnings(ids, fid_sensor[included], e_sensor[included], points)

@@ -36,7 +36,8 @@ if TYPE_CHECKING:
     from rrbc_core.io.scene import Scene
 
 STRATEGY_NAMES = tuple(registration.STRATEGIES)  # the registries' names, in their order
-INTERPOLATION_NAMES = tuple(interpolation.METHODS)
+#: every fixed method (`auto` re-chooses per trial by cross-validation: run it through `rrbc correct` on a file)
+INTERPOLATION_NAMES = tuple(name for name in interpolation.METHODS if name != "auto")
 MAX_TRIALS = 100_000  # Monte Carlo trials `simulate` runs at most (issue 16: a stated limit)
 
 

@@ -91,7 +91,7 @@ def outside_queries(points, rng, m):
 
 
 def test_registry_and_protocol():
-    assert set(METHODS) == {"idw", "linear", "tps", "gp", "none"}
+    assert set(METHODS) == {"idw", "linear", "tps", "gp", "none", "auto"}
     p = plate_grid()
     e = smooth_field(p)
     for name, cls in METHODS.items():
@@ -104,7 +104,7 @@ def test_registry_and_protocol():
         assert pred.values.shape == (1, 3)
         assert pred.extrapolated.shape == (1,) and pred.extrapolated.dtype == bool
         assert pred.off_plane_mm.shape == (1,)
-        if name == "gp":
+        if name == "gp" or (name == "auto" and fitted.choice.method.name == "gp"):
             assert pred.std is not None and pred.std.shape == (1, 3)
         else:
             assert pred.std is None
