@@ -170,16 +170,18 @@ def _cmd_correct(args) -> str:
 
 
 def _cmd_diagnose(args) -> str:
-    from rrbc_core.analysis.diagnosis import diagnose
+    from rrbc_core.analysis.diagnosis_stations import StationsDiagnosis, diagnose_stations
     from rrbc_core.analysis.diagnosis_text import diagnosis_text
     from rrbc_core.io.measurements import read_measurements
 
     if not args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
     mset = read_measurements(args.measurements)
-    dg = diagnose(mset, alpha=args.alpha, seed=args.seed, tool_mm=args.tool, **robot_model_args(args))
+    dg = diagnose_stations(mset, alpha=args.alpha, seed=args.seed, tool_mm=args.tool, **robot_model_args(args))
     if args.json:
         return json.dumps(dg.to_json(), allow_nan=False) + "\n"
+    if isinstance(dg, StationsDiagnosis):
+        return "\n".join(dg.lines()) + "\n"
     return diagnosis_text(dg)
 
 

@@ -78,6 +78,7 @@ class Diagnosis:
     basis: str = "leave-one-out"  # or "checks": rrbc correct's own figure on the file's check rows
     checks_rms_mm: tuple[float, float] | None = None  # rrbc correct's check RMST (rigid, RRBC), None without checks
     check_statistics: CheckStatistics | None = None  # rrbc correct's before/after statistics of the checks
+    checks_extrapolation: str | None = None  # the checks outside the fiducials' hull / off their plane, in words
 
     @property
     def assumes(self) -> str:
@@ -130,6 +131,7 @@ class Diagnosis:
                     else float(self.expected_change_without_outliers)
                 ),
                 "assumes": self.assumes,
+                "checks_extrapolation": self.checks_extrapolation,
             },
             "n_points": int(self.n_points),
             "alpha": float(self.alpha),
@@ -336,4 +338,5 @@ def diagnose(
         basis=verdict.basis,
         checks_rms_mm=(verdict.rms_rigid_mm, verdict.rms_rrbc_mm) if verdict.basis == "checks" else None,
         check_statistics=verdict.statistics,
+        checks_extrapolation=verdict.checks_extrapolation,
     )

@@ -53,10 +53,13 @@ def diagnosis_lines(dg: Diagnosis) -> list[str]:
     if dg.expected_change_without_outliers is not None:
         lines.append(f"  with the outliers removed from the file: {_pct(dg.expected_change_without_outliers)}")
     lines.append(f"  {'measured' if dg.checks_rms_mm is not None else 'predicts'}: {dg.assumes}")
+    if dg.checks_extrapolation is not None:
+        lines.append(f"  extrapolated checks: {dg.checks_extrapolation}")
     if dg.checks_rms_mm is not None:
         lines.append(
-            f"  leave-one-out over the paired points (not the basis of the verdict): {_pct(loo)}; it treats each "
-            "paired point as a stand-in for a check at its place"
+            f"  leave-one-out over the paired points (not the basis of the verdict): {_pct(loo)}; it assumes each "
+            "paired point stands in for a check at its place"
+            + (", which checks outside the fiducials' hull are not" if dg.checks_extrapolation is not None else "")
         )
     if dg.check_statistics is not None:
         lines += dg.check_statistics.lines()

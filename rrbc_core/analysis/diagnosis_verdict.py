@@ -23,6 +23,7 @@ import numpy as np
 from rrbc_core.analysis.diagnosis_stats import loo
 from rrbc_core.correction.check_statistics import CheckStatistics
 from rrbc_core.correction.pipeline import correct_measurements
+from rrbc_core.correction.warnings import Corrected, extrapolation
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
 
@@ -42,6 +43,9 @@ class Verdict:
     loo_rigid_mm: float
     loo_rrbc_mm: float
     statistics: CheckStatistics | None = None  # `rrbc correct`'s before/after statistics of the checks (basis checks)
+    #: how many checks lie outside the fiducials' hull and how far off their plane (`correction.warnings.extrapolation`),
+    #: None when all are inside or there are no scored checks
+    checks_extrapolation: str | None = None
 
     @property
     def change(self) -> float:
@@ -52,9 +56,9 @@ class Verdict:
         return bool(self.rms_rrbc_mm < self.rms_rigid_mm)
 
 
-def _check_rms(mset: MeasurementSet) -> tuple[float, float, CheckStatistics] | None:
-    """`rrbc correct`'s check RMST (rigid, RRBC) on `mset` and its check statistics, or None when it has no scored
-    checks or cannot run."""
+def _check_rms(mset: MeasurementSet) -> tuple[float, float, CheckStatistics, str | None] | None:
+    """`rrbc correct`'s check RMST (rigid, RRBC) on `mset`, its check statistics and its words on the checks'
+    extrapolation, or None when it has no scored checks or cannot run."""
     if not any(r == "check" for r in mset.roles):
         return None
     try:
@@ -64,7 +68,11 @@ def _check_rms(mset: MeasurementSet) -> tuple[float, float, CheckStatistics] | N
     s = res.summary()
     if s["rmst_rigid_mm"] is None:
         return None
-    return float(s["rmst_rigid_mm"]), float(s["rmst_rrbc_mm"]), res.statistics()
+    corrected = res.checks_corrected
+    words = None
+    if corrected is not None:
+        words = extrapolation(Corrected("check", res.checks.ids, corrected.correction, res.checks_coverage))
+    return float(s["rmst_rigid_mm"]), float(s["rmst_rrbc_mm"]), res.statistics(), words
 
 
 def _without_ids(mset: MeasurementSet, drop: set) -> MeasurementSet:
@@ -120,7 +128,7 @@ def rrbc_verdict(
         if drop:
             w = _check_rms(_without_ids(mset, drop))
             without = (w[1] / w[0] - 1.0 if w[0] > 0 else 0.0) if w is not None else None
-        return Verdict("checks", checks[0], checks[1], without, loo_rigid, loo_rrbc, checks[2])
+        return Verdict("checks", checks[0], checks[1], without, loo_rigid, loo_rrbc, checks[2], checks[3])
     without = None
     if drop:
         r2, f2 = loo(sensor[good], robot[good], count[good])
