@@ -255,6 +255,7 @@ class RunningApp:
                     "to start."
                 )
                 ctx.controls.diagnose.show_prompt()
+                ctx.controls.file.show_stations(session.stations, session.station)
                 self.present.show(ev, heat=True)
                 self._frame_camera(loaded.mesh, ev)
             if not first:

@@ -384,6 +384,7 @@ class DiagnosePanel:
 
 
 NO_MESH = "(no mesh)"
+NO_STATION = "(no stations)"
 
 
 class FilePanel:
@@ -391,6 +392,7 @@ class FilePanel:
     server path), or upload one; download the data or the results."""
 
     def __init__(self, gui, app: Actions):
+        self._showing = False  # show_stations is setting the Station menu: not a user's choice
         self.path = gui.add_dropdown(
             "Scene or data file", ("",), initial_value="", hint="Files in scenes/ and in the folders given by --data"
         )
@@ -402,6 +404,13 @@ class FilePanel:
             "Only files in the bundled scenes/ and in folders named with `rrbc view --data DIR` can be opened here; "
             "anything else: upload it. An uploaded scene cannot bring its mesh along."
         )
+        self.station = gui.add_dropdown(
+            "Station",
+            (NO_STATION,),
+            initial_value=NO_STATION,
+            hint="The file has a group column: each station is registered and corrected on its own",
+            visible=False,
+        )
         self.download_csv = gui.add_button("Download data (CSV)", icon=viser.Icon.DOWNLOAD)
         self.download_json = gui.add_button("Download results (JSON)", icon=viser.Icon.DOWNLOAD)
 
@@ -412,6 +421,11 @@ class FilePanel:
 
         self.rescan.on_click(lambda event: app.files.rescan_files())
 
+        @self.station.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if self.station.value != NO_STATION and not self._showing:
+                app.files.load_station(self.station.value, client=event.client)
+
         @self.upload.on_upload
         def _(event: viser.GuiEvent) -> None:
             f = self.upload.value
@@ -419,6 +433,16 @@ class FilePanel:
 
         self.download_csv.on_click(lambda event: app.files.download("csv", client=event.client))
         self.download_json.on_click(lambda event: app.files.download("json", client=event.client))
+
+    def show_stations(self, stations: tuple[str, ...], current: str | None) -> None:
+        """The Station menu: shown with the file's stations when it has a group column, hidden otherwise."""
+        self._showing = True
+        try:
+            self.station.options = tuple(stations) or (NO_STATION,)
+            self.station.value = current if current in stations else self.station.options[0]
+            self.station.visible = bool(stations)
+        finally:
+            self._showing = False
 
     def offer(self, sources: list[str], meshes: list[str]) -> None:
         """The files the tab offers (labels)."""

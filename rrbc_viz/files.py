@@ -145,11 +145,28 @@ def _from_scene(scene, label: str) -> Loaded:
     return Loaded(session, scene.load_mesh(), label)
 
 
-def _from_measurements(mset: MeasurementSet, mesh, label: str) -> Loaded:
+def _from_measurements(mset: MeasurementSet, mesh, label: str, station: str | None = None) -> Loaded:
     mesh_obj = load_mesh(mesh) if mesh is not None else None
-    session = ExplorerSession.from_measurements(mset, mesh_path=None if mesh is None else Path(mesh))
+    session = ExplorerSession.from_measurements(mset, mesh_path=None if mesh is None else Path(mesh), station=station)
     session.evaluate()
+    if session.stations:
+        k = session.stations.index(session.station) + 1
+        label += f", station {session.station!r} ({k} of {len(session.stations)})"
     return Loaded(session, mesh_obj, label)
+
+
+def load_station(loaded: Loaded, station: str) -> Loaded:
+    """Another station of the file `loaded` opened (its mesh kept); InputError for a name the file does not have."""
+    session = loaded.session
+    if not session.stations:
+        raise InputError("these data have no stations (no group column)")
+    base = loaded.label.split(", station ")[0]
+    fresh = ExplorerSession.from_measurements(
+        session.file_mset, mesh_path=session.mesh_path, settings=session.settings, station=station
+    )
+    fresh.evaluate()
+    k = fresh.stations.index(fresh.station) + 1
+    return Loaded(fresh, loaded.mesh, f"{base}, station {fresh.station!r} ({k} of {len(fresh.stations)})")
 
 
 def load_upload(name: str, content: bytes) -> Loaded:

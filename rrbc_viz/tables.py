@@ -50,6 +50,22 @@ def summary(ev: Evaluation, kind: str) -> str:
     return "\n\n".join(lines)
 
 
+def stations_line(session) -> str:
+    """With stations: which one is open and `rrbc correct`'s pooled figures over all of them (the session's
+    `stations_summary`), as a paragraph to append to the summary; "" without stations."""
+    if not session.stations:
+        return ""
+    n = len(session.stations)
+    text = f"\n\nStation **{session.station}** of {n} (File → Station)."
+    s = session.stations_summary()
+    if s is not None and s.get("rmst_rigid_mm") is not None:
+        text += (
+            f" All {n} stations, each registered and corrected on its own (as `rrbc correct`): check RMS "
+            f"**{_mm(s['rmst_rigid_mm'])} mm rigid → {_mm(s['rmst_rrbc_mm'])} mm RRBC** over {s['checks']} checks."
+        )
+    return text
+
+
 def target_table(ev: Evaluation) -> str:
     """Per target: error rigid, error RRBC (mm, — without truth), |correction|, gp std, extrapolation flag."""
     t = ev.targets

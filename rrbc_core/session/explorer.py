@@ -98,6 +98,9 @@ class ExplorerSession:
         self.history = History()  # the edits (authoring.undo / redo)
         self.target_tools: dict = {}  # target id -> (tilt, azimuth) degrees of its tool (vec_view); absent: tool down
         self.varied_registration = False  # registration points measured with the tool leaned (vec_view)
+        self.stations: tuple[str, ...] = ()  # a file with a group column: its stations (from_measurements)
+        self.station: str | None = None  # ... the one open
+        self.file_mset = None  # ... and the whole file
 
     # ------------------------------------------------------------------------------------------------ sources
     @classmethod
@@ -121,7 +124,47 @@ class ExplorerSession:
 
     @classmethod
     @thread_limited
-    def from_measurements(cls, mset, mesh_path=None, settings: Settings | None = None) -> ExplorerSession:
+    def from_measurements(
+        cls, mset, mesh_path=None, settings: Settings | None = None, station: str | None = None
+    ) -> ExplorerSession:
+        """A session on measured data. A file with stations (a `group` column, `io.groups`) opens one station —
+        `station`, default the first — as a file of its own: its registration, fiducials, targets and checks;
+        ``stations`` lists them all, ``station`` is the one open and ``file_mset`` the whole file (for the pooled
+        figures, `stations_summary`)."""
+        from rrbc_core.io.groups import group_names, has_groups, split_groups
+
+        if has_groups(mset):
+            parts = dict(split_groups(mset))
+            names = group_names(mset)
+            chosen = names[0] if station is None else str(station)
+            if chosen not in parts:
+                raise InputError(f"{mset.source}: no station {chosen!r}; its stations: {', '.join(names[:20])}")
+            session = cls._from_rows(parts[chosen], mesh_path, settings)
+            session.stations, session.station, session.file_mset = names, chosen, mset
+            session.name = f"{mset.source}, station {chosen!r}"
+            return session
+        if station is not None:
+            raise InputError(f"{mset.source}: has no group column, so no station {station!r}")
+        return cls._from_rows(mset, mesh_path, settings)
+
+    def stations_summary(self) -> dict | None:
+        """With stations: `rrbc correct`'s pooled summary over all stations' checks with this session's method
+        (`correction.stations.StationsResult.summary`), cached per method; None without stations or when a station
+        cannot be corrected."""
+        if not self.stations:
+            return None
+        from rrbc_core.correction.stations import correct_stations
+
+        def compute():
+            try:
+                return correct_stations(self.file_mset, self.settings.method).summary()
+            except InputError:
+                return None
+
+        return self.cached("stations_summary", self.settings.method, compute)
+
+    @classmethod
+    def _from_rows(cls, mset, mesh_path=None, settings: Settings | None = None) -> ExplorerSession:
         reg = mset.points("registration")
         fid = mset.points("fiducial")
         tgt = mset.points("target")

@@ -54,6 +54,19 @@ class FileController:
                 [name for name, _ in self.ctx.library.sources()], [name for name, _ in self.ctx.library.meshes()]
             )
 
+    def load_station(self, station: str, client=None) -> bool:
+        """Open another station of the current file (a file with a group column); the settings are kept."""
+        with self.ctx.lock:
+            if station == self.ctx.session.station:
+                return True
+            try:
+                loaded = files.load_station(self.ctx.loaded, station)
+            except InputError as exc:
+                self.ctx.message(str(exc), client, title="Station not opened")
+                return False
+        self.ctx.install(loaded)
+        return True
+
     def load_upload(self, name: str, content: bytes, client=None) -> bool:
         try:
             loaded = files.load_upload(name, content)

@@ -40,7 +40,7 @@ class Presenter:
         ctx.nodes.update(ev)
         ctx.controls.explore.show_results(
             tables.scale_line(ctx.state.display.magnification),
-            tables.summary(ev, session.kind),
+            tables.summary(ev, session.kind) + tables.stations_line(session),
             tables.target_table(ev),
         )
         if ctx.state.lesson_index is not None:
