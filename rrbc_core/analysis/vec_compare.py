@@ -31,7 +31,7 @@ from rrbc_core.analysis.calibration import Calibration, calibrate, vec_commands
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.errors import InputError
 from rrbc_core.io.joints import joint_values
-from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.io.measurements import GROUP_COLUMN, MeasurementSet
 from rrbc_core.models.chain import Chain
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
@@ -128,6 +128,12 @@ def compare(
     """The JSON object of `rrbc calibrate` (docs/cli.md) for a measurement file with joint values. The model:
     `robot` (ur5, ur10) or `urdf` with `tip` and `base` (`robot_model.robot_chain`); `tool`: a length along the DH
     flange's z axis or a point (3,) in the tip link's frame, mm."""
+    if GROUP_COLUMN in mset.extra:
+        raise InputError(
+            f"{mset.source}: has a group column (stations): rrbc calibrate does not yet fit one transform per "
+            "station with shared arm errors; calibrate one station's rows at a time (rrbc correct and rrbc diagnose "
+            "take the stations)"
+        )
     chain = robot_chain(None if urdf is not None else robot, urdf, tip, base, tool)
     q = joint_values(mset, chain)
     if q is None:

@@ -164,3 +164,22 @@ def test_diagnose_tests_the_arm_with_the_urdf_model(tmp_path):
     clean = _file(tmp_path, "panda", 12, kin_size=0.0)
     out = json.loads(_run("diagnose", clean, *_model_args("panda"), "--json").stdout)
     assert "kinematic" not in [e["name"] for e in out["effects"]]
+
+
+def test_a_file_with_stations_is_refused_until_calibrate_fits_them(tmp_path):
+    """Stations need one transform each with shared arm errors; until rrbc calibrate fits that, it says so rather
+    than pooling the stations under one transform."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.simulation.station_data import station_measurements
+
+    path = tmp_path / "st.csv"
+    write_measurements(path, station_measurements(1, stations=2))
+    rrbc = str(Path(sys.executable).with_name("rrbc"))
+    out = subprocess.run(
+        [rrbc, "calibrate", str(path), "--urdf", "lift_arm"], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 2 and "group column (stations)" in out.stderr and out.stdout == ""
