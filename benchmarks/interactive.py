@@ -181,9 +181,11 @@ class _OneSetPerCall:
     def __init__(self, pool):
         self.pool = pool
 
-    def score(self, sets):
-        scores = [self.pool.score(np.asarray(s, int)[None]) for s in np.asarray(sets, int)]
-        return np.array([c[0] for c, _ in scores]), np.array([r[0] for _, r in scores])
+    def score(self, sets, cover_first: bool = False):
+        return np.vstack([self.pool.score(np.asarray(c, int)[None], cover_first) for c in np.asarray(sets, int)])
+
+    def current(self):
+        return self.pool.current()
 
 
 def plan_optimiser(quick: bool) -> list[dict]:
@@ -205,8 +207,14 @@ def plan_optimiser(quick: bool) -> list[dict]:
     cand = scene.candidates.positions[mask]
     cand = cand[np.min(np.linalg.norm(cand[:, None] - base[None], axis=2), axis=1) > 1e-6]
     pool = planning_search._pool(scene, base, cand, planning.SAMPLES_PER_TARGET, 0)
-    t_vec, (chosen_v, evals) = best_time(lambda: planning_search._optimise(pool, len(cand), 4), 1 if quick else 3)
-    t_set, (chosen_s, _) = best_time(lambda: planning_search._optimise(_OneSetPerCall(pool), len(cand), 4), 1)
+    rng = np.random.default_rng([0, 7])
+    rules = {  # the planner's own rule sets (planning.plan)
+        "hull-corners": planning._corner_choice(scene, cand, 4),
+        "random": np.array([rng.choice(len(cand), size=4, replace=False) for _ in range(planning.RANDOM_DRAWS)]),
+    }
+    t_vec, found_v = best_time(lambda: planning_search._optimise(pool, len(cand), 4, rules), 1 if quick else 3)
+    t_set, found_s = best_time(lambda: planning_search._optimise(_OneSetPerCall(pool), len(cand), 4, rules), 1)
+    chosen_v, chosen_s, evals = found_v.chosen, found_s.chosen, found_v.evaluated
     assert list(chosen_v) == list(chosen_s), "vectorised and per-set search chose different candidates"
     note = (
         f"{len(cand)} usable candidates, {evals} sets scored; chose {', '.join(res.suggested_ids)}; "

@@ -70,6 +70,10 @@ class Calibration:
     residuals: np.ndarray
     chi2: float = float("nan")
     chi2_dof: int = 0
+    #: stations (`groups` given to `calibrate`): one transform each, (G, 3, 3) and (G, 3); `rotation`/`translation`
+    #: are the first station's. None for one transform.
+    rotations: np.ndarray | None = None
+    translations: np.ndarray | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -82,31 +86,43 @@ class Calibration:
 
         return float(chi2.sf(self.chi2, self.chi2_dof)) if self.chi2_dof else 1.0
 
-    def sensor_to_robot(self, s) -> np.ndarray:
-        return np.asarray(s, float).reshape(-1, 3) @ self.rotation.T + self.translation
+    def sensor_to_robot(self, s, groups=None) -> np.ndarray:
+        """T(s) (N, 3) robot frame, mm; with stations, `groups` (N,) says whose transform each row takes."""
+        s = np.asarray(s, float).reshape(-1, 3)
+        if self.rotations is None or self.translations is None or groups is None:
+            return s @ self.rotation.T + self.translation
+        g = np.asarray(groups, int)
+        return np.einsum("nij,nj->ni", self.rotations[g], s) + self.translations[g]
 
     def forward(self, q) -> np.ndarray:
         """Where the identified arm's tool point is at inputs q (N, I), robot frame, mm."""
         return self.chain.forward(q, self.delta)
 
 
-def _scales(chain: Chain) -> np.ndarray:
-    """Per parameter (P + 6: the chain's, then T's rotation vector and translation), mm per unit."""
+def _scales(chain: Chain, n_groups: int = 1) -> np.ndarray:
+    """Per parameter (P + 6G: the chain's, then each transform's rotation vector and translation), mm per unit."""
     a = angle_scale(chain)
-    sc = np.ones(chain.n_params + 6)
+    sc = np.ones(chain.n_params + 6 * n_groups)
     sc[: chain.n_params][chain.angular] = a
-    sc[chain.n_params : chain.n_params + 3] = a
+    for g in range(n_groups):
+        sc[chain.n_params + 6 * g : chain.n_params + 6 * g + 3] = a
     return sc
 
 
-def _system(chain: Chain, q, s, delta, rot, t) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals (3N,) = T(s) − FK(δ, q) and their Jacobian (3N, P + 6) in the parameters' own units."""
+def _system(chain: Chain, q, s, delta, rot, t, groups) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals (3N,) = T_g(s) − FK(δ, q) and their Jacobian (3N, P + 6G) in the parameters' own units; rot (G, 3, 3),
+    t (G, 3), groups (N,) each row's transform."""
     p, jp, _ = chain.kinematics(q, delta)
     assert jp is not None
-    rs = s @ rot.T
-    res = rs + t - p
-    n = len(q)
-    j = np.concatenate([-jp, -_skew(rs), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
+    rs = np.einsum("nij,nj->ni", rot[groups], s)
+    res = rs + t[groups] - p
+    n, n_p, n_g = len(q), chain.n_params, len(rot)
+    j = np.zeros((n, 3, n_p + 6 * n_g))
+    j[:, :, :n_p] = -jp
+    rows = np.arange(n)
+    for a in range(3):
+        j[rows, :, n_p + 6 * groups + a] = -_skew(rs)[:, :, a]
+        j[rows, :, n_p + 6 * groups + 3 + a] = np.eye(3)[:, a]
     return res.reshape(-1), j.reshape(3 * n, -1)
 
 
@@ -115,7 +131,7 @@ def _describe(names: tuple, v: np.ndarray, k: int = 3) -> str:
     return " ".join(f"{'+' if v[i] >= 0 else '-'}{abs(v[i]):.2f}·{names[i]}" for i in top)
 
 
-def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None) -> Calibration:
+def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None, groups=None) -> Calibration:
     """Identify the arm's errors and the sensor-to-robot transform from N poses (module docstring).
 
     Parameters
@@ -127,7 +143,10 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None) -> Cal
     sensor : array_like, (N, 3)
         The sensor's readings of the tool point, sensor frame, mm.
     rotation0, translation0 : array_like, optional
-        A starting registration (default: the least-squares fit of the readings to the nominal arm).
+        A starting registration, (3, 3) and (3,), or with `groups` (G, 3, 3) and (G, 3) (default: the least-squares
+        fit of each station's readings to the nominal arm).
+    groups : array_like of int, (N,), optional
+        Stations 0..G-1: one sensor-to-robot transform each, the arm's errors shared by all.
 
     Raises
     ------
@@ -140,20 +159,26 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None) -> Cal
         raise InputError(f"{len(qa)} joint configurations for {len(s)} sensor readings")
     if len(qa) < MIN_POSES:
         raise InputError(f"calibration needs at least {MIN_POSES} poses with joint values, got {len(qa)}")
+    grouped = groups is not None
+    gi = np.zeros(len(qa), int) if groups is None else np.asarray(groups, int).reshape(-1)
+    if len(gi) != len(qa) or (len(gi) and gi.min() < 0):
+        raise InputError(f"{len(gi)} station labels for {len(qa)} poses")
+    n_g = int(gi.max()) + 1 if len(gi) else 1
     p_nominal = chain.forward(qa)
     if rotation0 is None:
         from rrbc_core.registration import register
 
-        m = register("least-squares", s, p_nominal).mapping
-        rotation0, translation0 = m.rotation, m.translation
-    rot = np.asarray(rotation0, float).copy()
-    t = np.asarray(translation0, float).copy()
+        maps = [register("least-squares", s[gi == g], p_nominal[gi == g]).mapping for g in range(n_g)]
+        rotation0 = np.array([m.rotation for m in maps])
+        translation0 = np.array([m.translation for m in maps])
+    rot = np.asarray(rotation0, float).reshape(-1, 3, 3).copy()
+    t = np.asarray(translation0, float).reshape(-1, 3).copy()
     n_p = chain.n_params
     delta = np.zeros(n_p)
-    sc = _scales(chain)
-    basis = np.zeros((n_p + 6, 0))
+    sc = _scales(chain, n_g)
+    basis = np.zeros((n_p + 6 * n_g, 0))
     for _ in range(MAX_STEPS):
-        res, j = _system(chain, qa, s, delta, rot, t)
+        res, j = _system(chain, qa, s, delta, rot, t, gi)
         js = j / sc
         _, sv, vt = np.linalg.svd(js, full_matrices=False)
         rank = int(np.sum(sv > RANK_TOL * sv[0]))
@@ -162,11 +187,13 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None) -> Cal
         step_scaled = basis @ z
         step = step_scaled / sc
         delta = delta + step[:n_p]
-        rot = _exp(step[n_p : n_p + 3]) @ rot
-        t = t + step[n_p + 3 :]
+        for g in range(n_g):
+            k = n_p + 6 * g
+            rot[g] = _exp(step[k : k + 3]) @ rot[g]
+            t[g] = t[g] + step[k + 3 : k + 6]
         if np.max(np.abs(step_scaled)) < STEP_TOL_MM:
             break
-    res, j = _system(chain, qa, s, delta, rot, t)
+    res, j = _system(chain, qa, s, delta, rot, t, gi)
     js = j / sc
     _, sv, vt = np.linalg.svd(js, full_matrices=False)
     rank = int(np.sum(sv > RANK_TOL * sv[0]))
@@ -184,22 +211,25 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None) -> Cal
     w, v = np.linalg.eigh(cov_arm)
     keep = w > w.max() * 1e-9 if w.max() > 0 else np.zeros(len(w), bool)
     chi2 = float(np.sum((v[:, keep].T @ d_scaled) ** 2 / w[keep])) if keep.any() else 0.0
-    null = np.eye(n_p + 6) - basis @ basis.T
+    null = np.eye(n_p + 6 * n_g) - basis @ basis.T
     alone = np.linalg.norm(null, axis=0) < 1e-3  # a unit change of this parameter lies in the identified space
-    names = chain.param_names + ("T.rx", "T.ry", "T.rz", "T.x", "T.y", "T.z")
+    tnames = ("rx", "ry", "rz", "x", "y", "z")
+    names = chain.param_names + tuple(f"T.{c}" if not grouped else f"T[{g}].{c}" for g in range(n_g) for c in tnames)
     return Calibration(
         chain=chain,
         delta=delta,
         delta_se=np.where(alone[:n_p], se[:n_p], np.nan),
         identifiable=alone[:n_p],
-        rotation=rot,
-        translation=t,
+        rotation=rot[0],
+        translation=t[0],
         rank=rank,
         combinations=tuple(_describe(names, basis[:, k]) for k in range(rank)),
         sigma_mm=float(np.sqrt(sigma2)),
         residuals=res.reshape(-1, 3),
         chi2=chi2,
         chi2_dof=int(keep.sum()),
+        rotations=rot if grouped else None,
+        translations=t if grouped else None,
     )
 
 
@@ -211,8 +241,9 @@ def position_jacobian(chain: Chain, q) -> np.ndarray:
     return jp / _scales(chain)[: chain.n_params]
 
 
-def vec_commands(cal: Calibration, s_rows, q_rows) -> np.ndarray:
-    """VEC's robot commands (D, 3) for rows with sensor readings s_rows (D, 3) and joint values q_rows (D, I).
+def vec_commands(cal: Calibration, s_rows, q_rows, groups=None) -> np.ndarray:
+    """VEC's robot commands (D, 3) for rows with sensor readings s_rows (D, 3) and joint values q_rows (D, I)
+    (with stations, `groups` (D,): each row's station).
 
     The point p = T(s); the joints q* that put the IDENTIFIED arm's tool point there (two damped least-squares steps
     of position-only inverse kinematics from the row's joints, every row at once); the command the NOMINAL
@@ -220,7 +251,7 @@ def vec_commands(cal: Calibration, s_rows, q_rows) -> np.ndarray:
     is far below the noise where the row's joints are the ones that reach the point."""
     chain = cal.chain
     q = np.asarray(q_rows, float).copy()
-    p = cal.sensor_to_robot(s_rows)
+    p = cal.sensor_to_robot(s_rows, groups)
     if len(q) == 0:
         return np.zeros((0, 3))
     a = angle_scale(chain)

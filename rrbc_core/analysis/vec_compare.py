@@ -57,32 +57,56 @@ def _kabsch(sensor, robot) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True, eq=False)
 class MethodsFit:
-    rot: np.ndarray
-    t: np.ndarray
+    rot: np.ndarray  # (G, 3, 3): each station's rigid registration (G = 1 without stations)
+    t: np.ndarray  # (G, 3)
     cal: Calibration
     fid_sensor: np.ndarray
     fid_robot: np.ndarray
     vec_fid: np.ndarray  # VEC's commands for the fiducials' sensor readings
+    fid_group: np.ndarray  # (F,) the fiducials' stations
+    grouped: bool = False
 
 
-def fit_methods(rows_reg, rows_fid, s, b, q, chain: Chain) -> MethodsFit:
+def fit_methods(rows_reg, rows_fid, s, b, q, chain: Chain, gi=None) -> MethodsFit:
     """The rigid registration (rows_reg), the calibration (rows_reg and rows_fid) and VEC's commands at the fiducials,
-    from sensor readings s (R, 3), robot readings b (R, 3) and joint values q (R, I) (rad or mm) of `chain`;
-    `predict_methods` uses it."""
-    rot, t = _kabsch(s[rows_reg], b[rows_reg])
+    from sensor readings s (R, 3), robot readings b (R, 3) and joint values q (R, I) (rad or mm) of `chain`; with
+    stations, `gi` (R,) each row's station 0..G-1: a rigid registration and a transform per station, the arm's errors
+    shared. `predict_methods` uses it."""
+    grouped = gi is not None
+    gi = np.zeros(len(s), int) if gi is None else np.asarray(gi, int)
+    n_g = int(gi.max()) + 1
+    fits = [_kabsch(s[rows_reg[gi[rows_reg] == g]], b[rows_reg[gi[rows_reg] == g]]) for g in range(n_g)]
+    rot, t = np.array([f[0] for f in fits]), np.array([f[1] for f in fits])
     rows = np.union1d(rows_reg, rows_fid)
-    cal = calibrate(chain, q[rows], s[rows], rot, t)  # started from the rigid registration (sensor -> robot)
-    vec_fid = vec_commands(cal, s[rows_fid], q[rows_fid])
-    return MethodsFit(rot, t, cal, s[rows_fid], b[rows_fid], vec_fid)
+    if grouped:  # sensor -> robot per station, started from the stations' rigid registrations
+        cal = calibrate(chain, q[rows], s[rows], rot, t, groups=gi[rows])
+    else:
+        cal = calibrate(chain, q[rows], s[rows], rot[0], t[0])
+    vec_fid = vec_commands(cal, s[rows_fid], q[rows_fid], gi[rows_fid] if grouped else None)
+    return MethodsFit(rot, t, cal, s[rows_fid], b[rows_fid], vec_fid, gi[rows_fid], grouped)
 
 
-def predict_methods(f: MethodsFit, s_rows, q_rows) -> dict:
-    """The four commands (D, 3) for rows with sensor readings s_rows and joint values q_rows."""
-    rigid = s_rows @ f.rot.T + f.t
-    fid_rigid = f.fid_sensor @ f.rot.T + f.t
-    rrbc = rigid + _idw(fid_rigid, f.fid_robot - fid_rigid, rigid) if len(f.fid_sensor) else rigid
-    vec = vec_commands(f.cal, s_rows, q_rows)
-    vec_rrbc = vec + _idw(f.vec_fid, f.fid_robot - f.vec_fid, vec) if len(f.fid_sensor) else vec
+def _idw_by_group(src, values, dst, g_src, g_dst) -> np.ndarray:
+    """IDW corrections at dst from the fiducials of the same station only (zero where a station has none)."""
+    out = np.zeros((len(dst), 3))
+    for g in np.unique(g_dst):
+        into, fro = g_dst == g, g_src == g
+        if np.any(fro):
+            out[into] = _idw(src[fro], values[fro], dst[into])
+    return out
+
+
+def predict_methods(f: MethodsFit, s_rows, q_rows, g_rows=None) -> dict:
+    """The four commands (D, 3) for rows with sensor readings s_rows, joint values q_rows and (with stations)
+    stations g_rows (D,)."""
+    g_rows = np.zeros(len(s_rows), int) if g_rows is None else np.asarray(g_rows, int)
+    rigid = np.einsum("nij,nj->ni", f.rot[g_rows], s_rows) + f.t[g_rows]
+    fid_rigid = np.einsum("nij,nj->ni", f.rot[f.fid_group], f.fid_sensor) + f.t[f.fid_group]
+    vec = vec_commands(f.cal, s_rows, q_rows, g_rows if f.grouped else None)
+    if not len(f.fid_sensor):
+        return {"rigid": rigid, "rrbc": rigid, "vec": vec, "vec_rrbc": vec}
+    rrbc = rigid + _idw_by_group(fid_rigid, f.fid_robot - fid_rigid, rigid, f.fid_group, g_rows)
+    vec_rrbc = vec + _idw_by_group(f.vec_fid, f.fid_robot - f.vec_fid, vec, f.fid_group, g_rows)
     return {"rigid": rigid, "rrbc": rrbc, "vec": vec, "vec_rrbc": vec_rrbc}
 
 
@@ -100,22 +124,40 @@ def one_standard_error_choice(squared: dict) -> str:
     return best
 
 
-def cv_folds(rows_reg: np.ndarray, rows_fid: np.ndarray) -> list[np.ndarray]:
+def cv_folds(rows_reg: np.ndarray, rows_fid: np.ndarray, gi=None) -> list[np.ndarray]:
     """Cross-validation folds over the fiducials (indices into rows_fid; module docstring): fiducial i in fold
     i mod k, k = min(CV_FOLDS, fiducials); a fiducial that is also a registration row is held out only where at
-    least MIN_REGISTRATION registration rows remain."""
+    least MIN_REGISTRATION registration rows remain (with stations, `gi` (R,): in its station)."""
     if len(rows_fid) < 2:
         return []
+    gi = np.zeros(int(max(rows_reg.max(initial=0), rows_fid.max(initial=0))) + 1, int) if gi is None else gi
     k = min(CV_FOLDS, len(rows_fid))
     folds = []
     for f in range(k):
         held = np.arange(f, len(rows_fid), k)
         both = held[np.isin(rows_fid[held], rows_reg)]
-        if len(np.setdiff1d(rows_reg, rows_fid[both])) < MIN_REGISTRATION:
-            held = np.setdiff1d(held, both)
+        left = np.setdiff1d(rows_reg, rows_fid[both])
+        short = [g for g in np.unique(gi[rows_fid[both]]) if np.sum(gi[left] == g) < MIN_REGISTRATION]
+        held = np.setdiff1d(held, both[np.isin(gi[rows_fid[both]], short)])
         if len(held):
             folds.append(held)
     return folds
+
+
+def _stations(mset: MeasurementSet) -> tuple[tuple[str, ...], np.ndarray | None]:
+    """The stations' names and each row's station index (R,), or ((), None) without a group column; a station
+    without 3 registration rows is refused naming it (the reader already checks this for files)."""
+    if GROUP_COLUMN not in mset.extra:
+        return (), None
+    values = mset.extra[GROUP_COLUMN]
+    names = tuple(dict.fromkeys(values))
+    index = {g: k for k, g in enumerate(names)}
+    gi = np.array([index[v] for v in values], int)
+    reg = np.isin(np.array(mset.roles), ("registration", "both"))
+    for k, g in enumerate(names):
+        if np.sum(reg & (gi == k)) < MIN_REGISTRATION:
+            raise InputError(f"{mset.source}, group {g!r}: fewer than {MIN_REGISTRATION} registration rows")
+    return names, gi
 
 
 def _rms(a, b) -> float:
@@ -128,12 +170,6 @@ def compare(
     """The JSON object of `rrbc calibrate` (docs/cli.md) for a measurement file with joint values. The model:
     `robot` (ur5, ur10) or `urdf` with `tip` and `base` (`robot_model.robot_chain`); `tool`: a length along the DH
     flange's z axis or a point (3,) in the tip link's frame, mm."""
-    if GROUP_COLUMN in mset.extra:
-        raise InputError(
-            f"{mset.source}: has a group column (stations): rrbc calibrate does not yet fit one transform per "
-            "station with shared arm errors; calibrate one station's rows at a time (rrbc correct and rrbc diagnose "
-            "take the stations)"
-        )
     chain = robot_chain(None if urdf is not None else robot, urdf, tip, base, tool)
     q = joint_values(mset, chain)
     if q is None:
@@ -153,20 +189,22 @@ def compare(
             f"{mset.source}: {len(np.union1d(rows_reg, rows_fid))} registration and fiducial rows: too few poses to "
             "identify the arm (at least 8; more, in varied configurations, identify more)"
         )
+    names, gi = _stations(mset)
     known = np.union1d(rows_reg, rows_fid)
     model = require_model(chain, q[known], b[known], mset.source)
-    fit = fit_methods(rows_reg, rows_fid, s, b, q, chain)
+    fit = fit_methods(rows_reg, rows_fid, s, b, q, chain, gi)
+    g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])  # noqa: E731
     rmst = dict.fromkeys(METHODS)
     if len(rows_chk):
-        pred = predict_methods(fit, s[rows_chk], q[rows_chk])
+        pred = predict_methods(fit, s[rows_chk], q[rows_chk], g_of(rows_chk))
         rmst = {m: _rms(pred[m], b[rows_chk]) for m in METHODS}
     # cross-validation over the fiducials (no check rows used)
-    folds = cv_folds(rows_reg, rows_fid)
+    folds = cv_folds(rows_reg, rows_fid, gi)
     errs: dict[str, list] = {m: [] for m in METHODS}
     for held in folds:
         keep = np.setdiff1d(np.arange(len(rows_fid)), held)
-        f = fit_methods(np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, chain)
-        pred = predict_methods(f, s[rows_fid[held]], q[rows_fid[held]])
+        f = fit_methods(np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, chain, gi)
+        pred = predict_methods(f, s[rows_fid[held]], q[rows_fid[held]], g_of(rows_fid[held]))
         for m in METHODS:
             errs[m].append(np.sum((pred[m] - b[rows_fid[held]]) ** 2, axis=1))
     cv_values = {m: float(np.sqrt(np.mean(np.concatenate(errs[m])))) for m in METHODS} if folds else {}
@@ -183,9 +221,12 @@ def compare(
     )
     targets = []
     if len(rows_tgt):
-        pred = predict_methods(fit, s[rows_tgt], q[rows_tgt])
+        pred = predict_methods(fit, s[rows_tgt], q[rows_tgt], g_of(rows_tgt))
         for k, i in enumerate(rows_tgt):
-            targets.append({"id": mset.ids[i], **{m: pred[m][k].tolist() for m in METHODS}})
+            row = {"id": mset.ids[i], **{m: pred[m][k].tolist() for m in METHODS}}
+            if gi is not None:
+                row["group"] = names[gi[i]]
+            targets.append(row)
     angular = chain.angular
     return {
         "robot": chain.name,
@@ -219,7 +260,15 @@ def compare(
             for n, d, se, ok, ang in zip(cal.names, cal.delta, cal.delta_se, cal.identifiable, angular)
         ],
         "units": "per parameter (unit): angles rad, lengths mm",
-        "sensor_to_robot": {"rotation": cal.rotation.tolist(), "translation": cal.translation.tolist()},
+        "sensor_to_robot": (
+            {"rotation": cal.rotation.tolist(), "translation": cal.translation.tolist()}
+            if cal.rotations is None or cal.translations is None
+            else [
+                {"group": g, "rotation": r.tolist(), "translation": t.tolist()}
+                for g, r, t in zip(names, cal.rotations, cal.translations)
+            ]
+        ),
+        "groups": list(names),
         "residual_sigma_mm": cal.sigma_mm,
         "kinematic_error": {
             "claimed": claimed,

@@ -47,12 +47,15 @@ def chain_measurements(
     both_first: int = 0,
     source: str = "<simulated>",
     q_override: np.ndarray | None = None,
+    stations: int = 1,
 ) -> MeasurementSet:
     """A measurement set with the chain's joint columns (ROS units: rad, m; q1..q6 degrees for a DH chain): the true
     arm (the nominal one with `random_errors` of `kin_size`) reaches each point at random joints; the sensor reads it
     (a random pose, plus a smooth field of `field_mm` RMS, plus noise); the robot columns are the nominal controller's
     positions of the same joints, plus noise. `both_first`: that many registration rows come first with role `both`.
-    `q_override`: joint values written to the file instead of the ones measured (another robot's, say)."""
+    `q_override`: joint values written to the file instead of the ones measured (another robot's, say).
+    `stations` > 1: that many stationings in one file (a `group` column, rows dealt round-robin, every role in each),
+    the instrument at another pose for each, the arm's errors the same."""
     from scipy.spatial.transform import Rotation
 
     from rrbc_core.models.errormodels import PointSet
@@ -66,6 +69,11 @@ def chain_measurements(
     rot = Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix()
     t = np.array([900.0, -400.0, 1200.0])
     s = (p - t) @ rot
+    station = np.arange(n) % max(int(stations), 1)
+    for g in range(1, max(int(stations), 1)):  # the instrument moved for each further station
+        rg = Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix()
+        tg = t + rng.normal(0, 200.0, 3)
+        s[station == g] = (p[station == g] - tg) @ rg
     if field_mm > 0:
         pts = PointSet(robot=s, sensor=s, time=np.zeros(len(s)), tool_rotation=None, joint_seed=None)
         s = (
@@ -83,6 +91,8 @@ def chain_measurements(
     b[n - n_tgt :] = np.nan
     written = q if q_override is None else q_override
     extra = {inp.column: tuple(repr(float(v)) for v in written[:, i] / inp.scale) for i, inp in enumerate(chain.inputs)}
+    if stations > 1:
+        extra["group"] = tuple(f"station{g + 1}" for g in station)
     return MeasurementSet(
         ids=tuple(ids),
         roles=tuple(roles),
