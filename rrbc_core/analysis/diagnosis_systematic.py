@@ -239,13 +239,17 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         res_nl = mm_cols(g, (y - q_nl @ (q_nl.T @ y))[:, None])[:, 0]
         del q_nl
         mm_blocks = {k: mm_cols(g, v) for k, v in blocks.items()}
+        prefit = None  # a field already fitted to these very residuals (the drift's second look, when it finds none)
         if dcol_ok is not None and dcol_ok.shape[1] and "drift" not in found:
             # drift looked for again beside the field: the field's variance swamps a drift in the OLS test
-            res_nl = _drift_beside_field(g, p, y_mm, res_nl, mm_blocks, mm_cols(g, dcol_ok), found, tests, a_each)
+            res_nl, prefit = _drift_beside_field(
+                g, p, y_mm, res_nl, mm_blocks, mm_cols(g, dcol_ok), found, tests, a_each
+            )
             if "drift" in found:
                 blocks["drift"] = dcol_ok
         for _ in range(2):
-            field = fit_field(p, res_nl.reshape(n, 3))
+            field = prefit if prefit is not None else fit_field(p, res_nl.reshape(n, 3))
+            prefit = None
             y_w = gls_whiten(field, y_mm)
             wb = {k: gls_whiten(field, v) for k, v in mm_blocks.items()}
             rejudged += rejudge(y_w, wb, found, a_each, "the field", tests)
@@ -310,14 +314,15 @@ def _drift_beside_field(g, p, y_mm, res_nl, mm_blocks: dict, dcols, found: dict,
     beside a field many times the noise, the ordinary F-test's residual variance is the field's and a drift of a few
     noise levels goes unseen, to be mistaken later for anisotropic noise. At a_each / 2 (a second look at the same
     hypothesis: the drift's false-alarm rate stays within 1.5 × a_each). On acceptance the drift joins `found` and
-    `mm_blocks`, and the residuals the field is refitted to lose it; returns those residuals."""
+    `mm_blocks`, and the residuals the field is refitted to lose it. Returns those residuals and, when no drift was
+    found, the field fitted to them (None otherwise: it must be refitted without the drift)."""
     field = fit_field(p, res_nl.reshape(len(p), 3))
     y_w = gls_whiten(field, y_mm)
     base = np.hstack([gls_whiten(field, v) for v in mm_blocks.values()])
     p_b, q_b, nu_b, f_b, rss_a, rss_d, coef = ftest(y_w, base, np.hstack([base, gls_whiten(field, dcols)]))
     tests["drift_beside_field"] = p_b
     if p_b >= a_each / 2:
-        return res_nl
+        return res_nl, field
     found["drift"] = Effect(
         "drift",
         {"rate_mm_per_s": []},  # estimated with the field below
@@ -328,7 +333,7 @@ def _drift_beside_field(g, p, y_mm, res_nl, mm_blocks: dict, dcols, found: dict,
         magnitude_mm=float(np.sqrt(max(0.0, float(np.mean((dcols @ coef[-dcols.shape[1] :]) ** 2)) * 3))),
     )
     mm_blocks["drift"] = dcols
-    return res_nl - dcols @ coef[-dcols.shape[1] :]
+    return res_nl - dcols @ coef[-dcols.shape[1] :], None
 
 
 def rejudge(y, blocks: dict, found: dict, a_each: float, beside: str, tests: dict) -> list:
