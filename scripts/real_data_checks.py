@@ -35,19 +35,11 @@ FIXED = ("none", "idw", "linear", "tps", "gp")
 
 
 def auto(n: int = 40) -> None:
+    from tests.interpolation.test_auto import real_like_station
+
     near = worse = 0
     for seed in range(n):
-        rng = np.random.default_rng(seed)
-        mset = station_measurements(
-            seed,
-            stations=1,
-            n_eval=int(rng.integers(30, 80)),
-            bias_mm=float(rng.choice([0.0, 0.5, 2.0, 5.0])),
-            length_mm=float(rng.uniform(150, 600)),
-            robot_noise_mm=float(rng.choice([0.02, 0.1, 0.3])),
-            eval_fiducials=0.5,
-            group_column=False,
-        )
+        mset = real_like_station(seed)
         rmst = {}
         for m in (*FIXED, "auto"):
             res = correct_measurements(mset, MethodOptions.named("least-squares", m))
@@ -78,33 +70,18 @@ def stations() -> None:
 
 
 def mixed() -> None:
-    from rrbc_core.models.errorterms import Drift, SmoothField
-    from tests.analysis.test_diagnosis import synth
+    from tests.analysis.test_diagnosis_mixed import large_field_case
 
     missed = aniso = outl = 0
     for seed in range(30):
-        rng = np.random.default_rng(7700 + seed)
-        sigma, n = float(rng.uniform(0.005, 0.05)), int(rng.integers(40, 201))
-        planar, reps = bool(rng.integers(2)), int(rng.integers(1, 3))
-        _, info = synth(seed, n=n, sigma=sigma, planar=planar)
-        field = SmoothField(rms_mm=sigma * rng.uniform(5, 30), length_mm=rng.uniform(0.2, 0.5) * info["ext"], seed=seed)
-        v = rng.normal(size=3)
-        drift = Drift((v / np.linalg.norm(v) * sigma * rng.uniform(5, 20) / (n * 10.0)).tolist())
-        m, _ = synth(seed, n=n, sigma=sigma, terms=[field, drift], planar=planar, repeats=reps)
-        names = diagnose(m).names
+        names = diagnose(large_field_case(seed, drift=True)).names
         missed += "drift" not in names
         aniso += "anisotropic_noise" in names
         outl += "outliers" in names
     print(f"field + drift, 30 cases: drift missed {missed}, anisotropic_noise named {aniso}, outliers named {outl}")
     invented = extra = 0
     for seed in range(100):
-        rng = np.random.default_rng(8800 + seed)
-        sigma, n = float(rng.uniform(0.005, 0.05)), int(rng.integers(40, 201))
-        planar, reps = bool(rng.integers(2)), int(rng.integers(1, 3))
-        _, info = synth(seed, n=n, sigma=sigma, planar=planar)
-        field = SmoothField(rms_mm=sigma * rng.uniform(5, 30), length_mm=rng.uniform(0.2, 0.5) * info["ext"], seed=seed)
-        m, _ = synth(seed, n=n, sigma=sigma, terms=[field], planar=planar, repeats=reps)
-        names = diagnose(m).names
+        names = diagnose(large_field_case(seed, drift=False)).names
         invented += "drift" in names
         extra += bool(set(names) - {"smooth_field", "affine", "scale"})
     print(f"field alone, 100 cases: drift named {invented}, any effect beyond the field's {extra}")

@@ -25,7 +25,7 @@ from rrbc_core.correction.check_statistics import CheckStatistics
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.correction.warnings import Corrected, extrapolation
 from rrbc_core.errors import InputError
-from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.io.measurements import MeasurementSet, select_rows
 
 BASES = ("checks", "leave-one-out")
 
@@ -76,19 +76,7 @@ def _check_rms(mset: MeasurementSet) -> tuple[float, float, CheckStatistics, str
 
 
 def _without_ids(mset: MeasurementSet, drop: set) -> MeasurementSet:
-    keep = [i for i, pid in enumerate(mset.ids) if pid not in drop]
-    extra = {k: tuple(v[i] for i in keep) for k, v in mset.extra.items()}
-    time = mset.time[keep] if len(mset.time) == len(mset.ids) else mset.time
-    return MeasurementSet(
-        tuple(mset.ids[i] for i in keep),
-        tuple(mset.roles[i] for i in keep),
-        mset.sensor[keep],
-        mset.robot[keep],
-        time,
-        tuple(mset.lines[i] for i in keep),
-        mset.source,
-        extra,
-    )
+    return select_rows(mset, [i for i, pid in enumerate(mset.ids) if pid not in drop])
 
 
 def rrbc_verdict(

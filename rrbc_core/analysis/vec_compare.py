@@ -30,8 +30,9 @@ import numpy as np
 from rrbc_core.analysis.calibration import Calibration, calibrate, vec_commands
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.errors import InputError
+from rrbc_core.io.groups import GROUP_COLUMN, group_names, has_groups
 from rrbc_core.io.joints import joint_values
-from rrbc_core.io.measurements import GROUP_COLUMN, MeasurementSet
+from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.chain import Chain
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
@@ -147,12 +148,11 @@ def cv_folds(rows_reg: np.ndarray, rows_fid: np.ndarray, gi=None) -> list[np.nda
 def _stations(mset: MeasurementSet) -> tuple[tuple[str, ...], np.ndarray | None]:
     """The stations' names and each row's station index (R,), or ((), None) without a group column; a station
     without 3 registration rows is refused naming it (the reader already checks this for files)."""
-    if GROUP_COLUMN not in mset.extra:
+    if not has_groups(mset):
         return (), None
-    values = mset.extra[GROUP_COLUMN]
-    names = tuple(dict.fromkeys(values))
+    names = group_names(mset)
     index = {g: k for k, g in enumerate(names)}
-    gi = np.array([index[v] for v in values], int)
+    gi = np.array([index[v] for v in mset.extra[GROUP_COLUMN]], int)
     reg = np.isin(np.array(mset.roles), ("registration", "both"))
     for k, g in enumerate(names):
         if np.sum(reg & (gi == k)) < MIN_REGISTRATION:

@@ -7,9 +7,7 @@ it. Format: docs/formats/measurement-file.md, "Stations".
 
 from __future__ import annotations
 
-import numpy as np
-
-from rrbc_core.io.measurements import GROUP_COLUMN, MeasurementSet
+from rrbc_core.io.measurements import GROUP_COLUMN, MeasurementSet, select_rows
 
 __all__ = ["GROUP_COLUMN", "group_label", "group_names", "has_groups", "select_rows", "split_groups"]
 
@@ -27,22 +25,6 @@ def group_names(mset: MeasurementSet) -> tuple[str, ...]:
 def group_label(source: str, name: str) -> str:
     """How messages name a station: ``data.csv, group 'station3'``."""
     return f"{source}, group {name!r}"
-
-
-def select_rows(mset: MeasurementSet, rows, source: str | None = None) -> MeasurementSet:
-    """The rows `rows` (indices, file order kept) of a set as a set of their own; extra columns follow the rows."""
-    rows = np.asarray(rows, dtype=int)
-    take = lambda seq: tuple(seq[i] for i in rows.tolist())  # noqa: E731
-    return MeasurementSet(
-        ids=take(mset.ids),
-        roles=take(mset.roles),
-        sensor=mset.sensor[rows],
-        robot=mset.robot[rows],
-        time=mset.time[rows],
-        lines=take(mset.lines) if len(mset.lines) == len(mset.ids) else tuple(0 for _ in rows),
-        source=mset.source if source is None else source,
-        extra={k: take(v) for k, v in mset.extra.items()},
-    )
 
 
 def split_groups(mset: MeasurementSet) -> tuple[tuple[str, MeasurementSet], ...]:

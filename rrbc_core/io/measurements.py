@@ -32,7 +32,7 @@ import os
 import re
 from array import array
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from os import PathLike
 
 import numpy as np
@@ -192,6 +192,23 @@ class MeasurementSet:
         n_lines = len(self.lines)
         first_line = [self.lines[i] if i < n_lines else 0 for i in first.tolist()]
         return PointGroup(tuple(order), sensor, robot, count, tuple(first_line))
+
+
+def select_rows(mset: MeasurementSet, rows, source: str | None = None) -> MeasurementSet:
+    """The rows `rows` (indices, in the order given) of a set as a set of their own; extra columns follow the rows;
+    `source` names it in messages (default: the set's)."""
+    rows = np.asarray(rows, dtype=int)
+    take = lambda seq: tuple(seq[i] for i in rows.tolist())  # noqa: E731
+    return MeasurementSet(
+        ids=take(mset.ids),
+        roles=take(mset.roles),
+        sensor=mset.sensor[rows],
+        robot=mset.robot[rows],
+        time=mset.time[rows],
+        lines=take(mset.lines) if len(mset.lines) == len(mset.ids) else tuple(0 for _ in rows),
+        source=mset.source if source is None else source,
+        extra={k: take(v) for k, v in mset.extra.items()},
+    )
 
 
 def _selected_roles(role: str) -> tuple[str, ...]:
@@ -572,16 +589,8 @@ def _validate_groups(mset: MeasurementSet, header_line: int) -> None:
     values = mset.extra[GROUP_COLUMN]
     for name in dict.fromkeys(values):
         rows = [i for i, v in enumerate(values) if v == name]
-        pick = lambda seq: tuple(seq[i] for i in rows)  # noqa: B023, E731
-        station = MeasurementSet(
-            pick(mset.ids),
-            pick(mset.roles),
-            mset.sensor[rows],
-            mset.robot[rows],
-            mset.time[rows],
-            pick(mset.lines),
-            f"{mset.source}, group {name!r}",  # as io.groups.group_label names a station
-        )
+        station = select_rows(mset, rows, f"{mset.source}, group {name!r}")  # as io.groups.group_label names it
+        station = replace(station, extra={k: v for k, v in station.extra.items() if k != GROUP_COLUMN})
         _validate(station, header_line)
 
 

@@ -198,6 +198,23 @@ def test_with_outliers_in_the_file_the_prediction_is_for_the_file_as_given():
     assert agree >= 8
 
 
+def large_field_case(seed: int, drift: bool) -> MeasurementSet:
+    """A smooth field of 5-30 noise levels (length 0.2-0.5 of the extent), with drift of 5-20 noise levels over the
+    run (seeds from 7700) or without (seeds from 8800); 40-200 points, planar or not, with or without repeats.
+    Also used by scripts/real_data_checks.py."""
+    rng = np.random.default_rng((7700 if drift else 8800) + seed)
+    sigma, n = float(rng.uniform(0.005, 0.05)), int(rng.integers(40, 201))
+    planar, reps = bool(rng.integers(2)), int(rng.integers(1, 3))
+    _, info = synth(seed, n=n, sigma=sigma, planar=planar)
+    terms: list = [
+        SmoothField(rms_mm=sigma * rng.uniform(5, 30), length_mm=rng.uniform(0.2, 0.5) * info["ext"], seed=seed)
+    ]
+    if drift:
+        v = rng.normal(size=3)
+        terms.append(Drift((v / np.linalg.norm(v) * sigma * rng.uniform(5, 20) / (n * 10.0)).tolist()))
+    return synth(seed, n=n, sigma=sigma, terms=terms, planar=planar, repeats=reps)[0]
+
+
 @pytest.mark.parametrize("seed", range(24))
 def test_a_large_field_beside_drift_does_not_hide_the_drift_nor_become_anisotropic_noise(seed):
     """Issue 28, item 5: the hidden cases named `anisotropic_noise` beside a smooth field and drift (2 of 6) and
@@ -205,26 +222,12 @@ def test_a_large_field_beside_drift_does_not_hide_the_drift_nor_become_anisotrop
     again beside the field (generalised least squares), and the noise is judged on what field and drift leave.
     Sizes wider than the test above: fields of 5-30 noise levels, drift of 5-20 over the run, 40-200 points, planar
     or not, with or without repeats."""
-    rng = np.random.default_rng(7700 + seed)
-    sigma, n = float(rng.uniform(0.005, 0.05)), int(rng.integers(40, 201))
-    planar, reps = bool(rng.integers(2)), int(rng.integers(1, 3))
-    _, info = synth(seed, n=n, sigma=sigma, planar=planar)
-    field = SmoothField(rms_mm=sigma * rng.uniform(5, 30), length_mm=rng.uniform(0.2, 0.5) * info["ext"], seed=seed)
-    v = rng.normal(size=3)
-    drift = Drift((v / np.linalg.norm(v) * sigma * rng.uniform(5, 20) / (n * 10.0)).tolist())
-    m, _ = synth(seed, n=n, sigma=sigma, terms=[field, drift], planar=planar, repeats=reps)
-    names = set(diagnose(m).names)
+    names = set(diagnose(large_field_case(seed, drift=True)).names)
     assert {"drift", "smooth_field"} <= names and "anisotropic_noise" not in names and "outliers" not in names, names
 
 
 @pytest.mark.parametrize("seed", range(24))
 def test_a_large_field_alone_gains_no_drift_from_the_second_look(seed):
     """The second look at drift beside a field must not find drift where there is none (same sizes, no drift)."""
-    rng = np.random.default_rng(8800 + seed)
-    sigma, n = float(rng.uniform(0.005, 0.05)), int(rng.integers(40, 201))
-    planar, reps = bool(rng.integers(2)), int(rng.integers(1, 3))
-    _, info = synth(seed, n=n, sigma=sigma, planar=planar)
-    field = SmoothField(rms_mm=sigma * rng.uniform(5, 30), length_mm=rng.uniform(0.2, 0.5) * info["ext"], seed=seed)
-    m, _ = synth(seed, n=n, sigma=sigma, terms=[field], planar=planar, repeats=reps)
-    dg = diagnose(m)
+    dg = diagnose(large_field_case(seed, drift=False))
     assert "drift" not in dg.names, dg.tests

@@ -12,9 +12,9 @@ from rrbc_core.simulation.station_data import station_measurements
 FIXED = ("none", "idw", "linear", "tps", "gp")
 
 
-def _case(seed: int):
+def real_like_station(seed: int):
     """One real-like station with fiducials around its checks: bias, correlation length and noise drawn per seed
-    (clean data included), as the sizes real cells have."""
+    (clean data included), as the sizes real cells have. Also used by scripts/real_data_checks.py."""
     rng = np.random.default_rng(seed)
     return station_measurements(
         seed,
@@ -34,7 +34,7 @@ def test_auto_is_near_the_best_method_at_held_out_checks_and_never_much_worse_th
     near = 0
     n = 30
     for seed in range(n):
-        mset = _case(seed)
+        mset = real_like_station(seed)
         rmst = {
             m: correct_measurements(mset, MethodOptions.named("least-squares", m)).summary()["rmst_rrbc_mm"]
             for m in (*FIXED, "auto")
@@ -46,7 +46,7 @@ def test_auto_is_near_the_best_method_at_held_out_checks_and_never_much_worse_th
 
 def test_the_choice_uses_the_fiducials_only():
     """Moving the checks (their sensor readings and truths) changes nothing in the choice or its table."""
-    mset = _case(3)
+    mset = real_like_station(3)
     a = correct_measurements(mset, MethodOptions.named("least-squares", "auto")).choice
     checks = np.array([r == "check" for r in mset.roles])
     robot = mset.robot.copy()
@@ -104,17 +104,31 @@ def test_the_command_line_json_names_the_chosen_method_and_its_table(tmp_path):
     from rrbc_core.io.measurements_write import write_measurements
 
     path = tmp_path / "one.csv"
-    write_measurements(path, _case(2))
+    write_measurements(path, real_like_station(2))
     rrbc = str(Path(sys.executable).with_name("rrbc"))
     out = subprocess.run(
         [rrbc, "correct", str(path), "--interpolation", "auto", "--json"], capture_output=True, text=True, timeout=120
     )
     assert out.returncode == 0, out.stderr
     interp = json.loads(out.stdout)["interpolation"]
-    expected = correct_measurements(_case(2), MethodOptions.named("least-squares", "auto")).choice
+    expected = correct_measurements(real_like_station(2), MethodOptions.named("least-squares", "auto")).choice
     assert interp["method"] == expected.method.name != "auto"
     assert [r["cv_rms_mm"] for r in interp["cv"]] == pytest.approx([r.cv_rms_mm for r in expected.table])
 
 
 def test_auto_is_a_method_name():
     assert isinstance(make_interpolator("auto"), Auto)
+
+
+def test_the_app_shows_the_choice_rrbc_correct_makes():
+    """One answer: the explorer session on a file chooses what `rrbc correct --interpolation auto` chooses, with the
+    same table, and the Explore summary says it in the choice's own words."""
+    from rrbc_core.session.explorer import ExplorerSession
+    from rrbc_viz import tables
+
+    mset = real_like_station(4)
+    session = ExplorerSession.from_measurements(mset)
+    ev = session.update(interpolation="auto")
+    cli = correct_measurements(mset, MethodOptions.named("least-squares", "auto")).choice
+    assert ev.choice.method == cli.method and ev.choice.to_json() == cli.to_json()
+    assert cli.describe() in tables.summary(ev, session.kind)
