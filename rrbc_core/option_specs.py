@@ -157,3 +157,22 @@ def check_options(obj, owner: str) -> None:
     `__post_init__`). InputError names the method and the option's flag."""
     for spec in option_specs(obj):
         object.__setattr__(obj, spec.name, spec.check(getattr(obj, spec.name), owner))
+
+
+def build_from_registry(registry: dict, name: str, options: dict, unknown_name: str, owner: str):
+    """The option object registered under `name` (case and surrounding spaces ignored) built from `options` (None
+    values: the defaults). InputError `unknown_name` for a name not in `registry`, and one naming the options the
+    object does not take (`owner` names it: "method 'idw'", "registration 'three-point'")."""
+    key = str(name).strip().lower()
+    if key not in registry:
+        raise InputError(unknown_name)
+    cls = registry[key]
+    given = {k: v for k, v in options.items() if v is not None}
+    allowed = {spec.name for spec in option_specs(cls)}
+    unknown = sorted(set(given) - allowed)
+    if unknown:
+        takes = ", ".join(sorted(allowed)) or "no options"
+        raise InputError(
+            f"{owner.format(key=repr(key))} does not take option(s) {', '.join(unknown)}; it takes: {takes}"
+        )
+    return cls(**given)

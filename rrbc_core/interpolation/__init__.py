@@ -56,9 +56,6 @@ All errors in user input raise `errors.InputError`.
 
 from __future__ import annotations
 
-from dataclasses import fields
-
-from rrbc_core.errors import InputError
 from rrbc_core.interpolation.auto import Auto
 from rrbc_core.interpolation.base import EXACT_MM, FittedInterpolator, Prediction
 from rrbc_core.interpolation.gp import GP
@@ -66,6 +63,7 @@ from rrbc_core.interpolation.hull import HULL_TOL, hull_flags
 from rrbc_core.interpolation.idw import IDW, NoCorrection
 from rrbc_core.interpolation.linear import SLIVER_QUALITY, Linear
 from rrbc_core.interpolation.tps import TPS
+from rrbc_core.option_specs import build_from_registry
 
 __all__ = [
     "EXACT_MM",
@@ -110,14 +108,10 @@ def make_interpolator(name: str, **options) -> IDW | Linear | TPS | GP | NoCorre
     InputError
         An unknown name, or an option the method does not take or that is out of range.
     """
-    key = str(name).strip().lower()
-    if key not in METHODS:
-        raise InputError(f"unknown interpolation method {name!r}; valid methods: {', '.join(METHODS)}")
-    cls = METHODS[key]
-    given = {k: v for k, v in options.items() if v is not None}
-    allowed = {fl.name for fl in fields(cls)}
-    unknown = sorted(set(given) - allowed)
-    if unknown:
-        takes = ", ".join(sorted(allowed)) if allowed else "no options"
-        raise InputError(f"method {key!r} does not take option(s) {', '.join(unknown)}; it takes: {takes}")
-    return cls(**given)
+    return build_from_registry(
+        METHODS,
+        name,
+        options,
+        f"unknown interpolation method {name!r}; valid methods: {', '.join(METHODS)}",
+        "method {key}",
+    )

@@ -14,9 +14,8 @@ from typing import Any, ClassVar, Protocol
 
 from numpy.typing import ArrayLike
 
-from rrbc_core.errors import InputError
 from rrbc_core.geometry import points as geometry
-from rrbc_core.option_specs import check_options, option, option_specs
+from rrbc_core.option_specs import build_from_registry, check_options, option, option_specs
 from rrbc_core.registration import strategies as st
 from rrbc_core.registration.strategies import Registration
 from rrbc_core.runtime.threads import thread_limited
@@ -173,17 +172,13 @@ STRATEGY_OPTIONS: dict[str, tuple] = {
 def make_strategy(name: str, **options) -> StrategyObject:
     """The strategy object for a command-line name with its options (None: the default). InputError for an unknown
     name or an option the strategy does not take or that is out of range."""
-    key = str(name).strip().lower()
-    if key not in STRATEGIES:
-        raise InputError(f"unknown registration '{name}': choose one of {', '.join(STRATEGIES)}")
-    cls = STRATEGIES[key]
-    given = {k: v for k, v in options.items() if v is not None}
-    allowed = {spec.name for spec in option_specs(cls)}
-    unknown = sorted(set(given) - allowed)
-    if unknown:
-        takes = ", ".join(sorted(allowed)) or "no options"
-        raise InputError(f"registration {key!r} does not take option(s) {', '.join(unknown)}; it takes: {takes}")
-    return cls(**given)
+    return build_from_registry(
+        STRATEGIES,
+        name,
+        options,
+        f"unknown registration '{name}': choose one of {', '.join(STRATEGIES)}",
+        "registration {key}",
+    )
 
 
 @thread_limited

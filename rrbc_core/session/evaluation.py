@@ -335,7 +335,7 @@ def evaluate(
         "fiducials_used": int(np.count_nonzero(included)),
     }
     coverage = assess_coverage(fid_r.sensor[included], tgt_r.sensor) if np.any(included) else None
-    warnings = _warnings(layout, fids.ids, fid_r.sensor, e_sensor, included, targets, coverage, check_ids)
+    warnings = _warnings(fids.ids, fid_r.sensor, e_sensor, included, targets, coverage, check_ids)
     return Evaluation(
         s,
         reg,
@@ -357,7 +357,7 @@ def evaluate(
     )
 
 
-def _warnings(layout, fid_ids, fid_sensor, e_sensor, included, targets: TargetResult, coverage, check_ids):
+def _warnings(fid_ids, fid_sensor, e_sensor, included, targets: TargetResult, coverage, check_ids):
     """`correction_warnings` on the included fiducials and the targets, split into targets and checks as a file
     has them."""
     ids = [pid for pid, keep in zip(fid_ids, included) if keep]
