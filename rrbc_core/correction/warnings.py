@@ -5,7 +5,8 @@ with groups, and by the app's Explore tab, so that all say the same. Each warnin
 
 * **Wild corrections**: a target's or check's interpolated correction larger than `WILD_FACTOR` times the largest
   fiducial correction. An interpolation between fiducials has no business predicting more than its data; where it
-  does, it extrapolates or swings (real data: tps predicted 456 mm from fiducial corrections of at most 6.6 mm).
+  does, it extrapolates or swings (on pooled stations an exact spline swings far beyond its data:
+  tests/interpolation/test_no_blow_up.py).
 * **Conflicting twins**: fiducials nearly at one place (closer than `NEAR_FRACTION` of the fiducials' RMS radius, at
   least `NEAR_MIN_MM`) whose corrections differ by more than `CONFLICT_FRACTION` of the fiducials' RMS correction (at
   least `CONFLICT_MIN_MM`): the same place measured at two stations or reached in two arm configurations. No

@@ -16,8 +16,8 @@ with the smallest CV error on all fiducials:
   rigid's by more than one standard error of the paired per-fiducial difference; else `none` (on clean, noisy data
   a method can beat rigid on the fiducials by chance, and lose at the checks).
 
-Cost: (K + 1) fits per candidate, up to 25 candidates: about 0.3 s for 30 fiducials, 3 s for 150 and 2 s for 1000
-(gp left out) on one core (benchmark rows `auto_interpolation_*`). One fiducial cannot be cross-validated: it is
+Cost: (K + 1) fits per candidate, up to 25 candidates; measured in the benchmark rows `auto_interpolation_*`
+(docs/benchmarks.md: 0.34 s for 30 fiducials, 2.3 s for 150, 2.1 s for 1000 with gp left out). One fiducial cannot be cross-validated: it is
 used as a constant (IDW).
 
 The fitted object predicts like the chosen method and carries the choice (`AutoChoice`: method, table, folds).

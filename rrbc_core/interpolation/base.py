@@ -92,8 +92,8 @@ def coincident_groups(local: np.ndarray, tol: float) -> np.ndarray:
 #: Fiducials closer than this fraction of their set's RMS radius (local units) are one place for the exact
 #: interpolators (tps, linear): their positions and corrections are averaged before fitting. Real files hold the same
 #: place measured twice — at two stations, or reached in two arm configurations — with corrections that differ by
-#: millimetres; an exact interpolant through both has gradients of millimetres per micrometre (issue 28: tps predicted
-#: 456 mm from fiducial corrections of 6.6 mm). 1e-3 of the radius is 0.3 mm for a 300 mm cell: far below any
+#: millimetres; an exact interpolant through both has gradients of millimetres per micrometre
+#: (tests/interpolation/test_no_blow_up.py). 1e-3 of the radius is 0.3 mm for a 300 mm cell: far below any
 #: spacing a user plans, far above a tracker's noise.
 NEAR_FRACTION = 1e-3
 
