@@ -23,6 +23,16 @@ def _xyz(text: str):
         raise argparse.ArgumentTypeError(f"expected three numbers X,Y,Z in mm, got {text!r}") from None
 
 
+def _gravity(text: str):
+    parts = text.split(",")
+    try:
+        if len(parts) != 3:
+            raise ValueError
+        return tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three numbers GX,GY,GZ in m/s², got {text!r}") from None
+
+
 def add_parsers(sub) -> None:
     s = sub.add_parser("scene", help="make scenes", description="Make scenes for your own cell.")
     ss = s.add_subparsers(dest="scene_command", required=True, parser_class=type(s))
@@ -64,6 +74,27 @@ def add_parsers(sub) -> None:
     )
     k.add_argument("measurements", help="measurement CSV with joint columns")
     add_robot_model_options(k, "the arm's model")
+    k.add_argument(
+        "--compliance",
+        action="store_true",
+        help="add joint compliance under gravity load (and a lift column's bending) from the URDF's link masses; "
+        "terms enter where cross-validation over the fiducials says they help",
+    )
+    k.add_argument("--backlash", action="store_true", help="with --compliance: backlash terms too (rad)")
+    k.add_argument(
+        "--gravity",
+        type=_gravity,
+        default=None,
+        help="with --compliance: gravity GX,GY,GZ in m/s² in the base frame (default 0,0,-9.80665)",
+    )
+    k.add_argument("--save-model", default=None, metavar="M.json", help="write the identified arm to this file")
+    k.add_argument(
+        "--model",
+        default=None,
+        metavar="M.json",
+        help="reuse a saved arm (from --save-model): only the sensor-to-robot transform is fitted, to the "
+        "registration and fiducial rows (3 registration rows per station suffice)",
+    )
     k.add_argument("--json", action="store_true", help="print one JSON object")
     k.set_defaults(run=_cmd_calibrate)
 
@@ -119,10 +150,25 @@ def _cmd_convert(args) -> str:
 
 
 def _cmd_calibrate(args) -> str:
+    from rrbc_core.analysis.saved_model import load_model
     from rrbc_core.analysis.vec_compare import METHODS, compare
     from rrbc_core.io.measurements import read_measurements
 
-    result = compare(read_measurements(args.measurements), tool=args.tool, **robot_model_args(args))
+    if (args.backlash or args.gravity is not None) and not args.compliance:
+        raise InputError("--backlash and --gravity go with --compliance")
+    if args.model is not None and (args.compliance or args.tool is not None):
+        raise InputError("--model keeps the saved arm (its tool and load terms): drop --compliance and --tool")
+    model = load_model(args.model) if args.model is not None else None
+    result = compare(
+        read_measurements(args.measurements),
+        tool=args.tool,
+        compliance=args.compliance,
+        backlash=args.backlash,
+        gravity=args.gravity,
+        model=model,
+        save_model=args.save_model,
+        **robot_model_args(args),
+    )
     if args.json:
         return json.dumps(result) + "\n"
 
@@ -146,10 +192,43 @@ def _cmd_calibrate(args) -> str:
         f"kinematic error: {'yes' if k['claimed'] else 'not claimed'} (χ² {k['chi2']:.1f} on {k['dof']} degrees of "
         f"freedom, p = {k['p_value']:.2g}; rule: {k['rule']})"
     )
-    ident = [p for p in result["parameters"] if p["identifiable"]]
+    ident = [p for p in result["parameters"] if p["identifiable"] and "kind" not in p]
     lines.append(
         "identified errors: "
         + ", ".join(f"{p['name']} {p['error']:+.4g} ± {p['std_error']:.2g}" for p in ident)
         + " (angles rad, lengths mm)"
     )
+    lines += compliance_lines(result)
     return "\n".join(lines) + "\n"
+
+
+def compliance_lines(result: dict) -> list[str]:
+    """The text lines of `rrbc calibrate` about load terms and a saved model."""
+    lines = []
+    c = result["compliance"]
+    if c["requested"]:
+        table = ", ".join(f"{k} {v:.4f}" for k, v in c["cv_rmst_mm"].items())
+        lines.append(f"compliance candidates: {', '.join(c['candidates']) or 'none the data can see'}")
+        lines.append(f"VEC cross-validated RMS (mm): {table or '-'}")
+        terms = [p for p in result["parameters"] if "kind" in p]
+        lines.append(
+            "load terms entered: "
+            + (
+                ", ".join(
+                    f"{p['name']} {p['error']:+.3g}"
+                    + ("" if p["std_error"] is None else f" ± {p['std_error']:.2g}")
+                    + f" {p['unit']}"
+                    for p in terms
+                )
+                or "none (cross-validation says they do not help)"
+            )
+        )
+    if result["saved_model"] is not None:
+        m = result["saved_model"]
+        lines.append(
+            f"arm from {m['path']} (identified on {m['identified_on']}, {m['poses']} poses; load terms "
+            f"{', '.join(m['terms']) or 'none'}): only the sensor-to-robot transform was fitted"
+        )
+    if result["saved_to"] is not None:
+        lines.append(f"wrote the identified arm to {result['saved_to']}")
+    return lines

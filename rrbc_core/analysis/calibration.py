@@ -5,7 +5,10 @@ Model. A row measured with joint values q has its physical point at FK(δ, q), t
 chain (`models.chain.Chain`: from a URDF or a DH table) with the TRUE parameter errors δ (joint zero offsets, errors
 of the joints' origins, the tool point); the sensor reads it at s = T⁻¹(FK(δ, q)) + noise. Identification minimises
 Σ |T(s_i) − FK(δ, q_i)|² (robot frame, mm) over δ and T (robot = R @ sensor + t), by Gauss–Newton with the chain's
-analytic Jacobians (every pose at once).
+analytic Jacobians (every pose at once); a step that does not lower the sum is halved (an error the model does not
+hold, a bending arm fitted with geometric terms alone, can make full steps oscillate). With load terms
+(`models.loads`: joint compliance under gravity, a column's bending, backlash) FK includes their deflections and
+their coefficients are fitted beside δ.
 
 Identifiability. Not every parameter can be told apart from these data: an error of the base is absorbed by T,
 some errors act alike at the data's poses. At each step (parameters scaled to mm: angles × `angle_scale`, half the
@@ -17,17 +20,20 @@ identifiable on its own when its unit change lies in that subspace; the others a
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.models.chain import Chain, rotation
+from rrbc_core.models.loads import GRAVITY, Loads, LoadTerm, deflections, factor_scale, gravity_loads, term_jacobian
 
 RANK_TOL = 1e-4  # singular values below this fraction of the largest: a combination the data do not determine
 MAX_STEPS = 30  # Gauss–Newton steps at most (it converges in a few on data the model describes)
+MAX_HALVINGS = 12  # a step is halved at most this often before the iteration stops (no lower residuals found)
 STEP_TOL_MM = 1e-9  # a step that moves no scaled parameter by more than this (mm) ends the iteration
 MIN_POSES = 6
+TERM_ALONE_TOL = 1e-2
 
 
 def angle_scale(chain: Chain) -> float:
@@ -74,10 +80,24 @@ class Calibration:
     #: are the first station's. None for one transform.
     rotations: np.ndarray | None = None
     translations: np.ndarray | None = None
+    #: load terms (`models.loads`): the terms, their coefficients (T,) (rad/Nm or rad) with standard errors (NaN
+    #: where not identifiable on its own) and identifiability, and the gravity vector (3,) m/s², base frame
+    terms: tuple[LoadTerm, ...] = ()
+    coef: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    coef_se: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    coef_identifiable: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    gravity: tuple = GRAVITY
 
     @property
     def names(self) -> tuple[str, ...]:
         return self.chain.param_names
+
+    def deflections(self, q) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The identified load terms' joint deflections (dv, drot) at inputs q (N, I) (`models.loads.deflections`),
+        (None, None) without terms."""
+        if not self.terms:
+            return None, None
+        return deflections(self.chain, self.terms, self.coef, gravity_loads(self.chain, q, self.gravity))
 
     @property
     def kinematic_p_value(self) -> float:
@@ -95,34 +115,50 @@ class Calibration:
         return np.einsum("nij,nj->ni", self.rotations[g], s) + self.translations[g]
 
     def forward(self, q) -> np.ndarray:
-        """Where the identified arm's tool point is at inputs q (N, I), robot frame, mm."""
-        return self.chain.forward(q, self.delta)
+        """Where the identified arm's tool point is at inputs q (N, I), robot frame, mm (its load terms included)."""
+        dv, drot = self.deflections(q)
+        return self.chain.kinematics(q, self.delta, jacobians=False, dv=dv, drot=drot)[0]
 
 
-def _scales(chain: Chain, n_groups: int = 1) -> np.ndarray:
-    """Per parameter (P + 6G: the chain's, then each transform's rotation vector and translation), mm per unit."""
+def _scales(chain: Chain, n_groups: int = 1, term_scales=()) -> np.ndarray:
+    """Per parameter (P + T + 6G: the chain's, the load terms', then each transform's rotation vector and
+    translation), mm per unit."""
     a = angle_scale(chain)
-    sc = np.ones(chain.n_params + 6 * n_groups)
+    n_t = len(term_scales)
+    sc = np.ones(chain.n_params + n_t + 6 * n_groups)
     sc[: chain.n_params][chain.angular] = a
+    sc[chain.n_params : chain.n_params + n_t] = a * np.asarray(term_scales, float)
     for g in range(n_groups):
-        sc[chain.n_params + 6 * g : chain.n_params + 6 * g + 3] = a
+        k = chain.n_params + n_t + 6 * g
+        sc[k : k + 3] = a
     return sc
 
 
-def _system(chain: Chain, q, s, delta, rot, t, groups) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals (3N,) = T_g(s) − FK(δ, q) and their Jacobian (3N, P + 6G) in the parameters' own units; rot (G, 3, 3),
-    t (G, 3), groups (N,) each row's transform."""
-    p, jp, _ = chain.kinematics(q, delta)
+def _system(
+    chain: Chain, q, s, delta, rot, t, groups, terms=(), coef=None, loads=None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals (3N,) = T_g(s) − FK(δ, q, deflections) and their Jacobian (3N, P + T + 6G) in the parameters' own
+    units; rot (G, 3, 3), t (G, 3), groups (N,) each row's transform; `terms` with coefficients `coef` (T,) and the
+    poses' `loads` (`models.loads`)."""
+    dv = drot = None
+    if terms:
+        assert loads is not None and coef is not None
+        dv, drot = deflections(chain, terms, coef, loads)
+    p, jp, _ = chain.kinematics(q, delta, dv=dv, drot=drot)
     assert jp is not None
     rs = np.einsum("nij,nj->ni", rot[groups], s)
     res = rs + t[groups] - p
-    n, n_p, n_g = len(q), chain.n_params, len(rot)
-    j = np.zeros((n, 3, n_p + 6 * n_g))
+    n, n_p, n_t, n_g = len(q), chain.n_params, len(terms), len(rot)
+    j = np.zeros((n, 3, n_p + n_t + 6 * n_g))
     j[:, :, :n_p] = -jp
+    if terms:
+        assert loads is not None
+        j[:, :, n_p : n_p + n_t] = -term_jacobian(terms, loads, jp)
     rows = np.arange(n)
+    k0 = n_p + n_t
     for a in range(3):
-        j[rows, :, n_p + 6 * groups + a] = -_skew(rs)[:, :, a]
-        j[rows, :, n_p + 6 * groups + 3 + a] = np.eye(3)[:, a]
+        j[rows, :, k0 + 6 * groups + a] = -_skew(rs)[:, :, a]
+        j[rows, :, k0 + 6 * groups + 3 + a] = np.eye(3)[:, a]
     return res.reshape(-1), j.reshape(3 * n, -1)
 
 
@@ -131,7 +167,9 @@ def _describe(names: tuple, v: np.ndarray, k: int = 3) -> str:
     return " ".join(f"{'+' if v[i] >= 0 else '-'}{abs(v[i]):.2f}·{names[i]}" for i in top)
 
 
-def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None, groups=None) -> Calibration:
+def calibrate(
+    chain: Chain, q, sensor, rotation0=None, translation0=None, groups=None, terms=(), gravity=None
+) -> Calibration:
     """Identify the arm's errors and the sensor-to-robot transform from N poses (module docstring).
 
     Parameters
@@ -147,6 +185,9 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None, groups
         fit of each station's readings to the nominal arm).
     groups : array_like of int, (N,), optional
         Stations 0..G-1: one sensor-to-robot transform each, the arm's errors shared by all.
+    terms : sequence of LoadTerm, optional
+        Load terms identified beside the geometric errors (`models.loads.candidate_terms`), under `gravity` (3,)
+        m/s² in the base frame (default: the base frame's −z).
 
     Raises
     ------
@@ -173,12 +214,15 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None, groups
         translation0 = np.array([m.translation for m in maps])
     rot = np.asarray(rotation0, float).reshape(-1, 3, 3).copy()
     t = np.asarray(translation0, float).reshape(-1, 3).copy()
-    n_p = chain.n_params
-    delta = np.zeros(n_p)
-    sc = _scales(chain, n_g)
-    basis = np.zeros((n_p + 6 * n_g, 0))
+    n_p, n_t = chain.n_params, len(terms)
+    terms = tuple(terms)
+    loads: Loads | None = gravity_loads(chain, qa, gravity) if terms else None
+    delta, coef = np.zeros(n_p), np.zeros(n_t)
+    sc = _scales(chain, n_g, [factor_scale(tm, loads) for tm in terms] if loads is not None else ())
+    k0 = n_p + n_t
+    res, j = _system(chain, qa, s, delta, rot, t, gi, terms, coef, loads)
+    cost = float(res @ res)
     for _ in range(MAX_STEPS):
-        res, j = _system(chain, qa, s, delta, rot, t, gi)
         js = j / sc
         _, sv, vt = np.linalg.svd(js, full_matrices=False)
         rank = int(np.sum(sv > RANK_TOL * sv[0]))
@@ -186,14 +230,23 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None, groups
         z, *_ = np.linalg.lstsq(js @ basis, -res, rcond=None)
         step_scaled = basis @ z
         step = step_scaled / sc
-        delta = delta + step[:n_p]
-        for g in range(n_g):
-            k = n_p + 6 * g
-            rot[g] = _exp(step[k : k + 3]) @ rot[g]
-            t[g] = t[g] + step[k + 3 : k + 6]
+        for _ in range(MAX_HALVINGS):  # a Gauss–Newton step that does not lower the residuals is halved
+            d_new, c_new = delta + step[:n_p], coef + step[n_p:k0]
+            r_new, t_new = rot.copy(), t.copy()
+            for g in range(n_g):
+                k = k0 + 6 * g
+                r_new[g] = _exp(step[k : k + 3]) @ rot[g]
+                t_new[g] = t[g] + step[k + 3 : k + 6]
+            res_new, j_new = _system(chain, qa, s, d_new, r_new, t_new, gi, terms, c_new, loads)
+            if float(res_new @ res_new) <= cost:
+                break
+            step, step_scaled = 0.5 * step, 0.5 * step_scaled
+        else:
+            break
+        delta, coef, rot, t, res, j = d_new, c_new, r_new, t_new, res_new, j_new
+        cost = float(res @ res)
         if np.max(np.abs(step_scaled)) < STEP_TOL_MM:
             break
-    res, j = _system(chain, qa, s, delta, rot, t, gi)
     js = j / sc
     _, sv, vt = np.linalg.svd(js, full_matrices=False)
     rank = int(np.sum(sv > RANK_TOL * sv[0]))
@@ -211,10 +264,17 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None, groups
     w, v = np.linalg.eigh(cov_arm)
     keep = w > w.max() * 1e-9 if w.max() > 0 else np.zeros(len(w), bool)
     chi2 = float(np.sum((v[:, keep].T @ d_scaled) ** 2 / w[keep])) if keep.any() else 0.0
-    null = np.eye(n_p + 6 * n_g) - basis @ basis.T
+    null = np.eye(k0 + 6 * n_g) - basis @ basis.T
     alone = np.linalg.norm(null, axis=0) < 1e-3  # a unit change of this parameter lies in the identified space
+    # a load term counts as identified when at most 1 % of its unit change lies outside that space (a column's
+    # bending shares most of its effect with the shoulder's compliance, never all of it)
+    alone[n_p:k0] = np.linalg.norm(null, axis=0)[n_p:k0] < TERM_ALONE_TOL
     tnames = ("rx", "ry", "rz", "x", "y", "z")
-    names = chain.param_names + tuple(f"T.{c}" if not grouped else f"T[{g}].{c}" for g in range(n_g) for c in tnames)
+    names = (
+        chain.param_names
+        + tuple(tm.name for tm in terms)
+        + tuple(f"T.{c}" if not grouped else f"T[{g}].{c}" for g in range(n_g) for c in tnames)
+    )
     return Calibration(
         chain=chain,
         delta=delta,
@@ -230,6 +290,35 @@ def calibrate(chain: Chain, q, sensor, rotation0=None, translation0=None, groups
         chi2_dof=int(keep.sum()),
         rotations=rot if grouped else None,
         translations=t if grouped else None,
+        terms=terms,
+        coef=coef,
+        coef_se=np.where(alone[n_p:k0], se[n_p:k0], np.nan),
+        coef_identifiable=alone[n_p:k0],
+        gravity=tuple(float(v) for v in (GRAVITY if gravity is None else gravity)),
+    )
+
+
+def fixed_transforms(cal: Calibration, q, sensor, groups, n_groups: int, grouped: bool) -> Calibration:
+    """`cal`'s arm kept as it is, with each station's sensor-to-robot transform fitted anew (least squares) to N rows:
+    sensor readings (N, 3) mm of the tool point at inputs q (N, I), `groups` (N,) their stations 0..n_groups-1 (each
+    with 3 rows or more). `grouped`: one transform per station (else the first is the only one)."""
+    from rrbc_core.registration import register
+
+    p = cal.forward(q)
+    s = np.asarray(sensor, float).reshape(-1, 3)
+    g = np.asarray(groups, int)
+    maps = [register("least-squares", s[g == k], p[g == k]).mapping for k in range(n_groups)]
+    rot = np.array([m.rotation for m in maps], float)
+    t = np.array([m.translation for m in maps], float)
+    res = np.einsum("nij,nj->ni", rot[g], s) + t[g] - p
+    return replace(
+        cal,
+        rotation=rot[0],
+        translation=t[0],
+        rotations=rot if grouped else None,
+        translations=t if grouped else None,
+        residuals=res,
+        sigma_mm=float(np.sqrt(np.sum(res**2) / max(res.size - 6 * n_groups, 1))),
     )
 
 
@@ -257,10 +346,11 @@ def vec_commands(cal: Calibration, s_rows, q_rows, groups=None) -> np.ndarray:
     a = angle_scale(chain)
     w = np.array([1.0 if i.kind == "prismatic" else a for i in chain.inputs])  # joint units -> mm-equivalent
     for _ in range(2):
-        pid, _, jq = chain.kinematics(q, cal.delta)
+        dv, drot = cal.deflections(q)
+        pid, _, jq = chain.kinematics(q, cal.delta, dv=dv, drot=drot)
         assert jq is not None
         js = jq / w  # mm per mm-equivalent
         m = js @ np.swapaxes(js, 1, 2) + (1e-9 * a * a) * np.eye(3)
         step = np.einsum("nji,nj->ni", js, np.linalg.solve(m, (p - pid)[..., None])[..., 0])
         q = q + step / w
-    return p + chain.forward(q) - chain.forward(q, cal.delta)
+    return p + chain.forward(q) - cal.forward(q)

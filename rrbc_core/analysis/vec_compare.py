@@ -27,19 +27,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rrbc_core.analysis.calibration import Calibration, calibrate, vec_commands
+from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.errors import InputError
 from rrbc_core.io.groups import GROUP_COLUMN, group_names, has_groups
 from rrbc_core.io.joints import joint_values
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.chain import Chain
+from rrbc_core.models.loads import candidate_terms, gravity_loads
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
 CV_FOLDS = 10
 MIN_REGISTRATION = 3
 KINEMATIC_ALPHA = 1e-3
 KINEMATIC_MARGIN = 0.8
+TERM_SE = 2.0  # load terms: the gain must exceed this many standard errors ...
+TERM_GAIN = 0.05  # ... and this fraction of the RMS
 
 
 def _idw(src, values, dst) -> np.ndarray:
@@ -68,21 +71,27 @@ class MethodsFit:
     grouped: bool = False
 
 
-def fit_methods(rows_reg, rows_fid, s, b, q, chain: Chain, gi=None) -> MethodsFit:
+def fit_methods(
+    rows_reg, rows_fid, s, b, q, chain: Chain, gi=None, terms=(), gravity=None, fixed: Calibration | None = None
+) -> MethodsFit:
     """The rigid registration (rows_reg), the calibration (rows_reg and rows_fid) and VEC's commands at the fiducials,
     from sensor readings s (R, 3), robot readings b (R, 3) and joint values q (R, I) (rad or mm) of `chain`; with
     stations, `gi` (R,) each row's station 0..G-1: a rigid registration and a transform per station, the arm's errors
-    shared. `predict_methods` uses it."""
+    shared. `terms`: load terms identified with the arm (`models.loads`, under `gravity`). `fixed`: a saved arm
+    (`analysis.saved_model`) kept as it is: only each station's sensor-to-robot transform is fitted, to the
+    registration and fiducial rows. `predict_methods` uses it."""
     grouped = gi is not None
     gi = np.zeros(len(s), int) if gi is None else np.asarray(gi, int)
     n_g = int(gi.max()) + 1
     fits = [_kabsch(s[rows_reg[gi[rows_reg] == g]], b[rows_reg[gi[rows_reg] == g]]) for g in range(n_g)]
     rot, t = np.array([f[0] for f in fits]), np.array([f[1] for f in fits])
     rows = np.union1d(rows_reg, rows_fid)
-    if grouped:  # sensor -> robot per station, started from the stations' rigid registrations
-        cal = calibrate(chain, q[rows], s[rows], rot, t, groups=gi[rows])
+    if fixed is not None:
+        cal = fixed_transforms(fixed, q[rows], s[rows], gi[rows], n_g, grouped)
+    elif grouped:  # sensor -> robot per station, started from the stations' rigid registrations
+        cal = calibrate(chain, q[rows], s[rows], rot, t, groups=gi[rows], terms=terms, gravity=gravity)
     else:
-        cal = calibrate(chain, q[rows], s[rows], rot[0], t[0])
+        cal = calibrate(chain, q[rows], s[rows], rot[0], t[0], terms=terms, gravity=gravity)
     vec_fid = vec_commands(cal, s[rows_fid], q[rows_fid], gi[rows_fid] if grouped else None)
     return MethodsFit(rot, t, cal, s[rows_fid], b[rows_fid], vec_fid, gi[rows_fid], grouped)
 
@@ -164,13 +173,88 @@ def _rms(a, b) -> float:
     return float(np.sqrt(np.mean(np.sum((np.asarray(a) - np.asarray(b)) ** 2, axis=1))))
 
 
+def _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, terms=(), gravity=None, fixed=None) -> dict:
+    """Per method, the held-out fiducials' squared errors (H,) mm² over `folds` (`cv_folds`)."""
+    g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])  # noqa: E731
+    errs: dict[str, list] = {m: [] for m in METHODS}
+    for held in folds:
+        keep = np.setdiff1d(np.arange(len(rows_fid)), held)
+        f = fit_methods(
+            np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, chain, gi, terms, gravity, fixed
+        )
+        pred = predict_methods(f, s[rows_fid[held]], q[rows_fid[held]], g_of(rows_fid[held]))
+        for m in METHODS:
+            errs[m].append(np.sum((pred[m] - b[rows_fid[held]]) ** 2, axis=1))
+    return {m: np.concatenate(errs[m]) if errs[m] else np.zeros(0) for m in METHODS}
+
+
+def _better(sq_a: np.ndarray, sq_b: np.ndarray) -> bool:
+    """a beats b clearly: its mean squared error is lower by more than `TERM_SE` standard errors of the paired
+    difference and its RMS by at least `TERM_GAIN` (a load term is a claim about the arm; a gain the held-out
+    fiducials barely resolve is not enough to make it)."""
+    d = sq_b - sq_a
+    se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else np.inf
+    gain = 1.0 - np.sqrt(float(np.mean(sq_a)) / max(float(np.mean(sq_b)), 1e-300))
+    return bool(float(np.mean(d)) > TERM_SE * se and gain >= TERM_GAIN)
+
+
+def select_terms(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, gravity) -> tuple[tuple, dict, dict]:
+    """The load terms that enter (docs/calibration.md, "Compliance"): all candidates together must beat the geometric
+    arm clearly (VEC's cross-validated error over the fiducials, `_better`); then each term in turn leaves unless
+    the others without it lose clearly. Returns (entered terms, VEC's squared
+    errors per held-out fiducial for the entered model, {"geometric": RMS, "all": RMS, "without <term>": RMS ...})."""
+    sq_geo = _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi)
+    table = {"geometric": float(np.sqrt(np.mean(sq_geo["vec"])))}
+    if not candidates or not folds:
+        return (), sq_geo, table
+    sq_all = _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, gravity)
+    table["all terms"] = float(np.sqrt(np.mean(sq_all["vec"])))
+    if not _better(sq_all["vec"], sq_geo["vec"]):
+        return (), sq_geo, table
+    entered, current = tuple(candidates), sq_all
+    for term in candidates:
+        rest = tuple(t for t in entered if t != term)
+        sq_rest = _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, rest, gravity) if rest else sq_geo
+        table[f"without {term.name}"] = float(np.sqrt(np.mean(sq_rest["vec"])))
+        if not _better(current["vec"], sq_rest["vec"]):
+            entered, current = rest, sq_rest
+    return entered, current, table
+
+
 def compare(
-    mset: MeasurementSet, robot: str | None = "ur5", tool=None, urdf=None, tip: str | None = None, base=None
+    mset: MeasurementSet,
+    robot: str | None = "ur5",
+    tool=None,
+    urdf=None,
+    tip: str | None = None,
+    base=None,
+    compliance: bool = False,
+    backlash: bool = False,
+    gravity=None,
+    model=None,
+    save_model: str | None = None,
 ) -> dict:
     """The JSON object of `rrbc calibrate` (docs/cli.md) for a measurement file with joint values. The model:
     `robot` (ur5, ur10) or `urdf` with `tip` and `base` (`robot_model.robot_chain`); `tool`: a length along the DH
-    flange's z axis or a point (3,) in the tip link's frame, mm."""
-    chain = robot_chain(None if urdf is not None else robot, urdf, tip, base, tool)
+    flange's z axis or a point (3,) in the tip link's frame, mm. `compliance` (and `backlash`): load terms under
+    `gravity` (m/s², base frame) enter where cross-validation says they help (`select_terms`). `model`: a saved arm
+    (`saved_model.SavedModel`) kept fixed; only the sensor-to-robot transforms are fitted. `save_model`: a path to
+    write the identified arm to (`saved_model.save_model`)."""
+    if save_model is not None:
+        from pathlib import Path
+
+        if model is not None:
+            raise InputError("--save-model with --model: the arm is the saved one already; nothing new to save")
+        if Path(save_model).is_dir() or not Path(save_model).parent.is_dir():
+            raise InputError(f"--save-model {save_model}: must be a file in an existing directory")
+    fixed = None
+    if model is not None:
+        chain, fixed = model.chain_for(urdf=urdf, tip=tip, base=base, robot=robot if urdf is None else None)
+        gravity = fixed.gravity
+    else:
+        chain = robot_chain(None if urdf is not None else robot, urdf, tip, base, tool)
+        if compliance and chain.inertia is None:
+            gravity_loads(chain, np.zeros((1, len(chain.inputs))))  # refuses, naming what is missing
     q = joint_values(mset, chain)
     if q is None:
         raise InputError(
@@ -184,32 +268,33 @@ def compare(
     rows_tgt = np.flatnonzero(roles == "target")
     if len(rows_reg) < MIN_REGISTRATION:
         raise InputError(f"{mset.source}: at least 3 registration rows are needed, got {len(rows_reg)}")
-    if len(np.union1d(rows_reg, rows_fid)) < 8:
+    if fixed is None and len(np.union1d(rows_reg, rows_fid)) < 8:
         raise InputError(
             f"{mset.source}: {len(np.union1d(rows_reg, rows_fid))} registration and fiducial rows: too few poses to "
-            "identify the arm (at least 8; more, in varied configurations, identify more)"
+            "identify the arm (at least 8; more, in varied configurations, identify more; or reuse a saved arm "
+            "with --model)"
         )
     names, gi = _stations(mset)
     known = np.union1d(rows_reg, rows_fid)
-    model = require_model(chain, q[known], b[known], mset.source)
-    fit = fit_methods(rows_reg, rows_fid, s, b, q, chain, gi)
+    model_check = require_model(chain, q[known], b[known], mset.source)
+    folds = cv_folds(rows_reg, rows_fid, gi)
+    terms: tuple = ()
+    load_table: dict = {}
+    candidates: tuple = ()
+    if compliance and fixed is None:
+        candidates = candidate_terms(chain, gravity_loads(chain, q[known], gravity), backlash)
+        terms, sq, load_table = select_terms(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, gravity)
+    else:
+        sq = _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, fixed=fixed)
+    fit = fit_methods(rows_reg, rows_fid, s, b, q, chain, gi, terms, gravity, fixed)
     g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])  # noqa: E731
     rmst = dict.fromkeys(METHODS)
     if len(rows_chk):
         pred = predict_methods(fit, s[rows_chk], q[rows_chk], g_of(rows_chk))
         rmst = {m: _rms(pred[m], b[rows_chk]) for m in METHODS}
-    # cross-validation over the fiducials (no check rows used)
-    folds = cv_folds(rows_reg, rows_fid, gi)
-    errs: dict[str, list] = {m: [] for m in METHODS}
-    for held in folds:
-        keep = np.setdiff1d(np.arange(len(rows_fid)), held)
-        f = fit_methods(np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, chain, gi)
-        pred = predict_methods(f, s[rows_fid[held]], q[rows_fid[held]], g_of(rows_fid[held]))
-        for m in METHODS:
-            errs[m].append(np.sum((pred[m] - b[rows_fid[held]]) ** 2, axis=1))
-    cv_values = {m: float(np.sqrt(np.mean(np.concatenate(errs[m])))) for m in METHODS} if folds else {}
+    cv_values = {m: float(np.sqrt(np.mean(sq[m]))) for m in METHODS} if folds else {}
     cv: dict[str, float | None] = {m: cv_values.get(m) for m in METHODS}
-    recommended = one_standard_error_choice({m: np.concatenate(errs[m]) for m in METHODS}) if folds else "rigid"
+    recommended = one_standard_error_choice(sq) if folds else "rigid"
     cal = fit.cal
     # a kinematic error is claimed only when the arm's identified errors are significant against their stated
     # uncertainty AND the arm model beats a model-free correction out of sample: a smooth sensor field leaks into
@@ -228,6 +313,11 @@ def compare(
                 row["group"] = names[gi[i]]
             targets.append(row)
     angular = chain.angular
+    if save_model is not None:
+        from rrbc_core.analysis.saved_model import from_calibration
+        from rrbc_core.analysis.saved_model import save_model as write_model
+
+        write_model(save_model, from_calibration(cal, robot, urdf, mset.source, len(known)))
     return {
         "robot": chain.name,
         "model": {
@@ -236,7 +326,7 @@ def compare(
             "tip": chain.tip,
             "joints": [{"column": i.column, "unit": i.unit} for i in chain.inputs],
             "tool_mm": chain.tool.tolist(),
-            "check": model.to_json(),
+            "check": model_check.to_json(),
         },
         "tool_mm": chain.tool.tolist(),
         "poses": int(len(known)),
@@ -258,8 +348,31 @@ def compare(
                 "unit": "rad" if ang else "mm",
             }
             for n, d, se, ok, ang in zip(cal.names, cal.delta, cal.delta_se, cal.identifiable, angular)
+        ]
+        + [
+            {
+                "name": tm.name,
+                "error": float(c),
+                "std_error": None if not ok else float(se),
+                "identifiable": bool(ok),
+                "unit": tm.unit,
+                "kind": tm.kind,
+            }
+            for tm, c, se, ok in zip(cal.terms, cal.coef, cal.coef_se, cal.coef_identifiable)
         ],
-        "units": "per parameter (unit): angles rad, lengths mm",
+        "compliance": {
+            "requested": bool(compliance),
+            "gravity_m_s2": list(cal.gravity),
+            "candidates": [tm.name for tm in candidates],
+            "entered": [tm.name for tm in cal.terms],
+            "cv_rmst_mm": load_table,
+            "rule": f"all candidate terms must beat the geometric arm's cross-validated VEC error over the fiducials by "
+            f"more than {TERM_SE:g} standard errors and {TERM_GAIN:.0%} of its RMS; then each term stays only if the "
+            "model without it is worse by as much",
+        },
+        "saved_model": None if model is None else model.describe(),
+        "saved_to": save_model,
+        "units": "per parameter (unit): angles rad, lengths mm, compliances rad/Nm",
         "sensor_to_robot": (
             {"rotation": cal.rotation.tolist(), "translation": cal.translation.tolist()}
             if cal.rotations is None or cal.translations is None

@@ -62,6 +62,13 @@ def _rotvec(v: np.ndarray) -> np.ndarray:
     return np.eye(3) if angle == 0.0 else rotation(v / angle, np.array(angle))
 
 
+def _rotvecs(v: np.ndarray) -> np.ndarray:
+    """Rotations (N, 3, 3) of rotation vectors (N, 3) rad."""
+    angle = np.linalg.norm(v, axis=1)
+    safe = np.where(angle > 0, angle, 1.0)
+    return rotation(v / safe[:, None], angle)
+
+
 def _perpendicular(axis: np.ndarray) -> tuple[tuple[np.ndarray, str], tuple[np.ndarray, str]]:
     """Two unit directions perpendicular to `axis` with their names: the other coordinate axes when `axis` is one
     of x, y, z (within 1e-9), else an orthonormal pair named u, v."""
@@ -122,6 +129,10 @@ class Chain:
     tail: np.ndarray
     tool: np.ndarray
     source: str
+    #: (K, 4) per moving joint: the mass (kg) its joint carries up to the next moving joint (its segment: the
+    #: links rigidly attached to it on the chain, from the URDF's `<inertial>`) and their centre of mass (mm) in the
+    #: joint's frame after its motion (F_k). None: the model has no masses (a DH table).
+    inertia: np.ndarray | None = None
 
     def __post_init__(self):
         if not self.joints:
@@ -142,7 +153,7 @@ class Chain:
         t = np.asarray(tool_mm, float).reshape(3)
         if not np.all(np.isfinite(t)):
             raise InputError("the tool point must be 3 finite numbers (mm)")
-        return Chain(self.name, self.base, self.tip, self.joints, self.inputs, self.tail, t, self.source)
+        return Chain(self.name, self.base, self.tip, self.joints, self.inputs, self.tail, t, self.source, self.inertia)
 
     def _directions(self) -> list[tuple[int, str, str, np.ndarray]]:
         """Per parameter: (joint index or -1 for the tool, kind "offset"/"rot"/"pos", name suffix, direction)."""
@@ -199,10 +210,12 @@ class Chain:
         return qa
 
     def kinematics(
-        self, q, delta=None, jacobians: bool = True
+        self, q, delta=None, jacobians: bool = True, dv=None, drot=None
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """Tool points and Jacobians for inputs q (N, I) (rad or mm) with parameter errors `delta` (P,) (None: the
-        nominal chain).
+        nominal chain) and, per pose, deflections under load (`models.loads`): `dv` (N, K) added to the moving
+        joints' values (rad or mm), `drot` (N, K, 3) rotation vectors (rad) of each joint's origin in its frame, as
+        the rotation parameters are.
 
         Returns
         -------
@@ -217,7 +230,7 @@ class Chain:
         n = len(qa)
         dirs = self._directions()
         d = np.zeros(self.n_params) if delta is None else np.asarray(delta, float).reshape(self.n_params)
-        v = self._values(qa)
+        v = self._values(qa) + (0.0 if dv is None else np.asarray(dv, float))
         rot = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
         pos = np.zeros((n, 3))
         frames = []  # per joint: (R of G_k (N,3,3), o of G_k (N,3)) before the motion
@@ -229,7 +242,7 @@ class Chain:
                     rv = rv + d[idx] * dirs[idx][3]
                 else:
                     e_pos = e_pos + d[idx] * dirs[idx][3]
-            e_rot = _rotvec(rv)
+            e_rot = _rotvec(rv) if drot is None or not np.any(drot[:, k]) else _rotvecs(rv + drot[:, k])
             o_rot = j.origin[:3, :3] @ e_rot
             o_pos = j.origin[:3, :3] @ e_pos + j.origin[:3, 3]
             pos = pos + rot @ o_pos
@@ -266,6 +279,27 @@ class Chain:
     def forward(self, q, delta=None) -> np.ndarray:
         """Tool points (N, 3), base frame, mm, for inputs q (N, I) rad or mm (`kinematics` without Jacobians)."""
         return self.kinematics(q, delta, jacobians=False)[0]
+
+    def frames(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The nominal chain's joint frames at inputs q (N, I), base frame: before each joint's motion (G_k: rotations
+        (N, K, 3, 3), origins (N, K, 3) mm) and after it (F_k: the same shapes)."""
+        qa = self._check_q(q)
+        n, kk = len(qa), len(self.joints)
+        v = self._values(qa)
+        g_rot, g_pos = np.empty((n, kk, 3, 3)), np.empty((n, kk, 3))
+        f_rot, f_pos = np.empty((n, kk, 3, 3)), np.empty((n, kk, 3))
+        rot = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+        pos = np.zeros((n, 3))
+        for k, j in enumerate(self.joints):
+            pos = pos + rot @ j.origin[:3, 3]
+            rot = rot @ j.origin[:3, :3]
+            g_rot[:, k], g_pos[:, k] = rot, pos
+            if j.prismatic:
+                pos = pos + (rot @ j.axis) * v[:, k, None]
+            else:
+                rot = rot @ rotation(j.axis, v[:, k])
+            f_rot[:, k], f_pos[:, k] = rot, pos
+        return g_rot, g_pos, f_rot, f_pos
 
     # -------------------------------------------------------------------------------------------- from DH
     @classmethod

@@ -74,7 +74,8 @@ def _parse(path: Path):
         raise InputError(f"{path}: cannot read as a URDF{hint}: {' '.join(str(exc).split())[:200]}") from None
 
 
-def _resolve(urdf) -> Path:
+def resolve_urdf(urdf) -> Path:
+    """The URDF file of `urdf`: a path, or a packaged or bundled name; InputError when neither."""
     p = Path(urdf)
     if p.exists():
         return p
@@ -127,7 +128,7 @@ def load_urdf(urdf, tip: str | None = None, base: str | None = None, tool_mm=Non
         Unreadable file, unknown links, a tip not below the base, a floating or planar joint on the chain, a mimic
         joint whose master does not exist, or no moving joint between base and tip.
     """
-    path = _resolve(urdf)
+    path = resolve_urdf(urdf)
     robot = _parse(path).robot
     links = [lk.name for lk in robot.links]
     joints = {j.name: j for j in robot.joints}
@@ -169,9 +170,13 @@ def load_urdf(urdf, tip: str | None = None, base: str | None = None, tool_mm=Non
 
     moving: list[MovingJoint] = []
     acc = np.eye(4)
+    link_of = {lk.name: lk for lk in robot.links}
+    segments: list[list[tuple[float, np.ndarray]]] = []  # per moving joint: (mass kg, centre mm in F_k)
     for j in path_joints:
         if j.type == "fixed":
             acc = acc @ _matrix(j)
+            if segments:
+                segments[-1] += _inertial(link_of[j.child], acc, path)
             continue
         if j.type not in _SCALE:
             raise InputError(
@@ -206,9 +211,37 @@ def load_urdf(urdf, tip: str | None = None, base: str | None = None, tool_mm=Non
             )
         )
         acc = np.eye(4)
+        segments.append(_inertial(link_of[j.child], acc, path))
     tool = np.zeros(3) if tool_mm is None else np.asarray(tool_mm, float)
     name = robot.name or path.stem
-    return Chain(name, base, tip, tuple(moving), tuple(inputs), acc, tool, str(path))
+    return Chain(name, base, tip, tuple(moving), tuple(inputs), acc, tool, str(path), _segment_inertia(segments))
+
+
+def _inertial(link, frame: np.ndarray, path: Path) -> list[tuple[float, np.ndarray]]:
+    """[(mass kg, centre of mass (3,) mm in the segment's frame)] of a link whose frame is `frame` (4, 4) mm in its
+    segment's frame; [] without `<inertial>`."""
+    inertial = getattr(link, "inertial", None)
+    if inertial is None or inertial.mass is None:
+        return []
+    mass = float(inertial.mass)
+    origin = np.eye(4) if inertial.origin is None else np.array(inertial.origin, float)
+    if not np.isfinite(mass) or mass < 0 or origin.shape != (4, 4) or not np.all(np.isfinite(origin)):
+        raise InputError(f"{path}: link {link.name}: its <inertial> mass or origin is not usable")
+    centre = frame[:3, :3] @ (origin[:3, 3] * 1000.0) + frame[:3, 3]
+    return [(mass, centre)]
+
+
+def _segment_inertia(segments: list[list[tuple[float, np.ndarray]]]) -> np.ndarray | None:
+    """(K, 4): each segment's mass (kg) and centre of mass (mm), or None when no link on the chain has a mass."""
+    if not any(m > 0 for seg in segments for m, _ in seg):
+        return None
+    out = np.zeros((len(segments), 4))
+    for k, seg in enumerate(segments):
+        mass = sum(m for m, _ in seg)
+        if mass > 0:
+            out[k, 0] = mass
+            out[k, 1:] = sum(m * c for m, c in seg) / mass
+    return out
 
 
 def describe(chain: Chain) -> str:
@@ -217,4 +250,4 @@ def describe(chain: Chain) -> str:
     return f"{chain.name}: {chain.base} → {chain.tip}, {len(chain.joints)} moving joints; joint columns {cols}"
 
 
-__all__ = ["BUNDLED", "PACKAGED", "bundled_urdf", "describe", "load_urdf", "packaged_urdf"]
+__all__ = ["BUNDLED", "PACKAGED", "bundled_urdf", "describe", "load_urdf", "packaged_urdf", "resolve_urdf"]

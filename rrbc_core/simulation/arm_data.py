@@ -48,6 +48,9 @@ def chain_measurements(
     source: str = "<simulated>",
     q_override: np.ndarray | None = None,
     stations: int = 1,
+    compliance: dict | None = None,
+    gravity=None,
+    arm_seed: int | None = None,
 ) -> MeasurementSet:
     """A measurement set with the chain's joint columns (ROS units: rad, m; q1..q6 degrees for a DH chain): the true
     arm (the nominal one with `random_errors` of `kin_size`) reaches each point at random joints; the sensor reads it
@@ -55,7 +58,8 @@ def chain_measurements(
     positions of the same joints, plus noise. `both_first`: that many registration rows come first with role `both`.
     `q_override`: joint values written to the file instead of the ones measured (another robot's, say).
     `stations` > 1: that many stationings in one file (a `group` column, rows dealt round-robin, every role in each),
-    the instrument at another pose for each, the arm's errors the same."""
+    the instrument at another pose for each, the arm's errors the same. `compliance`: load terms the true arm has,
+    name -> coefficient (`models.loads`: `<joint>.compliance` rad/Nm, ...), under `gravity` (m/s², base frame)."""
     from scipy.spatial.transform import Rotation
 
     from rrbc_core.models.errormodels import PointSet
@@ -63,9 +67,17 @@ def chain_measurements(
 
     rng = np.random.default_rng(seed)
     truth = random_errors(chain, rng, kin_size)
+    if arm_seed is not None:
+        truth = random_errors(chain, np.random.default_rng(arm_seed), kin_size)
     n = n_reg + n_fid + n_chk + n_tgt
     q = random_poses(chain, rng, n)
-    p = chain.forward(q, truth)
+    dv = drot = None
+    if compliance:
+        from rrbc_core.models.loads import deflections, gravity_loads, named_terms
+
+        terms = named_terms(chain, list(compliance))
+        dv, drot = deflections(chain, terms, list(compliance.values()), gravity_loads(chain, q, gravity))
+    p = chain.kinematics(q, truth, jacobians=False, dv=dv, drot=drot)[0]
     rot = Rotation.from_rotvec(rng.normal(size=3) * 0.3).as_matrix()
     t = np.array([900.0, -400.0, 1200.0])
     s = (p - t) @ rot
