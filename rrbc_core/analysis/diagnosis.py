@@ -173,7 +173,7 @@ def diagnose(
     Returns
     -------
     Diagnosis
-        The effects found (outliers, scale, affine, drift, kinematic, smooth_field, anisotropic_noise) with their
+        The effects found (outliers, scale, affine, drift, kinematic, compliance, smooth_field, anisotropic_noise) with their
         parameters and p-values, the noise per axis (mm), the bias RMS (mm), the verdict on RRBC and
         the limits of what these data can show; `to_json()` is the JSON of `rrbc diagnose --json`.
 
@@ -198,11 +198,14 @@ def diagnose(
     if not use_time:
         limits.append("no usable time column: drift was not tested")
     repeats = bool(np.any(d.count > 1))
-    # the family: outliers, scale, affine, [drift], [kinematic], smooth_field, anisotropic_noise, each at alpha/m
-    m_tests = 5 + int(use_time) + int(arm is not None)
+    # the family: outliers, scale, affine, [drift], [kinematic], [compliance], smooth_field, anisotropic_noise, each
+    # at alpha/m
+    m_tests = 5 + int(use_time) + int(arm is not None) + int(arm is not None and arm.load_fields is not None)
     a_each = alpha / m_tests
     all_idx = np.arange(n_all)
-    extra = arm.fields if arm is not None else None
+    extra = None
+    if arm is not None:  # the outlier test's model holds the arm: its geometric and load columns
+        extra = arm.fields if arm.load_fields is None else np.concatenate([arm.fields, arm.load_fields])
 
     white = np.eye(3)
     out_idx, p_out = outliers(d, use_time, a_each, white, extra)

@@ -18,15 +18,17 @@ depends on the configuration (the same place reached two ways disagreeing) has n
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from rrbc_core.analysis.calibration import position_jacobian
+from rrbc_core.analysis.calibration import angle_scale, position_jacobian
+from rrbc_core.analysis.diagnosis_stats import ftest, usable
 from rrbc_core.analysis.robot_model import ModelCheck, check_model, robot_chain
 from rrbc_core.errors import InputError
 from rrbc_core.io.joints import joint_values
 from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.models.loads import candidate_terms, factor_scale, gravity_loads, term_jacobian
 
 MIN_POINTS = 12  # fewer paired points with joints: the kinematic test is not run (said in the limits)
 
@@ -42,6 +44,12 @@ class ArmColumns:
     tip: str
     tool_mm: tuple
     check: ModelCheck
+    #: the load terms the data can see (`models.loads.candidate_terms`; empty without link masses), their columns
+    #: per point (T, N, 3) and per row (R, 3, T) in mm per scaled coefficient, and the scales (T,) (mm per rad/Nm)
+    load_terms: tuple = ()
+    load_fields: np.ndarray | None = None
+    load_row_fields: np.ndarray | None = None
+    load_scales: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -87,7 +95,49 @@ def arm_columns(
         )
         return None
     jac = position_jacobian(chain, q[rows])  # (R, 3, P)
+    cols = ArmColumns(
+        _per_point(jac, row_point, n_points), jac, chain.name, chain.tip, tuple(chain.tool.tolist()), check
+    )
+    if chain.inertia is None:
+        return cols
+    loads = gravity_loads(chain, q[rows])
+    terms = candidate_terms(chain, loads)
+    if not terms:
+        return cols
+    _, jp, _ = chain.kinematics(q[rows])
+    assert jp is not None
+    scales = angle_scale(chain) * np.array([factor_scale(t, loads) for t in terms])
+    jt = term_jacobian(terms, loads, jp) / scales
+    return replace(
+        cols, load_terms=terms, load_fields=_per_point(jt, row_point, n_points), load_row_fields=jt, load_scales=scales
+    )
+
+
+def _per_point(jac: np.ndarray, row_point: np.ndarray, n_points: int) -> np.ndarray:
+    """(K, N, 3): the mean of the rows' columns (R, 3, K) over each point's rows."""
     mean = np.zeros((n_points, 3, jac.shape[2]))
     np.add.at(mean, row_point, jac)
     mean /= np.bincount(row_point, minlength=n_points)[:, None, None]
-    return ArmColumns(np.moveaxis(mean, 2, 0), jac, chain.name, chain.tip, tuple(chain.tool.tolist()), check)
+    return np.moveaxis(mean, 2, 0)
+
+
+def judge_compliance(y, x_acc, kfull, load_cols, a_each: float, tests: dict, beside_field):
+    """The `compliance` test (docs/theory.md §6.5): do the load terms' columns `load_cols` (3n, T) explain the
+    residuals `y` beyond everything accepted `x_acc` AND the arm's geometric columns `kfull` (whether or not
+    `kinematic` was accepted)? Nested F-test at a_each; when significant, judged again beside a smooth field of
+    position (`beside_field(x0, x1)` → p) like the kinematic test. Returns (p, p beside the field, the usable
+    columns (3n, j), their map (T, j), the F-test's q, nu, F, RSS before and after) or None when no direction of
+    the load columns is left beside the geometric ones."""
+    x0 = np.hstack([x_acc, kfull])
+    # (built from joint values, not measured positions: like the kinematic columns, only directions inside the base
+    # up to 1e-4 of their energy are left out)
+    cols, _, c_map = usable(x0, load_cols, kept=1e-4)
+    if cols.shape[1] == 0:
+        return None
+    p_c, q_c, nu_c, f_c, rss_a, rss_c, _ = ftest(y, x0, np.hstack([x0, cols]))
+    tests["compliance"] = p_c
+    p_cf = 1.0
+    if p_c < a_each:
+        p_cf = beside_field(x0, cols)
+        tests["compliance_beside_field"] = p_cf
+    return p_c, p_cf, cols, c_map, q_c, nu_c, f_c, rss_a, rss_c

@@ -11,6 +11,7 @@ import numpy as np
 from scipy import stats
 from scipy.spatial import cKDTree
 
+from rrbc_core.analysis.diagnosis_arm import judge_compliance
 from rrbc_core.analysis.diagnosis_field import FieldModel, fit_field, gls_whiten
 from rrbc_core.analysis.diagnosis_stats import (
     BOOTSTRAP,
@@ -70,6 +71,7 @@ class Pass:
     field: FieldModel | None = None  # once a smooth field is found
     moran: tuple = ()  # (I, bootstrap mean, k)
     rejudged: tuple = ()  # names dropped beside the field or the arm, with their p-values
+    c_delta: np.ndarray | None = None  # the load terms' scaled coefficients when compliance is accepted
 
 
 def mm_cols(g: Geometry, cols: np.ndarray) -> np.ndarray:
@@ -155,7 +157,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             )
             blocks["drift"] = dcol_ok
     # the arm (joint angles in the file)
-    delta = None
+    delta = c_delta = c_map = None
     rejudged = []
     if arm is not None:
         x_acc = x_of(blocks)
@@ -208,6 +210,10 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
                 "identifies them and compares model-based correction with RRBC.",
                 magnitude_mm=rms_k,
             )
+        if arm.load_fields is not None:
+            c_delta, c_map = _compliance(g, p, y, blocks, found, tests, limits, arm, inl, kfull, base, a_each, x_of)
+            if c_delta is not None:
+                rejudged += rejudge(y, blocks, found, a_each, "the load", tests)
     # smooth field: Moran's I of the residuals after the accepted model, parametric bootstrap under white noise
     x_acc = x_of(blocks)
     qa = orth(x_acc)
@@ -267,6 +273,8 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
                     rate = ck / g.tscale
                 if k == "kinematic":
                     delta = k_map @ ck
+                if k == "compliance":
+                    c_delta = c_map @ ck
             res_nl = y_mm - contrib
         for k in [k for k in blocks if k not in mm_blocks]:
             del blocks[k]
@@ -292,6 +300,8 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         rate = np.zeros(3)
     if "kinematic" not in found:
         delta = None
+    if "compliance" not in found:
+        c_delta = None
     return Pass(
         inl,
         reg,
@@ -306,6 +316,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         field,
         (i_obs, boot_mean, nb.shape[1]),
         tuple(rejudged),
+        c_delta,
     )
 
 
@@ -384,6 +395,8 @@ def systematic_at(d, arm, ps: Pass, idx: np.ndarray) -> np.ndarray:
         out += np.outer(d.time[idx] - ps.t_mean, ps.rate)
     if ps.delta is not None:
         out += np.einsum("knc,k->nc", arm.fields[:, idx], ps.delta)
+    if ps.c_delta is not None:
+        out += np.einsum("knc,k->nc", arm.load_fields[:, idx], ps.c_delta)
     return out
 
 
@@ -394,4 +407,64 @@ def row_systematic(d, arm, ps: Pass) -> np.ndarray:
         out += np.outer(d.row_time - ps.t_mean, ps.rate)
     if ps.delta is not None:
         out += arm.row_fields @ ps.delta
+    if ps.c_delta is not None:
+        out += arm.load_row_fields @ ps.c_delta
     return out
+
+
+def _compliance(g, p, y, blocks, found, tests, limits, arm, inl, kfull, base, a_each, x_of):
+    """The `compliance` test (`diagnosis_arm.judge_compliance`) and, when accepted, its Effect and block; returns
+    the load terms' scaled coefficients (T,) and the map (T, j) from the block's columns to them, or (None, None)."""
+    n = len(p)
+    cache: dict = {}
+
+    def beside_field(x0, cols):
+        if "fb" not in cache:
+            q_b = orth(base)
+            cache["fb"] = fit_field(p, mm_cols(g, (y - q_b @ (q_b.T @ y))[:, None]).reshape(n, 3))
+        fb = cache["fb"]
+        xw0 = gls_whiten(fb, mm_cols(g, x0))
+        xw1 = np.hstack([xw0, gls_whiten(fb, mm_cols(g, cols))])
+        return ftest(gls_whiten(fb, mm_cols(g, y[:, None])[:, 0]), xw0, xw1)[0]
+
+    out = judge_compliance(y, x_of(blocks), kfull, g._cols(arm.load_fields[:, inl]), a_each, tests, beside_field)
+    if out is None:
+        return None, None
+    p_c, p_cf, cols, c_map, q_c, nu_c, f_c, rss_a, rss_c = out
+    if p_c < a_each and p_cf >= a_each:
+        limits.append(
+            f"the arm's deflection under its own weight would explain these residuals (p {fmt_p(p_c)}) but no better "
+            f"than a smooth field of position (p {fmt_p(p_cf)} beside it): reach places in more than one "
+            "configuration to tell them apart; `rrbc calibrate --compliance` compares the models out of sample"
+        )
+    if not (p_c < a_each and p_cf < a_each):
+        return None, None
+    blocks["compliance"] = cols
+    if "kinematic" in blocks:  # the geometric terms judged again beside the load: a bending arm is not a bent one
+        others = x_of([k for k in blocks if k != "kinematic"])
+        p_kc = ftest(y, others, np.hstack([others, usable(others, blocks["kinematic"])[0]]))[0]
+        tests["kinematic_beside_compliance"] = p_kc
+        if p_kc >= a_each:
+            del blocks["kinematic"]
+            found.pop("kinematic", None)
+    coef = fit(y, np.hstack([x_of([k for k in blocks if k != "compliance"]), kfull, cols]))[0][-cols.shape[1] :]
+    c_delta = c_map @ coef
+    contrib = np.einsum("knc,k->nc", arm.load_fields[:, inl], c_delta)
+    rms_c = float(np.sqrt(np.mean(np.sum(contrib**2, axis=1))))
+    params = {"robot": arm.robot, "terms": [t.name for t in arm.load_terms], "rms_mm": rms_c}
+    if c_map.shape[0] == c_map.shape[1]:  # every term's own coefficient is determined: rad/Nm (residual = −effect)
+        params["compliance_rad_per_Nm"] = {
+            t.name: float(-c / sc) for t, c, sc in zip(arm.load_terms, c_delta, arm.load_scales)
+        }
+    found["compliance"] = Effect(
+        "compliance",
+        params,
+        p_c,
+        f"the residuals follow the gravity load on the arm's joints: {q_c} combinations of its load terms "
+        f"({', '.join(t.name for t in arm.load_terms)}), beyond the geometric kinematic terms, reduce the residual "
+        f"sum of squares from {rss_a:.3g} to {rss_c:.3g} (F({q_c}, {nu_c}) = {f_c:.3g}, p {fmt_p(p_c)}), and more "
+        f"than a smooth field of position alone explains (p {fmt_p(p_cf)}); the arm bends under its own weight by "
+        f"{rms_c:.3g} mm RMS at these points; `rrbc calibrate --compliance` identifies it.",
+        magnitude_mm=rms_c,
+    )
+    return c_delta, c_map
