@@ -223,7 +223,7 @@ def select_terms(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, grav
 
 def compare(
     mset: MeasurementSet,
-    robot: str | None = "ur5",
+    robot: str | None = None,
     tool=None,
     urdf=None,
     tip: str | None = None,
@@ -235,7 +235,7 @@ def compare(
     save_model: str | None = None,
 ) -> dict:
     """The JSON object of `rrbc calibrate` (docs/cli.md) for a measurement file with joint values. The model:
-    `robot` (ur5, ur10) or `urdf` with `tip` and `base` (`robot_model.robot_chain`); `tool`: a length along the DH
+    `robot` (ur5, ur10; default ur5) or `urdf` with `tip` and `base` (`robot_model.robot_chain`); `tool`: a length along the DH
     flange's z axis or a point (3,) in the tip link's frame, mm. `compliance` (and `backlash`): load terms under
     `gravity` (m/s², base frame) enter where cross-validation says they help (`select_terms`). `model`: a saved arm
     (`saved_model.SavedModel`) kept fixed; only the sensor-to-robot transforms are fitted. `save_model`: a path to
