@@ -23,7 +23,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from rrbc_core.analysis.diagnosis_stations import diagnose_stations
+from rrbc_core.analysis.diagnosis_stations import StationsDiagnosis, diagnose_stations
 from rrbc_core.analysis.saved_model import load_model
 from rrbc_core.analysis.vec_compare import compare
 from rrbc_core.models.urdf import load_urdf
@@ -58,6 +58,7 @@ def run(seeds=SEEDS, progress=None) -> dict:
             geo = compare(mset, urdf=ROBOT)
             comp = compare(mset, urdf=ROBOT, compliance=True, save_model=str(saved) if k == 0 else None)
             diag = diagnose_stations(mset, urdf=ROBOT, seed=0)
+            assert isinstance(diag, StationsDiagnosis)  # the file has a group column
             effects = {name: len(where) for name, where in diag.effects().items()}
             row = {
                 "seed": seed,
