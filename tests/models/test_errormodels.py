@@ -470,6 +470,7 @@ def test_table_round_trip():
         "affine",
         "smooth_field",
         "kinematic",
+        "compliance",
         "outliers",
         "drift",
         "warm_up",
