@@ -29,6 +29,7 @@ from rrbc_core.io.scene import (
     sensor_pose,
 )
 from rrbc_core.io.toml_checks import Checker, fmt_value, read_toml
+from rrbc_core.models.compliance_term import Compliance
 from rrbc_core.models.errormodels import ErrorModel
 from rrbc_core.models.errorterms import Kinematic, error_model_from_dict
 from rrbc_core.models.kinematics import ROBOT_DH, reachable, tool_down
@@ -425,7 +426,7 @@ def _layouts(c: Checker, doc: dict, pool: dict) -> tuple[dict, dict]:
 
 
 def _with_tool(model, table: dict, tool_mm: float, robot_model: str = "ur5", source: str = "scene"):
-    """The scene's arm (`robot.model`) with its `robot.tool_mm` is the arm of every kinematic robot term that does
+    """The scene's arm (`robot.model`) with its `robot.tool_mm` is the arm of every kinematic or compliance term that does
     not give its own `dh`: the simulated arm then reaches the scene's points with its tool tip, as the scene
     describes. A robot without kinematics ("none") cannot carry a kinematic term."""
     import dataclasses
@@ -434,12 +435,12 @@ def _with_tool(model, table: dict, tool_mm: float, robot_model: str = "ur5", sou
     terms = []
     for k, term in enumerate(model.robot):
         own_dh = k < len(rows) and isinstance(rows[k], dict) and "dh" in rows[k]
-        if isinstance(term, Kinematic) and robot_model not in ROBOT_DH:
+        if isinstance(term, (Kinematic, Compliance)) and robot_model not in ROBOT_DH:
             raise InputError(
-                f"{source}: error_model.robot[{k}]: a kinematic error term needs an arm model (robot.model "
+                f"{source}: error_model.robot[{k}]: a {term.kind} error term needs an arm model (robot.model "
                 f"{', '.join(ROBOT_DH)}), not {robot_model!r}; give a robot without kinematics a smooth_field bias"
             )
-        if isinstance(term, Kinematic) and not own_dh:
+        if isinstance(term, (Kinematic, Compliance)) and not own_dh:
             term = dataclasses.replace(term, dh=ROBOT_DH[robot_model].with_tool(tool_mm))
         terms.append(term)
     return ErrorModel(robot=tuple(terms), sensor=model.sensor)

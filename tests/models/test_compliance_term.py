@@ -65,6 +65,11 @@ def test_a_scene_carries_the_term(tmp_path):
         assert r.returncode == 0, r.stderr
         return json.loads(r.stdout)["strategies"][0]
 
+    from rrbc_core.io.scene_toml import load_scene
+
+    loaded = load_scene(scene)
+    assert loaded.error_model.robot[0].kind == "compliance"
+    assert loaded.error_model.robot[0].dh.tool_mm == loaded.tool_mm  # the scene's arm and tool, as kinematic
     bent_run, demo_run = simulate(scene), simulate(SCENES / "demo_workcell.toml")
     # the bending arm is simulated (another bias than the demo's kinematic error), and RRBC corrects it there
     assert abs(bent_run["tre_rms_mm"] - demo_run["tre_rms_mm"]) > 0.1 * demo_run["tre_rms_mm"], (bent_run, demo_run)
