@@ -29,9 +29,8 @@ from rrbc_core.io.scene import (
     sensor_pose,
 )
 from rrbc_core.io.toml_checks import Checker, fmt_value, read_toml
-from rrbc_core.models.compliance_term import Compliance
 from rrbc_core.models.errormodels import ErrorModel
-from rrbc_core.models.errorterms import Kinematic, error_model_from_dict
+from rrbc_core.models.errorterms import Compliance, Kinematic, error_model_from_dict
 from rrbc_core.models.kinematics import ROBOT_DH, reachable, tool_down
 
 MAX_CHECK_POINTS_PER_TARGET = 10_000  # a scene's simulated check points per target (issue 16: bounded work)

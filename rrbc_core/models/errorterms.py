@@ -11,6 +11,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.models.arm_masses import dh_chain_with_masses
 from rrbc_core.models.dh_table import _dh_table, _dh_value
 from rrbc_core.models.errormodels import (
     SIDES,
@@ -27,6 +28,7 @@ from rrbc_core.models.errormodels import (
     _vector,
 )
 from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, DHParameters, forward, inverse_path, perturbed
+from rrbc_core.models.loads import gravity_loads
 
 _FIELD_CHUNK = 8192  # points per block when evaluating a smooth field
 
@@ -339,6 +341,46 @@ class Kinematic(_Term):
 
 
 @dataclass(frozen=True)
+class Compliance(_Term):
+    """Joint compliance under gravity load (module docstring): `joints_rad_per_Nm` (6,) per joint, `payload_kg` at
+    the tool point, `dh` the arm (as for `kinematic`: "UR5" or a table)."""
+
+    joints_rad_per_Nm: tuple = (0.0, 3e-5, 2e-5, 0.0, 0.0, 0.0)
+    payload_kg: float = 0.0
+    dh: DHParameters = field(default=UR5)
+    kind: ClassVar[str] = "compliance"
+    random: ClassVar[bool] = False
+    sides: ClassVar[tuple[str, ...]] = ("robot",)
+
+    def __post_init__(self):
+        _set(self, "joints_rad_per_Nm", _vector("joints_rad_per_Nm", self.joints_rad_per_Nm, 6, minimum=0.0))
+        _set(self, "payload_kg", _number("payload_kg", self.payload_kg, minimum=0, unit="kg"))
+        _set(self, "dh", _dh_value(self.dh))
+        if max(self.joints_rad_per_Nm) > 1e-3:
+            raise InputError("joints_rad_per_Nm: at most 1e-3 rad/Nm per joint (real arms: 1e-6 to 1e-4)")
+
+    def displacement(self, points: PointSet) -> np.ndarray:
+        """Reported minus physical position (P, 3) mm, robot frame."""
+        if points.tool_rotation is None:
+            raise InputError(
+                "the compliance error term needs the tool orientation at each point (PointSet.tool_rotation)"
+            )
+        seed = UR5_TOOL_DOWN_SEED if points.joint_seed is None else points.joint_seed
+        try:
+            q = inverse_path(self.dh, points.robot, points.tool_rotation, seed)
+        except InputError as e:
+            raise InputError(f"compliance error term: {e}") from None
+        tau = gravity_loads(dh_chain_with_masses(self.dh, self.payload_kg), q).torque
+        commanded = q - np.asarray(self.joints_rad_per_Nm) * tau
+        return forward(self.dh, commanded)[0] - points.robot
+
+    def sample(self, points: PointSet, side: str, rng: np.random.Generator, trials: int) -> np.ndarray:
+        self._side(side)
+        _check_trials(trials)
+        return self.displacement(points)[None]
+
+
+@dataclass(frozen=True)
 class Drift(_Term):
     """Linear drift in time: displacement = rate_mm_per_s·(t − t0_s) (mm; rate mm/s, t s). Either side."""
 
@@ -459,6 +501,3 @@ def error_model_to_dict(model: ErrorModel) -> dict:
             for t in model.terms(side)
         ]
     return out
-
-
-from rrbc_core.models import compliance_term as _compliance_term  # noqa: E402,F401 - registers `compliance`

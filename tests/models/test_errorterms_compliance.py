@@ -1,4 +1,4 @@
-"""The `compliance` error term (`rrbc_core.models.compliance_term`): a UR5 giving way under its own weight. Its
+"""The `compliance` error term (`rrbc_core.models.errorterms.Compliance`, masses in `rrbc_core.models.arm_masses`): a UR5 giving way under its own weight. Its
 displacement is the first-order deflection −J(q)·(c τ(q)) (by the chain's own Jacobian), zero without compliance,
 larger with a payload; a scene carrying it simulates through the real command, and RRBC corrects it where the
 fiducials surround the targets."""
@@ -10,9 +10,9 @@ import subprocess
 
 import numpy as np
 
-from rrbc_core.models.compliance_term import Compliance, dh_chain_with_masses
+from rrbc_core.models.arm_masses import dh_chain_with_masses
 from rrbc_core.models.errormodels import PointSet
-from rrbc_core.models.errorterms import error_model_from_dict, error_model_to_dict
+from rrbc_core.models.errorterms import Compliance, error_model_from_dict, error_model_to_dict
 from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward
 from rrbc_core.models.loads import gravity_loads
 from tests.paths import RRBC, SCENES
