@@ -31,18 +31,12 @@ UR5_LINKS = (
 
 def dh_chain_with_masses(dh: DHParameters, payload_kg: float = 0.0) -> Chain:
     """The DH arm as a `Chain` (`Chain.from_dh`) with `UR5_LINKS`' masses and a payload at the tool point: segment k
-    (after joint k's motion, F_k) holds link k + 1, whose distal DH frame is F_k · link(k)."""
-    from rrbc_core.models.chain import rotation
-
+    (after joint k's motion, F_k) holds link k + 1, whose distal DH frame is F_k · link(k) — the next joint's origin
+    in the chain (the tail for the last link)."""
     chain = Chain.from_dh(dh, "ur5")
+    links = [j.origin for j in chain.joints[1:]] + [chain.tail]  # link(k): F_k -> distal DH frame k + 1
     inertia = np.zeros((6, 4))
-    for k, (mass, com) in enumerate(UR5_LINKS):
-        m = np.eye(4)  # link(k) as Chain.from_dh builds it: Rz(θ_off) · [Rx(α) | (a, 0, d)]
-        m[:3, :3] = rotation(np.array([0.0, 0.0, 1.0]), np.array(dh.theta_offset[k]))
-        step = np.eye(4)
-        step[:3, :3] = rotation(np.array([1.0, 0.0, 0.0]), np.array(dh.alpha[k]))
-        step[:3, 3] = [dh.a[k], 0.0, dh.d[k]]
-        frame = m @ step
+    for k, ((mass, com), frame) in enumerate(zip(UR5_LINKS, links)):
         inertia[k] = (mass, *(frame[:3, :3] @ (np.array(com) * 1000.0) + frame[:3, 3]))
     if payload_kg > 0:  # the payload at the tool point, in F_6
         tool = chain.tail[:3, :3] @ chain.tool + chain.tail[:3, 3]

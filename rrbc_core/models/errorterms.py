@@ -284,6 +284,21 @@ class SmoothField(_Term):
         return self.field(points.frame(self._side(side)))[None]
 
 
+def _arm_joints(kind: str, dh: DHParameters, points: PointSet) -> np.ndarray:
+    """Joint angles (P, 6) rad that put arm `dh` at the physical points with their tool rotations (IK seeded by
+    points.joint_seed, default `UR5_TOOL_DOWN_SEED`), for the error term `kind`."""
+    if points.tool_rotation is None:
+        raise InputError(
+            f"the {kind} error term needs the tool orientation at each point (PointSet.tool_rotation): "
+            "the error depends on the joint configuration, not only on the position"
+        )
+    seed = UR5_TOOL_DOWN_SEED if points.joint_seed is None else points.joint_seed
+    try:
+        return inverse_path(dh, points.robot, points.tool_rotation, seed)
+    except InputError as e:
+        raise InputError(f"{kind} error term: {e}") from None
+
+
 @dataclass(frozen=True)
 class Kinematic(_Term):
     """Robot kinematic (DH) error, robot side only (docs/theory.md §5.1).
@@ -318,16 +333,7 @@ class Kinematic(_Term):
 
     def joints(self, points: PointSet) -> np.ndarray:
         """Joint angles (P, 6) rad of the true robot at the physical points."""
-        if points.tool_rotation is None:
-            raise InputError(
-                "the kinematic error term needs the tool orientation at each point (PointSet.tool_rotation): "
-                "the error depends on the joint configuration, not only on the position"
-            )
-        seed = UR5_TOOL_DOWN_SEED if points.joint_seed is None else points.joint_seed
-        try:
-            return inverse_path(self.true_robot(), points.robot, points.tool_rotation, seed)
-        except InputError as e:
-            raise InputError(f"kinematic error term: {e}") from None
+        return _arm_joints(self.kind, self.true_robot(), points)
 
     def displacement(self, points: PointSet) -> np.ndarray:
         """Reported minus physical position (P, 3) mm, robot frame."""
@@ -361,15 +367,7 @@ class Compliance(_Term):
 
     def displacement(self, points: PointSet) -> np.ndarray:
         """Reported minus physical position (P, 3) mm, robot frame."""
-        if points.tool_rotation is None:
-            raise InputError(
-                "the compliance error term needs the tool orientation at each point (PointSet.tool_rotation)"
-            )
-        seed = UR5_TOOL_DOWN_SEED if points.joint_seed is None else points.joint_seed
-        try:
-            q = inverse_path(self.dh, points.robot, points.tool_rotation, seed)
-        except InputError as e:
-            raise InputError(f"compliance error term: {e}") from None
+        q = _arm_joints(self.kind, self.dh, points)
         tau = gravity_loads(dh_chain_with_masses(self.dh, self.payload_kg), q).torque
         commanded = q - np.asarray(self.joints_rad_per_Nm) * tau
         return forward(self.dh, commanded)[0] - points.robot
