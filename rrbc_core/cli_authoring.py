@@ -1,5 +1,5 @@
 """The `rrbc` subcommands that bring a user's cell and data in: `rrbc scene new` (a scene from a mesh and a
-target list), `rrbc convert` (measurement file <-> 3D Slicer markups) and `rrbc calibrate` (RRBC against
+target list), `rrbc convert` (measurement file <-> 3D Slicer markups; stationing YAML -> measurement file) and `rrbc calibrate` (RRBC against
 model-based calibration on a file with joint angles). A thin layer like `cli.py`, which adds these parsers
 (`add_parsers`); same exit codes and one-line errors (docs/cli.md)."""
 
@@ -11,6 +11,7 @@ from pathlib import Path
 
 from rrbc_core.cli_options import add_robot_model_options, robot_model_args
 from rrbc_core.errors import InputError
+from rrbc_core.io.stationing_yaml import FIDUCIAL_CHOICES, read_stationing_yaml
 
 
 def _xyz(text: str):
@@ -55,13 +56,33 @@ def add_parsers(sub) -> None:
 
     c = sub.add_parser(
         "convert",
-        help="measurement file <-> 3D Slicer markups",
+        help="measurement file <-> 3D Slicer markups; stationing YAML -> measurement file",
         description="Convert a measurement file to two 3D Slicer markups files (sensor and robot point lists, "
-        "labels = ids) or back (docs/formats/slicer-markups.md).",
+        "labels = ids) or back (docs/formats/slicer-markups.md); or a mobile manipulator's stationing data (YAML, "
+        "the form of the public construction-robot stationing data sets) to a measurement file with one station "
+        "per column height and solution space, the robot columns from the URDF's forward kinematics "
+        "(docs/real_data.md).",
     )
-    c.add_argument("inputs", nargs="+", help="a measurement CSV (--to slicer) or SENSOR.mrk.json ROBOT.mrk.json")
+    c.add_argument(
+        "inputs",
+        nargs="+",
+        help="a measurement CSV (--to slicer), SENSOR.mrk.json ROBOT.mrk.json, or a stationing .yaml (--to csv)",
+    )
     c.add_argument("--to", required=True, choices=("slicer", "csv"), help="what to write")
     c.add_argument("--out", required=True, help="a directory (--to slicer) or a CSV file (--to csv)")
+    c.add_argument("--urdf", default=None, help="stationing YAML: the robot's URDF")
+    c.add_argument(
+        "--tip", default=None, help="stationing YAML: the measured link (default: the URDF's link named prism)"
+    )
+    c.add_argument("--base", default=None, help="stationing YAML: the base link (default: the root link)")
+    c.add_argument(
+        "--fiducials",
+        default="stationing",
+        choices=FIDUCIAL_CHOICES,
+        help="stationing YAML: the stationing points are registration points and fiducials (role both); 'half' "
+        "makes every other evaluation point of a station a fiducial too ('half-swapped' the other half); the rest "
+        "are checks (default stationing)",
+    )
     c.set_defaults(run=_cmd_convert)
 
     k = sub.add_parser(
@@ -131,6 +152,11 @@ def _cmd_convert(args) -> str:
     from rrbc_core.io.measurements_write import write_measurements
     from rrbc_core.io.slicer_markups import read_markups, write_markups
 
+    yaml_input = len(args.inputs) == 1 and args.inputs[0].lower().endswith((".yaml", ".yml"))
+    if not yaml_input and (args.urdf or args.tip or args.base or args.fiducials != "stationing"):
+        raise InputError("--urdf, --tip, --base and --fiducials go with a stationing .yaml file")
+    if yaml_input:
+        return _convert_stationing(args)
     if args.to == "slicer":
         if len(args.inputs) != 1:
             raise InputError("convert --to slicer takes one measurement CSV")
@@ -141,12 +167,54 @@ def _cmd_convert(args) -> str:
         return "".join(f"wrote {p}\n" for p in paths)
     if len(args.inputs) != 2:
         raise InputError("convert --to csv takes two markups files: SENSOR.mrk.json ROBOT.mrk.json")
-    out = Path(args.out)
-    if out.is_dir() or not out.parent.is_dir():
-        raise InputError(f"--out {out}: must be a file in an existing directory")
+    out = _csv_out(args.out)
     mset = read_markups(*args.inputs)
     write_measurements(out, mset, comments=[f"converted from {args.inputs[0]} and {args.inputs[1]} by rrbc convert"])
     return f"wrote {out} ({len(mset.ids)} rows)\n"
+
+
+def _csv_out(path: str) -> Path:
+    out = Path(path)
+    if out.is_dir() or not out.parent.is_dir():
+        raise InputError(f"--out {out}: must be a file in an existing directory")
+    return out
+
+
+def _convert_stationing(args) -> str:
+    from rrbc_core.io.groups import group_names
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.models.urdf import load_urdf
+
+    if args.to != "csv":
+        raise InputError("a stationing .yaml file converts --to csv")
+    if args.urdf is None:
+        raise InputError("a stationing .yaml file needs the robot's --urdf (and --tip, the measured link)")
+    out = _csv_out(args.out)
+    if args.tip is None:  # the file measures a prism: its link, when the URDF names one so
+        try:
+            chain = load_urdf(args.urdf, tip="prism", base=args.base)
+        except InputError:
+            raise InputError(
+                f"{Path(args.urdf).name}: no link named 'prism': give --tip, the link whose origin the instrument "
+                "measured"
+            ) from None
+    else:
+        chain = load_urdf(args.urdf, tip=args.tip, base=args.base)
+    src = args.inputs[0]
+    mset = read_stationing_yaml(src, chain, args.fiducials)
+    write_measurements(
+        out,
+        mset,
+        comments=[
+            f"converted from {Path(src).name} by rrbc convert (--urdf {Path(args.urdf).name} --tip {chain.tip} "
+            f"--fiducials {args.fiducials}); robot columns: the URDF's forward kinematics of the joint columns"
+        ],
+    )
+    n = {r: sum(1 for x in mset.roles if x == r) for r in ("both", "fiducial", "check")}
+    return (
+        f"wrote {out} ({len(mset.ids)} rows, {len(group_names(mset))} stations: {n['both']} stationing points "
+        f"(registration and fiducial), {n['fiducial']} further fiducials, {n['check']} checks)\n"
+    )
 
 
 def _cmd_calibrate(args) -> str:
@@ -187,11 +255,16 @@ def _cmd_calibrate(args) -> str:
     for m in METHODS:
         lines.append(f"{m:<11} {mm(result['rmst_mm'][m]):>16}   {mm(result['cv_rmst_mm'][m]):>12}")
     lines.append(f"recommended (chosen without the checks): {result['recommended']}")
+    if result["extrapolated_share"] > 0.5:
+        lines.append(f"recommendation: {result['recommendation_basis']}")
     k = result["kinematic_error"]
-    lines.append(
-        f"kinematic error: {'yes' if k['claimed'] else 'not claimed'} (χ² {k['chi2']:.1f} on {k['dof']} degrees of "
-        f"freedom, p = {k['p_value']:.2g}; rule: {k['rule']})"
-    )
+    if result["saved_model"] is not None:
+        lines.append("kinematic error: the saved arm's (only the sensor-to-robot transform was fitted to this file)")
+    else:
+        lines.append(
+            f"kinematic error: {'yes' if k['claimed'] else 'not claimed'} (χ² {k['chi2']:.1f} on {k['dof']} degrees "
+            f"of freedom, p = {k['p_value']:.2g}; rule: {k['rule']})"
+        )
     ident = [p for p in result["parameters"] if p["identifiable"] and "kind" not in p]
     lines.append(
         "identified errors: "
@@ -223,6 +296,12 @@ def compliance_lines(result: dict) -> list[str]:
                 or "none (cross-validation says they do not help)"
             )
         )
+        if c["refused"]:
+            lines.append(
+                "load terms taken out: "
+                + ", ".join(f"{r['name']} (identified {r['value']:+.3g} {r['unit']}: below zero)" for r in c["refused"])
+                + "; an arm does not stiffen under its load, so the rest were fitted again without them"
+            )
     if result["saved_model"] is not None:
         m = result["saved_model"]
         lines.append(

@@ -120,13 +120,14 @@ def predict_methods(f: MethodsFit, s_rows, q_rows, g_rows=None) -> dict:
     return {"rigid": rigid, "rrbc": rrbc, "vec": vec, "vec_rrbc": vec_rrbc}
 
 
-def one_standard_error_choice(squared: dict) -> str:
+def one_standard_error_choice(squared: dict, among: tuple[str, ...] = METHODS) -> str:
     """The recommended method from held-out squared errors (method -> (H,) mm², the same held-out points): the
     simplest method (`METHODS` order: rigid, rrbc, vec, vec_rrbc) whose mean squared error exceeds the smallest by no
     more than one standard error of their paired difference — the one-standard-error rule of cross-validation, so a
-    difference the held-out points cannot resolve does not decide."""
-    best = min(METHODS, key=lambda m: float(np.mean(squared[m])))
-    for m in METHODS:
+    difference the held-out points cannot resolve does not decide. `among`: the methods to choose from."""
+    among = tuple(m for m in METHODS if m in among)
+    best = min(among, key=lambda m: float(np.mean(squared[m])))
+    for m in among:
         d = squared[m] - squared[best]
         se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
         if float(np.mean(d)) <= se:
@@ -221,6 +222,55 @@ def select_terms(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, grav
     return entered, current, table
 
 
+def _beyond_share(s, rows_fid, rows_pred, gi) -> float:
+    """The share of the rows to predict (checks and targets) beyond what cross-validation over their station's
+    fiducials tests: outside the fiducials' hull (`interpolation.hull.covered`, sensor frame) and farther from the
+    nearest fiducial than any fiducial is from its nearest neighbour (a held-out fiducial is predicted from no farther
+    than that). 0 without such rows; a station with fewer than 2 fiducials counts all of its rows."""
+    from scipy.spatial import cKDTree
+
+    from rrbc_core.interpolation.hull import covered
+
+    if not len(rows_pred):
+        return 0.0
+    g = np.zeros(len(s), int) if gi is None else np.asarray(gi, int)
+    beyond = 0
+    for k in np.unique(g[rows_pred]):
+        pred, fid = rows_pred[g[rows_pred] == k], rows_fid[g[rows_fid] == k]
+        if len(fid) < 2:
+            beyond += len(pred)
+            continue
+        tree = cKDTree(s[fid])
+        reach = float(np.max(tree.query(s[fid], k=2)[0][:, 1]))
+        far = tree.query(s[pred])[0] > reach
+        beyond += int(np.sum(far & ~covered(s[fid], s[pred])))
+    return beyond / len(rows_pred)
+
+
+def drop_unphysical_terms(fit: MethodsFit, terms: tuple, refit) -> tuple[MethodsFit, tuple, list[dict]]:
+    """Take out, one at a time, the entered load term with the most negative identified value (a compliance, a
+    bending or a backlash below zero: the arm would stiffen under its load, which no arm does) and `refit(terms)` ->
+    (MethodsFit, terms) with the rest, until every value is at least zero. Returns the final fit and terms and what
+    was taken out ({name, value, std_error, unit})."""
+    refused = []
+    while terms:
+        cal = fit.cal
+        negative = [(c, tm, se) for tm, c, se in zip(cal.terms, cal.coef, cal.coef_se) if c < 0]
+        if not negative:
+            break
+        c, worst, se = min(negative, key=lambda x: x[0] / x[2] if x[2] and np.isfinite(x[2]) else x[0])
+        refused.append(
+            {
+                "name": worst.name,
+                "value": float(c),
+                "std_error": float(se) if np.isfinite(se) else None,
+                "unit": worst.unit,
+            }
+        )
+        fit, terms = refit(tuple(t for t in terms if t.name != worst.name))
+    return fit, terms, refused
+
+
 def compare(
     mset: MeasurementSet,
     robot: str | None = None,
@@ -287,6 +337,19 @@ def compare(
     else:
         sq = _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, fixed=fixed)
     fit = fit_methods(rows_reg, rows_fid, s, b, q, chain, gi, terms, gravity, fixed)
+    refused: list[dict] = []
+    if terms:
+
+        def refit(rest: tuple) -> tuple[MethodsFit, tuple]:
+            nonlocal sq
+            sq_rest = _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, rest, gravity)
+            sq_geo = _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi)
+            if not rest or not _better(sq_rest["vec"], sq_geo["vec"]):  # what is left must still earn its place
+                rest, sq_rest = (), sq_geo
+            sq = sq_rest
+            return fit_methods(rows_reg, rows_fid, s, b, q, chain, gi, rest, gravity, fixed), rest
+
+        fit, terms, refused = drop_unphysical_terms(fit, terms, refit)
     g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])  # noqa: E731
     rmst = dict.fromkeys(METHODS)
     if len(rows_chk):
@@ -294,7 +357,31 @@ def compare(
         rmst = {m: _rms(pred[m], b[rows_chk]) for m in METHODS}
     cv_values = {m: float(np.sqrt(np.mean(sq[m]))) for m in METHODS} if folds else {}
     cv: dict[str, float | None] = {m: cv_values.get(m) for m in METHODS}
-    recommended = one_standard_error_choice(sq) if folds else "rigid"
+    extrapolated = _beyond_share(s, rows_fid, np.concatenate([rows_chk, rows_tgt]), gi)
+    among: tuple[str, ...]
+    if extrapolated <= 0.5:
+        among, basis = METHODS, "the one-standard-error rule over the cross-validated fiducials"
+    else:
+        beyond = (
+            f"{extrapolated:.0%} of the checks and targets lie outside the fiducials' hull and farther from them than "
+            "the fiducials lie from each other, where cross-validation over the fiducials says nothing about "
+            "corrections interpolated from them"
+        )
+        if fixed is not None:  # the arm was identified elsewhere, over the configurations its saved file covers
+            among, basis = (
+                ("rigid", "vec"),
+                f"{beyond}: chosen between rigid and the saved arm's vec by the one-standard-error rule over the "
+                "cross-validated fiducials",
+            )
+        else:  # an arm identified from these fiducials alone extrapolates as far as they do
+            among, basis = (
+                ("rigid",),
+                (
+                    f"{beyond}, nor about an arm identified from them alone: rigid; measure fiducials around the "
+                    "checks, or identify the arm once on data that covers its configurations and reuse it (--model)"
+                ),
+            )
+    recommended = one_standard_error_choice(sq, among) if folds else "rigid"
     cal = fit.cal
     # a kinematic error is claimed only when the arm's identified errors are significant against their stated
     # uncertainty AND the arm model beats a model-free correction out of sample: a smooth sensor field leaks into
@@ -334,6 +421,8 @@ def compare(
         "rmst_mm": rmst,
         "cv_rmst_mm": cv,
         "recommended": recommended,
+        "recommendation_basis": basis,
+        "extrapolated_share": extrapolated,
         "identifiable": {
             "rank": cal.rank,
             "parameters": [n for n, ok in zip(cal.names, cal.identifiable) if ok],
@@ -365,10 +454,12 @@ def compare(
             "gravity_m_s2": list(cal.gravity),
             "candidates": [tm.name for tm in candidates],
             "entered": [tm.name for tm in cal.terms],
+            "refused": refused,
             "cv_rmst_mm": load_table,
             "rule": f"all candidate terms must beat the geometric arm's cross-validated VEC error over the fiducials by "
             f"more than {TERM_SE:g} standard errors and {TERM_GAIN:.0%} of its RMS; then each term stays only if the "
-            "model without it is worse by as much",
+            "model without it is worse by as much; a term identified below zero (an arm stiffening under load) is "
+            "taken out and the rest fitted again",
         },
         "saved_model": None if model is None else model.describe(),
         "saved_to": save_model,
