@@ -260,7 +260,8 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
         if padj < alpha:
             found = i + 1
     out = [s[0] for s in steps[:found]]
-    p_value = max(float(s[1]) for s in steps[:found]) if found else (float(steps[0][1]) if steps else 1.0)
+    # the ESD's decision rests on the last significant step (earlier steps may lie above alpha: masking)
+    p_value = float(steps[found - 1][1]) if found else (float(steps[0][1]) if steps else 1.0)
     return out, p_value
 
 

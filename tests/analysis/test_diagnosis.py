@@ -210,6 +210,8 @@ def test_outliers_are_found_by_id_exactly(seed):
     assert dg.names[0] == "outliers", dg.tests
     assert sorted(dg.effects[0].parameters["ids"]) == sorted(f"P{i}" for i in idx)
     assert "scale" not in dg.names and "smooth_field" not in dg.names
+    # the printed evidence "p X < alpha/m" is true: the reported p is the ESD's deciding step, below its level
+    assert dg.effects[0].p_value < dg.alpha / 5, (dg.effects[0].p_value, dg.effects[0].evidence)
 
 
 def test_two_effects_at_once_are_reported_as_two():
