@@ -122,6 +122,14 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--port", type=non_negative_int, default=8080, help="port (default 8080; 0 = any free port)")
     v.add_argument("--mesh", default=None, help="work-cell mesh for a measurement CSV (any format trimesh reads)")
     v.add_argument(
+        "--urdf",
+        default=None,
+        help="for a measurement CSV with joint columns: the robot's URDF (or ur5, ur10, panda, lift_arm), drawn with "
+        "its meshes at the selected point's joint values",
+    )
+    v.add_argument("--tip", default=None, help="with --urdf: the measured link (default: end of the longest chain)")
+    v.add_argument("--base", default=None, help="with --urdf: the base link (default: the root link)")
+    v.add_argument(
         "--data",
         action="append",
         default=[],
@@ -264,6 +272,9 @@ def _cmd_view(args) -> str:
         present=args.present,
         token=not args.no_token,
         data_dirs=args.data,
+        urdf=args.urdf,
+        tip=args.tip,
+        base=args.base,
     )
     try:
         signal.signal(signal.SIGTERM, signal.default_int_handler)  # stop cleanly on SIGTERM too

@@ -46,7 +46,16 @@ def add_parsers(sub) -> None:
     )
     n.add_argument("--mesh", required=True, help="the cell's mesh (STL, OBJ, PLY, GLB, 3MF; mm, robot frame)")
     n.add_argument("--targets", required=True, help="targets CSV: id,x,y,z[,region_mm] (mm, robot frame)")
-    n.add_argument("--robot", default="ur5", choices=("ur5", "ur10", "none"), help="the arm (default ur5)")
+    n.add_argument(
+        "--robot", default=None, choices=("ur5", "ur10", "none"), help="the arm (default ur5; none with --urdf)"
+    )
+    n.add_argument(
+        "--urdf",
+        default=None,
+        help="a robot the kinematics do not model, drawn from its URDF (a file in --out's folder or below, with its "
+        "meshes; or ur5, ur10, panda, lift_arm); reach is not checked",
+    )
+    n.add_argument("--tip", default=None, help="with --urdf: the tool link (default: end of the longest chain)")
     n.add_argument("--sensor", type=_xyz, default=None, help="sensor position X,Y,Z in mm (default: chosen)")
     n.add_argument("--fiducials", type=int, default=6, help="fiducials the planner places at first (default 6)")
     n.add_argument("--seed", type=int, default=0, help="seed of the surface sampling, error model and planner")
@@ -123,7 +132,10 @@ def add_parsers(sub) -> None:
 def _cmd_scene_new(args) -> str:
     from rrbc_core.authoring.scene_new import NewSceneOptions, new_scene
 
-    opts = NewSceneOptions(robot=args.robot, sensor=args.sensor, fiducials=args.fiducials, seed=args.seed)
+    robot = args.robot or ("none" if args.urdf is not None else "ur5")
+    opts = NewSceneOptions(
+        robot=robot, sensor=args.sensor, fiducials=args.fiducials, seed=args.seed, urdf=args.urdf, tip=args.tip
+    )
     result = new_scene(args.mesh, args.targets, args.out, opts)
     s = result.summary
     if args.json:
@@ -144,6 +156,12 @@ def _cmd_scene_new(args) -> str:
         f"{s['predicted_rmst_mm']['rrbc']:.3f} mm",
         f"next: rrbc plan {s['scene']} --add 4   |   rrbc simulate {s['scene']} --out data.csv   |   rrbc view {s['scene']}",
     ]
+    if args.urdf is not None:
+        lines.insert(
+            -1,
+            f"robot: drawn from {args.urdf}; its reach is not checked (the app poses it by its tool point and hides "
+            "it where it cannot reach)",
+        )
     return "\n".join(lines) + "\n"
 
 

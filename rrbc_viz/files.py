@@ -165,6 +165,10 @@ def load_station(loaded: Loaded, station: str) -> Loaded:
         session.file_mset, mesh_path=session.mesh_path, settings=session.settings, station=station
     )
     fresh.evaluate()
+    if session.arm_spec is not None:  # the robot of `rrbc view data.csv --urdf`, posed at this station's joints
+        from rrbc_core.session.arm import attach_arm
+
+        attach_arm(fresh, *session.arm_spec)
     k = fresh.stations.index(fresh.station) + 1
     return Loaded(fresh, loaded.mesh, f"{base}, station {fresh.station!r} ({k} of {len(fresh.stations)})")
 

@@ -39,7 +39,7 @@ import numpy as np
 import viser
 
 from rrbc_core.errors import InputError
-from rrbc_core.session.arm import arm_pose
+from rrbc_core.session.arm import arm_description, arm_pose, measured_arm_pose
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 from rrbc_core.session.tools import tool_rotation
@@ -92,8 +92,9 @@ class SceneNodes:
         self.label_scale = 1.0  # labels' screen size factor (presentation mode)
         self.true_pose = None  # the sensor's true pose (scene mode), for the magnified registered frame
         self.frame_mag = 1.0  # the registered frame's error is drawn this many times larger
-        self.arm: ArmNodes | None = None  # scenes with a UR5
+        self.arm: ArmNodes | None = None  # scenes with an arm (a DH arm or a URDF)
         self.scene_model = None
+        self.session: Any = None  # the session built (build)
         self._arm_key: tuple | None = None
         self.bias_scale = 1.0  # the session's bias size (the real arm's landing scales with it)
         self.vec_landings: dict | None = None  # target id -> VEC's landing (3,), robot frame mm (Arm tab on)
@@ -177,8 +178,13 @@ class SceneNodes:
         self.arm = None
         self.scene_model = scene
         self._arm_key = None
-        if scene is not None and scene.robot_model in ("ur5", "ur10") and len(ev.targets.ids):
-            self.arm = ArmNodes(sc)
+        has_arm = scene is not None and (scene.robot_model in ("ur5", "ur10") or scene.robot_urdf is not None)
+        self.session = session
+        if has_arm and len(ev.targets.ids):
+            self.arm = ArmNodes(sc, arm_description(scene), self.server)
+            self.arm.build()
+        elif session.kind == "measurements" and session.arm is not None:  # rrbc view data.csv --urdf
+            self.arm = ArmNodes(sc, session.arm, self.server)
             self.arm.build()
         if scene is not None and scene.sensor_kind != "ground_truth":
             T = scene.sensor_to_robot
@@ -475,6 +481,20 @@ class SceneNodes:
         """Pose the arm to reach `position` (the bullseye's target) with the tool down or leaned (tool: (tilt,
         azimuth) degrees); hide it where it cannot reach."""
         if self.arm is None:
+            return
+        if self.kind == "measurements":  # at the selected point's joint values (the first target's before)
+            t = self.session.last.targets if self.session.last is not None else None
+            sel = self.selected or (("targets", t.ids[0]) if t is not None and len(t.ids) else None)
+            if sel is None or sel == self._arm_key:
+                return
+            self._arm_key = sel
+            try:
+                pose = measured_arm_pose(self.session, *sel)
+            except InputError:
+                self.groups["arm"].visible = False
+                return
+            self.groups["arm"].visible = self.layers.get("arm", True)
+            self.arm.show(pose, magnification)
             return
         bias = self.bias_scale
         key = (tuple(np.round(position, 9)), bias, magnification, tool)

@@ -1,11 +1,12 @@
 """The arm and the sensors in the scene, drawn as what they are.
 
-The arm: the scene's UR5 posed by the nominal controller's inverse kinematics to reach the selected target
-(`rrbc_core.session.arm.arm_pose`), as clean generated links — a cylinder between successive DH frame origins, a
-joint housing about each joint axis, a thin stylus to the tool point — and, at its tool, where the real (biased)
-arm lands: a short line from the commanded place to the landing, drawn ×magnification like the arrows.
-Checked before writing this: no package made for shipping robot models offers a UR5 we may load at run time
-without a download (robot_descriptions clones repositories on first use; pybullet_data ships no UR5).
+The arm: the scene's robot posed to reach the selected target (`rrbc_core.session.arm.arm_pose`: a DH arm by the
+nominal controller's inverse kinematics, a URDF robot by damped least squares), drawn from its URDF with its own
+meshes (`rrbc_core.session.arm.arm_description`: a UR5 or UR10 from the description the `example-robot-data`
+package ships, a scene's `robot.urdf` otherwise; viser's `ViserUrdf`, metres scaled to mm), with a thin stylus from
+the flange to the tool point — and, at its tool, where the real (biased) arm lands: a short line from the
+commanded place to the landing, drawn ×magnification like the arrows. Where no description can be loaded, generated
+links stand in (a cylinder between successive DH frame origins, a joint housing about each joint axis).
 
 The sensors: a stereo head as two cameras on a bar at the sensor's pose with their viewing frusta reaching the
 work; a motion-capture system as four cameras around the cell looking at what the sensor looks at (placement
@@ -14,6 +15,9 @@ tracker as one instrument with its frustum; a reference artefact ("ground_truth"
 """
 
 from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import viser
@@ -51,19 +55,54 @@ def arm_segments(frames: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 class ArmNodes:
-    """Nodes of the arm (under /arm): links, joints, stylus, the commanded-versus-landed marks."""
+    """Nodes of the arm (under /arm): its URDF's meshes (or generated links and joints), the stylus, the
+    commanded-versus-landed marks. `description` (models.arm_description.ArmDescription) and `stage` (what
+    ViserUrdf draws on: the server or one tab) draw the URDF."""
 
-    def __init__(self, scene: viser.SceneApi):
+    def __init__(self, scene: viser.SceneApi, description=None, stage=None):
         self.scene = scene
+        self.description = description
+        self.stage = stage
+        self.urdf: Any = None  # viser.extras.ViserUrdf of the description
+        self.urdf_names: tuple[str, ...] = ()  # the description's actuated joints, in ViserUrdf's order
         self.links: list = []
         self.joints: list = []
         self.stylus: viser.CylinderHandle | None = None
         self.marks: dict = {}
         self.pose = None
 
+    def _build_urdf(self) -> bool:
+        """The description's meshes under /arm/urdf, its root at the description's base pose; False if they cannot
+        be loaded (a message on stderr, generated links then)."""
+        import sys
+
+        from viser.extras import ViserUrdf
+
+        d = self.description
+        try:
+            self.scene.add_frame(
+                "/arm/urdf",
+                show_axes=False,
+                wxyz=np.asarray(vtf.SO3.from_matrix(d.rotation).wxyz, float),
+                position=np.asarray(d.translation, float),
+            )
+            self.urdf = ViserUrdf(self.stage, Path(d.urdf), scale=1000.0, root_node_name="/arm/urdf")
+        except Exception as exc:  # noqa: BLE001 - a description whose meshes do not load: generated links instead
+            print(f"rrbc view: {Path(d.urdf).name}: its meshes could not be drawn ({exc}); generated links instead",
+                  file=sys.stderr)  # fmt: skip
+            self.scene.remove_by_name("/arm/urdf")
+            self.urdf = None
+            return False
+        self.urdf_names = tuple(self.urdf.get_actuated_joint_names())
+        return True
+
     def build(self, radius_mm: float = 38.0) -> None:
         sc = self.scene
         self.radius = radius_mm
+        if self.description is not None and self.stage is not None and self._build_urdf():
+            self.stylus = sc.add_cylinder("/arm/stylus", radius=4.0, height=1.0, color=TOOL_RGB, cast_shadow=False)
+            self._build_marks()
+            return
         self.links = [
             sc.add_cylinder(f"/arm/link{i}", radius=radius_mm, height=1.0, color=LINK_RGB, cast_shadow=False)
             for i in range(6)
@@ -75,6 +114,10 @@ class ArmNodes:
             for i in range(6)
         ]
         self.stylus = sc.add_cylinder("/arm/stylus", radius=4.0, height=1.0, color=TOOL_RGB, cast_shadow=False)
+        self._build_marks()
+
+    def _build_marks(self) -> None:
+        sc = self.scene
         self.marks["line"] = sc.add_line_segments(
             "/arm/landing", np.zeros((1, 2, 3), np.float32), (30, 30, 30), thickness=2.0, thickness_units="screen"
         )
@@ -85,6 +128,29 @@ class ArmNodes:
     def show(self, pose, magnification: float) -> None:
         """Pose the arm (session.arm.ArmPose) and draw where its real tool lands, offset ×magnification."""
         self.pose = pose
+        if self.urdf is not None:
+            self._show_urdf(pose)
+        else:
+            self._show_links(pose)
+        self._show_marks(pose, magnification)
+
+    def _set_stylus(self, a, b) -> None:
+        assert self.stylus is not None  # built with the arm
+        self.stylus.position = 0.5 * (a + b)
+        self.stylus.wxyz = _z_to(b - a)
+        self.stylus.height = max(float(np.linalg.norm(b - a)), 1.0)
+
+    def _show_urdf(self, pose) -> None:
+        """The URDF posed at the pose's joints (the description's inputs; joints off its chain at 0), the stylus from
+        the tip link's origin to the tool point."""
+        assert self.urdf is not None
+        d = self.description
+        values = d.joint_values_si(pose.joints)
+        self.urdf.update_cfg(np.array([values.get(n, 0.0) for n in self.urdf_names], float))
+        tip = d.tip_frame(pose.joints)
+        self._set_stylus(tip[:3, 3], d.tool_point(pose.joints))
+
+    def _show_links(self, pose) -> None:
         f = pose.frames
         segs = arm_segments(f)
         for i, link in enumerate(self.links):
@@ -99,11 +165,9 @@ class ArmNodes:
         for i, joint in enumerate(self.joints):  # joint i+1 turns about z of frame i
             joint.position = f[i, :3, 3]
             joint.wxyz = _z_to(f[i, :3, 2])
-        a, b = f[6, :3, 3], f[7, :3, 3]
-        assert self.stylus is not None  # built with the arm
-        self.stylus.position = 0.5 * (a + b)
-        self.stylus.wxyz = _z_to(b - a)
-        self.stylus.height = max(float(np.linalg.norm(b - a)), 1.0)
+        self._set_stylus(f[6, :3, 3], f[7, :3, 3])
+
+    def _show_marks(self, pose, magnification: float) -> None:
         end = pose.commanded + magnification * (pose.landed - pose.commanded)
         self.marks["line"].points = np.array([[pose.commanded, end]], np.float32)
         off = float(np.linalg.norm(pose.landed - pose.commanded))

@@ -40,11 +40,15 @@ def serve(
     present: bool = False,
     token: str | bool | None = True,
     data_dirs=(),
+    urdf=None,
+    tip: str | None = None,
+    base: str | None = None,
 ):
     """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
     .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
     raises InputError before any server starts. `quiet` hides viser's start-up banner and its "Server stopped"
-    line. `per_client`: one independent session per browser tab (per_client.PerClientApp) instead of one shared
+    line. `urdf` (with `tip`, `base`): the robot of a measurement file, drawn from its URDF at each point's joint
+    values (`session.arm.attach_arm`). `per_client`: one independent session per browser tab (per_client.PerClientApp) instead of one shared
     by all; `present`: start in presentation mode (large text, collapsible panel; View → Presentation mode). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
     server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
     apply_process_policy()
@@ -53,6 +57,12 @@ def serve(
         source.evaluate()
     else:
         loaded = files.load_source(source, mesh)
+    if urdf is not None:  # measured data's robot, posed at each point's joint values (session.arm.attach_arm)
+        from rrbc_core.session.arm import attach_arm
+
+        attach_arm(loaded.session, urdf, tip, base)
+    elif tip is not None or base is not None:
+        raise InputError("--tip and --base choose links of a URDF: give --urdf")
     _check_host(host)
     library = files.Library.of(data_dirs, source)
     out = io.StringIO() if quiet else None

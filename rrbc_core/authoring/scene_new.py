@@ -54,10 +54,19 @@ class NewSceneOptions:
     margin_mm: float = 150.0
     seed: int = 0
     name: str | None = None
+    urdf: str | None = None  # the robot's URDF (a file in the scene's folder or below, or a packaged name)
+    tip: str | None = None  # ... its tool link
 
     def __post_init__(self):
         if self.robot not in ROBOTS:
             raise InputError(f"--robot must be one of {', '.join(ROBOTS)}, got {self.robot!r}")
+        if self.urdf is not None and self.robot != "none":
+            raise InputError(
+                f"--urdf is for a robot the {self.robot.upper()}'s kinematics do not model: leave --robot out (or "
+                "give --robot none); a UR5 or UR10 is drawn from its own description"
+            )
+        if self.tip is not None and self.urdf is None:
+            raise InputError("--tip names a link of the robot's URDF: give --urdf")
         if self.sensor is not None:
             s = np.asarray(self.sensor, float).reshape(-1)
             if s.shape != (3,) or not np.all(np.isfinite(s)) or np.abs(s).max() > 1e6:
@@ -138,6 +147,7 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
         raise InputError(f"--out {out}: directory {out.parent} does not exist")
     if out.exists() and not out.is_file():
         raise InputError(f"--out {out}: exists and is not a regular file")
+    urdf_rel = _urdf_beside(opt.urdf, out.parent)  # checked before anything is written
     tl = read_targets(targets_path)
     mesh = cg.load_cell_mesh(mesh_path)
     t = tl.positions
@@ -189,6 +199,7 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
     try:
         mesh_rel = _mesh_beside(Path(mesh_path), out.parent)
         parts = dict(
+            urdf_rel=urdf_rel,
             opt=opt,
             tl=tl,
             mesh_rel=mesh_rel,
@@ -265,7 +276,28 @@ def _error_model(robot: str, kind: str, seed: int) -> tuple[dict, list[str]]:
     return {"robot": robot_terms, "sensor": sensor_terms}, said
 
 
-def _toml(opt, tl, mesh_rel, sensor, look, sensor_why, hidden, reg, cand, name, fiducials, plan_note) -> str:
+def _urdf_beside(urdf: str | None, folder: Path) -> str | None:
+    """How the scene names the robot's URDF: a packaged name as it is, a file by its path from the scene's folder
+    (it must lie there or below, with its meshes). InputError otherwise."""
+    from rrbc_core.models.urdf import PACKAGED
+
+    if urdf is None or urdf in PACKAGED:
+        return urdf
+    p = Path(urdf).resolve()
+    if not p.is_file():
+        raise InputError(f"--urdf {urdf}: no such file")
+    base = folder.resolve()
+    if base not in p.parents:
+        raise InputError(
+            f"--urdf {urdf}: the scene names its robot by a path inside its own folder: write the scene (--out) in "
+            f"{p.parent} or above it, where the URDF's meshes are"
+        )
+    return p.relative_to(base).as_posix()
+
+
+def _toml(
+    opt, tl, mesh_rel, sensor, look, sensor_why, hidden, reg, cand, name, fiducials, plan_note, urdf_rel=None
+) -> str:
     from rrbc_core.io.scene_write import SceneSpec, scene_toml
 
     error_model, em_said = _error_model(opt.robot, opt.sensor_kind, opt.seed)
@@ -279,6 +311,8 @@ def _toml(opt, tl, mesh_rel, sensor, look, sensor_why, hidden, reg, cand, name, 
         seed=int(opt.seed),
         robot_model=opt.robot,
         tool_mm=float(opt.tool_mm),
+        robot_urdf=urdf_rel,
+        robot_tip=opt.tip,
         sensor_kind=opt.sensor_kind,
         sensor_position=sensor,
         sensor_look_at=look,

@@ -221,6 +221,9 @@ class Scene:
         default_factory=lambda: np.zeros(3)
     )  # "distance from the frame origin" is from here
     sensor_look_at: np.ndarray | None = None
+    #: `robot.urdf` (a path, or a packaged name) and `robot.tip`: the robot drawn for `robot_model` "none"
+    robot_urdf: Path | str | None = None
+    robot_tip: str | None = None
     _layout_points: dict = field(default_factory=dict, repr=False)
     _mesh: object = field(default=None, repr=False)
 

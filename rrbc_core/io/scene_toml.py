@@ -116,9 +116,10 @@ def load_scene(path: str | PathLike) -> Scene:
 
     # [robot] -----------------------------------------------------------------------------------------------
     rb = c.table(doc["robot"], "robot")
-    c.keys(rb, "robot", ("model", "tool_mm", "joint_seed_deg", "tool_yaw_deg"), ("model", "tool_mm"))
+    c.keys(rb, "robot", ("model", "tool_mm", "joint_seed_deg", "tool_yaw_deg", "urdf", "tip"), ("model", "tool_mm"))
     robot_model = c.string(rb["model"], "robot.model", choices=ROBOT_MODELS)
     tool_mm = c.number(rb["tool_mm"], "robot.tool_mm", nonneg=True)
+    robot_urdf, robot_tip = _robot_urdf(c, rb, robot_model, toml_path, tool_mm)
     joint_seed_deg = (
         c.vector(rb["joint_seed_deg"], "robot.joint_seed_deg", 6)
         if "joint_seed_deg" in rb
@@ -265,6 +266,8 @@ def load_scene(path: str | PathLike) -> Scene:
         mesh_path=mesh_path,
         robot_model=robot_model,
         tool_mm=tool_mm,
+        robot_urdf=robot_urdf,
+        robot_tip=robot_tip,
         joint_seed=_frozen(np.radians(joint_seed_deg)),
         tool_yaw_deg=tool_yaw,
         sensor_kind=sensor_kind,
@@ -285,6 +288,38 @@ def load_scene(path: str | PathLike) -> Scene:
         _layout_points=layout_points,
         _mesh=mesh,
     )
+
+
+def _robot_urdf(c: Checker, rb: dict, robot_model: str, toml_path: Path, tool_mm: float):
+    """`robot.urdf` (a file beside the scene or below its folder, or a packaged name) and `robot.tip`: the robot the
+    app draws and poses (models.arm_description). Only for `model = "none"`: a DH arm is drawn from its own packaged
+    description. Returns (the URDF's path or packaged name, the tip link) or (None, None)."""
+    if "urdf" not in rb:
+        if "tip" in rb:
+            raise c.error("robot.tip", "names a link of robot.urdf: give robot.urdf too")
+        return None, None
+    if robot_model != "none":
+        raise c.error(
+            "robot.urdf",
+            f"a {robot_model} is drawn from its own packaged description; a URDF is for a robot the scene's "
+            'kinematics do not model (set robot.model = "none")',
+        )
+    from rrbc_core.models.arm_description import urdf_arm_description
+    from rrbc_core.models.urdf import PACKAGED
+
+    ref = c.string(rb["urdf"], "robot.urdf")
+    tip = c.string(rb["tip"], "robot.tip") if "tip" in rb else None
+    if ref in PACKAGED:
+        where: str | Path = ref
+    else:
+        where = (toml_path.parent / ref).resolve()
+        if toml_path.parent.resolve() not in where.parents:
+            raise c.error("robot.urdf", f"{ref[:80]!r} leaves the scene's folder: put the URDF in it or below it")
+    try:
+        desc = urdf_arm_description(where, tip=tip, tool_mm=(0.0, 0.0, tool_mm))
+    except InputError as exc:
+        raise c.error("robot.urdf", str(exc)) from None
+    return where, desc.chain.tip
 
 
 def _points(c: Checker, doc: dict, kind: str, default_yaw: float, site_pos: dict, with_region=False) -> list:

@@ -37,6 +37,8 @@ class SceneSpec:
     sensor_up: np.ndarray | None = None
     joint_seed_deg: np.ndarray | None = None
     tool_yaw_deg: float = 0.0
+    robot_urdf: str | None = None
+    robot_tip: str | None = None
     simulation: dict = field(default_factory=dict)
     comments: dict = field(default_factory=dict)
 
@@ -91,6 +93,10 @@ def scene_toml(spec: SceneSpec) -> str:
         out.append(f"joint_seed_deg = {_value([float(x) for x in spec.joint_seed_deg])}")
     if spec.tool_yaw_deg:
         out.append(f"tool_yaw_deg = {_value(float(spec.tool_yaw_deg))}")
+    if spec.robot_urdf is not None:
+        out.append(f"urdf = {_value(str(spec.robot_urdf))}")
+    if spec.robot_tip is not None:
+        out.append(f"tip = {_value(str(spec.robot_tip))}")
     out += [""] + _comment(spec, "sensor")
     out += [
         "[sensor]",

@@ -176,6 +176,18 @@ def move_sensor(session: ExplorerSession, position, look_at=None) -> Evaluation:
 
 
 # ------------------------------------------------------------------------------------------- writing
+def _urdf_ref(sc) -> str | None:
+    """The scene's `robot.urdf` as a saved file names it: a packaged name, or the path from the scene's folder (keep
+    the saved scene there, as its mesh)."""
+    u = getattr(sc, "robot_urdf", None)
+    if u is None or isinstance(u, str):
+        return u
+    try:
+        return Path(u).relative_to(Path(sc.path).resolve().parent).as_posix()
+    except ValueError:
+        return Path(u).name
+
+
 def scene_spec(session: ExplorerSession, mesh: str | None = None):
     """The session as a scene file's content (`io.scene_write.SceneSpec`): the scene it came from with its
     points, targets' regions, candidates and sensor as they are now. `mesh`: the path to write for the mesh
@@ -198,6 +210,8 @@ def scene_spec(session: ExplorerSession, mesh: str | None = None):
         seed=int(s.seed),
         robot_model=sc.robot_model,
         tool_mm=float(sc.tool_mm),
+        robot_urdf=_urdf_ref(sc),
+        robot_tip=sc.robot_tip,
         joint_seed_deg=np.rad2deg(np.asarray(sc.joint_seed, float)),
         tool_yaw_deg=float(sc.tool_yaw_deg),
         sensor_kind=sc.sensor_kind,

@@ -95,6 +95,44 @@ def test_other_robots_and_a_given_sensor(tmp_path):
         assert ("kinematic" in kinds) == (robot == "ur10") and ("smooth_field" in kinds) == (robot == "none")
 
 
+def test_a_robot_from_its_urdf(tmp_path):
+    """--urdf: a robot the kinematics do not model, named by the scene (a packaged name, or a file in the scene's
+    folder with its path from there), posed by the app at the targets."""
+    import shutil
+
+    from rrbc_core.models.urdf import bundled_urdf
+    from rrbc_core.session.arm import arm_description, arm_pose
+
+    mesh_path, targets_path, _ = random_cell(tmp_path, 3)
+    (tmp_path / "robot").mkdir()
+    shutil.copy(bundled_urdf("lift_arm"), tmp_path / "robot" / "arm.urdf")
+    for urdf, named in (("panda", "panda"), (tmp_path / "robot" / "arm.urdf", "robot/arm.urdf")):
+        out = tmp_path / "urdf.toml"
+        r = _run("scene", "new", "--mesh", mesh_path, "--targets", targets_path, "--urdf", urdf, "--out", out)
+        assert r.returncode == 0, r.stderr
+        assert f"robot: drawn from {urdf}; its reach is not checked" in r.stdout
+        assert f'urdf = "{named}"' in out.read_text()
+        scene = load_scene(out)
+        assert scene.robot_model == "none" and arm_description(scene) is not None
+    scene = load_scene(tmp_path / "urdf.toml")
+    try:
+        pose = arm_pose(scene, scene.targets[0].position)
+    except Exception:  # the lift arm may not reach the bench's targets: drawn hidden, not an error of the scene
+        pose = None
+    if pose is not None:
+        np.testing.assert_allclose(arm_description(scene).tool_point(pose.joints), scene.targets[0].position, atol=0.05)
+    for args, words in (
+        (["--urdf", "panda", "--robot", "ur5"], "leave --robot out"),
+        (["--tip", "panda_link8"], "give --urdf"),
+        (["--urdf", tmp_path.parent / "elsewhere.urdf"], "no such file"),
+    ):
+        out = tmp_path / "bad" / "x.toml"
+        out.parent.mkdir(exist_ok=True)
+        r = _run("scene", "new", "--mesh", mesh_path, "--targets", targets_path, *args, "--out", out)
+        assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert list(out.parent.iterdir()) == []
+
+
 def _bad_cases(tmp_path):
     import trimesh
 

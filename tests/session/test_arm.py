@@ -59,3 +59,43 @@ def test_bias_size_scales_the_landing_and_bad_input_is_refused(scene):
     measured = ExplorerSession.from_measurements(read_measurements(example))
     with pytest.raises(InputError, match="no arm model"):
         arm_pose(measured.scene, p)
+
+
+def test_measured_data_pose_their_robot_from_the_joint_columns(tmp_path):
+    """`rrbc view data.csv --urdf`: the robot at each point's joint values, its tool on the point's robot reading;
+    a URDF that is not the file's robot, or a scene, is refused in one line."""
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.models.urdf import load_urdf
+    from rrbc_core.session.arm import attach_arm, measured_arm_pose
+    from rrbc_core.simulation.arm_data import chain_measurements
+
+    mset = chain_measurements(load_urdf("ur5", tip="tool0"), 3, n_fid=12, n_chk=6, n_tgt=2, noise_mm=0.05)
+    write_measurements(tmp_path / "d.csv", mset)
+    session = ExplorerSession.from_measurements(read_measurements(tmp_path / "d.csv"))
+    attach_arm(session, "ur5", tip="tool0")
+    for kind in ("registration", "fiducials"):
+        g = session.layout[kind]
+        for pid, p in zip(g.ids, g.positions):
+            np.testing.assert_allclose(measured_arm_pose(session, kind, pid).commanded, p, atol=0.5)  # noise 0.05
+    assert len(session.arm_joints) == len(set(zip(mset.roles, mset.ids)))
+    with pytest.raises(InputError, match="not this robot"):
+        attach_arm(ExplorerSession.from_measurements(read_measurements(tmp_path / "d.csv")), "ur10", tip="tool0")
+    with pytest.raises(InputError, match="no joint columns"):
+        attach_arm(ExplorerSession.from_measurements(read_measurements(tmp_path / "d.csv")), "panda")
+    with pytest.raises(InputError, match="a scene names its own"):
+        attach_arm(ExplorerSession.from_scene(load_scene(default_scene_path())), "ur5")
+
+
+def test_rrbc_view_refuses_a_urdf_that_cannot_pose_the_files_robot(tmp_path):
+    import subprocess
+
+    from tests.paths import EXAMPLE_CSV, RRBC
+
+    for args, words in (
+        ([str(EXAMPLE_CSV), "--urdf", "panda"], "no joint columns"),
+        ([str(EXAMPLE_CSV), "--tip", "tool0"], "give --urdf"),
+        ([str(default_scene_path()), "--urdf", "ur5"], "a scene names its own"),
+    ):
+        r = subprocess.run([*RRBC, "view", *args, "--port", "0"], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert r.stdout == ""

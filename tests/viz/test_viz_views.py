@@ -164,6 +164,42 @@ def test_the_arm_reaches_the_selected_target_and_sensors_are_drawn_as_what_they_
     assert (default_scene_path().parent / "peg_in_hole_cell.toml").exists()
 
 
+def _world_pose(scene, name: str) -> np.ndarray:
+    """(4, 4) the node `name`'s frame in the world, composed from its ancestors' poses as the app sent them."""
+    import viser.transforms as vtf
+
+    m = np.eye(4)
+    parts = name.strip("/").split("/")
+    for k in range(1, len(parts) + 1):
+        h = scene.get_handle_by_name("/" + "/".join(parts[:k]))
+        if h is None:
+            continue
+        step = np.eye(4)
+        step[:3, :3] = vtf.SO3(np.asarray(h.wxyz, float)).as_matrix()
+        step[:3, 3] = np.asarray(h.position, float)
+        m = m @ step
+    return m
+
+
+def test_the_arm_is_the_ur5s_own_description_with_its_meshes_posed_on_the_target(app):
+    """The default scene's UR5 drawn from the URDF example-robot-data ships: its meshes are in the scene, and the
+    flange frame as the app posed it carries the tool point to the selected target within 1 mm."""
+    arm = app.nodes.arm
+    assert arm is not None and arm.urdf is not None
+    scene = app.server.scene
+    meshes = [h for h in arm.urdf._meshes if h.name.startswith("/arm/urdf/visual/")]
+    assert len(meshes) >= 6, [h.name for h in arm.urdf._meshes]
+    flange = [f.name for f in arm.urdf._joint_frames if f.name.endswith("/tool0")]
+    assert len(flange) == 1
+    t = app.session.last.targets
+    for target in ("H1", "H6"):
+        app.views.select("targets", target)
+        i = list(t.ids).index(target)
+        pose = _world_pose(scene, flange[0])
+        tool = pose[:3, 3] + app.session.scene.tool_mm * pose[:3, 2]
+        assert np.linalg.norm(tool - t.positions[i]) < 1.0, (target, tool, t.positions[i])
+
+
 def test_presentation_mode_enlarges_text_markers_and_labels_and_goes_back(app):
     from rrbc_viz.controllers.views import PRESENTATION_LABEL_SCALE, PRESENTATION_MARKERS
     from rrbc_viz.controls import PRESENTATION_CSS
