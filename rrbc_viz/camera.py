@@ -19,8 +19,12 @@ import viser
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.framing import CameraPose, frame_points
 
-#: The floating control panel (theme control_width="large": 24 em × 16 px) plus its gap to the window's edge.
-PANEL_PX = 24 * 16 + 24
+#: The floating control panel's width (theme control_width="large": 24 em × 16 px; set explicitly by
+#: `controls.Controls.apply_theme`), and in presentation mode (its text is larger); the gap to the window's edge.
+PANEL_WIDTH_PX = 24 * 16
+PRESENTATION_PANEL_WIDTH_PX = 560
+PANEL_GAP_PX = 24
+PANEL_PX = PANEL_WIDTH_PX + PANEL_GAP_PX
 #: The image the initial camera is framed for (tabs report their own size once connected).
 DEFAULT_IMAGE = (1280, 800)
 FOV_Y = np.deg2rad(50.0)
@@ -45,8 +49,8 @@ class View:
     position: np.ndarray | None = None
 
 
-def _pose_from(view: View, fov_y: float, aspect: float, width_px: float) -> CameraPose:
-    panel = float(np.clip(PANEL_PX / max(width_px, 1.0), 0.0, 0.6))
+def _pose_from(view: View, fov_y: float, aspect: float, width_px: float, panel_px: float = PANEL_PX) -> CameraPose:
+    panel = float(np.clip(panel_px / max(width_px, 1.0), 0.0, 0.6))
     if view.position is not None:  # from a fixed place: look at the points' centre, framed by the fov alone
         centre = 0.5 * (view.points.min(0) + view.points.max(0))
         up = np.array([0.0, 0.0, 1.0])
@@ -61,11 +65,12 @@ class CameraDirector:
         self.server = server
         self.last: dict[int, CameraPose] = {}  # client id -> the pose last sent to it
         self.initial: CameraPose | None = None
+        self.panel_px = float(PANEL_PX)  # the panel's width and gap: what a framed view leaves free
 
     def set_initial(self, view: View, near: float, far: float) -> CameraPose:
         """The camera every newly opened tab starts with."""
         w, h = DEFAULT_IMAGE
-        pose = _pose_from(view, FOV_Y, w / h, w)
+        pose = _pose_from(view, FOV_Y, w / h, w, self.panel_px)
         cam = self.server.initial_camera
         cam.fov = float(FOV_Y)
         cam.near = near
@@ -75,6 +80,13 @@ class CameraDirector:
         cam.look_at = tuple(pose.look_at)
         self.initial = pose
         return pose
+
+    def reframe_initial(self, view: View) -> None:
+        """The initial camera framed again for `view` (the panel's width changed), near and far kept."""
+        cam = self.server.initial_camera
+        if self.initial is None:
+            return
+        self.set_initial(view, cam.near, cam.far)
 
     def show(self, view: View, clients=None) -> dict[int, CameraPose]:
         """Move the camera of each client in `clients` (default: every connected tab) to `view`, framed for that
@@ -91,7 +103,7 @@ class CameraDirector:
                 continue
             if not (aspect > 0 and width > 0):
                 continue
-            pose = _pose_from(view, float(cam.fov), aspect, width)
+            pose = _pose_from(view, float(cam.fov), aspect, width, self.panel_px)
             with client.atomic():
                 cam.up_direction = (0.0, 0.0, 1.0)
                 cam.position = tuple(pose.position)  # moves look_at along: set it after

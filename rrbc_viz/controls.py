@@ -21,7 +21,7 @@ from rrbc_core.methods import method_flags
 from rrbc_core.session.evaluation import Settings
 
 from .authoring_panel import AuthoringPanel
-from .camera import PRESETS
+from .camera import PANEL_WIDTH_PX, PRESENTATION_PANEL_WIDTH_PX, PRESETS
 from .checks_panel import ChecksPanel
 from .colors import legend_html
 from .diagnosis_panel import PROMPT
@@ -57,7 +57,18 @@ HEAT_CHOICES = {
 }
 MAG_MAX = 2000
 #: Presentation mode's style sheet: larger text for a projector (the panel's sizes are rem-based).
-PRESENTATION_CSS = "<style>html { font-size: 20px !important; }</style>"
+#: The panel's (outermost) scroll area never taller than the window (viser 1.1.1 sizes it from the panel's content
+#: and its own font size), so every control can be scrolled to at any window height.
+PANEL_CSS = (
+    ".mantine-Paper-root .mantine-ScrollArea-root:not(.mantine-ScrollArea-root .mantine-ScrollArea-root), "
+    ".mantine-Paper-root .mantine-ScrollArea-viewport:not(.mantine-ScrollArea-root .mantine-ScrollArea-viewport) "
+    "{ max-height: calc(100vh - 3.5rem) !important; }"
+)
+#: Presentation mode (a projector at 1280x720): the panel's sizes are in rem, so a root font of 27.5 px makes its
+#: body text (0.875 rem) 24 px.
+PRESENTATION_FONT_PX = 27.5
+PRESENTATION_CSS = f"<style>html {{ font-size: {PRESENTATION_FONT_PX}px !important; }} {PANEL_CSS}</style>"
+NORMAL_CSS = f"<style>{PANEL_CSS}</style>"
 
 
 def _band(label: str, color: str) -> dict:
@@ -297,11 +308,12 @@ class LearnPanel:
     """Learn tab: the nine-step lesson's text and its buttons."""
 
     def __init__(self, gui, app: Actions):
+        # the buttons first: on a projector (1280x720, large text) Next stays in view without scrolling
+        self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
+        self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
         self.lesson = gui.add_markdown(
             "The nine steps of RRBC, one at a time, each shown in the scene with live numbers. Press **Next** to start."
         )
-        self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
-        self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
         self.lesson_end = gui.add_button("End lesson (restore layers)")
         self.lesson_next.on_click(lambda event: app.views.lesson_step(+1))
         self.lesson_prev.on_click(lambda event: app.views.lesson_step(-1))
@@ -465,9 +477,14 @@ class Controls:
         self.gui = gui
         self.apply_theme(presentation=False)
         gui.set_panel_label("RRBC explorer")
-        self.style = gui.add_html("")  # presentation mode's style sheet (empty otherwise)
+        self.style = gui.add_html(NORMAL_CSS)  # the panel's style sheet (presentation mode: large text)
         self.status = gui.add_markdown("")
-        self.legend = gui.add_html(legend_html())
+        self.headline = gui.add_html("")  # rigid → RRBC, pinned above the tabs (tables.headline)
+        # the colour legend, collapsible: open while exploring, closed in presentation mode (a lesson needs the room)
+        with gui.add_folder("Colours", expand_by_default=True) as self.legend_open:
+            self.legend = gui.add_html(legend_html())
+        with gui.add_folder("Colours", expand_by_default=False, visible=False) as self.legend_closed:
+            self.legend_closed_html = gui.add_html(legend_html())
         tabs = gui.add_tab_group()
         with tabs.add_tab("Explore", icon=viser.Icon.ADJUSTMENTS):
             self.selection = SelectionPanel(gui, app, self.syncing)
@@ -494,10 +511,23 @@ class Controls:
         rem, so a larger root font scales them). The panel floats over the view in both modes and collapses with
         its own minimise control (the view then takes the whole screen)."""
         self.gui.configure_theme(show_share_button=False, control_width="large", brand_color=(40, 120, 255))
+        self.gui.main_panel.set_width(PRESENTATION_PANEL_WIDTH_PX if presentation else PANEL_WIDTH_PX)
         if hasattr(self, "style"):
-            self.style.content = PRESENTATION_CSS if presentation else ""
+            self.style.content = PRESENTATION_CSS if presentation else NORMAL_CSS
+            self.show_legend(not presentation)
+
+    def show_legend(self, open_: bool) -> None:
+        """The colour legend open (exploring) or closed to its title (presentation mode, a lesson)."""
+        self.legend_open.visible = bool(open_)
+        self.legend_closed.visible = not open_
 
     # -------------------------------------------------------------------------------- what the app shows here
+    def show_headline(self, html: str) -> None:
+        """The pinned rigid → RRBC readout (tables.headline); hidden when empty."""
+        if self.headline.content != html:
+            self.headline.content = html
+        self.headline.visible = bool(html)
+
     def show_status(self, line: str) -> None:
         """The status line at the top of the panel (the last message)."""
         self.status.content = line

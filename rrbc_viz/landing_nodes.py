@@ -93,3 +93,4 @@ class LandingNodes:
         node = self.handles.get("/landing/scale")
         if node is not None:
             node.font_screen_scale = 0.8 * factor
+            node.anchor = "top-center" if factor > 1.0 else "bottom-left"

@@ -82,21 +82,24 @@ def fiducial_label(pid: str, ev: Evaluation, i: int) -> str:
     return fiducial_labels(ev)[i]
 
 
-def target_labels(ev: Evaluation) -> list[str]:
-    """Label texts of every target (errors against the truth, or the correction and its std without truth)."""
+def target_labels(ev: Evaluation, compact: bool = False) -> list[str]:
+    """Label texts of every target (errors against the truth, or the correction and its std without truth);
+    `compact`: short texts for large labels (presentation mode), "H1 0.738 → 0.119 mm"."""
     t = ev.targets
     corr = np.linalg.norm(t.correction, axis=1)
     std = None if t.correction_std is None else np.linalg.norm(t.correction_std, axis=1)
     out = []
     for i, pid in enumerate(t.ids):
-        if np.isfinite(t.error_rigid[i]):
+        if np.isfinite(t.error_rigid[i]) and compact:
+            s = f"{pid} {t.error_rigid[i]:.3f} → {t.error_rrbc[i]:.3f} mm"
+        elif np.isfinite(t.error_rigid[i]):
             s = f"{pid} · rigid {t.error_rigid[i]:.3f} / RRBC {t.error_rrbc[i]:.3f} mm"
         else:
             s = f"{pid} · ê {corr[i]:.3f} mm"
             if std is not None:
                 s += f" ± {std[i]:.3f}"
         if bool(t.extrapolated[i]):
-            s += " ⚠ extrapolated"
+            s += " ⚠" if compact else " ⚠ extrapolated"
         out.append(s)
     return out
 
@@ -194,16 +197,17 @@ def landing_offsets(t, i: int) -> tuple[np.ndarray, np.ndarray, bool]:
     return t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref, known
 
 
-def landing_display(t, i: int, marker_mm: float, vec=None) -> LandingDisplay:
+def landing_display(t, i: int, marker_mm: float, vec=None, ring_mm: float | None = None) -> LandingDisplay:
     """The landing bullseye of target i of `t` (evaluation.TargetResult), with VEC's landing `vec` (3,) robot frame
     mm when given. It floats beside the target, away from the robot's base (the arm reaches the target from that
-    side, its wrist straight above it) and above it."""
+    side, its wrist straight above it) and above it. `ring_mm`: keep this ring (and so the drawing scale) instead of
+    fitting the ring to the offsets (during a drag: a doubled error is drawn twice as far out)."""
     off_rigid, off_rrbc, known = landing_offsets(t, i)
     off_vec = None if vec is None else np.asarray(vec, float) - (t.truth[i] if known else t.robot_rigid[i])
     biggest = float(max(np.linalg.norm(off_rigid), np.linalg.norm(off_rrbc)))
     if off_vec is not None:
         biggest = max(biggest, float(np.linalg.norm(off_vec)))
-    ring = nice_up(biggest) if biggest > 0 else 0.1
+    ring = float(ring_mm) if ring_mm is not None else nice_up(biggest) if biggest > 0 else 0.1
     radius = RING_MARKERS * marker_mm
     scale = radius / ring
     out = np.array([t.positions[i][0], t.positions[i][1], 0.0])

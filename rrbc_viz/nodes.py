@@ -33,7 +33,7 @@ Ids are used in node names with "/" replaced by "_" (`node_key`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import viser
@@ -95,6 +95,9 @@ class SceneNodes:
         self.arm: ArmNodes | None = None  # scenes with an arm (a DH arm or a URDF)
         self.scene_model = None
         self.session: Any = None  # the session built (build)
+        self.lesson_labels: tuple[str, ...] = ()  # kinds of point whose labels a lesson step shows
+        self.landing_hold = False  # a drag is under way: the bullseye keeps its ring (its drawing scale)
+        self.dragging: set[tuple[str, str]] = set()  # handles the user is dragging (the app leaves them be)
         self._arm_key: tuple | None = None
         self.bias_scale = 1.0  # the session's bias size (the real arm's landing scales with it)
         self.vec_landings: dict | None = None  # target id -> VEC's landing (3,), robot frame mm (Arm tab on)
@@ -377,7 +380,11 @@ class SceneNodes:
         )
 
         async def on_update(event: viser.TransformControlsEvent, kind=kind, pid=pid) -> None:
-            # async: runs on viser's event loop, in order (start, updates, end); never awaits.
+            # async: runs on viser's event loop, in order (start, updates, end); never awaits. While the user drags
+            # a handle the app does not move it (`dragging`): the drag's end must read the user's last position,
+            # not one the app set from an older update it handled meanwhile
+            if event.phase != "end":
+                self.dragging.add((kind, pid))
             self._on_drag(kind, pid, np.asarray(event.target.position, float), event.phase, client=event.client)
 
         tc.on_update(on_update)
@@ -434,7 +441,8 @@ class SceneNodes:
             self._assign(
                 self.spheres[("fiducials", pid)], "color", colors.FIDUCIAL if inc else colors.FIDUCIAL_EXCLUDED
             )
-            self._assign(self.gizmos[("fiducials", pid)], "position", tuple(ev.fiducial_positions[i]))
+            if ("fiducials", pid) not in self.dragging:
+                self._assign(self.gizmos[("fiducials", pid)], "position", tuple(ev.fiducial_positions[i]))
             self._assign(self.labels[f"{gizmo_name('fiducials', pid)}/label"], "text", texts[i])
         inc_idx = np.flatnonzero(ev.included)
         arrows = self.nodes["/corrections/fiducials"]
@@ -451,14 +459,21 @@ class SceneNodes:
 
         # targets
         t = ev.targets
-        texts = target_labels(ev)
+        compact = self.label_scale > 1.0
+        texts = target_labels(ev, compact=compact)
+        if compact:  # presentation mode: the selected target's numbers, the others (a lesson's) by name only
+            texts = [
+                x if self.selected == ("targets", pid) else pid + (" ⚠" if t.extrapolated[i] else "")
+                for i, (pid, x) in enumerate(zip(t.ids, texts))
+            ]
         for i, pid in enumerate(t.ids):
             self._assign(
                 self.spheres[("targets", pid)],
                 "color",
                 colors.TARGET_EXTRAPOLATED if t.extrapolated[i] else colors.TARGET,
             )
-            self._assign(self.gizmos[("targets", pid)], "position", tuple(t.positions[i]))
+            if ("targets", pid) not in self.dragging:
+                self._assign(self.gizmos[("targets", pid)], "position", tuple(t.positions[i]))
             self._assign(self.labels[f"{gizmo_name('targets', pid)}/label"], "text", texts[i])
             region = self.regions.get(pid)
             if region is not None:
@@ -472,7 +487,9 @@ class SceneNodes:
         if len(t.ids):
             sel = self.selected
             i = t.ids.index(sel[1]) if sel is not None and sel[0] == "targets" else 0
-            land = landing_display(t, i, self.display.marker_mm, (self.vec_landings or {}).get(t.ids[i]))
+            held = self.landing if self.landing_hold else None  # during a drag the bullseye keeps its scale
+            ring = held.ring_mm if held is not None and held.target == t.ids[i] else None
+            land = landing_display(t, i, self.display.marker_mm, (self.vec_landings or {}).get(t.ids[i]), ring)
             self.landing = land
             self.bullseye.show(land, self._assign)
             self._update_arm(land.position, mag, self.target_tools.get(land.target))
@@ -538,13 +555,22 @@ class SceneNodes:
     def set_label_scale(self, factor: float) -> None:
         """Labels' screen size × factor (presentation mode)."""
         self.label_scale = float(factor)
+        # large labels centred over their point (short texts): they stay in the view's free part
+        anchor: Literal["bottom-center", "bottom-left"] = "bottom-center" if self.label_scale > 1.0 else "bottom-left"
         for h in self.labels.values():
             h.font_screen_scale = 0.75 * self.label_scale
+            h.anchor = anchor
+        self._show_labels()
         for name in ("/landing/scale", "/frames/sensor_registered/note"):
             if name in self.nodes:
                 self.nodes[name].font_screen_scale = 0.8 * self.label_scale
+                self.nodes[name].anchor = "top-center" if self.label_scale > 1.0 else "bottom-left"
         if self.arm is not None:
             self.arm.marks["label"].font_screen_scale = 0.75 * self.label_scale
+            self.arm.marks["label"].anchor = "top-center" if self.label_scale > 1.0 else "bottom-left"
+            self.arm.compact = self.label_scale > 1.0
+            self.arm.refresh_label()
+        self.bullseye.set_label_scale(self.label_scale)
 
     def set_see_through(self, on: bool) -> None:
         """Draw the work cell solid or see-through (what lies under its surfaces shows)."""
@@ -572,11 +598,19 @@ class SceneNodes:
             self._assign(tc, "disable_sliders", not on)
         self._show_labels()
 
+    def set_lesson_labels(self, kinds: tuple[str, ...]) -> None:
+        """Show the labels of these kinds of point (a lesson step's, teaching.Step.labels) besides the others."""
+        self.lesson_labels = tuple(kinds)
+        self._show_labels()
+
     def _show_labels(self) -> None:
-        on = bool(self.layers.get("labels"))
+        # presentation mode: only the selected point's label and a lesson step's (large labels of every point would
+        # overlap)
+        on = bool(self.layers.get("labels")) and self.label_scale <= 1.0
+        lesson = tuple(f"/{k}/" for k in self.lesson_labels)
         mine = None if self.selected is None else f"{gizmo_name(*self.selected)}/label"
         for name, h in self.labels.items():
-            self._assign(h, "visible", on or name == mine)
+            self._assign(h, "visible", on or name == mine or name.startswith(lesson))
 
     def apply_sizes(self) -> None:
         """Marker size and region zoom changed: resize spheres, gizmos, arrows, regions."""

@@ -70,6 +70,8 @@ class ArmNodes:
         self.stylus: viser.CylinderHandle | None = None
         self.marks: dict = {}
         self.pose = None
+        self.compact = False  # short label text (presentation mode)
+        self.magnification = 1.0  # of the last pose shown
 
     def _build_urdf(self) -> bool:
         """The description's meshes under /arm/urdf, its root at the description's base pose; False if they cannot
@@ -167,12 +169,22 @@ class ArmNodes:
             joint.wxyz = _z_to(f[i, :3, 2])
         self._set_stylus(f[6, :3, 3], f[7, :3, 3])
 
+    def refresh_label(self) -> None:
+        """The landing label again (its text is shorter in presentation mode)."""
+        if self.pose is not None and self.marks:
+            self._show_marks(self.pose, self.magnification)
+
     def _show_marks(self, pose, magnification: float) -> None:
+        self.magnification = magnification
         end = pose.commanded + magnification * (pose.landed - pose.commanded)
         self.marks["line"].points = np.array([[pose.commanded, end]], np.float32)
         off = float(np.linalg.norm(pose.landed - pose.commanded))
         self.marks["label"].position = end
-        self.marks["label"].text = f"nominal model → real arm's tool: {off:.3f} mm (×{magnification:g})"
+        self.marks["label"].text = (
+            f"real arm {off:.3f} mm ×{magnification:g}"
+            if self.compact
+            else f"nominal model → real arm's tool: {off:.3f} mm (×{magnification:g})"
+        )
 
 
 def _look_wxyz(position, look_at, up=(0.0, 0.0, 1.0)) -> np.ndarray:

@@ -50,6 +50,25 @@ def summary(ev: Evaluation, kind: str) -> str:
     return "\n\n".join(lines)
 
 
+def headline(ev: Evaluation, kind: str) -> str:
+    """The pinned readout at the top of the panel: rigid → RRBC, the RMS error over what is scored (the scene's
+    targets against their truth, a measurement file's check rows), from the same summary as `summary`; "" when
+    nothing is scored. HTML (large type)."""
+    sm = ev.summary
+    rig, rr = sm.get("rmst_rigid_mm"), sm.get("rmst_rrbc_mm")
+    if rig is None or rr is None or not np.isfinite(rig) or not np.isfinite(rr):
+        return ""
+    what = "targets" if kind == "scene" else "check rows"
+    change = f"{100.0 * (rr / rig - 1.0):+.0f} %" if rig > 0 else ""
+    colour = "#1a7f37" if rr < rig else "#b42318"
+    return (
+        '<div style="padding:0 0.75rem"><div style="font-size:1.25em;line-height:1.3;margin:2px 0 0 0">'
+        f'rigid <b>{_mm(rig)}</b> → RRBC <b style="color:{colour}">{_mm(rr)}</b> mm '
+        f'<span style="font-size:0.8em;color:{colour}">{change}</span></div>'
+        f'<div style="font-size:0.8em;color:#555">RMS error over {sm["scored"]} {what}</div></div>'
+    )
+
+
 def stations_line(session) -> str:
     """With stations: which one is open and `rrbc correct`'s pooled figures over all of them (the session's
     `stations_summary`), as a paragraph to append to the summary; "" without stations."""

@@ -37,6 +37,8 @@ class Step:
     focus: tuple[str, ...] = ("targets", "fiducials")
     see_through: bool = False  # the work cell drawn see-through: arrows may point into surfaces
     direction: tuple[float, float, float] | None = None  # the camera's viewing direction (None: camera.OBLIQUE)
+    #: the kinds of point ("registration", "fiducials", "targets") whose labels the step shows: what its text names
+    labels: tuple[str, ...] = ()
 
 
 def _v(x) -> str:
@@ -200,14 +202,16 @@ STEPS: tuple[Step, ...] = (
         focus=("sensor",),  # the two sensor frames, close up
         direction=(0.7, -0.55, 0.15),  # from the work's side, level with the head: its mast is behind it
         see_through=True,  # the frames' origins lie inside the sensor's casing
+        labels=("registration",),
     ),
-    Step("Identify the targets", ("mesh", "targets", "regions"), _step3, focus=("targets",)),
+    Step("Identify the targets", ("mesh", "targets", "regions"), _step3, focus=("targets",), labels=("targets",)),
     Step("Choose fiducials around the targets", ("mesh", "targets", "fiducials", "hull", "regions"), _step4),
     Step(
         "Map the robot's fiducials back",
         ("mesh", "frames", "fiducials"),
         _step5,
         focus=("fiducials", "sensor"),
+        labels=("fiducials",),
     ),
     Step(
         "Corrections at the fiducials",
@@ -217,7 +221,13 @@ STEPS: tuple[Step, ...] = (
         focus=("fiducials", "corrections"),
         see_through=True,
     ),
-    Step("Measure the targets", ("mesh", "sensor", "targets", "fiducials"), _step7),
+    Step(
+        "Measure the targets",
+        ("mesh", "sensor", "targets", "fiducials"),
+        _step7,
+        focus=("targets", "fiducials", "sensor"),
+        labels=("targets",),
+    ),
     Step(
         "Interpolate corrections to the targets",
         ("mesh", "fiducials", "targets", "corrections"),

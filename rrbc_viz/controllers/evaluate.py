@@ -76,6 +76,9 @@ class EvaluateController:
         key = (kind, pid)
         with ctx.lock:
             session = ctx.session
+            ctx.nodes.landing_hold = phase != "end"  # the bullseye keeps its scale until the drag ends
+            if phase == "end":  # the drag is over: the app places the handle again (where the session has the point)
+                ctx.nodes.dragging.discard(key)
             if phase == "start":
                 self._refused.discard(key)
                 return session.last

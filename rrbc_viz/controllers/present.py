@@ -38,6 +38,7 @@ class Presenter:
         ctx.vec.show()  # the Arm tab, and VEC's landings for the bullseye
         ctx.nodes.target_tools = dict(session.target_tools)
         ctx.nodes.update(ev)
+        ctx.controls.show_headline(tables.headline(ev, session.kind))
         ctx.controls.explore.show_results(
             tables.scale_line(ctx.state.display.magnification),
             tables.summary(ev, session.kind) + tables.stations_line(session),

@@ -15,7 +15,16 @@ from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import default_plane
 
 from .. import selection_card, teaching
-from ..camera import OBLIQUE, PRESETS, CellGeometry, View, preset_view
+from ..camera import (
+    OBLIQUE,
+    PANEL_GAP_PX,
+    PANEL_WIDTH_PX,
+    PRESENTATION_PANEL_WIDTH_PX,
+    PRESETS,
+    CellGeometry,
+    View,
+    preset_view,
+)
 from ..colors import legend_markdown
 from ..node_values import LAYERS
 from ..slice_nodes import SLICE_CHOICES
@@ -32,7 +41,7 @@ SLICE_NOTE = (
 )
 
 
-PRESENTATION_LABEL_SCALE = 1.6  # labels' screen size in presentation mode
+PRESENTATION_LABEL_SCALE = 3.0  # labels' screen size in presentation mode: 0.75 x 3 x 12 px x 720/800 = 24 px
 PRESENTATION_MARKERS = 1.5  # markers' size in presentation mode
 
 
@@ -157,12 +166,14 @@ class ViewController:
             if on == self.ctx.state.presentation:
                 return
             self.ctx.state.presentation = on
+            self.ctx.camera.panel_px = (PRESENTATION_PANEL_WIDTH_PX if on else PANEL_WIDTH_PX) + PANEL_GAP_PX
             with self.ctx.server.atomic():
                 self.ctx.controls.apply_theme(on)
                 self.ctx.controls.sync_presentation(on)
                 self.ctx.nodes.set_label_scale(PRESENTATION_LABEL_SCALE if on else 1.0)
                 marker = self.ctx.state.display.marker_mm * (PRESENTATION_MARKERS if on else 1 / PRESENTATION_MARKERS)
                 self.ctx.evaluate.set_display(marker_mm=float(marker))
+                self.ctx.camera.reframe_initial(self.current_view())
                 self.ctx.camera.show(self.current_view())
 
     def set_see_through(self, on: bool) -> None:
@@ -270,12 +281,14 @@ class ViewController:
             index = int(np.clip(index, 0, len(teaching.STEPS) - 1))
             if self.ctx.state.lesson_index is None:
                 self.ctx.state.lesson_saved_layers = dict(self.ctx.state.layers)
+                self.ctx.controls.show_legend(False)  # the lesson needs the room: the legend closes to its title
             self.ctx.state.lesson_index = index
             step = teaching.STEPS[index]
             with self.ctx.server.atomic():
                 for name in LAYERS:
                     self.ctx.evaluate.set_layer(name, name in step.layers)
                 self.ctx.nodes.target_arrows = step.target_arrows
+                self.ctx.nodes.set_lesson_labels(step.labels)
                 self.set_see_through(step.see_through)
                 self.ctx.nodes.update(self.ctx.session.last)
                 text = teaching.render(index, self.ctx.session.last, self.ctx.present.lesson_context())
@@ -293,10 +306,12 @@ class ViewController:
             saved = self.ctx.state.lesson_saved_layers
             self.ctx.state.lesson_index = None
             self.ctx.state.lesson_saved_layers = None
+            self.ctx.controls.show_legend(not self.ctx.state.presentation)
             with self.ctx.server.atomic():
                 for name, visible in (saved or {}).items():
                     self.ctx.evaluate.set_layer(name, visible)
                 self.ctx.nodes.target_arrows = True
+                self.ctx.nodes.set_lesson_labels(())
                 self.set_see_through(False)
                 self.ctx.nodes.update(self.ctx.session.last)
                 self.ctx.controls.learn.show_text("Lesson ended. Press **Next** to start again.")

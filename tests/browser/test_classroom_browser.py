@@ -1,6 +1,7 @@
 """The classroom, in headless Chromium: one session per tab (`rrbc view --per-client`) isolates two tabs (shared
 mode syncing them is tests/browser/test_app_browser.py::test_five_tabs_share_one_state), and presentation mode is
-legible at 1280x720 (a projector): panel text of at least 16 px and the fixture plate several hundred pixels wide.
+legible at 1280x720 (a projector): panel text of at least 24 px, every control reachable by scrolling, the lesson's
+Next in view without scrolling, and the fixture plate a few hundred pixels wide beside the panel.
 """
 
 from __future__ import annotations
@@ -8,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from rrbc_viz.camera import PRESENTATION_PANEL_WIDTH_PX
 from rrbc_viz.serve import serve
 
 from .helpers import UNDRAWN_TAB_SCRIPT, dismiss_software_webgl_notification, wait_for
@@ -20,6 +22,17 @@ _JS_FONT_SIZES = """() => { const out = {};
     if (!(el.innerText || '').trim() || !el.offsetParent) continue;
     const fs = parseFloat(getComputedStyle(el).fontSize); out[fs] = (out[fs] || 0) + 1; }
   return out; }"""
+
+# The panel's scroll area: its bottom edge, and after scrolling it to the end, the last control's bottom edge.
+_JS_PANEL_SCROLL = """() => { const v = document.querySelector('.mantine-Paper-root .mantine-ScrollArea-viewport');
+  v.scrollTop = v.scrollHeight; const r = v.getBoundingClientRect();
+  const all = [...v.querySelectorAll('button, input, label, p')].filter((e) => e.offsetParent);
+  const last = all[all.length - 1].getBoundingClientRect();
+  return {bottom: r.bottom, lastBottom: last.bottom, scrolled: v.scrollTop}; }"""
+_JS_SCROLL_TOP = (
+    """() => { document.querySelector('.mantine-Paper-root .mantine-ScrollArea-viewport').scrollTop = 0; }"""
+)
+_JS_SCROLLED = """() => document.querySelector('.mantine-Paper-root .mantine-ScrollArea-viewport').scrollTop"""
 
 _JS_PROJECT = """(pts) => { const m = window.__viserMutable; const obj = m.nodeRefFromName['/mesh'];
   obj.updateWorldMatrix(true, false); m.camera.updateMatrixWorld(); const V = m.camera.position.constructor;
@@ -62,13 +75,32 @@ def test_presentation_mode_is_legible_on_a_1280x720_projector(viser_app, browser
         page.wait_for_timeout(1500)  # the tab reports its camera; the app frames the view for it
         sizes = page.evaluate(_JS_FONT_SIZES)
         total = sum(sizes.values())
-        big = sum(n for fs, n in sizes.items() if float(fs) >= 16.0)
+        big = sum(n for fs, n in sizes.items() if float(fs) >= 24.0 - 0.1)
         assert total > 20 and big / total > 0.9, sizes
-        # the fixture plate's top (300 x 400 mm, centred at (475, 0, 15)) spans several hundred pixels
+        # the fixture plate's top (300 x 400 mm, centred at (475, 0, 15)) spans a few hundred pixels, left of the
+        # (wider) panel
         corners = [[325, -200, 15], [625, -200, 15], [625, 200, 15], [325, 200, 15]]
         xy = np.array(page.evaluate(_JS_PROJECT, corners))
         width = xy[:, 0].max() - xy[:, 0].min()
-        assert width > 350, xy
-        assert xy[:, 0].max() < 1280 - 384  # left of the panel
+        assert width > 250, xy
+        assert xy[:, 0].max() < 1280 - PRESENTATION_PANEL_WIDTH_PX  # left of the panel
+        # every control of the panel can be scrolled into the window: its scroll area ends inside the window, and
+        # scrolled to the bottom, the last control lies inside it
+        box = page.evaluate(_JS_PANEL_SCROLL)
+        assert box["bottom"] <= 720 + 1, box
+        assert box["lastBottom"] <= 720 + 1 and box["scrolled"] > 0, box
+        # the lesson: Next in view without scrolling, after every step
+        page.evaluate(_JS_SCROLL_TOP)
+        page.get_by_role("tab", name="Learn").click()
+        for k in range(3):
+            nxt = page.get_by_role("button", name="Next")
+            b = nxt.bounding_box()
+            assert b is not None and 0 <= b["y"] and b["y"] + b["height"] <= 720, (k, b)
+            assert page.evaluate(_JS_SCROLLED) < 1.0, k  # seen without scrolling the panel
+            nxt.click()
+            wait_for(
+                lambda k=k: f"Step {k + 1} of 9" in page.inner_text("body"), 20, message=f"step {k + 1}", page=page
+            )
+            page.evaluate(_JS_SCROLL_TOP)
     finally:
         context.close()

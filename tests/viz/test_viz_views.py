@@ -202,7 +202,7 @@ def test_the_arm_is_the_ur5s_own_description_with_its_meshes_posed_on_the_target
 
 def test_presentation_mode_enlarges_text_markers_and_labels_and_goes_back(app):
     from rrbc_viz.controllers.views import PRESENTATION_LABEL_SCALE, PRESENTATION_MARKERS
-    from rrbc_viz.controls import PRESENTATION_CSS
+    from rrbc_viz.controls import NORMAL_CSS, PRESENTATION_CSS
 
     marker = app.state.display.marker_mm
     label = app.nodes.labels["/targets/H1/gizmo/label"]
@@ -212,8 +212,64 @@ def test_presentation_mode_enlarges_text_markers_and_labels_and_goes_back(app):
     assert app.state.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
     assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(marker * PRESENTATION_MARKERS)
     assert label.font_screen_scale == pytest.approx(scale0 * PRESENTATION_LABEL_SCALE)
+    # labels at least 24 px on a 720 px tall projector image (viser draws a screen label 12 px per unit of
+    # font_screen_scale in an 800 px tall view, proportionally in others)
+    for h in [*app.nodes.labels.values(), app.nodes.nodes["/landing/scale"], app.nodes.arm.marks["label"]]:
+        assert h.font_screen_scale * 12 * 720 / 800 >= 24 - 1e-9, h.name
+    assert not app.controls.legend_open.visible and app.controls.legend_closed.visible  # the legend closes
+    import re
+
+    assert app.state.selected == ("targets", "H1")
+    assert re.fullmatch(r"H1 \d+\.\d{3} → \d+\.\d{3} mm", label.text), label.text  # short texts
+    assert app.nodes.labels["/targets/H2/gizmo/label"].text == "H2"
     app.views.set_presentation(True)  # idempotent
     assert app.state.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
     app.controls.view.presentation.value = False
-    assert not app.state.presentation and app.controls.style.content == ""
+    assert not app.state.presentation and app.controls.style.content == NORMAL_CSS
     assert app.state.display.marker_mm == pytest.approx(marker) and label.font_screen_scale == pytest.approx(scale0)
+    assert app.controls.legend_open.visible and not app.controls.legend_closed.visible
+
+
+def test_the_headline_is_the_summarys_rigid_to_rrbc(app, measured):
+    """One answer: the pinned headline shows the Explore summary's own RMS figures (targets in a scene, check rows in
+    a measurement file)."""
+    import re
+
+    for a, what in ((app, "targets"), (measured, "check rows")):
+        head = a.controls.headline.content
+        sm = a.session.last.summary
+        assert f"{sm['rmst_rigid_mm']:.3f}" in head and f"{sm['rmst_rrbc_mm']:.3f}" in head
+        assert f"RMS error over {sm['scored']} {what}" in head and a.controls.headline.visible
+        rig, rr = (float(x) for x in re.findall(r"<b[^>]*>([0-9.]+)</b>", head))
+        assert f"{rig:.3f} mm rigid → {rr:.3f} mm RRBC" in a.controls.explore.summary.content
+
+
+def test_the_bullseye_keeps_its_scale_during_a_drag_and_refits_after(app):
+    """A doubled error must look doubled while dragging: the ring (the drawing scale) is held until the drag ends."""
+    land0 = app.nodes.landing
+    p0 = np.array(app.session.layout["targets"].positions[0], float)
+    app.evaluate.handle_drag("targets", "H1", p0, "start")
+    rings = []
+    for dx in (40.0, 80.0, 120.0):  # H1 moves away from its fiducials: its errors change
+        app.evaluate.handle_drag("targets", "H1", p0 + [dx, 0.0, 0.0], "update")
+        rings.append(app.nodes.landing.ring_mm)
+        assert app.nodes.landing.scale == pytest.approx(land0.scale)
+    assert rings == [land0.ring_mm] * 3
+    app.evaluate.handle_drag("targets", "H1", p0 + [120.0, 0.0, 0.0], "end")
+    t = app.session.last.targets
+    biggest = max(np.linalg.norm(t.robot_rigid[0] - t.truth[0]), np.linalg.norm(t.robot_rrbc[0] - t.truth[0]))
+    assert app.nodes.landing.ring_mm >= biggest  # refitted at the end
+
+
+def test_lesson_steps_label_what_their_text_names(app):
+    from rrbc_viz import teaching
+
+    app.views.set_presentation(True)
+    for k, step in enumerate(teaching.STEPS):
+        app.views.lesson_go(k)
+        for kind in step.labels:
+            names = [n for n in app.nodes.labels if n.startswith(f"/{kind}/")]
+            assert names and all(app.nodes.labels[n].visible for n in names), (k + 1, kind)
+    assert {1, 2, 4, 6} <= {k for k, s in enumerate(teaching.STEPS) if s.labels}  # steps 2, 3, 5 and 7
+    app.views.lesson_stop()
+    assert not any(h.visible for n, h in app.nodes.labels.items() if n.startswith("/fiducials/"))
