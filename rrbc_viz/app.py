@@ -228,7 +228,9 @@ class RunningApp:
             st.display = self._default_display(ev)
             if st.presentation:
                 st.display = replace(st.display, marker_mm=st.display.marker_mm * PRESENTATION_MARKERS)
-            st.selected = ("targets", ev.targets.ids[0]) if len(ev.targets.ids) else None
+            # the first target; in measured data the first check (what is scored: the headline's numbers)
+            first = [p for p in ev.targets.ids if p in ev.check_ids] or list(ev.targets.ids)
+            st.selected = ("targets", first[0]) if first else None
             ctx.nodes.selected = st.selected
             st.camera_preset = OPENING
             session = ctx.session
@@ -240,6 +242,7 @@ class RunningApp:
                 ctx.controls.sync_settings(session.settings, session.kind)
                 ctx.controls.sync_display(st.display, session.kind)
                 ctx.controls.sync_layers(st.layers)
+                ctx.controls.view.show_applicable_layers(ctx.nodes.applicable_layers())
                 self.authoring.sync_history()
                 ctx.controls.explore.show_source(
                     f"**{loaded.label}**: "

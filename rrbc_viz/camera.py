@@ -5,7 +5,7 @@ for each browser tab's own image size (`rrbc_core.geometry.framing.frame_points`
 every point inside the part of the image the floating panel leaves free) and moves that tab's camera, or sets the
 initial camera of tabs still to come. Frames and units: robot frame, mm (the scene frame).
 
-Presets (View tab → Camera): the whole cell (mesh, robot, sensor), the work area (the point sets and the robot's
+Presets (View tab → Camera): the whole cell (mesh, robot, sensor; measured data: the data and their mesh), the work area (the point sets and the robot's
 base: the opening view), a close-up from above on the targets and fiducials, the sensor's view, the selected point. The Learn tab's steps frame what each step talks about (`teaching.Step.focus`).
 """
 
@@ -155,8 +155,9 @@ def preset_view(name: str, cell: CellGeometry, selected=None, marker_mm: float =
     """The View of a camera preset (`PRESETS`). `selected`: (M, 3) points the selected-point view must show (the
     point, its region, its landings), None for the work area."""
     work = cell.points("targets", "fiducials")
-    if name == "whole cell":
-        return View(cell.points("mesh", "registration", "fiducials", "targets", "robot", "sensor"), OBLIQUE)
+    if name == "whole cell":  # a modelled cell with its robot's base; measured data: the data (and their mesh)
+        robot = ("robot",) if cell.sensor_kind is not None else ()
+        return View(cell.points("mesh", "registration", "fiducials", "targets", "sensor", *robot), OBLIQUE)
     if name == "sensor's view":
         if cell.sensor_position is not None and cell.sensor_kind in ("stereo", "mocap", "laser_tracker"):
             return View(_halo(work, 2 * marker_mm), OBLIQUE, position=cell.sensor_position)

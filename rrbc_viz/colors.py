@@ -14,6 +14,7 @@ FIDUCIAL: Rgb = (255, 150, 30)
 FIDUCIAL_EXCLUDED: Rgb = (150, 150, 150)
 TARGET: Rgb = (20, 40, 110)
 TARGET_EXTRAPOLATED: Rgb = (235, 30, 200)
+CHECK: Rgb = (0, 100, 50)  # a measurement file's check rows (targets scored against their robot values)
 REGION: Rgb = (80, 170, 255)
 HULL: Rgb = (240, 190, 40)
 CORRECTION_FIDUCIAL: Rgb = (255, 110, 0)
@@ -36,6 +37,7 @@ DATA_COLORS: dict[str, Rgb] = {
     "fiducial": FIDUCIAL,
     "excluded fiducial": FIDUCIAL_EXCLUDED,
     "target": TARGET,
+    "check (measured data)": CHECK,
     "target outside the hull (extrapolated)": TARGET_EXTRAPOLATED,
     "region of variability": REGION,
     "fiducials' hull": HULL,

@@ -297,6 +297,11 @@ class ViewPanel:
     def show_slice_legend(self, markdown: str) -> None:
         self.slice_legend.content = markdown
 
+    def show_applicable_layers(self, names) -> None:
+        """Only the layers that have something to show get a checkbox (measured data: no mesh, arm or sensor)."""
+        for name, box in self.layers.items():
+            box.visible = name in names
+
     def sync_layers(self, layers: dict[str, bool]) -> None:
         with self.syncing.quiet():
             for name, box in self.layers.items():

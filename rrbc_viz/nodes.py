@@ -470,7 +470,11 @@ class SceneNodes:
             self._assign(
                 self.spheres[("targets", pid)],
                 "color",
-                colors.TARGET_EXTRAPOLATED if t.extrapolated[i] else colors.TARGET,
+                colors.TARGET_EXTRAPOLATED
+                if t.extrapolated[i]
+                else colors.CHECK
+                if pid in ev.check_ids
+                else colors.TARGET,
             )
             if ("targets", pid) not in self.dragging:
                 self._assign(self.gizmos[("targets", pid)], "position", tuple(t.positions[i]))
@@ -597,6 +601,19 @@ class SceneNodes:
             self._assign(tc, "disable_axes", not on)
             self._assign(tc, "disable_sliders", not on)
         self._show_labels()
+
+    def applicable_layers(self) -> tuple[str, ...]:
+        """The layers this build has something in (the View tab lists only these)."""
+        missing = set()
+        if "/mesh/cell" not in self.nodes:
+            missing.add("mesh")
+        if self.arm is None:
+            missing.add("arm")
+        if self.scene.get_handle_by_name("/sensor/camera0/body") is None:
+            missing.add("sensor")
+        if not self.regions:
+            missing.add("regions")
+        return tuple(n for n in LAYERS if n not in missing)
 
     def set_lesson_labels(self, kinds: tuple[str, ...]) -> None:
         """Show the labels of these kinds of point (a lesson step's, teaching.Step.labels) besides the others."""

@@ -28,22 +28,54 @@ def _mm(x) -> str:
     return "—" if x is None or not np.isfinite(x) else f"{float(x):.3f} mm"
 
 
-def point_names(ev: Evaluation) -> tuple[str, ...]:
-    """Choices of the "Selected point" dropdown: 'target H1', 'fiducial F1', … ('none' first)."""
-    return ("none",) + tuple(f"target {p}" for p in ev.targets.ids) + tuple(f"fiducial {p}" for p in ev.fiducial_ids)
+#: How the point list ("Selected point" dropdown) is ordered: its name -> what it sorts by.
+SORTS = ("file order", "error rigid", "error RRBC", "fiducial residual")
+_SEP = " · "
+
+
+def _word(ev: Evaluation, kind: str, pid: str) -> str:
+    if kind == "fiducials":
+        return "fiducial"
+    return "check" if pid in ev.check_ids else "target"
+
+
+def point_names(ev: Evaluation, sort: str = "file order") -> tuple[str, ...]:
+    """Choices of the "Selected point" dropdown, a point list ('none' first): targets (a file's check rows called
+    checks) with their error rigid → RRBC, fiducials with their residual (the |correction| RRBC reads there), in
+    file order or sorted by `sort` (`SORTS`, largest first): 'check C3 · 3.412 → 0.871 mm', 'fiducial F1 · 0.512 mm'."""
+    t = ev.targets
+    rows = []
+    for i, pid in enumerate(t.ids):
+        rig, rr = float(t.error_rigid[i]), float(t.error_rrbc[i])
+        text = (
+            f" {rig:.3f} → {rr:.3f} mm" if np.isfinite(rig) else f" ê {float(np.linalg.norm(t.correction[i])):.3f} mm"
+        )
+        rows.append((f"{_word(ev, 'targets', pid)} {pid}{_SEP}{text.strip()}", rig, rr, -np.inf, i))
+    res = np.linalg.norm(np.nan_to_num(ev.corrections), axis=1) if len(ev.fiducial_ids) else np.zeros(0)
+    for i, pid in enumerate(ev.fiducial_ids):
+        rows.append((f"fiducial {pid}{_SEP}{res[i]:.3f} mm", -np.inf, -np.inf, float(res[i]), len(t.ids) + i))
+    key = {"error rigid": 1, "error RRBC": 2, "fiducial residual": 3}.get(sort)
+    if key is not None:
+        rows.sort(key=lambda r: (-np.nan_to_num(r[key], nan=-np.inf), r[4]))
+    return ("none",) + tuple(r[0] for r in rows)
 
 
 def parse_choice(choice: str) -> tuple[str, str] | None:
     """(kind, id) of a dropdown choice, None for 'none'."""
+    choice = choice.split(_SEP)[0]
     if choice == "none" or " " not in choice:
         return None
     word, pid = choice.split(" ", 1)
-    return ({"target": "targets", "fiducial": "fiducials"}[word], pid)
+    return ({"target": "targets", "check": "targets", "fiducial": "fiducials"}[word], pid)
 
 
-def choice_of(selected: tuple[str, str] | None) -> str:
+def choice_of(selected: tuple[str, str] | None, choices: tuple[str, ...] = ()) -> str:
+    """The dropdown choice of a selection: the entry of `choices` that names it (with its numbers), else its name."""
     if selected is None:
         return "none"
+    for c in choices:
+        if parse_choice(c) == tuple(selected):
+            return c
     kind, pid = selected
     return f"{'target' if kind == 'targets' else 'fiducial'} {pid}"
 
@@ -66,7 +98,7 @@ def info_card(ev: Evaluation, selected: tuple[str, str] | None, region_fraction:
         t = ev.targets
         i = t.ids.index(pid)
         lines = [
-            f"**Target {pid}** at {_v(t.positions[i])} mm (robot frame)",
+            f"**{_word(ev, kind, pid).capitalize()} {pid}** at {_v(t.positions[i])} mm (robot frame)",
             f"- sensor reading x = {_v(t.sensor[i])} mm (sensor frame)",
             f"- correction ê = {_v(t.correction[i])} mm, |ê| = {float(np.linalg.norm(t.correction[i])):.3f} mm"
             + (f" ± {float(np.linalg.norm(t.correction_std[i])):.3f} (1σ)" if t.correction_std is not None else ""),

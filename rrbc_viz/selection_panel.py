@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import viser
 
-from .selection_card import parse_choice
+from .selection_card import SORTS, parse_choice
 
 if TYPE_CHECKING:
     from .actions import Actions
@@ -37,6 +37,9 @@ class SelectionPanel:
         self.app, self.syncing = app, syncing
         with gui.add_folder("Selected point"):
             self.choice = gui.add_dropdown("Select", ("none",), initial_value="none")
+            self.sort = gui.add_dropdown(
+                "List by", SORTS, initial_value=SORTS[0], hint="order the points above: file order, or largest first"
+            )
             self.info = gui.add_markdown("")
             self.exclude = gui.add_button("Exclude / include this fiducial", visible=False)
             self.bullseye = Bullseye(gui)
@@ -49,6 +52,11 @@ class SelectionPanel:
                     app.views.select(None, client=event.client)
                 else:
                     app.views.select(sel[0], sel[1], client=event.client)
+
+        @self.sort.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if not self.syncing.on:
+                app.views.set_point_sort(self.sort.value)
 
         @self.exclude.on_click
         def _(event: viser.GuiEvent) -> None:

@@ -44,6 +44,7 @@ class AppState:
 
     selected: tuple[str, str] | None = None
     camera_preset: str = OPENING
+    point_sort: str = "file order"  # how the point list is ordered (selection_card.SORTS)
     presentation: bool = False
     display: Display = field(default_factory=Display)
     layers: dict[str, bool] = field(default_factory=lambda: dict(DEFAULT_LAYERS))

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 import tempfile
 import time
@@ -211,8 +212,8 @@ def click_label(page: Any, label: str) -> None:
     raise ShotSkipped(f"no visible GUI element labelled {label!r} (page as it was: {debug})")
 
 
-def click_role(page: Any, role: str, name: str) -> None:
-    loc = page.get_by_role(role, name=name, exact=True).filter(visible=True).first
+def click_role(page: Any, role: str, name: str | re.Pattern) -> None:
+    loc = page.get_by_role(role, name=name, exact=isinstance(name, str)).filter(visible=True).first
     try:
         loc.wait_for(state="visible", timeout=CLICK_TIMEOUT_S * 1000)
     except Exception:  # noqa: BLE001
@@ -275,7 +276,8 @@ def run_action(page: Any, h: Any, app: Any, action: tuple[str, Any]) -> None:
         except Exception:  # noqa: BLE001
             raise ShotSkipped(f"no visible dropdown labelled {label!r}") from None
         box.click()
-        click_role(page, "option", str(option))
+        # an option is named by its text, or starts with it (the point list adds each point's numbers: "target H5 · …")
+        click_role(page, "option", re.compile(rf"^{re.escape(str(option))}( · .*)?$"))
     elif kind == "drag":
         drag_gizmo(page, h, app, *arg)
     elif kind == "zoom":

@@ -201,6 +201,8 @@ class Evaluation:
     warnings: tuple[str, ...] = ()
     #: with interpolation "auto": what cross-validation over the fiducials chose (`interpolation.auto.AutoChoice`)
     choice: AutoChoice | None = None
+    #: the targets that are a measurement file's check rows (scored against their robot values)
+    check_ids: frozenset = frozenset()
 
 
 def hull_edges(points) -> np.ndarray:
@@ -354,6 +356,7 @@ def evaluate(
         coverage,
         warnings,
         getattr(fitted, "choice", None),
+        frozenset(check_ids),
     )
 
 

@@ -243,6 +243,14 @@ class ViewController:
                 self.ctx.nodes.update(ev)  # the landing bullseye follows the selected target
                 self.show_selection(ev)
 
+    def set_point_sort(self, sort: str) -> None:
+        """Order the point list (the "Selected point" dropdown) by `sort` (selection_card.SORTS)."""
+        if sort not in selection_card.SORTS:
+            raise InputError(f"unknown order {sort!r}: {', '.join(selection_card.SORTS)}")
+        with self.ctx.lock:
+            self.ctx.state.point_sort = sort
+            self.show_selection(self.ctx.session.last)
+
     def on_point_click(self, kind: str, pid: str, client=None) -> None:
         try:
             self.select(kind, pid, client=client)
@@ -253,7 +261,8 @@ class ViewController:
         """Refresh the info card, the bullseye and the selection dropdown (caller holds the lock)."""
         c = self.ctx.controls
         sel = self.ctx.state.selected
-        c.sync_selection(selection_card.point_names(ev), selection_card.choice_of(sel), sel)
+        names = selection_card.point_names(ev, self.ctx.state.point_sort)
+        c.sync_selection(names, selection_card.choice_of(sel, names), sel)
         state = self.ctx.planning.state if self.ctx.planning is not None else None
         fraction = None
         if sel is not None and sel[0] == "targets" and state is not None and sel[1] in state.target_ids:

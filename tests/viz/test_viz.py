@@ -193,7 +193,9 @@ def test_selecting_a_fiducial_then_excluding_and_including_it(app):
     sphere = app.nodes.spheres[("fiducials", "F3")]
     n = len(app.session.last.fiducial_ids)
     _click(sphere)  # a click selects: F3 alone carries the drag gizmo, its card shows its numbers
-    assert app.state.selected == ("fiducials", "F3") and app.controls.selection.choice.value == "fiducial F3"
+    assert app.state.selected == ("fiducials", "F3") and app.controls.selection.choice.value.startswith(
+        "fiducial F3 · "
+    )
     assert [key for key, tc in app.nodes.gizmos.items() if not tc.disable_axes] == [("fiducials", "F3")]
     assert "**Fiducial F3**" in app.controls.selection.info.content and app.controls.selection.exclude.visible
     assert app.nodes.labels["/fiducials/F3/gizmo/label"].visible  # its label, with the labels layer off

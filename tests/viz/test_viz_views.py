@@ -273,3 +273,42 @@ def test_lesson_steps_label_what_their_text_names(app):
     assert {1, 2, 4, 6} <= {k for k, s in enumerate(teaching.STEPS) if s.labels}  # steps 2, 3, 5 and 7
     app.views.lesson_stop()
     assert not any(h.visible for n, h in app.nodes.labels.items() if n.startswith("/fiducials/"))
+
+
+def test_a_researcher_sees_checks_as_checks_and_only_the_layers_that_apply(measured):
+    """A measurement file: check rows named and coloured as checks, the first selection a check (what the headline
+    scores), no mesh, arm, sensor or region layers to tick, 'whole cell' framed on the data (no robot origin metres
+    away), and a point list that sorts by error and selects."""
+    from rrbc_viz import colors
+    from rrbc_viz.camera import preset_view
+    from rrbc_viz.selection_card import parse_choice
+
+    ev = measured.session.last
+    checks = sorted(ev.check_ids)
+    assert checks and measured.state.selected == ("targets", [p for p in ev.targets.ids if p in ev.check_ids][0])
+    assert measured.controls.selection.info.content.startswith(f"**Check {measured.state.selected[1]}**")
+    assert tuple(measured.nodes.spheres[("targets", checks[0])].color) in (colors.CHECK, colors.TARGET_EXTRAPOLATED)
+    others = [p for p in ev.targets.ids if p not in ev.check_ids]
+    if others:
+        assert tuple(measured.nodes.spheres[("targets", others[0])].color) in (
+            colors.TARGET,
+            colors.TARGET_EXTRAPOLATED,
+        )
+    shown = {n for n, box in measured.controls.view.layers.items() if box.visible}
+    assert not shown & {"mesh", "arm", "sensor", "regions"} and {"fiducials", "targets", "landing"} <= shown
+    whole = preset_view("whole cell", measured.views.cell_geometry()).points
+    data = np.vstack([ev.fiducial_positions, ev.targets.positions, ev.registration_positions])
+    assert whole.min(0).tolist() == data.min(0).tolist() and whole.max(0).tolist() == data.max(0).tolist()
+    measured.controls.selection.sort.value = "error rigid"  # the user orders the list
+    names = measured.controls.selection.choice.options
+    rigid = {p: e for p, e in zip(ev.targets.ids, ev.targets.error_rigid) if np.isfinite(e)}
+    listed = [parse_choice(n)[1] for n in names[1:] if parse_choice(n)[1] in rigid]
+    assert listed == sorted(rigid, key=lambda p: -rigid[p])  # largest first
+    assert names[1].startswith("check ") and " → " in names[1]
+    measured.controls.selection.choice.value = names[2]  # picking a row selects it
+    assert measured.state.selected == parse_choice(names[2])
+
+
+def test_the_app_and_a_scene_keep_every_layer(app):
+    shown = {n for n, box in app.controls.view.layers.items() if box.visible}
+    assert {"mesh", "arm", "sensor", "regions"} <= shown
