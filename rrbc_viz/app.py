@@ -229,8 +229,8 @@ class RunningApp:
             if st.presentation:
                 st.display = replace(st.display, marker_mm=st.display.marker_mm * PRESENTATION_MARKERS)
             # the first target; in measured data the first check (what is scored: the headline's numbers)
-            first = [p for p in ev.targets.ids if p in ev.check_ids] or list(ev.targets.ids)
-            st.selected = ("targets", first[0]) if first else None
+            first_ids = [p for p in ev.targets.ids if p in ev.check_ids] or list(ev.targets.ids)
+            st.selected = ("targets", first_ids[0]) if first_ids else None
             ctx.nodes.selected = st.selected
             st.camera_preset = OPENING
             session = ctx.session
