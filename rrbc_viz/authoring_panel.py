@@ -29,6 +29,7 @@ class AuthoringPanel:
     def __init__(self, gui, app: Actions):
         with gui.add_folder("Edit the cell"):
             self.mode = gui.add_dropdown("Click on the cell adds", tuple(k for k, _ in CLICK_MODES))
+            self.mode_md = gui.add_markdown("Clicks **select** points.")
             self.region = gui.add_slider("Target region (mm)", 0.5, 50.0, 0.5, 4.0)
             gui.add_markdown(
                 f"Points land where you click on the mesh (registration points {REGISTRATION_LIFT_MM:g} mm above it, "
@@ -62,11 +63,24 @@ class AuthoringPanel:
             f = self.mesh.value
             app.authoring.upload_mesh(f.name, f.content, client=event.client)
 
+    def show_mode(self, markdown: str) -> None:
+        """What a click on the cell does now."""
+        self.mode_md.content = markdown
+
     def sync(self, can_undo: bool, can_redo: bool, scene: bool, sensor=None) -> None:
         if sensor is not None:
             self.sensor.value = tuple(float(round(v, 1)) for v in sensor)
         self.undo.disabled = not can_undo
         self.redo.disabled = not can_redo
-        for w in (self.mode, self.region, self.delete, self.undo, self.redo, self.sensor, self.move_sensor):
+        for w in (
+            self.mode,
+            self.mode_md,
+            self.region,
+            self.delete,
+            self.undo,
+            self.redo,
+            self.sensor,
+            self.move_sensor,
+        ):
             w.visible = scene
         self.save_scene.visible = self.plan.visible = scene

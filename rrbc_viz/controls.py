@@ -409,6 +409,9 @@ class FilePanel:
     server path), or upload one; download the data or the results."""
 
     def __init__(self, gui, app: Actions):
+        self.gui = gui
+        self.confirm_yes: viser.GuiButtonHandle | None = None  # the last question's buttons (`confirm`)
+        self.confirm_keep: viser.GuiButtonHandle | None = None
         self._showing = False  # show_stations is setting the Station menu: not a user's choice
         self.path = gui.add_dropdown(
             "Scene or data file", ("",), initial_value="", hint="Files in scenes/ and in the folders given by --data"
@@ -450,6 +453,21 @@ class FilePanel:
 
         self.download_csv.on_click(lambda event: app.files.download("csv", client=event.client))
         self.download_json.on_click(lambda event: app.files.download("json", client=event.client))
+
+    def confirm(self, title: str, text: str, yes: str, on_yes: Callable[[], object]) -> None:
+        """Ask before an action that discards something (a modal: `yes` runs `on_yes`, "Keep editing" closes)."""
+        with self.gui.add_modal(title) as modal:
+            self.gui.add_markdown(text)
+            go = self.gui.add_button(yes, color="red")
+            keep = self.gui.add_button("Keep editing")
+
+        def _yes(event: viser.GuiEvent) -> None:
+            modal.close()
+            on_yes()
+
+        go.on_click(_yes)
+        keep.on_click(lambda event: modal.close())
+        self.confirm_yes, self.confirm_keep = go, keep  # the question last asked
 
     def show_stations(self, stations: tuple[str, ...], current: str | None) -> None:
         """The Station menu: shown with the file's stations when it has a group column, hidden otherwise."""

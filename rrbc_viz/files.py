@@ -140,8 +140,11 @@ def load_source(source=None, mesh=None) -> Loaded:
 
 
 def _from_scene(scene, label: str) -> Loaded:
+    from rrbc_core.session.authoring import mark_saved
+
     session = ExplorerSession.from_scene(scene)
     session.evaluate()
+    mark_saved(session)  # as its file has it: nothing unsaved yet
     return Loaded(session, scene.load_mesh(), label)
 
 
@@ -171,6 +174,15 @@ def load_station(loaded: Loaded, station: str) -> Loaded:
         attach_arm(fresh, *session.arm_spec)
     k = fresh.stations.index(fresh.station) + 1
     return Loaded(fresh, loaded.mesh, f"{base}, station {fresh.station!r} ({k} of {len(fresh.stations)})")
+
+
+def safe_file_name(name: str, suffix: str) -> str:
+    """A file name for an upload kept on the server: the user's base name (letters, digits, '-', '_', '.'), else
+    'cell', with `suffix` (lower case)."""
+    import re
+
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(str(name)).stem).strip("._")[:80] or "cell"
+    return stem + suffix
 
 
 def load_upload(name: str, content: bytes) -> Loaded:

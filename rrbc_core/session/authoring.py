@@ -35,6 +35,42 @@ def _restore(session: ExplorerSession, state) -> None:
     session._heat_cache.clear()
 
 
+def fingerprint(session: ExplorerSession) -> str:
+    """A digest of what a saved scene holds of the session: every point's id and position, the targets' regions,
+    the candidates and the sensor's pose (equal digests: nothing to save)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for kind in ("registration", "fiducials", "targets"):
+        g = session.layout[kind]
+        h.update(repr((kind, tuple(g.ids))).encode())
+        h.update(np.ascontiguousarray(np.asarray(g.positions, float)).tobytes())
+    h.update(repr(tuple(session.candidates.ids)).encode())
+    h.update(np.ascontiguousarray(np.asarray(session.candidates.positions, float)).tobytes())
+    for pid in sorted(session.regions):
+        r = session.regions[pid]
+        h.update(repr((pid, r.kind)).encode())
+        h.update(np.ascontiguousarray(np.asarray(getattr(r, "size", np.zeros(3)), float)).tobytes())
+    pose = session.sensor_to_robot
+    if pose is not None:
+        h.update(np.ascontiguousarray(np.asarray(pose.rotation, float)).tobytes())
+        h.update(np.ascontiguousarray(np.asarray(pose.translation, float)).tobytes())
+    return h.hexdigest()
+
+
+def mark_saved(session: ExplorerSession) -> None:
+    """The session as it is now is saved (opened from its file, or downloaded as a scene)."""
+    session.saved_fingerprint = fingerprint(session)
+
+
+def has_unsaved_edits(session: ExplorerSession) -> bool:
+    """Whether a scene session differs from what was last opened or saved (measured data are never edited)."""
+    if session.kind != "scene":
+        return False
+    saved = getattr(session, "saved_fingerprint", None)
+    return saved is not None and saved != fingerprint(session)
+
+
 def checkpoint(session: ExplorerSession) -> None:
     """Remember the session as it is now, so the next change can be undone (the app calls this when a drag
     starts)."""
@@ -204,7 +240,7 @@ def scene_spec(session: ExplorerSession, mesh: str | None = None):
     depth = max(float((look - pos) @ r[:, 2]), 1.0)
     s = session.settings
     return SceneSpec(
-        name=sc.name,
+        name=session.name,
         description=sc.description,
         mesh=Path(sc.mesh_path).name if mesh is None else mesh,
         seed=int(s.seed),

@@ -101,6 +101,7 @@ class ExplorerSession:
         self.stations: tuple[str, ...] = ()  # a file with a group column: its stations (from_measurements)
         self.station: str | None = None  # ... the one open
         self.file_mset = None  # ... and the whole file
+        self.saved_fingerprint: str | None = None  # authoring.fingerprint of what was last opened or saved
         self.arm = None  # measured data: the robot's URDF description (session.arm.attach_arm), else None
         self.arm_joints: dict = {}  # ... each point's joint values, (kind, id) -> (I,) rad or mm
         self.arm_spec: tuple | None = None  # ... (urdf, tip, base), kept when another station opens

@@ -10,6 +10,7 @@ Frames and units: robot frame, mm. A registration point goes `REGISTRATION_LIFT_
 from __future__ import annotations
 
 import json
+import shutil
 import tempfile
 import traceback
 from pathlib import Path
@@ -57,6 +58,10 @@ class AuthoringController:
         self.click_mode = kind
         if region_mm is not None:
             self.target_region_mm = float(region_mm)
+        word = dict((k, w) for w, k in CLICK_MODES)[kind]
+        self.ctx.controls.authoring.show_mode(
+            "Clicks **select** points." if kind is None else f"**Adding {word}s**: click on the cell's mesh."
+        )
 
     def on_scene_click(self, event) -> None:
         if self.click_mode is None:
@@ -82,7 +87,22 @@ class AuthoringController:
                 return None
             if kind == "registration":
                 hit = hit + [0.0, 0.0, REGISTRATION_LIFT_MM]
-            return self._author(lambda s: authoring.add_point(s, kind, hit, region_mm=self.target_region_mm), client)
+            before = set(self._ids(kind))
+            ev = self._author(lambda s: authoring.add_point(s, kind, hit, region_mm=self.target_region_mm), client)
+            if ev is None:
+                return None
+            new = [p for p in self._ids(kind) if p not in before]
+            word = dict((k, w) for w, k in CLICK_MODES)[kind]
+            where = ", ".join(f"{v:.1f}" for v in hit)
+            self.ctx.message(f"Added {word} {new[0]} at ({where}) mm", client, title="Added", error=False)
+            if kind in ("targets", "fiducials"):  # the new point is selected: its card shows it, its handle moves it
+                self.ctx.views.select(kind, new[0], client=client)
+            return ev
+
+    def _ids(self, kind: str) -> tuple:
+        if kind == "candidates":
+            return tuple(self.ctx.session.candidates.ids)
+        return tuple(self.ctx.session.layout[kind].ids)
 
     def delete_selected(self, client=None):
         """Delete the selected point."""
@@ -150,15 +170,20 @@ class AuthoringController:
             return False
         with self.ctx.lock:
             d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
-            path = d / ("cell" + suffix)
+            path = d / files.safe_file_name(name, suffix)  # the user's own name: a saved scene names it so
             path.write_bytes(content)
             try:
                 mesh = load_cell_mesh(path)
             except InputError as exc:
+                shutil.rmtree(d, ignore_errors=True)
                 self.ctx.message(str(exc).replace(str(path), str(name)), client, title="Upload refused")
                 return False
             self.ctx.loaded = files.Loaded(self.ctx.loaded.session, mesh, self.ctx.loaded.label)
+            if self.uploaded_mesh is not None:  # the mesh it replaces: its temporary copy goes
+                shutil.rmtree(self.uploaded_mesh.parent, ignore_errors=True)
             self.uploaded_mesh = path
+            if self.ctx.session.kind == "scene":  # the cell is now this mesh's: it carries its name
+                self.ctx.session.name = path.stem
             self.redraw(self.ctx.session.last)
         self.ctx.message(f"{name}: the cell's mesh now ({len(mesh.faces)} triangles)", client, error=False)
         return True
@@ -190,6 +215,13 @@ class AuthoringController:
         except (InputError, ValueError) as exc:
             self.ctx.message(str(exc), client, title="Export failed")
             return None
-        for name, content in out:
-            (client or self.ctx.server).send_file_download(name, content)
+        for name, content in out:  # saved at once under their full names (not links in a notification)
+            (client or self.ctx.server).send_file_download(name, content, save_immediately=True)
+        if what == "scene":
+            authoring.mark_saved(self.ctx.session)
+            mesh = self.uploaded_mesh.name if self.uploaded_mesh is not None else Path(self.ctx.session.mesh_path).name
+            self.ctx.message(
+                f"Saved {out[0][0]}: keep the mesh {mesh} beside it (the scene names it)", client, title="Saved",
+                error=False,
+            )  # fmt: skip
         return out

@@ -8,7 +8,7 @@ import json
 from typing import TYPE_CHECKING
 
 from rrbc_core.errors import InputError
-from rrbc_core.session import views
+from rrbc_core.session import authoring, views
 
 from .. import files
 
@@ -23,9 +23,30 @@ class FileController:
         self.ctx = ctx
 
     # --------------------------------------------------------------------------------------------- files
-    def load(self, source=None, mesh=None, client=None) -> bool:
+    def _unsaved(self, what: str, again, client) -> bool:
+        """True (and a question asked) when the session has edits not saved as a scene: `again()` runs once the user
+        agrees to discard them."""
+        if not authoring.has_unsaved_edits(self.ctx.session):
+            return False
+        self.ctx.controls.file.confirm(
+            "Unsaved edits",
+            f"The cell **{self.ctx.session.name}** has edits that are not saved (File → Save scene). Opening "
+            f"{what} discards them.",
+            "Discard the edits and open",
+            again,
+        )
+        return True
+
+    def load(self, source=None, mesh=None, client=None, confirmed: bool = False) -> bool:
         """Open a scene (.toml) or measurement file (.csv; optional mesh). On bad input the current session
-        stays and a message says why; returns whether the file was loaded."""
+        stays and a message says why; returns whether the file was loaded. A session with unsaved edits asks first
+        (`confirmed`: the user agreed)."""
+        if not confirmed and self._unsaved(
+            str(getattr(source, "name", source) or "the default scene"),
+            lambda: self.load(source, mesh, client, confirmed=True),
+            client,
+        ):
+            return False
         try:
             loaded = files.load_source(source, mesh)
         except InputError as exc:
@@ -67,7 +88,11 @@ class FileController:
         self.ctx.install(loaded)
         return True
 
-    def load_upload(self, name: str, content: bytes, client=None) -> bool:
+    def load_upload(self, name: str, content: bytes, client=None, confirmed: bool = False) -> bool:
+        if not confirmed and self._unsaved(
+            str(name), lambda: self.load_upload(name, content, client, confirmed=True), client
+        ):
+            return False
         try:
             loaded = files.load_upload(name, content)
         except InputError as exc:
@@ -108,8 +133,6 @@ class FileController:
         except (InputError, ValueError) as exc:
             self.ctx.message(str(exc), client, title="Export failed")
             return None
-        if client is not None:
-            client.send_file_download(name, content)
-        else:
-            self.ctx.server.send_file_download(name, content)
+        # saved at once under its full name (not a link in a notification)
+        (client or self.ctx.server).send_file_download(name, content, save_immediately=True)
         return name, content

@@ -432,8 +432,10 @@ def test_bad_files_leave_the_server_and_session(app, tmp_path):
     with urllib.request.urlopen(app.url, timeout=10) as r:
         assert r.status == 200
     assert app.evaluate.handle_drag("targets", "H1", [401.0, -150.0, 15.0], "end") is not None
-    # a good measurement upload replaces the session
-    assert app.files.load_upload("example.csv", EXAMPLE_CSV.read_bytes()) is True
+    # a good measurement upload replaces the session, once the user agrees to discard the unsaved move of H1
+    assert app.files.load_upload("example.csv", EXAMPLE_CSV.read_bytes()) is False
+    assert app.session is session and app.controls.file.confirm_yes is not None
+    _press(app.controls.file.confirm_yes)
     assert app.session.kind == "measurements"
 
 

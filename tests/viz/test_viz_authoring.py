@@ -92,14 +92,30 @@ def test_an_uploaded_mesh_becomes_the_cells(app, tmp_path):
     box.apply_translation((450, 0, 40))  # a slab over the plate: clicks now land on its top (z = 50)
     stl = tmp_path / "slab.stl"
     box.export(stl)
-    assert app.authoring.upload_mesh("slab.stl", stl.read_bytes())
+    assert app.authoring.upload_mesh("bench_v3.stl", stl.read_bytes())
+    assert app.session.name == "bench_v3"  # the cell carries its mesh's name
     app.authoring.set_click_mode("fiducials")
+    assert "Adding fiducials" in app.controls.authoring.mode_md.content  # the mode is shown
     app.authoring.add_at_ray([450, 0, 800], [0, 0, -1])
     np.testing.assert_allclose(app.session.last.fiducial_positions[-1], [450, 0, 50], atol=1e-3)
+    new = app.session.last.fiducial_ids[-1]
+    assert app.state.selected == ("fiducials", new)  # what was added is selected, and said with its place
+    assert f"Added fiducial {new} at (450.0, 0.0, 50.0) mm" in app.last_message
     assert not app.authoring.upload_mesh("notes.txt", b"hello")
     assert not app.authoring.upload_mesh("bad.stl", b"\x00" * 10)
-    ((_, content),) = app.authoring.export_authoring("scene")
-    assert b'mesh = "cell.stl"' in content  # saved beside the scene by the user
+    ((name, content),) = app.authoring.export_authoring("scene")
+    assert b'mesh = "bench_v3.stl"' in content and b'name = "bench_v3"' in content and name == "bench_v3.toml"
+    assert app.authoring.download_authoring("scene") is not None
+    assert "keep the mesh bench_v3.stl beside it" in app.last_message
+    # the user keeps the two side by side: the scene reloads with its mesh
+    from rrbc_core.io.scene_toml import load_scene
+
+    (tmp_path / "saved").mkdir()
+    (tmp_path / "saved" / name).write_bytes(content)
+    (tmp_path / "saved" / "bench_v3.stl").write_bytes(stl.read_bytes())
+    again = load_scene(tmp_path / "saved" / name)
+    np.testing.assert_allclose(again.load_mesh().bounds, box.bounds, atol=1e-6)
+    assert again.name == "bench_v3" and new in again.fiducials.ids
     with pytest.raises(InputError, match="unknown export"):
         app.authoring.export_authoring("zip")
 
