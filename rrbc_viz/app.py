@@ -205,6 +205,7 @@ class RunningApp:
         self.evaluate.stop()
         self.montecarlo.close()
         self.ctx.planning.stop()
+        self.authoring.remove_upload()  # the uploaded mesh's temporary copy (a per-tab app too, when its tab goes)
         if not self.owns_server:
             return
         with contextlib.redirect_stdout(io.StringIO()) if self.quiet else contextlib.nullcontext():

@@ -199,7 +199,10 @@ def load_upload(name: str, content: bytes) -> Loaded:
         with tempfile.TemporaryDirectory(prefix="rrbc-upload-") as tmp:
             path = Path(tmp) / (base if base.lower().endswith(".toml") else base + ".toml")
             path.write_text(text, encoding="utf-8")
-            return _from_scene(load_scene(path), f"uploaded scene {base}")
+            try:
+                return _from_scene(load_scene(path), f"uploaded scene {base}")
+            except InputError as exc:  # the message names the user's file, never the server's folders
+                raise InputError(str(exc).replace(str(path), path.name).replace(tmp + os.sep, "")) from None
     return _from_measurements(parse_measurements(text, base), None, f"measurements {base} (uploaded)")
 
 

@@ -31,6 +31,9 @@ def load_cell_mesh(path):
         raise InputError(f"{p}: mesh file not found")
     if p.stat().st_size > MESH_MAX_BYTES:
         raise InputError(f"{p}: mesh file larger than {MESH_MAX_BYTES >> 20} MiB; decimate it first")
+    declared = declared_triangles(p)
+    if declared is not None and declared > MESH_MAX_FACES:  # refused from its header, before it is parsed
+        raise InputError(f"{p}: {declared} triangles; at most {MESH_MAX_FACES} (decimate it first)")
     try:
         mesh = _load_mesh_file(p)
     except Exception as exc:  # trimesh raises many types for unreadable files
@@ -51,6 +54,44 @@ def load_cell_mesh(path):
             "(scale by 1000)"
         )
     return mesh
+
+
+def declared_triangles(path) -> int | None:
+    """The number of triangles a mesh file says it holds, read without parsing the mesh (bounded memory): a binary
+    STL's count field, an ASCII STL's facets, a PLY header's face element, an OBJ's face lines (at least one
+    triangle each); None for other formats or a file that says nothing readable."""
+    p = Path(path)
+    suffix = p.suffix.lower()
+    size = p.stat().st_size
+    with open(p, "rb") as f:
+        head = f.read(512)
+        if suffix == ".stl":
+            n = int.from_bytes(head[80:84], "little") if len(head) >= 84 else -1
+            if 84 + 50 * n == size:  # binary: the count field agrees with the file's length
+                return n
+            return _count(f, b"facet normal") if head.lstrip()[:5].lower() == b"solid" else None
+        if suffix == ".ply" and head.startswith(b"ply"):
+            for line in head.split(b"\n"):
+                parts = line.split()
+                if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"face" and parts[2].isdigit():
+                    return int(parts[2])
+            return None
+        if suffix == ".obj":
+            return _count(f, b"\nf ")
+    return None
+
+
+def _count(f, token: bytes, chunk: int = 1 << 22) -> int:
+    """Occurrences of `token` in an open binary file, read in chunks (memory: one chunk)."""
+    f.seek(0)
+    n, tail = 0, b""
+    while True:
+        block = f.read(chunk)
+        if not block:
+            return n
+        data = tail + block  # a token across the boundary starts in the tail, shorter than the token
+        n += data.count(token)
+        tail = data[-(len(token) - 1) :] if len(token) > 1 else b""
 
 
 def inside(mesh, points) -> np.ndarray:

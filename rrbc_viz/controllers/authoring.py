@@ -188,6 +188,11 @@ class AuthoringController:
         self.ctx.message(f"{name}: the cell's mesh now ({len(mesh.faces)} triangles)", client, error=False)
         return True
 
+    def remove_upload(self) -> None:
+        """Remove the uploaded mesh's temporary copy (the app stops)."""
+        if self.uploaded_mesh is not None:
+            shutil.rmtree(self.uploaded_mesh.parent, ignore_errors=True)
+
     def export_authoring(self, what: str) -> list[tuple[str, bytes]]:
         """Files of "scene" (the session as a scene TOML), "plan" (the measurement plan CSV) or "slicer" (two
         markups files of the current data)."""

@@ -192,3 +192,31 @@ def test_a_mesh_in_another_folder_is_copied_beside_the_scene(tmp_path):
     r = _run("scene", "new", "--mesh", mesh_path, "--targets", targets_path, "--out", out2)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "already holds" in r.stderr
     assert not out2.exists()
+
+
+def test_a_mesh_file_too_large_is_refused_from_its_header(tmp_path):
+    """Issue 31: a mesh over the triangle limit is refused before it is parsed (its header says how many)."""
+    import struct
+
+    import trimesh
+
+    from rrbc_core.authoring import cell_geometry as cg
+    from rrbc_core.errors import InputError
+
+    box = trimesh.creation.box(extents=(100, 100, 100))
+    for fmt in ("stl", "obj", "ply"):
+        p = tmp_path / f"box.{fmt}"
+        box.export(p)
+        assert cg.declared_triangles(p) == 12, fmt
+    ascii_stl = tmp_path / "ascii.stl"
+    ascii_stl.write_text(trimesh.exchange.stl.export_stl_ascii(box))
+    assert cg.declared_triangles(ascii_stl) == 12
+    big = tmp_path / "big.stl"  # a binary STL whose count says 3 million (its length agrees): never parsed
+    n = 3_000_000
+    with open(big, "wb") as f:
+        f.write(b"\0" * 80 + struct.pack("<I", n))
+        f.seek(84 + 50 * n - 1)
+        f.write(b"\0")
+    assert cg.declared_triangles(big) == n
+    with pytest.raises(InputError, match="3000000 triangles; at most"):
+        cg.load_cell_mesh(big)

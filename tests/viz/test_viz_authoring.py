@@ -138,3 +138,50 @@ def test_the_plan_tab_suggests_where_to_measure_for_measured_data():
         assert not app.planning.accept_button.visible  # nothing to accept: they are places to measure
     finally:
         app.stop()
+
+
+@pytest.mark.parametrize("fmt", ["stl", "obj", "ply", "glb", "3mf", "off"])
+def test_every_advertised_mesh_format_loads(app, tmp_path, fmt):
+    """The README and the refusal message name STL, OBJ, PLY, GLB and 3MF (and the File tab takes OFF): each loads
+    as the cell's mesh, under its own name."""
+    import trimesh
+
+    box = trimesh.creation.box(extents=(600, 600, 20))
+    box.apply_translation((450, 0, 40))
+    data = box.export(file_type=fmt)
+    name = f"bench.{fmt}"
+    assert app.authoring.upload_mesh(name, data if isinstance(data, bytes) else data.encode()), app.last_message
+    assert app.authoring.uploaded_mesh.name == name and len(app.loaded.mesh.faces) == 12
+
+
+def test_an_uploaded_scene_that_fails_names_the_users_file_not_the_servers_folders(app):
+    import tempfile
+
+    assert app.files.load_upload("empty.toml", b"") is False
+    assert app.files.load_upload("cell.toml", b'[scene]\nname = "x"\nmesh = "cell.glb"\n') is False
+    for message in app.state.messages[-2:]:
+        assert tempfile.gettempdir() not in message and "rrbc-upload-" not in message, message
+
+
+def test_uploaded_meshes_leave_no_temporary_files(tmp_path):
+    """Issue 31: a replaced upload's copy is removed at once, the last one when the app stops; a refused one never
+    stays."""
+    import trimesh
+
+    from rrbc_viz.serve import serve
+
+    a = serve(port=0)
+    try:
+        box = trimesh.creation.box(extents=(600, 600, 20))
+        box.apply_translation((450, 0, 40))
+        data = box.export(file_type="stl")
+        assert a.authoring.upload_mesh("one.stl", data)
+        first = a.authoring.uploaded_mesh.parent
+        assert a.authoring.upload_mesh("two.stl", data)
+        second = a.authoring.uploaded_mesh.parent
+        assert not first.exists() and second.exists()
+        assert not a.authoring.upload_mesh("bad.stl", b"\x00" * 10)
+        assert a.authoring.uploaded_mesh.parent == second  # the refused upload left nothing, the cell kept two.stl
+    finally:
+        a.stop()
+    assert not second.exists()
