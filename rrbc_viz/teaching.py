@@ -212,6 +212,7 @@ STEPS: tuple[Step, ...] = (
         _step5,
         focus=("fiducials", "sensor"),
         labels=("fiducials",),
+        see_through=True,  # from the sensor's side some fiducials lie behind parts of the cell
     ),
     Step(
         "Corrections at the fiducials",
@@ -225,7 +226,6 @@ STEPS: tuple[Step, ...] = (
         "Measure the targets",
         ("mesh", "sensor", "targets", "fiducials"),
         _step7,
-        focus=("targets", "fiducials", "sensor"),
         labels=("targets",),
     ),
     Step(

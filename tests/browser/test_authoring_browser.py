@@ -59,14 +59,13 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     before = _rows(page)
     # save: a real download, kept beside the mesh under the name the scene refers to
     page.get_by_role("tab", name="File").click()
-    page.get_by_text("Save scene (TOML)").click()
-    link = page.locator('a[download$=".toml"]').first  # viser offers the file in a notification: the user clicks it
-    link.wait_for(state="visible", timeout=20_000)
-    with page.expect_download() as dl:
-        link.click()
+    with page.expect_download(timeout=30_000) as dl:  # the download starts at once, under its full name
+        page.get_by_text("Save scene (TOML)").click()
     saved = tmp_path / dl.value.suggested_filename
+    assert saved.name == "slab.toml", saved.name  # the cell took its mesh's name
     dl.value.save_as(saved)
-    (tmp_path / "cell.stl").write_bytes(mesh_file.read_bytes())
+    assert 'mesh = "slab.stl"' in saved.read_text()  # the mesh file as uploaded, already beside it here
+    page.get_by_text("keep the mesh slab.stl beside it", exact=False).first.wait_for(state="visible", timeout=15_000)
     # reload it through the File tab, as a user would: the folder was given with --data; rescan, pick, load
     page.get_by_role("button", name="Rescan folders").click()
     label = f"{tmp_path.name}/{saved.name}"

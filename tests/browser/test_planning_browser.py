@@ -56,9 +56,15 @@ def test_plan_tab_suggest_shows_ghosts_and_accept_lowers_the_predicted_rmst(vise
         page=page,
     )
     rect = canvas_rect(page)
-    for i in range(4):  # each ghost projects into the 3-D view
-        x, y = node_screen_position(page, f"/plan/ghosts/{i}")
-        assert rect["x"] < x < rect["x"] + rect["width"] and rect["y"] < y < rect["y"] + rect["height"], (i, x, y)
+
+    def ghosts_in_view() -> bool:  # each ghost projects into the 3-D view (once the server has framed the tab)
+        for i in range(4):
+            x, y = node_screen_position(page, f"/plan/ghosts/{i}")
+            if not (rect["x"] < x < rect["x"] + rect["width"] and rect["y"] < y < rect["y"] + rect["height"]):
+                return False
+        return True
+
+    wait_for(ghosts_in_view, 20, message="the four ghosts inside the 3-D view", page=page)
     body = page.inner_text("body")
     assert all(cid in body for cid in result.suggested_ids)
     assert f"{result.predicted_after.rrbc_mm:.3f}" in body  # the predicted gain, said before accepting

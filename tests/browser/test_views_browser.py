@@ -117,6 +117,7 @@ def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_
     for i, step in enumerate(teaching.STEPS):
         app.views.lesson_go(i)
         _wait_camera(page, app)
+        dismiss_software_webgl_notification(page, timeout_s=0.3)  # on a loaded machine it can come late
         objects = _step_objects(app, step)
         for name, pts in objects.items():
             res = page.evaluate(_JS_PROJECT_MANY, pts.tolist())
