@@ -14,7 +14,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.session.explorer import ExplorerSession
 
-from . import files
+from . import files, message_guard
 from .access import AccessGuard, new_token, page_url
 from .app import RunningApp
 from .per_client import PerClientApp
@@ -52,6 +52,7 @@ def serve(
     by all; `present`: start in presentation mode (large text, collapsible panel; View → Presentation mode). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
     server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
     apply_process_policy()
+    message_guard.install()  # malformed client messages dropped without a traceback (issue 31)
     if isinstance(source, ExplorerSession):
         loaded = files.Loaded(source, files.load_mesh(mesh) if mesh else None, f"session {source.name}")
         source.evaluate()

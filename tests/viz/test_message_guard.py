@@ -1,0 +1,71 @@
+"""Malformed and hostile messages (issue 31, item 4; rrbc_viz.message_guard): a real server and raw websocket
+clients. Garbage and wrongly typed messages are dropped without a traceback, logged at most once a minute per
+client, a client that keeps sending them is disconnected, the other tabs keep working, and well-formed messages (a
+drag) still reach the app."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+from rrbc_viz import message_guard
+from tests.support.viser_clients import ClientPool, encode
+
+
+@pytest.fixture
+def pool(app):
+    p = ClientPool(app.url, 2)
+    try:
+        yield p
+    finally:
+        p.close()
+
+
+def _garbage(k: int) -> bytes:
+    return [
+        os.urandom(48),
+        encode("TransformControlsUpdateMessage", name=5, wxyz="x", position=None),
+        encode("NoSuchMessage", a=1),
+        encode("TransformControlsUpdateMessage", name="/targets/H1/gizmo", wxyz=[1, 0, 0, 0], position=[1, 2]),
+        b"\x81\xa4type\xc0",  # a map whose type is nil
+    ][k % 5]
+
+
+def test_malformed_messages_are_dropped_logged_once_and_a_flood_disconnects(app, pool, capfd):
+    before = dict(message_guard.stats)
+    for k in range(message_guard.MAX_BAD):
+        pool.send_raw(1, _garbage(k))
+    time.sleep(1.0)
+    assert not pool.records[1].closed  # up to the limit: dropped, still connected
+    assert message_guard.stats["dropped"] - before["dropped"] == message_guard.MAX_BAD
+    err = capfd.readouterr().err
+    assert err.count("malformed message(s) from a client") == 1 and "Traceback" not in err, err
+    pool.send_raw(1, _garbage(0))  # one more within the minute: disconnected
+    deadline = time.monotonic() + 10
+    while not pool.records[1].closed and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert pool.records[1].closed and pool.records[1].close_code == 1008
+    assert not pool.records[0].closed  # the other tab is still served
+
+
+def test_well_formed_messages_still_drive_the_app(app, pool):
+    """A drag sent by a raw client passes the check: the target moves on the server."""
+    p0 = np.array(app.session.layout["targets"].positions[0], float)
+    goal = p0 + [30.0, 0.0, 0.0]
+    pool.drag_all(["/targets/H1/gizmo"], lambda k, t: goal, seconds=0.6)
+    assert app.evaluate.wait_drags(20.0)
+    np.testing.assert_allclose(app.session.layout["targets"].positions[0], goal, atol=1e-6)
+
+
+def test_the_check_names_what_is_wrong():
+    from viser.infra._messages import Message
+
+    assert message_guard.check(encode("NoSuchMessage"), Message)[1].startswith("unknown message type")
+    assert "not MessagePack" in message_guard.check(b"\xc1", Message)[1]
+    ok, why = message_guard.check(
+        encode("TransformControlsDragStartMessage", name="/targets/H1/gizmo", owner=""), Message
+    )
+    assert ok is not None and why == ""
