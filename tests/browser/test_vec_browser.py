@@ -56,7 +56,7 @@ def test_vec_tab_compares_and_a_leaned_tool_shows_what_rrbc_cannot_follow(viser_
     tilt.focus()
     for _ in range(40):
         tilt.press("ArrowRight")
-    wait_for(lambda: (page_row(page, pid) or ("down",))[0].startswith("40°"), 30, message="the leaned tool", page=page)
+    wait_for(lambda: (page_row(page, pid) or ("down",))[0].startswith("40°"), 90, message="the leaned tool", page=page)
     tool, rigid, rrbc, vec = page_row(page, pid)
     assert app.session.tool_of("targets", pid) == (40.0, 0.0)
     assert rrbc > before[2] and vec < rrbc, (before, (tool, rigid, rrbc, vec))

@@ -54,10 +54,14 @@ _JS_SOLID_CELL = (
 def _wait_camera(page, app) -> None:
     """Wait until the page renders with the camera the server last sent it, and a moment more (a frame)."""
     cid = next(iter(app.server.get_clients()))
-    sent = app.ctx.camera.last[cid].position
+
+    def arrived() -> bool:  # the pose last sent, read again each time: the server may have sent a newer one
+        sent = app.ctx.camera.last[cid].position
+        return bool(np.linalg.norm(np.array(page.evaluate(_JS_CAMERA)) - sent) < 1e-3 * np.linalg.norm(sent))
+
     wait_for(
-        lambda: np.linalg.norm(np.array(page.evaluate(_JS_CAMERA)) - sent) < 1e-3 * np.linalg.norm(sent),
-        10.0,
+        arrived,
+        30.0,
         message="the page's camera",
     )
     page.wait_for_timeout(300)

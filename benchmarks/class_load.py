@@ -1,0 +1,164 @@
+"""A class under load (issue 31): twenty real websocket clients drag at once, in the shared mode (a teacher's demo:
+one session, every tab sees every drag) and in the per-client mode (a class: one session per tab).
+
+Each client speaks viser's protocol over its own websocket (`tests/support/viser_clients.py`), drags its own handle
+(the demo scene's eight targets and twelve fiducials, in turn) at 20 Hz along a circle for `DRAG_S` seconds, and
+records when the server's frames reach it. Measured:
+
+- the longest time any client waited for a frame while dragging (after the first second): goal at most 0.5 s;
+- once the drags stop, how long a click (selecting a target) waits for its answer: goal at most 1 s;
+- the server's resident memory when the clients have gone, against before they came: goal within 20 %.
+
+The server runs in this process, as `rrbc view` runs it; the clients on their own event loop in a thread.
+"""
+
+from __future__ import annotations
+
+import gc
+import time
+
+import numpy as np
+
+CLIENTS = 20
+DRAG_S = 10.0
+RATE_HZ = 20.0
+GAP_GOAL_S = 0.5
+CLICK_GOAL_S = 1.0
+RSS_GOAL = 1.2
+
+
+def rss_mb() -> float:
+    """This process's resident set (MB)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _handles(app) -> list[tuple[str, np.ndarray]]:
+    """(gizmo node name, position) of every target and fiducial of the app's session."""
+    from rrbc_viz.node_values import gizmo_name
+
+    out = []
+    for kind in ("targets", "fiducials"):
+        g = app.session.layout[kind]
+        out += [(gizmo_name(kind, pid), np.array(p, float)) for pid, p in zip(g.ids, g.positions)]
+    return out
+
+
+def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S, settle_s: float = 3.0) -> dict:
+    """One run (module docstring): {"max_gap_s", "gaps_s" (per client), "click_s", "rss_before_mb",
+    "rss_after_mb", "clients"}."""
+    from rrbc_viz.serve import serve
+    from tests.support.viser_clients import ClientPool
+
+    gc.collect()
+    rss0 = rss_mb()
+    app = serve(port=0, per_client=per_client)
+    try:
+        rss_started = rss_mb()
+        pool = ClientPool(app.url, clients)
+        try:
+            time.sleep(settle_s)  # every tab has its scene (per-client: its own app)
+            probe = app.apps[min(app.apps)] if per_client else app
+            handles = _handles(probe)
+            mine = [handles[k % len(handles)] for k in range(clients)]
+
+            def position(k: int, t: float) -> np.ndarray:
+                a = 2 * np.pi * t / 4.0
+                return mine[k][1] + 15.0 * np.array([np.cos(a) - 1.0, np.sin(a), 0.0])
+
+            t0, t1 = pool.drag_all([h for h, _ in mine], position, seconds, RATE_HZ)
+            gaps = [rec.gaps_between(t0 + 1.0, t1) for rec in pool.records]
+            # the drags are over: a click (client 0 selects a target) must be answered at once
+            time.sleep(0.3)
+            target = mine[min(1, len(mine) - 1)]
+            name = target[0] + "/sphere"
+            origin = target[1] + np.array([0.0, 0.0, 500.0])
+            tc = pool.click(0, name, origin, [0.0, 0.0, -1.0])
+            deadline = time.monotonic() + 30.0
+            while pool.records[0].first_after(tc) is None and time.monotonic() < deadline:
+                time.sleep(0.01)
+            click = pool.records[0].first_after(tc)
+        finally:
+            pool.close()
+        time.sleep(2.0)  # tabs gone: per-client apps stopped
+        gc.collect()
+        rss_after = rss_mb()
+    finally:
+        app.stop()
+    return {
+        "clients": clients,
+        "gaps_s": gaps,
+        "max_gap_s": float(max(gaps)),
+        "click_s": None if click is None else float(click),
+        "rss_before_mb": rss_started,
+        "rss_process_start_mb": rss0,
+        "rss_after_mb": rss_after,
+    }
+
+
+def class_load(quick: bool) -> list[dict]:
+    """Rows: per mode, the longest wait for a frame while 20 clients drag, the click's answer after, and memory."""
+    from harness import busy_core, row
+
+    n, secs = (8, 4.0) if quick else (CLIENTS, DRAG_S)
+    rows = []
+    for per_client in (False, True):
+        mode = "per_client" if per_client else "shared"
+        idle = class_run(per_client, n, secs)
+        with busy_core():
+            loaded = class_run(per_client, n, secs)
+        note = (
+            f"{n} clients dragging at {RATE_HZ:g} Hz for {secs:g} s ({mode}); idle: longest wait "
+            f"{idle['max_gap_s']:.2f} s, click answered in {idle['click_s'] or float('nan'):.2f} s, RSS "
+            f"{idle['rss_before_mb']:.0f} -> {idle['rss_after_mb']:.0f} MB after the clients left"
+        )
+        rows.append(
+            row(
+                f"class_{mode}_longest_wait",
+                idle["max_gap_s"],
+                "s",
+                loaded=loaded["max_gap_s"],
+                goal=f"<= {GAP_GOAL_S:g} s",
+                met=loaded["max_gap_s"] <= GAP_GOAL_S,
+                note=note,
+            )
+        )
+        rows.append(
+            row(
+                f"class_{mode}_click_after",
+                idle["click_s"],
+                "s",
+                loaded=loaded["click_s"],
+                goal=f"<= {CLICK_GOAL_S:g} s",
+                met=loaded["click_s"] is not None and loaded["click_s"] <= CLICK_GOAL_S,
+            )
+        )
+        ratio = loaded["rss_after_mb"] / loaded["rss_before_mb"]
+        rows.append(
+            row(
+                f"class_{mode}_rss_after_ratio",
+                idle["rss_after_mb"] / idle["rss_before_mb"],
+                "ratio",
+                loaded=ratio,
+                goal=f"<= {RSS_GOAL:g}",
+                met=ratio <= RSS_GOAL,
+            )
+        )
+    return rows
+
+
+if __name__ == "__main__":  # a quick look: python benchmarks/class_load.py [per_client] [clients] [seconds]
+    import json
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    args = sys.argv[1:]
+    res = class_run(
+        bool(args and args[0] == "per_client"), *(int(a) for a in args[1:2]), *(float(a) for a in args[2:3])
+    )
+    res["gaps_s"] = [round(g, 3) for g in res["gaps_s"]]
+    print(json.dumps(res))
