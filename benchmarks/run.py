@@ -23,6 +23,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))  # run from a checkout without installing
 
 import big_inputs  # noqa: E402
+import class_load  # noqa: E402
 import interactive  # noqa: E402
 import montecarlo  # noqa: E402
 import reproduce_speed  # noqa: E402
@@ -34,6 +35,7 @@ BENCHMARKS = [
     threads_policy.mc_blas_threads,
     threads_policy.blas_pool_when_busy,
     interactive.drag_latency,
+    class_load.class_load,
     interactive.suggest_app,
     interactive.plan_command,
     interactive.plan_optimiser,

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from rrbc_core.errors import Cancelled, InputError
 from rrbc_core.session import views
 
+from .drag_queue import drags_waiting
 from .worker import CoalescingWorker
 
 ResultCallback = Callable[[object, str | None, float], None]  # (MonteCarloPlots | None, error message, seconds)
@@ -62,7 +63,7 @@ class MonteCarloRunner:
         start = time.perf_counter()
         plots, error = None, None
         try:
-            plots = views.monte_carlo(session, trials=trials, seed=seed, should_stop=lambda: not fresh())
+            plots = views.monte_carlo(session, trials=trials, seed=seed, should_stop=lambda: _between_chunks(fresh))
         except Cancelled:
             return  # stopped or superseded: whoever stopped it says so
         except InputError as exc:
@@ -76,3 +77,11 @@ class MonteCarloRunner:
                 self._on_result(plots, error, seconds)
             except Exception:  # noqa: BLE001
                 traceback.print_exc()
+
+
+def _between_chunks(fresh: Callable[[], bool]) -> bool:
+    """Between two chunks of trials: wait while any session's drags are being handled (a drag is what a user
+    watches; the plots can come a moment later), then say whether to stop (superseded or cancelled)."""
+    while drags_waiting() and fresh():
+        time.sleep(0.05)
+    return not fresh()

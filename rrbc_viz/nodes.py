@@ -32,6 +32,7 @@ Ids are used in node names with "/" replaced by "_" (`node_key`).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -68,6 +69,8 @@ from .robot_nodes import ArmNodes, SensorNodes
 
 #: The scene's layers, each a group node whose visibility the View tab and the lesson steps switch.
 
+#: While a drag is under way the arm is posed at most this often (s); always at the drag's end.
+ARM_DRAG_INTERVAL_S = 0.25
 #: (kind, id, robot-frame position mm, phase, client=...) -> anything
 DragCallback = Callable[..., object]
 #: (kind, id, client=...) -> anything: a target or fiducial sphere was clicked
@@ -99,6 +102,7 @@ class SceneNodes:
         self.landing_hold = False  # a drag is under way: the bullseye keeps its ring (its drawing scale)
         self.dragging: set[tuple[str, str]] = set()  # handles the user is dragging (the app leaves them be)
         self._arm_key: tuple | None = None
+        self._arm_time = -1e18  # when the arm was last posed (time.monotonic)
         self.bias_scale = 1.0  # the session's bias size (the real arm's landing scales with it)
         self.vec_landings: dict | None = None  # target id -> VEC's landing (3,), robot frame mm (Arm tab on)
         self.target_tools: dict = {}  # target id -> (tilt, azimuth) degrees of its leaned tool (the arm is drawn so)
@@ -521,7 +525,10 @@ class SceneNodes:
         key = (tuple(np.round(position, 9)), bias, magnification, tool)
         if key == self._arm_key:
             return
-        self._arm_key = key
+        now = time.monotonic()
+        if self.landing_hold and now - self._arm_time < ARM_DRAG_INTERVAL_S:
+            return  # during a drag the arm follows a few times a second (its inverse kinematics and meshes cost)
+        self._arm_key, self._arm_time = key, now
         rot = None
         if tool is not None:
             rot = tool_rotation(float(getattr(self.scene_model, "tool_yaw_deg", 0.0) or 0.0), *tool)

@@ -16,6 +16,7 @@ import traceback
 
 import viser
 
+from rrbc_core.runtime.memory import release_memory, release_memory_soon
 from rrbc_core.session.explorer import ExplorerSession
 
 from . import files
@@ -78,6 +79,9 @@ class PerClientApp:
             app = self.apps.pop(client.client_id, None)
         if app is not None:
             app.stop()
+            del app
+            release_memory()  # the tab's session, scene and buffers: back to the OS, not kept at the peak
+            release_memory_soon()  # and what its connection frees once viser has closed it
 
     def stop(self) -> None:
         with self._lock:

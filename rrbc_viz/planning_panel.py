@@ -40,6 +40,7 @@ from rrbc_core.session import planning_view
 from rrbc_core.session.results import PlanningState
 
 from . import colors
+from .drag_queue import drags_waiting
 from .syncing import clamped
 from .worker import CoalescingWorker
 
@@ -428,6 +429,10 @@ class PlanningPanel:
     def _background(self, job, fresh) -> None:
         """The worker's job: compute on the snapshot, show it if still wanted (under the app lock)."""
         live, snapshot = job
+        while drags_waiting():  # drags first (any session's): the plan follows when they pause
+            if not fresh():
+                return  # a newer request supersedes this one (or the worker stopped)
+            time.sleep(PLAN_QUIET_S)
         start = time.perf_counter()
         state = self._compute(snapshot)
         cost = time.perf_counter() - start

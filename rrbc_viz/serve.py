@@ -11,6 +11,7 @@ import socket
 import viser
 
 from rrbc_core.errors import InputError
+from rrbc_core.runtime.memory import release_memory_soon
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.session.explorer import ExplorerSession
 
@@ -80,6 +81,7 @@ def serve(
             app = RunningApp(server, loaded, host, library=library)
             if present:
                 app.views.set_presentation(True)
+            server.on_client_disconnect(lambda client: release_memory_soon())  # a tab's buffers: back to the OS
         app.quiet = quiet
         app.guard = guard
         app.url = page_url(app.url, guard.token)

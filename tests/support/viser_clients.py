@@ -80,6 +80,21 @@ class ClientPool:
         )
         self._sockets[k] = ws
         self._readers.append(asyncio.ensure_future(self._read(k, ws)))
+        # a browser reports its camera at once (the server waits for it before it frames the tab's view)
+        await ws.send(
+            encode(
+                "ViewerCameraMessage",
+                wxyz=[1.0, 0.0, 0.0, 0.0],
+                position=[0.0, -2000.0, 1500.0],
+                fov=0.87,
+                near=0.1,
+                far=100000.0,
+                image_height=800,
+                image_width=1280,
+                look_at=[450.0, 0.0, 0.0],
+                up_direction=[0.0, 0.0, 1.0],
+            )
+        )
 
     async def _connect_all(self, open_timeout: float) -> None:
         for k in range(len(self.records)):  # one after the other, as tabs are opened
@@ -105,23 +120,29 @@ class ClientPool:
             except websockets.exceptions.ConnectionClosed:
                 pass
 
-    def drag_all(self, handles, positions, seconds: float, rate_hz: float = 20.0) -> tuple[float, float]:
+    def drag_all(self, handles, positions, seconds: float, rate_hz: float = 20.0, owners=None) -> tuple[float, float]:
         """Client k drags gizmo node `handles[k]` for `seconds`: a start, updates at `rate_hz` along
-        `positions(k, t)` -> (3,), an end. Returns (t0, t1): when the updates began and ended (time.monotonic)."""
+        `positions(k, t)` -> (3,), an end. `owners[k]`: the scope the node belongs to, as viser's client echoes it
+        ("" the shared scene, str(client id) a tab's own scene). Returns (t0, t1): when the updates began and ended
+        (time.monotonic)."""
+        owners = [""] * len(handles) if owners is None else list(owners)
 
         async def one(k: int, t0: float) -> None:
-            name = handles[k]
-            await self._send(k, encode("TransformControlsDragStartMessage", name=name, owner=""))
+            name, owner = handles[k], owners[k]
+            await self._send(k, encode("TransformControlsDragStartMessage", name=name, owner=owner))
             step = 1.0 / rate_hz
             due = t0
             while (now := time.monotonic()) < t0 + seconds:
                 p = [float(v) for v in positions(k, now - t0)]
                 await self._send(
-                    k, encode("TransformControlsUpdateMessage", name=name, wxyz=[1.0, 0.0, 0.0, 0.0], position=p)
+                    k,
+                    encode(
+                        "TransformControlsUpdateMessage", name=name, wxyz=[1.0, 0.0, 0.0, 0.0], position=p, owner=owner
+                    ),
                 )
                 due += step
                 await asyncio.sleep(max(0.0, due - time.monotonic()))
-            await self._send(k, encode("TransformControlsDragEndMessage", name=name, owner=""))
+            await self._send(k, encode("TransformControlsDragEndMessage", name=name, owner=owner))
 
         async def all_() -> tuple[float, float]:
             t0 = time.monotonic() + 0.2
@@ -131,8 +152,9 @@ class ClientPool:
 
         return self.run(all_(), timeout=seconds + 60)
 
-    def click(self, k: int, name: str, origin, direction) -> float:
-        """Client k clicks node `name` (a ray from `origin` along `direction`); returns when it was sent."""
+    def click(self, k: int, name: str, origin, direction, owner: str = "") -> float:
+        """Client k clicks node `name` (a ray from `origin` along `direction`) of scope `owner`; returns when it was
+        sent."""
         data = encode(
             "SceneNodeClickMessage",
             name=name,
@@ -141,7 +163,7 @@ class ClientPool:
             ray_direction=[float(v) for v in direction],
             screen_pos=[0.5, 0.5],
             modifier=None,
-            owner="",
+            owner=owner,
         )
 
         async def go() -> float:
@@ -171,3 +193,6 @@ class ClientPool:
         finally:
             self._loop.call_soon_threadsafe(self._loop.stop)
             self._thread.join(10)
+            self._sockets = [None] * len(self._sockets)  # the connections and their buffers go (the records stay)
+            self._readers = []
+            self._loop.close()
