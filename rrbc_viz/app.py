@@ -217,6 +217,7 @@ class RunningApp:
         with ctx.lock:
             self.montecarlo.runner.cancel()
             ctx.loaded = loaded
+            self.authoring.forget_upload_unless_used(loaded.session.mesh_path)
             ev = ctx.session.last
             st = ctx.state
             st.lesson_index = None

@@ -41,6 +41,11 @@ class AuthoringPanel:
             self.sensor = gui.add_vector3("Sensor at (mm)", (1100.0, -450.0, 1250.0), step=10.0)
             self.move_sensor = gui.add_button("Move the sensor there")
             self.mesh = gui.add_upload_button("Upload cell mesh", icon=viser.Icon.UPLOAD)
+            self.new_cell = gui.add_button(
+                "New cell from this mesh",
+                icon=viser.Icon.FILE_PLUS,
+                hint="An empty start on the cell's mesh: one target, registration points over it, no fiducials",
+            )
             self.save_scene = gui.add_button("Save scene (TOML)", icon=viser.Icon.DOWNLOAD)
             self.plan = gui.add_button("Measurement plan (CSV)", icon=viser.Icon.DOWNLOAD)
             self.slicer = gui.add_button("Slicer markups (2 files)", icon=viser.Icon.DOWNLOAD)
@@ -54,6 +59,7 @@ class AuthoringPanel:
         self.undo.on_click(lambda event: app.authoring.undo(client=event.client))
         self.redo.on_click(lambda event: app.authoring.redo(client=event.client))
         self.move_sensor.on_click(lambda event: app.authoring.move_sensor(self.sensor.value, client=event.client))
+        self.new_cell.on_click(lambda event: app.authoring.new_cell_from_mesh(client=event.client))
         self.save_scene.on_click(lambda event: app.authoring.download_authoring("scene", client=event.client))
         self.plan.on_click(lambda event: app.authoring.download_authoring("plan", client=event.client))
         self.slicer.on_click(lambda event: app.authoring.download_authoring("slicer", client=event.client))
@@ -83,4 +89,4 @@ class AuthoringPanel:
             self.move_sensor,
         ):
             w.visible = scene
-        self.save_scene.visible = self.plan.visible = scene
+        self.save_scene.visible = self.plan.visible = self.new_cell.visible = scene

@@ -136,17 +136,8 @@ def _mesh_beside(mesh_path: Path, folder: Path) -> str:
 def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None = None) -> NewScene:
     """Write a complete scene for the cell (module docstring); returns what was written. InputError for bad
     input, with nothing written."""
-    from rrbc_core.analysis.planning import plan
-    from rrbc_core.io.scene_toml import load_scene
-
     opt = options or NewSceneOptions()
-    out = Path(out_path)
-    if not out.name.endswith(".toml"):
-        raise InputError(f"--out {out}: the scene file must end in .toml")
-    if not out.parent.is_dir():
-        raise InputError(f"--out {out}: directory {out.parent} does not exist")
-    if out.exists() and not out.is_file():
-        raise InputError(f"--out {out}: exists and is not a regular file")
+    out = _checked_out(out_path)
     urdf_rel = _urdf_beside(opt.urdf, out.parent)  # checked before anything is written
     tl = read_targets(targets_path)
     mesh = cg.load_cell_mesh(mesh_path)
@@ -162,6 +153,58 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
             f"{tl.source}: target(s) outside the {opt.robot.upper()}'s reach from its base at the origin (tool "
             f"{opt.tool_mm:g} mm pointing down): {names}; give targets in the robot's base frame, mm"
         )
+    return _compose(mesh, Path(mesh_path), tl, out, opt, urdf_rel, plan_fiducials=True)
+
+
+def empty_scene(mesh_path, out_path, options: NewSceneOptions | None = None) -> NewScene:
+    """An empty start on a cell mesh (the app's *New cell from this mesh*): no fiducials, one target where the arm
+    can work - the reachable point on an upward-facing surface nearest the middle of those points, outside solids
+    - and, as `new_scene` chooses them, the sensor, registration points over it and candidate fiducial locations
+    around it (none needed). The user then adds, moves and deletes points. Same checks and atomic write as
+    `new_scene`; InputError (nothing written) when no upward surface lies within the arm's reach."""
+    from rrbc_core.authoring.targets_file import DEFAULT_REGION_MM, TargetList
+
+    opt = options or NewSceneOptions()
+    out = _checked_out(out_path)
+    urdf_rel = _urdf_beside(opt.urdf, out.parent)
+    mesh = cg.load_cell_mesh(mesh_path)
+    lo, hi = np.asarray(mesh.bounds, float)
+    spacing = float(np.clip(np.linalg.norm(hi - lo) / 60.0, 5.0, 100.0))
+    pts = cg.surface_samples(mesh, lo - 1.0, hi + 1.0, spacing, opt.seed, max_count=20_000)
+    if len(pts):  # the point sits on the surface: its marker centre a hair above it, in free space
+        pts = pts + [0.0, 0.0, 1.0]
+        pts = pts[cg.reach(opt.robot, opt.tool_mm, pts)]
+    if len(pts):
+        pts = pts[~cg.inside(mesh, pts)]
+    if not len(pts):
+        raise InputError(
+            f"{mesh_path}: no upward-facing surface of the mesh lies within the {opt.robot.upper()}'s reach from its "
+            f"base at the origin (tool {opt.tool_mm:g} mm pointing down); give the mesh in the robot's base frame, mm"
+        )
+    middle = np.median(pts, axis=0)
+    target = pts[int(np.argmin(np.linalg.norm(pts[:, :2] - middle[:2], axis=1)))]
+    tl = TargetList(("T1",), target[None], np.array([DEFAULT_REGION_MM]), str(mesh_path))
+    return _compose(mesh, Path(mesh_path), tl, out, opt, urdf_rel, plan_fiducials=False)
+
+
+def _checked_out(out_path) -> Path:
+    out = Path(out_path)
+    if not out.name.endswith(".toml"):
+        raise InputError(f"--out {out}: the scene file must end in .toml")
+    if not out.parent.is_dir():
+        raise InputError(f"--out {out}: directory {out.parent} does not exist")
+    if out.exists() and not out.is_file():
+        raise InputError(f"--out {out}: exists and is not a regular file")
+    return out
+
+
+def _compose(mesh, mesh_path: Path, tl, out: Path, opt: NewSceneOptions, urdf_rel, plan_fiducials: bool) -> NewScene:
+    """The sensor, candidates and registration points for the targets `tl`, then (`plan_fiducials`) the planned
+    first fiducials; the scene written atomically to `out`."""
+    from rrbc_core.analysis.planning import plan
+    from rrbc_core.io.scene_toml import load_scene
+
+    t = tl.positions
     sensor, sensor_why = _choose_sensor(mesh, t, opt.sensor)
     look = 0.5 * (t.min(0) + t.max(0))
     hidden = [tl.ids[i] for i in np.flatnonzero(~cg.seen(mesh, sensor, t))]
@@ -170,7 +213,7 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
     cand = cg.marker_candidates(
         mesh, t, sensor, opt.robot, opt.tool_mm, opt.margin_mm, opt.spacing_mm, opt.seed, MAX_CANDIDATES
     )
-    if len(cand) < MIN_CANDIDATES:
+    if plan_fiducials and len(cand) < MIN_CANDIDATES:
         raise InputError(
             f"{mesh_path}: found only {len(cand)} usable fiducial locations on upward-facing surfaces within "
             f"{opt.margin_mm:g} mm of the targets (reachable, seen by the sensor at {_fmt(sensor)}, outside solids); "
@@ -210,25 +253,34 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
             reg=reg,
             cand=cand,
             name=opt.name or out.stem,
+            fiducials_planned=plan_fiducials,
         )
         tmp_path.write_text(_toml(**parts, fiducials=np.zeros((0, 3)), plan_note=""), encoding="utf-8")
         scene = load_scene(tmp_path)
-        result = plan(scene, add=int(opt.fiducials), seed=opt.seed, cover_targets=True)
-        fids = np.asarray(result.suggested, float).reshape(-1, 3)
-        chosen = set(result.suggested_ids)
-        rest = np.array([p for i, p in zip(scene.candidates.ids, scene.candidates.positions) if i not in chosen])
-        parts["cand"] = rest.reshape(-1, 3)
-        pr = result.predicted_after
-        inside = np.asarray(result.inside_after, bool)
-        covered_ids = [pid for pid, ok in zip(scene.target_ids, inside) if ok]
-        outside_ids = [pid for pid, ok in zip(scene.target_ids, inside) if not ok]
-        note = (
-            f"planned by `rrbc plan` (seed {opt.seed}) from {len(cand)} candidates, targets inside their hull first, "
-            f"then the predicted RMST: {len(covered_ids)} of {len(inside)} targets inside their hull"
-            + (f" (outside: {', '.join(outside_ids)})" if outside_ids else "")
-            + f"; predicted RMST over the targets' regions rigid {pr.rigid_mm:.3f} mm, RRBC {pr.rrbc_mm:.3f} mm "
-            "(first-order prediction)"
-        )
+        fids, note, planned = np.zeros((0, 3)), "", {}
+        if plan_fiducials:
+            result = plan(scene, add=int(opt.fiducials), seed=opt.seed, cover_targets=True)
+            fids = np.asarray(result.suggested, float).reshape(-1, 3)
+            chosen = set(result.suggested_ids)
+            rest = np.array([p for i, p in zip(scene.candidates.ids, scene.candidates.positions) if i not in chosen])
+            parts["cand"] = rest.reshape(-1, 3)
+            pr = result.predicted_after
+            inside = np.asarray(result.inside_after, bool)
+            covered_ids = [pid for pid, ok in zip(scene.target_ids, inside) if ok]
+            outside_ids = [pid for pid, ok in zip(scene.target_ids, inside) if not ok]
+            note = (
+                f"planned by `rrbc plan` (seed {opt.seed}) from {len(cand)} candidates, targets inside their hull "
+                f"first, then the predicted RMST: {len(covered_ids)} of {len(inside)} targets inside their hull"
+                + (f" (outside: {', '.join(outside_ids)})" if outside_ids else "")
+                + f"; predicted RMST over the targets' regions rigid {pr.rigid_mm:.3f} mm, RRBC {pr.rrbc_mm:.3f} mm "
+                "(first-order prediction)"
+            )
+            planned = {
+                "predicted_rmst_mm": {"rigid": float(pr.rigid_mm), "rrbc": float(pr.rrbc_mm)},
+                "targets_inside_hull": covered_ids,
+                "targets_outside_hull": outside_ids,
+                "region_coverage": {pid: float(c) for pid, c in zip(scene.target_ids, result.coverage_after)},
+            }
         text = _toml(**parts, fiducials=fids, plan_note=note)
         tmp_path.write_text(text, encoding="utf-8")
         load_scene(tmp_path)  # the file we hand over loads
@@ -244,10 +296,7 @@ def new_scene(mesh_path, targets_path, out_path, options: NewSceneOptions | None
         "candidates": len(parts["cand"]),
         "sensor": [float(v) for v in sensor],
         "hidden_targets": hidden,
-        "predicted_rmst_mm": {"rigid": float(pr.rigid_mm), "rrbc": float(pr.rrbc_mm)},
-        "targets_inside_hull": covered_ids,
-        "targets_outside_hull": outside_ids,
-        "region_coverage": {pid: float(c) for pid, c in zip(scene.target_ids, result.coverage_after)},
+        **planned,
     }
     return NewScene(out, text, summary)
 
@@ -296,7 +345,20 @@ def _urdf_beside(urdf: str | None, folder: Path) -> str | None:
 
 
 def _toml(
-    opt, tl, mesh_rel, sensor, look, sensor_why, hidden, reg, cand, name, fiducials, plan_note, urdf_rel=None
+    opt,
+    tl,
+    mesh_rel,
+    sensor,
+    look,
+    sensor_why,
+    hidden,
+    reg,
+    cand,
+    name,
+    fiducials,
+    plan_note,
+    urdf_rel=None,
+    fiducials_planned=True,
 ) -> str:
     from rrbc_core.io.scene_write import SceneSpec, scene_toml
 
@@ -306,7 +368,11 @@ def _toml(
         sensor_said.append(f"Hidden from it by the mesh: {', '.join(hidden)} (move it with --sensor).")
     spec = SceneSpec(
         name=name,
-        description=f"{len(tl.ids)} targets from {Path(tl.source).name}; generated by rrbc scene new",
+        description=(
+            f"{len(tl.ids)} targets from {Path(tl.source).name}; generated by rrbc scene new"
+            if fiducials_planned
+            else f"a new cell on {Path(mesh_rel).name}: add fiducials and targets"
+        ),
         mesh=mesh_rel,
         seed=int(opt.seed),
         robot_model=opt.robot,
@@ -325,8 +391,12 @@ def _toml(
         error_model=error_model,
         comments={
             "header": [
-                f"Written by `rrbc scene new` from {Path(tl.source).name} and {Path(mesh_rel).name}. Robot base "
-                "frame, mm;",
+                (
+                    f"Written by `rrbc scene new` from {Path(tl.source).name} and {Path(mesh_rel).name}. Robot base "
+                    "frame, mm;"
+                    if fiducials_planned
+                    else f"Written by rrbc (a new cell on {Path(mesh_rel).name}). Robot base frame, mm;"
+                ),
                 "the robot's base is at the origin. Format: scenes/README.md; how each part was chosen: "
                 "docs/scene-new.md.",
             ],
@@ -341,7 +411,14 @@ def _toml(
                 f"targets, ~{opt.spacing_mm:g} mm apart,",
                 "reachable, seen by the sensor, outside solids, clear of the targets.",
             ],
-            "target": ["Targets: from the targets file; region of variability: a cube of region_mm (default 4 mm)."],
+            "target": (
+                ["Targets: from the targets file; region of variability: a cube of region_mm (default 4 mm)."]
+                if fiducials_planned
+                else [
+                    "Target: an empty start - one target on the reachable upward-facing surface nearest the middle",
+                    "of the cell (move it, add your own); region of variability: a 4 mm cube.",
+                ]
+            ),
             "error_model": em_said,
         },
     )

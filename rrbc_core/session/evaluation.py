@@ -295,7 +295,7 @@ def evaluate(
         e_sensor[included] = fiducial_corrections(T_robot_sensor, fid_r.sensor[included], fid_r.robot[included])
         key = (s.interpolator(), fid_r.sensor[included].tobytes(), e_sensor[included].tobytes())
         fitted = cached("fitted", key, lambda: s.interpolator().fit(fid_r.sensor[included], e_sensor[included]))
-    elif s.interpolation != "none":
+    elif s.interpolation != "none" and len(fids.ids):
         raise InputError("every fiducial is excluded: include at least one, or choose interpolation 'none'")
     else:
         fitted = interpolation.NoCorrection().fit(reg_r.sensor, np.zeros_like(reg_r.sensor))
@@ -338,6 +338,8 @@ def evaluate(
     }
     coverage = assess_coverage(fid_r.sensor[included], tgt_r.sensor) if np.any(included) else None
     warnings = _warnings(fids.ids, fid_r.sensor, e_sensor, included, targets, coverage, check_ids)
+    if not len(fids.ids) and s.interpolation != "none":  # a new cell: nothing to interpolate yet
+        warnings = (NO_FIDUCIALS_WARNING,) + warnings
     return Evaluation(
         s,
         reg,
@@ -358,6 +360,10 @@ def evaluate(
         getattr(fitted, "choice", None),
         frozenset(check_ids),
     )
+
+
+#: What a cell without fiducials says (a new cell, before the user adds them).
+NO_FIDUCIALS_WARNING = "no fiducials yet: the RRBC corrections are zero (rigid registration only); add fiducials"
 
 
 def _warnings(fid_ids, fid_sensor, e_sensor, included, targets: TargetResult, coverage, check_ids):

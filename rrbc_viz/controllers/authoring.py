@@ -188,10 +188,69 @@ class AuthoringController:
         self.ctx.message(f"{name}: the cell's mesh now ({len(mesh.faces)} triangles)", client, error=False)
         return True
 
+    def new_cell_from_mesh(self, client=None, confirmed: bool = False) -> bool:
+        """*New cell from this mesh*: an empty start on the cell's mesh (the uploaded one, else the scene's) -
+        `rrbc_core.authoring.scene_new.empty_scene`: one target where the arm can work, registration points over it,
+        candidate locations around it, no fiducials - opened as the session (asks first if edits are unsaved), the
+        camera framed on the whole cell. The scene and a copy of the mesh live in a temporary folder of this server
+        until the user saves the scene."""
+        from rrbc_core.authoring.scene_new import NewSceneOptions, empty_scene
+
+        session = self.ctx.session
+        scene = getattr(session, "scene", None)
+        mesh = self.uploaded_mesh or (
+            Path(session.mesh_path) if session.kind == "scene" and session.mesh_path else None
+        )
+        if scene is None or mesh is None:
+            self.ctx.message("open a scene or upload a cell mesh first", client, title="No new cell")
+            return False
+        if not confirmed and self.ctx.files.ask_discard_unsaved(
+            f"a new cell on {mesh.name}", lambda: self.new_cell_from_mesh(client, confirmed=True), client
+        ):
+            return False
+        robot = scene.robot_model if scene.robot_model in ("ur5", "ur10") else "none"
+        opts = NewSceneOptions(robot=robot, tool_mm=float(scene.tool_mm), sensor_kind=scene.sensor_kind, name=mesh.stem)
+        d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
+        try:
+            made = empty_scene(mesh, d / f"{files.slug(mesh.stem)}.toml", opts)
+            loaded = files.load_source(made.path)
+        except InputError as exc:
+            shutil.rmtree(d, ignore_errors=True)
+            self.ctx.message(str(exc).replace(str(mesh), mesh.name), client, title="No new cell")
+            return False
+        except Exception as exc:  # noqa: BLE001 - keep serving; say what failed
+            shutil.rmtree(d, ignore_errors=True)
+            self.ctx.message(f"{mesh.name}: no new cell: {type(exc).__name__}", client, title="No new cell")
+            return False
+        old = self.uploaded_mesh
+        self.uploaded_mesh = d / Path(loaded.session.mesh_path).name  # the copy beside the new scene
+        self.ctx.install(loaded)
+        if old is not None:
+            shutil.rmtree(old.parent, ignore_errors=True)
+        self.ctx.views.show_camera("whole cell")
+        target = loaded.session.last.targets.positions[0]
+        self.ctx.message(
+            f"A new cell on {mesh.name}: one target T1 at ({', '.join(f'{v:.0f}' for v in target)}) mm, "
+            f"{len(loaded.session.last.registration_positions)} registration points, no fiducials. Add fiducials "
+            "and targets (Click on the cell adds), then Save scene.",
+            client,
+            title="New cell",
+            error=False,
+        )
+        return True
+
+    def forget_upload_unless_used(self, mesh_path) -> None:
+        """A new source was opened: the uploaded mesh's temporary copy goes unless it is that source's mesh (a saved
+        scene must not name a mesh of an earlier cell)."""
+        up = self.uploaded_mesh
+        if up is not None and (mesh_path is None or Path(mesh_path).resolve() != up.resolve()):
+            self.remove_upload()
+
     def remove_upload(self) -> None:
         """Remove the uploaded mesh's temporary copy (the app stops)."""
         if self.uploaded_mesh is not None:
             shutil.rmtree(self.uploaded_mesh.parent, ignore_errors=True)
+            self.uploaded_mesh = None
 
     def export_authoring(self, what: str) -> list[tuple[str, bytes]]:
         """Files of "scene" (the session as a scene TOML), "plan" (the measurement plan CSV) or "slicer" (two

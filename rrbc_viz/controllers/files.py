@@ -23,7 +23,7 @@ class FileController:
         self.ctx = ctx
 
     # --------------------------------------------------------------------------------------------- files
-    def _unsaved(self, what: str, again, client) -> bool:
+    def ask_discard_unsaved(self, what: str, again, client) -> bool:
         """True (and a question asked) when the session has edits not saved as a scene: `again()` runs once the user
         agrees to discard them."""
         if not authoring.has_unsaved_edits(self.ctx.session):
@@ -41,7 +41,7 @@ class FileController:
         """Open a scene (.toml) or measurement file (.csv; optional mesh). On bad input the current session
         stays and a message says why; returns whether the file was loaded. A session with unsaved edits asks first
         (`confirmed`: the user agreed)."""
-        if not confirmed and self._unsaved(
+        if not confirmed and self.ask_discard_unsaved(
             str(getattr(source, "name", source) or "the default scene"),
             lambda: self.load(source, mesh, client, confirmed=True),
             client,
@@ -89,7 +89,7 @@ class FileController:
         return True
 
     def load_upload(self, name: str, content: bytes, client=None, confirmed: bool = False) -> bool:
-        if not confirmed and self._unsaved(
+        if not confirmed and self.ask_discard_unsaved(
             str(name), lambda: self.load_upload(name, content, client, confirmed=True), client
         ):
             return False

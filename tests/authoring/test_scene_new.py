@@ -220,3 +220,40 @@ def test_a_mesh_file_too_large_is_refused_from_its_header(tmp_path):
     assert cg.declared_triangles(big) == n
     with pytest.raises(InputError, match="3000000 triangles; at most"):
         cg.load_cell_mesh(big)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_an_empty_start_on_a_mesh_holds_one_reachable_target_and_no_fiducials(tmp_path, seed):
+    """The app's *New cell from this mesh* (issue 30): one target on an upward surface the arm reaches, outside
+    solids; registration points over it; candidates on surfaces; no fiducials - and the session evaluates with
+    RRBC equal to rigid and says why."""
+    from rrbc_core.authoring.scene_new import empty_scene
+    from rrbc_core.session.evaluation import NO_FIDUCIALS_WARNING
+    from rrbc_core.session.explorer import ExplorerSession
+
+    mesh_path, _, info = random_cell(tmp_path, seed)
+    made = empty_scene(mesh_path, tmp_path / "new.toml")
+    scene = load_scene(made.path)
+    assert scene.target_ids == ("T1",) and len(scene.fiducials.ids) == 0 and len(scene.registration.ids) >= 4
+    d, inside = _on_surface_and_outside(info["mesh"], info, scene.target_positions)
+    assert d.max() <= 1.0 + 1e-3 and not inside.any()  # 1 mm above a surface (to proximity's rounding), in no solid
+    d, inside = _on_surface_and_outside(info["mesh"], info, scene.candidates.positions)
+    assert len(scene.candidates.ids) >= 4 and d.max() < 0.01 and not inside.any()
+    ev = ExplorerSession.from_scene(scene).evaluate()
+    assert ev.warnings[0] == NO_FIDUCIALS_WARNING
+    np.testing.assert_allclose(ev.targets.error_rrbc, ev.targets.error_rigid)
+
+
+def test_an_empty_start_beyond_the_arms_reach_is_refused_with_nothing_written(tmp_path):
+    import trimesh
+
+    from rrbc_core.authoring.scene_new import empty_scene
+    from rrbc_core.errors import InputError
+
+    far = trimesh.creation.box(extents=(300, 300, 20))
+    far.apply_translation((5000, 0, 0))
+    far.export(tmp_path / "far.stl")
+    (tmp_path / "out").mkdir()
+    with pytest.raises(InputError, match="no upward-facing surface of the mesh lies within the UR5's reach"):
+        empty_scene(tmp_path / "far.stl", tmp_path / "out" / "new.toml")
+    assert list((tmp_path / "out").iterdir()) == []

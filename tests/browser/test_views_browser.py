@@ -16,7 +16,14 @@ import pytest
 from rrbc_viz import teaching
 from rrbc_viz.serve import serve
 
-from .helpers import decode_png, dismiss_software_webgl_notification, drag, node_screen_position, wait_for
+from .helpers import (
+    SOFTWARE_WEBGL_TITLE,
+    decode_png,
+    dismiss_software_webgl_notification,
+    drag,
+    node_screen_position,
+    wait_for,
+)
 
 pytestmark = pytest.mark.browser
 
@@ -35,7 +42,8 @@ _JS_PROJECT_MANY = """(pts) => {
     const q = w.clone().project(cam);
     const x = r.left + (q.x + 1) / 2 * r.width, y = r.top + (1 - q.y) / 2 * r.height;
     const el = document.elementFromPoint(x, y);
-    return {x: x, y: y, inFront: inFront, onCanvas: el === m.canvas,
+    const note = el ? el.closest('.mantine-Notification-root') : null;
+    return {x: x, y: y, inFront: inFront, onCanvas: el === m.canvas, notice: note ? note.innerText : '',
             over: el ? (el.tagName + '.' + el.className + ':' + (el.innerText || '').slice(0, 60)) : null};
   });
   const c = obj.worldToLocal(cam.position.clone());
@@ -108,6 +116,18 @@ def _hidden_by_mesh(mesh, camera: np.ndarray, points: np.ndarray, slack_mm: floa
     return hidden
 
 
+def _project_past_software_notice(page, pts: np.ndarray) -> dict:
+    """Project ``pts`` with the page's camera; if viser's headless-only "software WebGL" notice covers one of them
+    (on a loaded machine it can appear long after the page connected), close it and project again. Anything else
+    covering a point (our panel, our notifications) is left for the test to see."""
+    for _ in range(3):
+        res = page.evaluate(_JS_PROJECT_MANY, pts.tolist())
+        if not any(SOFTWARE_WEBGL_TITLE in p["notice"] for p in res["points"]):
+            return res
+        dismiss_software_webgl_notification(page, timeout_s=3.0)
+    return res
+
+
 @pytest.mark.parametrize("projector", [False, True], ids=["1280x800", "presentation-1280x720"])
 def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_app, page_for, projector):
     """Also as a teacher runs it: presentation mode on a 1280x720 projector, nobody touching the camera."""
@@ -124,7 +144,7 @@ def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_
         dismiss_software_webgl_notification(page, timeout_s=0.3)  # on a loaded machine it can come late
         objects = _step_objects(app, step)
         for name, pts in objects.items():
-            res = page.evaluate(_JS_PROJECT_MANY, pts.tolist())
+            res = _project_past_software_notice(page, pts)
             left, top, w, h = res["canvas"]
             for j, p in enumerate(res["points"]):
                 where = f"step {i + 1}: {name} #{j} at {p['x']:.0f},{p['y']:.0f}"

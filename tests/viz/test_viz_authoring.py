@@ -185,3 +185,62 @@ def test_uploaded_meshes_leave_no_temporary_files(tmp_path):
     finally:
         a.stop()
     assert not second.exists()
+
+
+def test_a_new_cell_from_an_uploaded_mesh_starts_empty_framed_on_it_and_saves_with_its_mesh(app, tmp_path):
+    """Issue 30, item 3: *New cell from this mesh* - the demo's points go, one target and registration points over
+    it come, no fiducials; every tab's camera shows the whole new cell; the saved scene names the uploaded mesh and
+    reloads; a replaced upload's temporary copy goes; edits not saved are asked about first."""
+    import trimesh
+
+    box = trimesh.creation.box(extents=(500, 400, 30))
+    box.apply_translation((420, -80, 200))  # a raised bench, away from the demo's plate: top at z = 215
+    assert app.authoring.upload_mesh("bench_v3.stl", box.export(file_type="stl"))
+    uploaded_dir = app.authoring.uploaded_mesh.parent
+    demo_ids = set(app.session.last.targets.ids)
+    assert app.authoring.new_cell_from_mesh()
+    ev = app.session.last
+    assert ev.targets.ids == ("T1",) and not set(ev.targets.ids) & (demo_ids - {"T1"})
+    assert len(ev.fiducial_ids) == 0 and len(ev.registration_positions) >= 4
+    t = ev.targets.positions[0]
+    assert box.bounds[0, 0] <= t[0] <= box.bounds[1, 0] and box.bounds[0, 1] <= t[1] <= box.bounds[1, 1]
+    assert abs(t[2] - 215.0) <= 1.5  # on the bench's top
+    assert app.session.name == "bench_v3" and app.state.camera_preset == "whole cell"
+    assert "A new cell on bench_v3.stl: one target T1" in app.last_message
+    assert not uploaded_dir.exists() and app.authoring.uploaded_mesh.exists()  # the copy beside the new scene
+    # the user adds a fiducial, then saves: the scene names the uploaded mesh and reloads with it
+    app.authoring.set_click_mode("fiducials")
+    app.authoring.add_at_ray([t[0] + 60, t[1], 800], [0, 0, -1])
+    assert len(app.session.last.fiducial_ids) == 1
+    ((name, content),) = app.authoring.export_authoring("scene")
+    assert name == "bench_v3.toml" and b'mesh = "bench_v3.stl"' in content
+    (tmp_path / name).write_bytes(content)
+    (tmp_path / "bench_v3.stl").write_bytes(app.authoring.uploaded_mesh.read_bytes())
+    again = load_scene(tmp_path / name)
+    np.testing.assert_allclose(again.load_mesh().bounds, box.bounds, atol=1e-6)
+    # an edit not saved: a second new cell asks first, and nothing changes until the user agrees
+    asked = []
+    app.ctx.controls.file.confirm = lambda title, text, button, again: asked.append(again)
+    assert not app.authoring.new_cell_from_mesh()
+    assert len(asked) == 1 and len(app.session.last.fiducial_ids) == 1
+    asked[0]()
+    assert len(app.session.last.fiducial_ids) == 0
+    # another source opened: the upload's copy goes, and a saved scene names that source's own mesh
+    kept = app.authoring.uploaded_mesh
+    assert app.files.load(None, confirmed=True)
+    assert app.authoring.uploaded_mesh is None and not kept.exists()
+    ((_, content),) = app.authoring.export_authoring("scene")
+    assert b"bench_v3" not in content
+
+
+def test_a_new_cell_on_a_mesh_the_arm_cannot_reach_is_refused_and_nothing_changes(app):
+    import trimesh
+
+    far = trimesh.creation.box(extents=(300, 300, 20))
+    far.apply_translation((5000, 0, 0))  # 5 m away: beyond the UR5's reach
+    assert app.authoring.upload_mesh("far.stl", far.export(file_type="stl"))
+    before = app.session.last.targets.ids
+    assert not app.authoring.new_cell_from_mesh()
+    assert "no upward-facing surface" in app.last_message and "far.stl" in app.last_message
+    assert "rrbc-mesh-" not in app.last_message
+    assert app.session.last.targets.ids == before
