@@ -43,7 +43,7 @@ import viser
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
-from . import files
+from . import files, upload_spool
 from .camera import OPENING, CameraDirector, preset_view
 from .context import AppContext
 from .controllers.authoring import AuthoringController
@@ -206,6 +206,7 @@ class RunningApp:
         self.montecarlo.close()
         self.ctx.planning.stop()
         self.authoring.remove_upload()  # the uploaded mesh's temporary copy (a per-tab app too, when its tab goes)
+        upload_spool.close(self.ctx.server.gui)  # uploads still arriving, and what they stored
         if not self.owns_server:
             return
         with contextlib.redirect_stdout(io.StringIO()) if self.quiet else contextlib.nullcontext():

@@ -8,6 +8,9 @@ from typing import TYPE_CHECKING
 
 import viser
 
+from rrbc_core.authoring.cell_geometry import MESH_MAX_BYTES, refuse_from_header
+
+from . import upload_spool
 from .syncing import clamped
 
 if TYPE_CHECKING:
@@ -64,10 +67,15 @@ class AuthoringPanel:
         self.plan.on_click(lambda event: app.authoring.download_authoring("plan", client=event.client))
         self.slicer.on_click(lambda event: app.authoring.download_authoring("slicer", client=event.client))
 
-        @self.mesh.on_upload
-        def _(event: viser.GuiEvent) -> None:
-            f = self.mesh.value
-            app.authoring.upload_mesh(f.name, f.content, client=event.client)
+        # written to disk as it arrives, refused from its size and header before the rest is kept (upload_spool)
+        upload_spool.spool(
+            gui,
+            self.mesh,
+            MESH_MAX_BYTES,
+            on_file=lambda client, name, path: app.authoring.upload_mesh_file(name, path, client=client),
+            on_refused=lambda client, why: app.files.upload_refused(why, client=client),
+            check=refuse_from_header,
+        )
 
     def show_mode(self, markdown: str) -> None:
         """What a click on the cell does now."""

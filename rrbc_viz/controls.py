@@ -17,9 +17,11 @@ import numpy as np
 import viser
 
 from rrbc_core import interpolation, registration
+from rrbc_core.io.measurements import FILE_LIMIT_BYTES
 from rrbc_core.methods import method_flags
 from rrbc_core.session.evaluation import Settings
 
+from . import upload_spool
 from .authoring_panel import AuthoringPanel
 from .camera import PANEL_WIDTH_PX, PRESENTATION_PANEL_WIDTH_PX, PRESETS
 from .checks_panel import ChecksPanel
@@ -446,10 +448,14 @@ class FilePanel:
             if self.station.value != NO_STATION and not self._showing:
                 app.files.load_station(self.station.value, client=event.client)
 
-        @self.upload.on_upload
-        def _(event: viser.GuiEvent) -> None:
-            f = self.upload.value
-            app.files.load_upload(f.name, f.content, client=event.client)
+        # written to disk as it arrives and refused from its declared size before anything is kept (upload_spool)
+        upload_spool.spool(
+            gui,
+            self.upload,
+            FILE_LIMIT_BYTES,
+            on_file=lambda client, name, path: app.files.load_upload(name, path.read_bytes(), client=client),
+            on_refused=lambda client, why: app.files.upload_refused(why, client=client),
+        )
 
         self.download_csv.on_click(lambda event: app.files.download("csv", client=event.client))
         self.download_json.on_click(lambda event: app.files.download("json", client=event.client))

@@ -15,7 +15,7 @@ from rrbc_core.runtime.memory import release_memory_soon
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.session.explorer import ExplorerSession
 
-from . import files, message_guard
+from . import files, message_guard, upload_spool
 from .access import AccessGuard, new_token, page_url
 from .app import RunningApp
 from .per_client import PerClientApp
@@ -73,6 +73,7 @@ def serve(
     try:
         guard = AccessGuard(server, new_token() if token is True else (token or None))
         server.scene.set_up_direction("+z")
+        server.on_client_disconnect(lambda client: upload_spool.drop_client(client.client_id))  # half-sent uploads
         app: RunningApp | PerClientApp
         if per_client:
             server.gui.configure_theme(show_share_button=False)

@@ -65,19 +65,43 @@ def declared_triangles(path) -> int | None:
     size = p.stat().st_size
     with open(p, "rb") as f:
         head = f.read(512)
-        if suffix == ".stl":
-            n = int.from_bytes(head[80:84], "little") if len(head) >= 84 else -1
-            if 84 + 50 * n == size:  # binary: the count field agrees with the file's length
-                return n
-            return _count(f, b"facet normal") if head.lstrip()[:5].lower() == b"solid" else None
-        if suffix == ".ply" and head.startswith(b"ply"):
-            for line in head.split(b"\n"):
-                parts = line.split()
-                if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"face" and parts[2].isdigit():
-                    return int(parts[2])
-            return None
+        n = header_triangles(suffix, head, size)
+        if n is not None:
+            return n
+        if suffix == ".stl" and head.lstrip()[:5].lower() == b"solid":
+            return _count(f, b"facet normal")
         if suffix == ".obj":
             return _count(f, b"\nf ")
+    return None
+
+
+def header_triangles(suffix: str, head: bytes, size: int) -> int | None:
+    """The triangle count a mesh file's first bytes `head` declare (a file of `size` bytes, name ending in
+    `suffix`): a binary STL's count field (when it agrees with the size), a PLY header's face element; None when
+    the head alone does not say (other formats, ASCII STL, OBJ)."""
+    suffix = suffix.lower()
+    if suffix == ".stl" and len(head) >= 84:
+        n = int.from_bytes(head[80:84], "little")
+        if 84 + 50 * n == size:  # binary: the count field agrees with the file's length
+            return n
+    if suffix == ".ply" and head.startswith(b"ply"):
+        for line in head[:4096].split(b"\n"):
+            parts = line.split()
+            if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"face" and parts[2].isdigit():
+                return int(parts[2])
+            if line.strip() == b"end_header":
+                break
+    return None
+
+
+def refuse_from_header(name: str, head: bytes, size: int) -> str | None:
+    """Why an upload of a mesh file must be refused from its size and first bytes alone (too large, or declaring
+    more than `MESH_MAX_FACES` triangles), or None."""
+    if size > MESH_MAX_BYTES:
+        return f"{name}: mesh file larger than {MESH_MAX_BYTES >> 20} MiB; decimate it first"
+    n = header_triangles(Path(name).suffix, head, size)
+    if n is not None and n > MESH_MAX_FACES:
+        return f"{name}: {n} triangles; at most {MESH_MAX_FACES} (decimate it first)"
     return None
 
 

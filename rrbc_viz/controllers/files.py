@@ -104,6 +104,10 @@ class FileController:
         self.ctx.install(loaded)
         return True
 
+    def upload_refused(self, why: str, client=None) -> None:
+        """An upload refused before it was parsed (`upload_spool`: too large, or its header says too much)."""
+        self.ctx.message(why, client, title="Upload refused")
+
     def export(self, what: str) -> tuple[str, bytes]:
         """(file name, content) of "csv" (views.export_measurements(session) as a measurement file) or "json"
         (views.export_json(session))."""

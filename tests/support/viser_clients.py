@@ -173,6 +173,52 @@ class ClientPool:
 
         return self.run(go())
 
+    def upload(
+        self,
+        k: int,
+        button_uuid: str,
+        name: str,
+        parts,
+        size_bytes: int,
+        part_count: int,
+        transfer_uuid: str | None = None,
+    ) -> str:
+        """Client k uploads a file through upload button `button_uuid` as viser's client does: a
+        FileTransferStartUpload declaring `size_bytes` in `part_count` parts, then each of `parts` (an iterable of
+        bytes, 512 KiB each but the last in viser's client; a test may send fewer or other ones). Returns the
+        transfer's uuid."""
+        import uuid as uuid_
+
+        tid = transfer_uuid or str(uuid_.uuid4())
+
+        async def go() -> None:
+            await self._send(
+                k,
+                encode(
+                    "FileTransferStartUpload",
+                    source_component_uuid=button_uuid,
+                    transfer_uuid=tid,
+                    filename=name,
+                    mime_type="application/octet-stream",
+                    part_count=int(part_count),
+                    size_bytes=int(size_bytes),
+                ),
+            )
+            for i, content in enumerate(parts):
+                await self._send(
+                    k,
+                    encode(
+                        "FileTransferPart",
+                        source_component_uuid=button_uuid,
+                        transfer_uuid=tid,
+                        part_index=i,
+                        content=bytes(content),
+                    ),
+                )
+
+        self.run(go(), timeout=600)
+        return tid
+
     def send_raw(self, k: int, data: bytes) -> None:
         """Client k sends `data` as one binary message (garbage, or a wrongly typed message)."""
         self.run(self._send(k, data))
