@@ -104,3 +104,59 @@ def test_presentation_mode_is_legible_on_a_1280x720_projector(viser_app, browser
             page.evaluate(_JS_SCROLL_TOP)
     finally:
         context.close()
+
+
+_JS_MIN_FONT = """() => { let lo = 1e9;
+  for (const el of document.querySelectorAll('p, td, label, button')) {
+    if (!(el.innerText || '').trim() || !el.offsetParent) continue;
+    lo = Math.min(lo, parseFloat(getComputedStyle(el).fontSize)); }
+  return lo; }"""
+
+
+@pytest.mark.parametrize(
+    "present,width,height,min_font", [(False, 1440, 900, 11.0), (True, 1280, 720, 24.0)], ids=["1440x900", "projector"]
+)
+def test_every_tab_of_the_panel_can_be_scrolled_to_its_last_control(
+    viser_app, browser, present, width, height, min_font
+):
+    """Issue 30: at 1440x900 (an integrator's laptop) and on a 1280x720 projector, every tab's last control can be
+    scrolled into the window (the File tab's *New cell from this mesh* among them), no panel text is smaller than
+    the mode's size, and the lesson's Next is in view without scrolling at every step."""
+    app = viser_app(lambda: serve(present=present))
+    context = browser.new_context(viewport={"width": width, "height": height})
+    try:
+        page = context.new_page()
+        page.goto(app.url)
+        page.wait_for_function("() => window.__viserMutable && window.__viserMutable.canvas", timeout=30_000)
+        page.get_by_text("Selected point").first.wait_for(state="visible", timeout=30_000)
+        dismiss_software_webgl_notification(page, timeout_s=5.0)
+        tabs = [t for t in page.get_by_role("tab").all_inner_texts() if t.strip()]
+        assert {"Explore", "Learn", "File"} <= set(tabs), tabs
+        for name in tabs:
+            page.get_by_role("tab", name=name, exact=True).click()
+            page.wait_for_timeout(300)
+            box = page.evaluate(_JS_PANEL_SCROLL)
+            assert box["bottom"] <= height + 1, (name, box)
+            assert box["lastBottom"] <= height + 1, (name, box)
+            assert page.evaluate(_JS_MIN_FONT) >= min_font - 0.1, name
+            if name == "File":
+                button = page.get_by_role("button", name="New cell from this mesh")
+                button.scroll_into_view_if_needed()
+                b = button.bounding_box()
+                assert b is not None and 0 <= b["y"] and b["y"] + b["height"] <= height, b
+            page.evaluate(_JS_SCROLL_TOP)
+        page.get_by_role("tab", name="Learn", exact=True).click()
+        for k in range(9):
+            nxt = page.get_by_role("button", name="Next")
+            b = nxt.bounding_box()
+            assert b is not None and 0 <= b["y"] and b["y"] + b["height"] <= height, (k, b)
+            assert page.evaluate(_JS_SCROLLED) < 1.0, k
+            if k == 8:
+                break
+            nxt.click()
+            wait_for(
+                lambda k=k: f"Step {k + 1} of 9" in page.inner_text("body"), 20, message=f"step {k + 1}", page=page
+            )
+            page.evaluate(_JS_SCROLL_TOP)
+    finally:
+        context.close()
