@@ -65,11 +65,17 @@ PANEL_CSS = (
     ".mantine-Paper-root .mantine-ScrollArea-root:not(.mantine-ScrollArea-root .mantine-ScrollArea-root), "
     ".mantine-Paper-root .mantine-ScrollArea-viewport:not(.mantine-ScrollArea-root .mantine-ScrollArea-viewport) "
     "{ max-height: calc(100vh - 3.5rem) !important; }"
+    # the plots' legends (uPlot) at the panel's body size, not 0.65 of it
+    ".mantine-Paper-root .u-legend th, .mantine-Paper-root .u-legend td { font-size: 0.875rem !important; }"
 )
 #: Presentation mode (a projector at 1280x720): the panel's sizes are in rem, so a root font of 27.5 px makes its
 #: body text (0.875 rem) 24 px.
 PRESENTATION_FONT_PX = 27.5
-PRESENTATION_CSS = f"<style>html {{ font-size: {PRESENTATION_FONT_PX}px !important; }} {PANEL_CSS}</style>"
+PRESENTATION_CSS = (
+    f"<style>html {{ font-size: {PRESENTATION_FONT_PX}px !important; }} {PANEL_CSS} "
+    # button groups (the camera presets) at the body size too
+    ".mantine-Paper-root .mantine-Button-root { font-size: 0.875rem !important; }</style>"
+)
 NORMAL_CSS = f"<style>{PANEL_CSS}</style>"
 
 

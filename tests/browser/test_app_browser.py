@@ -78,9 +78,11 @@ def open_tab(page, name: str) -> None:
     page.get_by_role("tab", name=name).click()
 
 
-def drag_axis(page, node: str, scale: float, from_local: float, to_local: float, steps: int = 20) -> None:
+def drag_axis(page, node: str, scale: float, from_local: float, to_local: float, steps: int = 8) -> None:
     """Real-mouse drag of the X arrow of gizmo `node`: press on the shaft at `from_local`·scale along its local
-    X axis and release over `to_local`·scale (both projected with the page's camera)."""
+    X axis and release over `to_local`·scale (both projected with the page's camera). Eight moves: under
+    software WebGL each waits for a frame of the whole cell (0.5-2 s here), and a few already send several
+    updates."""
     start = node_screen_position(page, node, (from_local * scale, 0.0, 0.0))
     end = node_screen_position(page, node, (to_local * scale, 0.0, 0.0))
     assert np.hypot(end[0] - start[0], end[1] - start[1]) > 15, (start, end)

@@ -193,7 +193,7 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
     app.views.show_camera("whole cell")
     _wait_camera(page, app)
     grip = node_screen_position(page, "/targets/H1/gizmo", (0.0, 0.0, 0.7 * app.nodes._gizmo_scale()))
-    drag(page, grip, (grip[0], 5.0), steps=25, step_ms=25)
+    drag(page, grip, (grip[0], 5.0), steps=10, step_ms=25)  # each move waits for a frame (software WebGL)
     wait_for(lambda: app.messages, 15.0, message="a refusal message")
     assert "reach" in app.last_message, app.last_message
     refused_z = float(app.last_message.split("point 0 at (")[1].split(")")[0].split(",")[2])
@@ -250,7 +250,7 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
     scale = app.nodes._gizmo_scale()
     a = node_screen_position(page, "/fiducials/F5/gizmo", (0.7 * scale, 0.0, 0.0))
     b = node_screen_position(page, "/fiducials/F5/gizmo", (2.5 * scale, 0.0, 0.0))
-    drag(page, a, b, steps=20)
+    drag(page, a, b, steps=8)
     wait_for(lambda: not np.allclose(app.evaluate.gizmo("fiducials", "F5").position, f0), 5.0, message="F5 moved")
     page.wait_for_timeout(800)  # the drag's end: the slice is recomputed and sent
     assert not np.array_equal(np.array(app.slice_node.handle.image), image0)
