@@ -147,6 +147,35 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ),
 ]
 
+
+def _bench_stl() -> bytes:
+    """An integrator's own cell mesh as an STL (robot frame, mm): a bench top at z = 0 in front of the robot with a
+    fixture block on it."""
+    import trimesh
+
+    bench = trimesh.creation.box(extents=(800.0, 700.0, 40.0))
+    bench.apply_translation((480.0, 0.0, -20.0))
+    block = trimesh.creation.box(extents=(160.0, 120.0, 60.0))
+    block.apply_translation((520.0, 120.0, 30.0))
+    return trimesh.util.concatenate([bench, block]).export(file_type="stl")
+
+
+# The integrator's start: their own mesh uploaded (bench_v3.stl), then File -> New cell from this mesh: the demo's
+# points gone, one target and the registration points over it, the camera on the whole cell.
+SHOTS.append(
+    (
+        "new_cell_from_mesh.png",
+        [
+            ("call", lambda app: app.authoring.upload_mesh("bench_v3.stl", _bench_stl())),
+            ("tab", "File"),
+            ("button", "New cell from this mesh"),
+            ("wait_text", "A new cell on bench_v3.stl"),
+        ],
+    )
+)
+# The File tab on an integrator's laptop (1440x900).
+SHOTS.append(("file_tab_1440x900.png", [("tab", "File")]))
+
 #: Per-shot options: "serve" (keyword arguments of serve: a source, presentation mode) and "viewport" (the
 #: browser window, default helpers.VIEWPORT 1280x800).
 SCENES = ROOT / "scenes"
@@ -158,6 +187,7 @@ SHOT_OPTIONS: dict[str, dict] = {
         "mesh_node": "/registration/points",  # no work-cell mesh with this file: wait for the points instead
     },
     "presentation_1280x720.png": {"serve": {"present": True}, "viewport": {"width": 1280, "height": 720}},
+    "file_tab_1440x900.png": {"viewport": {"width": 1440, "height": 900}},
 }
 
 APP_ENTRY = "rrbc_viz.serve:serve"

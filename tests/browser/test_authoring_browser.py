@@ -1,6 +1,6 @@
-"""Authoring a cell in headless Chromium, as a user does it: upload a mesh from the File tab, place a fiducial by
-clicking on the mesh in the 3-D view, save the scene (a real download), load the saved scene back and see the same
-numbers in the page."""
+"""Authoring a cell in headless Chromium, as an integrator does it: upload their mesh from the File tab, start a new
+cell on it (*New cell from this mesh*), place a fiducial by clicking on the mesh in the 3-D view, save the scene (a
+real download), load the saved scene back and see the same numbers in the page."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ _JS_TABLE_ROWS = """() => Array.from(document.querySelectorAll('table tr'))
 
 
 def _rows(page):
-    return {r[0]: r[1:] for r in page.evaluate(_JS_TABLE_ROWS) if r and r[0].startswith("H")}
+    return {r[0]: r[1:] for r in page.evaluate(_JS_TABLE_ROWS) if r and r[0].startswith("T")}
 
 
 def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_app, page_for, tmp_path):
@@ -40,13 +40,19 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
         page.get_by_text("Upload cell mesh").click()
     chooser.value.set_files(str(mesh_file))
     wait_for(lambda: app.authoring.uploaded_mesh is not None, 30, message="the mesh uploaded", page=page)
+    # an empty start on it: the demo's points go, one target T1 on the slab, the camera on the whole cell
+    page.get_by_role("button", name="New cell from this mesh").click()
+    page.get_by_text("A new cell on slab.stl", exact=False).first.wait_for(state="visible", timeout=30_000)
+    assert app.session.last.targets.ids == ("T1",) and len(app.session.last.fiducial_ids) == 0
+    assert abs(app.session.last.targets.positions[0][2] - 51.0) < 1e-6  # on the slab's top (a hair above it)
     page.get_by_label("Click on the cell adds").click()
     page.get_by_role("option", name="fiducial", exact=True).click()
     wait_for(lambda: app.authoring.click_mode == "fiducials", 10, message="click mode on the server", page=page)
-    app.views.show_camera("close-up")
+    app.views.show_camera("work area")  # the target and the registration points over it
     page.wait_for_timeout(1500)
     n = len(app.session.last.fiducial_ids)
-    spot = np.array([560.0, 120.0, 50.0])
+    t1 = app.session.last.targets.positions[0]
+    spot = np.array([t1[0] + 60.0, t1[1] + 40.0, 50.0])  # on the slab beside T1
     x, y = page.evaluate(_JS_PROJECT, spot.tolist())
     page.mouse.click(x, y)
     wait_for(
@@ -55,7 +61,7 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     added = app.session.last.fiducial_positions[-1]
     assert abs(added[2] - 50.0) < 1e-3 and np.linalg.norm(added[:2] - spot[:2]) < 5.0  # on the slab, where clicked
     page.get_by_role("tab", name="Explore").click()
-    wait_for(lambda: len(_rows(page)) == 8, 15, message="the table", page=page)
+    wait_for(lambda: len(_rows(page)) == 1, 15, message="the table", page=page)
     before = _rows(page)
     # save: a real download, kept beside the mesh under the name the scene refers to
     page.get_by_role("tab", name="File").click()
