@@ -99,6 +99,7 @@ class SceneNodes:
         self.scene_model = None
         self.session: Any = None  # the session built (build)
         self.lesson_labels: tuple[str, ...] = ()  # kinds of point whose labels a lesson step shows
+        self.lesson_hidden: frozenset[str] = frozenset()  # ... less those that would overlap (lesson_labels.declutter)
         self.landing_hold = False  # a drag is under way: the bullseye keeps its ring (its drawing scale)
         self.dragging: set[tuple[str, str]] = set()  # handles the user is dragging (the app leaves them be)
         self._arm_key: tuple | None = None
@@ -430,7 +431,7 @@ class SceneNodes:
         reg_frame.position = position
         note = self.nodes.get("/frames/sensor_registered/note")
         if note is not None:
-            self._assign(note, "text", f"registration error ×{self.frame_mag:g} (drawn beside the true pose)")
+            self._assign(note, "text", self._frame_note())
         reg = self.nodes.get("/registration/points")
         if reg is not None:  # registration points only move when moved from Python (no gizmo)
             reg.batched_positions = ev.registration_positions.astype(np.float32)
@@ -563,6 +564,12 @@ class SceneNodes:
         tc.position = p + np.array([1e-4 * (1.0 + float(np.abs(p).max())), 0.0, 0.0])
         tc.position = p
 
+    def _frame_note(self) -> str:
+        """The registered frame's note; short in presentation mode (large text must stay left of the panel)."""
+        if self.label_scale > 1.0:
+            return f"registered ×{self.frame_mag:g}"
+        return f"registration error ×{self.frame_mag:g} (drawn beside the true pose)"
+
     def set_label_scale(self, factor: float) -> None:
         """Labels' screen size × factor (presentation mode)."""
         self.label_scale = float(factor)
@@ -572,6 +579,8 @@ class SceneNodes:
             h.font_screen_scale = 0.75 * self.label_scale
             h.anchor = anchor
         self._show_labels()
+        if "/frames/sensor_registered/note" in self.nodes:
+            self._assign(self.nodes["/frames/sensor_registered/note"], "text", self._frame_note())
         for name in ("/landing/scale", "/frames/sensor_registered/note"):
             if name in self.nodes:
                 self.nodes[name].font_screen_scale = 0.8 * self.label_scale
@@ -625,6 +634,12 @@ class SceneNodes:
     def set_lesson_labels(self, kinds: tuple[str, ...]) -> None:
         """Show the labels of these kinds of point (a lesson step's, teaching.Step.labels) besides the others."""
         self.lesson_labels = tuple(kinds)
+        self.lesson_hidden = frozenset()
+        self._show_labels()
+
+    def hide_lesson_labels(self, names) -> None:
+        """Of the lesson step's labels, hide these (lesson_labels.declutter: they would overlap)."""
+        self.lesson_hidden = frozenset(names)
         self._show_labels()
 
     def _show_labels(self) -> None:
@@ -633,8 +648,9 @@ class SceneNodes:
         on = bool(self.layers.get("labels")) and self.label_scale <= 1.0
         lesson = tuple(f"/{k}/" for k in self.lesson_labels)
         mine = None if self.selected is None else f"{gizmo_name(*self.selected)}/label"
+        hidden = self.lesson_hidden
         for name, h in self.labels.items():
-            self._assign(h, "visible", on or name == mine or name.startswith(lesson))
+            self._assign(h, "visible", on or name == mine or (name.startswith(lesson) and name not in hidden))
 
     def apply_sizes(self) -> None:
         """Marker size and region zoom changed: resize spheres, gizmos, arrows, regions."""

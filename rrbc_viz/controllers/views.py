@@ -14,8 +14,9 @@ from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import default_plane
 
-from .. import selection_card, teaching
+from .. import lesson_labels, selection_card, teaching
 from ..camera import (
+    DEFAULT_IMAGE,
     OBLIQUE,
     PANEL_GAP_PX,
     PANEL_WIDTH_PX,
@@ -303,8 +304,21 @@ class ViewController:
                 text = teaching.render(index, self.ctx.session.last, self.ctx.present.lesson_context())
                 self.ctx.controls.learn.show_text(text)
                 self.show_selection(self.ctx.session.last)
-                self.ctx.camera.show(self.current_view())
+                self._declutter(self.ctx.camera.show(self.current_view()))
             return text
+
+    def _declutter(self, poses: dict) -> None:
+        """The lesson's labels that would overlap, or run under the panel, in the first tab's view (or the initial
+        camera's) are hidden (lesson_labels.declutter)."""
+        clients = self.ctx.server.get_clients()
+        for cid, pose in poses.items():
+            cam = clients[cid].camera if cid in clients else None
+            if cam is not None:
+                size = (float(cam.image_width), float(cam.image_height))
+                lesson_labels.declutter(self.ctx.nodes, pose, size, self.ctx.camera.panel_px)
+                return
+        if self.ctx.camera.initial is not None:
+            lesson_labels.declutter(self.ctx.nodes, self.ctx.camera.initial, DEFAULT_IMAGE, self.ctx.camera.panel_px)
 
     def lesson_step(self, delta: int) -> str:
         """Next (+1) or previous (-1) step; the first press of either starts the lesson at step 1."""

@@ -1,0 +1,64 @@
+"""Which point labels to show so that none overlaps another or runs under the panel (the lessons' labels).
+
+A label is drawn at a fixed size on screen (viser's "screen" labels: an em of `LABEL_EM_PX` CSS px times its font
+scale) beside its anchor point, which the camera projects as in `framing.project`. Its box is estimated from its
+text: `CHAR_EM` em per character and `LINE_EM` em tall. Labels are taken greedily in the order given (the one a
+lesson's text names first): a label is kept when its anchor is in front of the camera, its box lies in the image
+left of the panel, and it does not meet a box already kept (with `GAP_PX` between them).
+
+Frames and units: anchors (N, 3) robot frame, mm; image and boxes in CSS px, origin at the image's top left.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rrbc_core.geometry.framing import CameraPose, project
+
+#: viser's screen labels: 12 CSS px per em at font scale 1.
+LABEL_EM_PX = 12.0
+#: Estimated advance per character (em) and line height (em) of the labels' sans-serif font.
+CHAR_EM = 0.6
+LINE_EM = 1.25
+#: Free pixels kept between two labels.
+GAP_PX = 2.0
+
+
+def label_boxes(anchors, texts, pose: CameraPose, image_px, font_scale: float, anchor: str = "bottom-left"):
+    """Screen boxes (N, 4) [left, top, right, bottom] (CSS px) of labels `texts` (N,) at `anchors` (N, 3) seen by
+    `pose` in an image of `image_px` (width, height); rows of labels behind the camera are NaN. `anchor`:
+    "bottom-left" (the text starts at the point) or "bottom-center" (centred over it)."""
+    a = np.asarray(anchors, float).reshape(-1, 3)
+    w_img, h_img = (float(v) for v in image_px)
+    ndc, depth = project(a, pose)
+    x = (ndc[:, 0] + 1.0) / 2.0 * w_img
+    y = (1.0 - ndc[:, 1]) / 2.0 * h_img
+    em = LABEL_EM_PX * float(font_scale)
+    width = np.array([CHAR_EM * em * max(len(str(t)), 1) for t in texts], float)
+    height = LINE_EM * em
+    left = x - width / 2.0 if anchor == "bottom-center" else x
+    boxes = np.stack([left, y - height, left + width, y], axis=1)
+    boxes[~(depth > 0)] = np.nan
+    return boxes
+
+
+def uncluttered(boxes, image_px, panel_px: float = 0.0, gap_px: float = GAP_PX) -> np.ndarray:
+    """(N,) bool: the labels to show, taken in the rows' order (module docstring), from their `boxes` (N, 4) as
+    `label_boxes` gives them; `panel_px`: the width the panel covers at the image's right."""
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    w_img, h_img = (float(v) for v in image_px)
+    keep = np.zeros(len(b), bool)
+    kept: list[np.ndarray] = []
+    for i, box in enumerate(b):
+        if not np.all(np.isfinite(box)):
+            continue
+        if box[0] < 0 or box[1] < 0 or box[2] > w_img - panel_px or box[3] > h_img:
+            continue
+        if any(
+            box[0] < k[2] + gap_px and k[0] < box[2] + gap_px and box[1] < k[3] + gap_px and k[1] < box[3] + gap_px
+            for k in kept
+        ):
+            continue
+        keep[i] = True
+        kept.append(box)
+    return keep
