@@ -73,8 +73,9 @@ PANEL_CSS = (
 PRESENTATION_FONT_PX = 27.5
 PRESENTATION_CSS = (
     f"<style>html {{ font-size: {PRESENTATION_FONT_PX}px !important; }} {PANEL_CSS} "
-    # button groups (the camera presets) at the body size too
-    ".mantine-Paper-root .mantine-Button-root { font-size: 0.875rem !important; }</style>"
+    # button groups (the camera presets) and the tabs' names at the body size too
+    ".mantine-Paper-root .mantine-Button-root, .mantine-Paper-root .mantine-Tabs-tab "
+    "{ font-size: 0.875rem !important; }</style>"
 )
 NORMAL_CSS = f"<style>{PANEL_CSS}</style>"
 
@@ -321,12 +322,12 @@ class LearnPanel:
     """Learn tab: the nine-step lesson's text and its buttons."""
 
     def __init__(self, gui, app: Actions):
-        # the buttons first: on a projector (1280x720, large text) Next stays in view without scrolling
+        # Next first, then the text: on a projector (1280x720, large text) both start in view without scrolling
         self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
-        self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
         self.lesson = gui.add_markdown(
             "The nine steps of RRBC, one at a time, each shown in the scene with live numbers. Press **Next** to start."
         )
+        self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
         self.lesson_end = gui.add_button("End lesson (restore layers)")
         self.lesson_next.on_click(lambda event: app.views.lesson_step(+1))
         self.lesson_prev.on_click(lambda event: app.views.lesson_step(-1))
@@ -336,6 +337,10 @@ class LearnPanel:
     def show_text(self, markdown: str) -> None:
         """The lesson step's text (or the prompt to start)."""
         self.lesson.content = markdown
+
+    def show_step(self, index: int | None, steps: int) -> None:
+        """Step `index` (0-based; None: no lesson) of `steps` is shown: Next is off at the last step."""
+        self.lesson_next.disabled = index is not None and index >= steps - 1
 
 
 class MonteCarloPanel:
@@ -514,7 +519,7 @@ class Controls:
         gui.set_panel_label("RRBC explorer")
         self.style = gui.add_html(NORMAL_CSS)  # the panel's style sheet (presentation mode: large text)
         self.status = gui.add_markdown("")
-        self.headline = gui.add_html("")  # rigid → RRBC, pinned above the tabs (tables.headline)
+        self.headline = gui.add_html("")  # rigid → RRBC, above the tabs (tables.headline)
         # the colour legend, collapsible: open while exploring, closed in presentation mode (a lesson needs the room)
         with gui.add_folder("Colours", expand_by_default=True) as self.legend_open:
             self.legend = gui.add_html(legend_html())
@@ -558,7 +563,7 @@ class Controls:
 
     # -------------------------------------------------------------------------------- what the app shows here
     def show_headline(self, html: str) -> None:
-        """The pinned rigid → RRBC readout (tables.headline); hidden when empty."""
+        """The rigid → RRBC readout above the tabs (tables.headline); hidden when empty."""
         if self.headline.content != html:
             self.headline.content = html
         self.headline.visible = bool(html)

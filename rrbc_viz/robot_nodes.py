@@ -169,6 +169,12 @@ class ArmNodes:
             joint.wxyz = _z_to(f[i, :3, 2])
         self._set_stylus(f[6, :3, 3], f[7, :3, 3])
 
+    def set_marks_visible(self, on: bool) -> None:
+        """Show or hide where the real tool lands (its line and label): a lesson hides them, as its text does not
+        talk about the arm's model error and its label would cover what the step shows."""
+        for h in self.marks.values():
+            h.visible = bool(on)
+
     def refresh_label(self) -> None:
         """The landing label again (its text is shorter in presentation mode)."""
         if self.pose is not None and self.marks:

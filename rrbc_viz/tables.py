@@ -51,7 +51,7 @@ def summary(ev: Evaluation, kind: str) -> str:
 
 
 def headline(ev: Evaluation, kind: str) -> str:
-    """The pinned readout at the top of the panel: rigid → RRBC, the RMS error over what is scored (the scene's
+    """The readout at the top of the panel, above the tabs: rigid → RRBC, the RMS error over what is scored (the scene's
     targets against their truth, a measurement file's check rows), from the same summary as `summary`; "" when
     nothing is scored. HTML (large type)."""
     sm = ev.summary
@@ -65,7 +65,7 @@ def headline(ev: Evaluation, kind: str) -> str:
         '<div style="padding:0 0.75rem"><div style="font-size:1.25em;line-height:1.3;margin:2px 0 0 0">'
         f'rigid <b>{_mm(rig)}</b> → RRBC <b style="color:{colour}">{_mm(rr)}</b> mm '
         f'<span style="font-size:0.8em;color:{colour}">{change}</span></div>'
-        f'<div style="font-size:0.8em;color:#555">RMS error over {sm["scored"]} {what}</div></div>'
+        f'<div style="font-size:0.875rem;color:#555">RMS error over {sm["scored"]} {what}</div></div>'
     )
 
 

@@ -93,7 +93,7 @@ class AuthoringController:
                 return None
             new = [p for p in self._ids(kind) if p not in before]
             word = dict((k, w) for w, k in CLICK_MODES)[kind]
-            where = ", ".join(f"{v:.1f}" for v in hit)
+            where = ", ".join(f"{v + 0.0:.1f}" for v in np.round(hit, 1))  # no "-0.0"
             self.ctx.message(f"Added {word} {new[0]} at ({where}) mm", client, title="Added", error=False)
             if kind in ("targets", "fiducials"):  # the new point is selected: its card shows it, its handle moves it
                 self.ctx.views.select(kind, new[0], client=client)
@@ -238,6 +238,7 @@ class AuthoringController:
             shutil.rmtree(d, ignore_errors=True)
             self.ctx.message(f"{mesh.name}: no new cell: {type(exc).__name__}", client, title="No new cell")
             return False
+        loaded = files.Loaded(loaded.session, loaded.mesh, f"a new cell on {mesh.name}")
         old = self.uploaded_mesh
         self.uploaded_mesh = d / Path(loaded.session.mesh_path).name  # the copy beside the new scene
         self.ctx.install(loaded)
@@ -246,9 +247,9 @@ class AuthoringController:
         self.ctx.views.show_camera("whole cell")
         target = loaded.session.last.targets.positions[0]
         self.ctx.message(
-            f"A new cell on {mesh.name}: one target T1 at ({', '.join(f'{v:.0f}' for v in target)}) mm, "
-            f"{len(loaded.session.last.registration_positions)} registration points, no fiducials. Add fiducials "
-            "and targets (Click on the cell adds), then Save scene.",
+            f"A new cell on {mesh.name}: one target T1 at ({', '.join(f'{v + 0.0:.0f}' for v in target)}) mm, "
+            f"{len(loaded.session.last.registration_positions)} registration points, no fiducials (RRBC equals "
+            "rigid until you add some). Add fiducials and targets (Click on the cell adds), then Save scene.",
             client,
             title="New cell",
             error=False,

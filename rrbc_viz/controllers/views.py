@@ -299,10 +299,13 @@ class ViewController:
                     self.ctx.evaluate.set_layer(name, name in step.layers)
                 self.ctx.nodes.target_arrows = step.target_arrows
                 self.ctx.nodes.set_lesson_labels(step.labels)
+                if self.ctx.nodes.arm is not None:
+                    self.ctx.nodes.arm.set_marks_visible(False)
                 self.set_see_through(step.see_through)
                 self.ctx.nodes.update(self.ctx.session.last)
                 text = teaching.render(index, self.ctx.session.last, self.ctx.present.lesson_context())
                 self.ctx.controls.learn.show_text(text)
+                self.ctx.controls.learn.show_step(index, len(teaching.STEPS))
                 self.show_selection(self.ctx.session.last)
                 self._declutter(self.ctx.camera.show(self.current_view()))
             return text
@@ -335,8 +338,11 @@ class ViewController:
                     self.ctx.evaluate.set_layer(name, visible)
                 self.ctx.nodes.target_arrows = True
                 self.ctx.nodes.set_lesson_labels(())
+                if self.ctx.nodes.arm is not None:
+                    self.ctx.nodes.arm.set_marks_visible(True)
                 self.set_see_through(False)
                 self.ctx.nodes.update(self.ctx.session.last)
                 self.ctx.controls.learn.show_text("Lesson ended. Press **Next** to start again.")
+                self.ctx.controls.learn.show_step(None, len(teaching.STEPS))
                 self.show_selection(self.ctx.session.last)
                 self.ctx.camera.show(self.current_view())

@@ -295,6 +295,7 @@ def test_layers_lesson_and_heat_map(app):
         "Step 9 of 9" in c.learn.lesson.content and f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
     )
     assert c.view.layers["landing"].value
+    assert c.learn.lesson_next.disabled  # the last step: Next is off (it would do nothing)
     app.evaluate.handle_drag("targets", "H3", [410.0, 40.0, 15.0], "end")
     sm = app.session.last.summary
     assert f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content

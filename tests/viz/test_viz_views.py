@@ -302,7 +302,9 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
                 apart = a[2] + GAP_PX <= b[0] or b[2] + GAP_PX <= a[0] or a[3] + GAP_PX <= b[1] or b[3] + GAP_PX <= a[1]
                 assert apart, (k + 1, shown[i], shown[j])
     assert {1, 2, 4, 6} <= {k for k, s in enumerate(teaching.STEPS) if s.labels}  # steps 2, 3, 5 and 7
+    assert not nodes.arm.marks["label"].visible  # the arm's model-error label is not the lesson's: it covered step 9
     app.views.lesson_stop()
+    assert nodes.arm.marks["label"].visible
     if present:
         assert not any(h.visible for n, h in nodes.labels.items() if n.startswith("/fiducials/"))
 
