@@ -75,7 +75,9 @@ PRESENTATION_CSS = (
     f"<style>html {{ font-size: {PRESENTATION_FONT_PX}px !important; }} {PANEL_CSS} "
     # button groups (the camera presets) and the tabs' names at the body size too
     ".mantine-Paper-root .mantine-Button-root, .mantine-Paper-root .mantine-Tabs-tab "
-    "{ font-size: 0.875rem !important; }</style>"
+    "{ font-size: 0.875rem !important; } "
+    # the panel's bullseye (an SVG with a viewBox) as wide as the panel: its ring scale and axes grow with it
+    ".mantine-Paper-root svg[data-ring-mm] { width: 100%; height: auto; }</style>"
 )
 NORMAL_CSS = f"<style>{PANEL_CSS}</style>"
 
