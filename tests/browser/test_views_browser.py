@@ -116,15 +116,24 @@ def _hidden_by_mesh(mesh, camera: np.ndarray, points: np.ndarray, slack_mm: floa
     return hidden
 
 
+_JS_HIDE_SOFTWARE_NOTICE = """(title) => { for (const n of document.querySelectorAll('.mantine-Notification-root')) {
+  const t = n.innerText || ''; if (t.includes(title) || t.includes('WebGL is running in software mode'))
+  n.style.display = 'none'; } }"""
+
+
 def _project_past_software_notice(page, pts: np.ndarray) -> dict:
     """Project ``pts`` with the page's camera; if viser's headless-only "software WebGL" notice covers one of them
-    (on a loaded machine it can appear long after the page connected), close it and project again. Anything else
-    covering a point (our panel, our notifications) is left for the test to see."""
+    (on a loaded machine it can appear long after the page connected, and its close button may not answer in
+    time), hide that notice - as a user closes it once - and project again. Anything else covering a point (our
+    panel, our notifications) is left for the test to see."""
+    res = page.evaluate(_JS_PROJECT_MANY, pts.tolist())
     for _ in range(3):
-        res = page.evaluate(_JS_PROJECT_MANY, pts.tolist())
-        if not any(SOFTWARE_WEBGL_TITLE in p["notice"] for p in res["points"]):
+        covered = [p for p in res["points"] if not p["onCanvas"]]
+        if not any(SOFTWARE_WEBGL_TITLE in p["notice"] or "software mode" in (p["over"] or "") for p in covered):
             return res
-        dismiss_software_webgl_notification(page, timeout_s=3.0)
+        page.evaluate(_JS_HIDE_SOFTWARE_NOTICE, SOFTWARE_WEBGL_TITLE)
+        page.wait_for_timeout(200)
+        res = page.evaluate(_JS_PROJECT_MANY, pts.tolist())
     return res
 
 
