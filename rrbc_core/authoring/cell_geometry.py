@@ -29,11 +29,10 @@ def load_cell_mesh(path):
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: mesh file not found")
-    if p.stat().st_size > MESH_MAX_BYTES:
-        raise InputError(f"{p}: mesh file larger than {MESH_MAX_BYTES >> 20} MiB; decimate it first")
-    declared = declared_triangles(p)
-    if declared is not None and declared > MESH_MAX_FACES:  # refused from its header, before it is parsed
-        raise InputError(f"{p}: {declared} triangles; at most {MESH_MAX_FACES} (decimate it first)")
+    size = p.stat().st_size
+    why = _too_large(str(p), size, declared_triangles(p) if size <= MESH_MAX_BYTES else None)
+    if why is not None:  # refused from its size and header, before it is parsed
+        raise InputError(why)
     try:
         mesh = _load_mesh_file(p)
     except Exception as exc:  # trimesh raises many types for unreadable files
@@ -97,11 +96,15 @@ def header_triangles(suffix: str, head: bytes, size: int) -> int | None:
 def refuse_from_header(name: str, head: bytes, size: int) -> str | None:
     """Why an upload of a mesh file must be refused from its size and first bytes alone (too large, or declaring
     more than `MESH_MAX_FACES` triangles), or None."""
+    return _too_large(name, size, header_triangles(Path(name).suffix, head, size) if size <= MESH_MAX_BYTES else None)
+
+
+def _too_large(name: str, size: int, declared: int | None) -> str | None:
+    """The one refusal of a mesh file over `MESH_MAX_BYTES` or declaring over `MESH_MAX_FACES` triangles."""
     if size > MESH_MAX_BYTES:
         return f"{name}: mesh file larger than {MESH_MAX_BYTES >> 20} MiB; decimate it first"
-    n = header_triangles(Path(name).suffix, head, size)
-    if n is not None and n > MESH_MAX_FACES:
-        return f"{name}: {n} triangles; at most {MESH_MAX_FACES} (decimate it first)"
+    if declared is not None and declared > MESH_MAX_FACES:
+        return f"{name}: {declared} triangles; at most {MESH_MAX_FACES} (decimate it first)"
     return None
 
 

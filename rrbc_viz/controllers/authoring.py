@@ -162,10 +162,10 @@ class AuthoringController:
         """Use an uploaded mesh (any format trimesh reads; robot frame, mm) as the cell's mesh: it is drawn, clicks
         land on it, and a saved scene refers to it (kept in a temporary directory of this server; save the mesh
         beside the downloaded scene)."""
-        d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
-        path = d / files.safe_file_name(name, Path(str(name)).suffix.lower() or ".stl")
-        path.write_bytes(content)
-        return self.upload_mesh_file(name, path, client)
+        with tempfile.TemporaryDirectory(prefix="rrbc-upload-") as tmp:
+            src = Path(tmp) / files.safe_file_name(name, Path(str(name)).suffix.lower() or ".stl")
+            src.write_bytes(content)
+            return self.upload_mesh_file(name, src, client)
 
     def upload_mesh_file(self, name: str, path, client=None) -> bool:
         """`upload_mesh` of a file already on this server's disk (the upload button writes it there as it arrives,
@@ -175,24 +175,17 @@ class AuthoringController:
         suffix = Path(str(name)).suffix.lower()
         src = Path(path)
         if suffix not in (".stl", ".obj", ".ply", ".glb", ".gltf", ".3mf", ".off"):
-            if src.parent.name.startswith("rrbc-mesh-"):
-                shutil.rmtree(src.parent, ignore_errors=True)
             self.ctx.message(f"{name}: not a mesh file (STL, OBJ, PLY, GLB, 3MF)", client, title="Upload refused")
             return False
         with self.ctx.lock:
-            if src.parent.name.startswith("rrbc-mesh-"):
-                d, path = src.parent, src  # upload_mesh's own folder
-            else:
-                d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
-                path = d / files.safe_file_name(name, suffix)  # the user's own name: a saved scene names it so
-                shutil.move(str(src), path)
+            d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
+            path = d / files.safe_file_name(name, suffix)  # the user's own name: a saved scene names it so
+            shutil.move(str(src), path)
             try:
                 mesh = load_cell_mesh(path)
             except InputError as exc:
                 shutil.rmtree(d, ignore_errors=True)
-                self.ctx.message(
-                    str(exc).replace(str(path), str(name)).replace(str(src), str(name)), client, title="Upload refused"
-                )
+                self.ctx.message(str(exc).replace(str(path), str(name)), client, title="Upload refused")
                 return False
             self.ctx.loaded = files.Loaded(self.ctx.loaded.session, mesh, self.ctx.loaded.label)
             if self.uploaded_mesh is not None:  # the mesh it replaces: its temporary copy goes
