@@ -23,5 +23,7 @@ stats = result.statistics()  # the same numbers `rrbc correct` and the app's Exp
 if stats is not None:
     print(f"95th percentile at the checks: rigid {stats.rigid['p95']:.3f} mm, RRBC {stats.rrbc['p95']:.3f} mm")
     print(f"checks RRBC made worse: {len(stats.worse)} of {stats.n}")
-for pid, (x, y, z) in list(zip(result.checks.ids, result.checks_corrected.robot_rrbc))[:5]:
-    print(f"  {pid}: robot frame after RRBC ({x:.3f}, {y:.3f}, {z:.3f}) mm")
+corrected = result.checks_corrected  # None when the file has no checks
+if corrected is not None:
+    for pid, (x, y, z) in list(zip(result.checks.ids, corrected.robot_rrbc))[:5]:
+        print(f"  {pid}: robot frame after RRBC ({x:.3f}, {y:.3f}, {z:.3f}) mm")

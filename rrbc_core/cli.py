@@ -305,7 +305,7 @@ def main(argv=None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
-    except Exception as exc:  # noqa: BLE001 - the contract: one line, exit 1
+    except Exception as exc:  # the contract: one line, exit 1 (re-raised under RRBC_DEBUG)
         if os.environ.get("RRBC_DEBUG"):
             raise
         print(

@@ -143,7 +143,7 @@ def plan_text(res) -> str:
         f"  {'target':<12} {'hull':<8} {'coverage':>9}"
         + (f" {'after':>9} {'hull after':<10}" if res.suggested_ids else "")
     )
-    word = lambda inside: "inside" if inside else "OUTSIDE"  # noqa: E731
+    word = lambda inside: "inside" if inside else "OUTSIDE"
     for k, tid in enumerate(res.target_ids):
         row = f"  {tid:<12} {word(res.inside[k]):<8} {100 * res.coverage[k]:8.1f}%"
         if res.suggested_ids:

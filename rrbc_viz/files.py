@@ -108,7 +108,7 @@ def load_mesh(path) -> trimesh.Trimesh:
         raise InputError(f"{path}: mesh file not found")
     try:
         mesh = trimesh.load(str(p), force="mesh")
-    except Exception as exc:  # trimesh raises many types for unreadable files
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types for unreadable files
         raise InputError(
             f"{path}: cannot load as a mesh: {exc.__class__.__name__}: {' '.join(str(exc).split())}"
         ) from None

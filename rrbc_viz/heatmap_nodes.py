@@ -4,11 +4,15 @@ and a ring around each target with the mean over its region. It owns its two poi
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rrbc_core.session.evaluation import Evaluation
+from rrbc_core.session.results import HeatMap
 
 from . import colors
+from .node_values import Display
 
 RING_INNER_MARKERS = 1.15  # least inner radius of a heat-map ring, in marker radii (the target sphere is 0.8)
 RING_WIDTH_MARKERS = 1.3  # ring width (outer - inner radius), in marker radii
@@ -32,11 +36,11 @@ def _ring_dots(inner: float, width: float, rows: int = RING_ROWS) -> np.ndarray:
 class HeatMapNodes:
     """The heat map's nodes (module docstring)."""
 
-    def __init__(self, scene):
+    def __init__(self, scene) -> None:
         self.scene = scene
-        self.points = None  # the samples' point cloud
-        self.rings = None  # the rings' point cloud (None without targets)
-        self.display = None  # the display options the map was last drawn with
+        self.points: Any = None  # the samples' point cloud (viser's PointCloudHandle once built)
+        self.rings: Any = None  # the rings' point cloud (None without targets)
+        self.display = Display()  # the display options the map was last drawn with
         self._rings_args: tuple | None = None  # what the rings were last drawn from (redrawn on a resize)
 
     def build(self, with_rings: bool) -> dict:
@@ -72,14 +76,14 @@ class HeatMapNodes:
         self.points = self.rings = None
         self._rings_args = None
 
-    def resize(self, display) -> None:
+    def resize(self, display: Display) -> None:
         """Redraw the rings for new marker sizes or region zoom."""
         self.display = display
         if self.rings is not None and self._rings_args is not None:
             self._update_heat_rings(self.rings, *self._rings_args)
 
     # ------------------------------------------------------------------------------------------ heat map
-    def show(self, hm, ev: Evaluation, display) -> tuple[str, float, float] | None:
+    def show(self, hm: HeatMap | None, ev: Evaluation, display: Display) -> tuple[str, float, float] | None:
         """Show a `HeatMap` (from views.heat_map(session)) coloured by the chosen value; returns (title, lo, hi) for
         the legend, or None if there is nothing to show. Samples are drawn `region_zoom` times farther from
         their target than they are."""

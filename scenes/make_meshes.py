@@ -25,7 +25,7 @@ import trimesh
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
-from rrbc_core.scene import sensor_pose  # noqa: E402
+from rrbc_core.io.scene import sensor_pose  # noqa: E402
 
 MESHES = HERE / "meshes"
 

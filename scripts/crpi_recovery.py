@@ -15,7 +15,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from rrbc_core.studies import crpi_models  # noqa: E402
+from rrbc_core.studies import crpi_models
 
 FAMILIES = ("seating", "smooth", "kinematic", "other")
 

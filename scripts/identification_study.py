@@ -6,7 +6,7 @@ table (3 decimals), and run the reproduction's selection (`model_fit.assess` + `
 
     .venv/bin/python scripts/identification_study.py [--tables 20] [--out docs]
 
-The ranges of the planted-table tests in tests/test_reproduction.py were chosen from this study.
+The ranges of the planted-table tests in tests/studies/test_reproduction.py were chosen from this study.
 """
 
 from __future__ import annotations

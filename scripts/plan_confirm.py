@@ -9,7 +9,7 @@
 2. Optimiser vs random over seeded scenes (`seeded_scene`): the demo cell with its kinematic error redrawn
    (seed s), 6 of its 12 fiducials drawn at random (seed s), and a 5 x 5 x 5 candidate grid; per scene, the
    predicted RRBC RMST of the optimiser's K = 4 and the mean over the random baseline's draws.
-The test suite (tests/test_planning.py) uses `seeded_scene` with other seeds.
+The test suite (tests/analysis/test_planning.py) uses `seeded_scene` with other seeds.
 """
 
 from __future__ import annotations
@@ -117,7 +117,7 @@ def report(conf: list[dict], study: list[dict], trials: int, command: str) -> st
         "",
         f"**Margin: the optimiser's predicted RRBC RMST is {100 * g.mean():.1f} % below the random mean on average "
         f"(sd {100 * g.std(ddof=1):.1f} % over {len(g)} scenes; min {100 * g.min():.1f} %, max {100 * g.max():.1f} %).** "
-        "tests/test_planning.py checks this on other seeds.",
+        "tests/analysis/test_planning.py checks this on other seeds.",
         "",
         "Limits: the comparison uses the fast prediction, the quantity the optimiser minimises; the Monte Carlo table",
         "above is what checks that the prediction itself is right. The optimiser suggests only sets that lower the",

@@ -25,11 +25,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from rrbc_core.analysis.diagnosis import diagnose  # noqa: E402
-from rrbc_core.correction.pipeline import correct_measurements  # noqa: E402
-from rrbc_core.correction.stations import correct_stations  # noqa: E402
-from rrbc_core.methods import MethodOptions  # noqa: E402
-from rrbc_core.simulation.station_data import station_measurements  # noqa: E402
+from rrbc_core.analysis.diagnosis import diagnose
+from rrbc_core.correction.pipeline import correct_measurements
+from rrbc_core.correction.stations import correct_stations
+from rrbc_core.methods import MethodOptions
+from rrbc_core.simulation.station_data import station_measurements
 
 FIXED = ("none", "idw", "linear", "tps", "gp")
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from rrbc_core.studies import sa_gap  # noqa: E402
+from rrbc_core.studies import sa_gap
 
 
 def markdown(outcomes, command: str) -> str:

@@ -6,7 +6,7 @@ bash "$root/scripts/setup.sh" --browser
 cd "$root"
 # No thread variables: tests run as users run (rrbc sets its own BLAS pools, docs/threads.md).
 # Lint, format and types first (ruff and mypy, configured in pyproject.toml): a failure stops the run before the tests.
-"$root/.venv/bin/ruff" check rrbc_core rrbc_viz tests scripts benchmarks examples
-"$root/.venv/bin/ruff" format --check rrbc_core rrbc_viz tests scripts benchmarks examples
+"$root/.venv/bin/ruff" check rrbc_core rrbc_viz tests scripts benchmarks examples scenes
+"$root/.venv/bin/ruff" format --check rrbc_core rrbc_viz tests scripts benchmarks examples scenes
 "$root/.venv/bin/mypy"
 exec "$root/.venv/bin/python" -m pytest -q -p no:cacheprovider "$@"

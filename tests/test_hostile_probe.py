@@ -8,7 +8,7 @@ from tests.paths import ROOT
 
 sys.path.insert(0, str(ROOT / "scripts"))
 
-import hostile_probe  # noqa: E402
+import hostile_probe
 
 
 def test_the_judge_catches_each_broken_contract():

@@ -74,3 +74,21 @@ def test_specs_are_the_only_bounds():
             names = {s.name for s in option_specs(cls)}
             fields = {f.name for f in dataclasses.fields(cls)}  # instance fields (ClassVars excluded)
             assert fields == names, (cls, fields, names)
+
+
+def test_methods_sharing_a_flag_declare_the_same_spec():
+    """One flag is one CLI option and one app widget, validated and drawn from the first owner's spec: every method
+    that offers the same flag must declare it identically (only the field's name may differ), or the other owners'
+    bounds, choices and defaults would be silently ignored."""
+
+    by_flag: dict[str, list] = {}
+    for registry in (registration.STRATEGIES, interpolation.METHODS):
+        for key, cls in registry.items():
+            for spec in option_specs(cls):
+                by_flag.setdefault(spec.flag, []).append((key, dataclasses.replace(spec, name="")))
+    shared = {flag: owners for flag, owners in by_flag.items() if len(owners) > 1}
+    assert shared, "no flag is shared: this test would check nothing"
+    for flag, owners in shared.items():
+        first_key, first = owners[0]
+        for key, spec in owners[1:]:
+            assert spec == first, f"--{flag}: {key} declares {spec}, {first_key} declares {first}"

@@ -72,3 +72,27 @@ def test_each_exported_function_is_typed(name):
     sig = inspect.signature(getattr(rrbc_core, name))
     untyped = [p.name for p in sig.parameters.values() if p.annotation is p.empty and p.kind is not p.VAR_KEYWORD]
     assert not untyped and sig.return_annotation is not sig.empty, f"{name}: untyped {untyped or 'return'}"
+
+
+def test_a_type_checker_sees_the_signatures_of_thread_limited_entry_points(tmp_path):
+    """`@thread_limited` keeps the wrapped function's signature for a type checker (a ParamSpec): a wrong call to a
+    public entry point is an error mypy reports, a right one is not."""
+    from rrbc_core.correction.pipeline import correct_measurements
+
+    assert getattr(correct_measurements, "__wrapped__", None) is not None  # it is a thread_limited entry point
+    snippet = tmp_path / "calls.py"
+    snippet.write_text(
+        "from rrbc_core import correct_measurements, read_measurements\n"
+        "good = correct_measurements(read_measurements('x.csv'))\n"
+        "bad = correct_measurements(1, 2, 3, 4, 5, 6, wrong=True)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-m", "mypy", "--no-incremental", "--config-file", str(ROOT / "pyproject.toml"), str(snippet)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
+    errors = [line for line in out.stdout.splitlines() if ": error:" in line]
+    assert errors and all(":3:" in line for line in errors), out.stdout
+    assert any("wrong" in line for line in errors), out.stdout

@@ -135,6 +135,7 @@ class Geometry:
         return self._cols(out)
 
     def drift(self):
+        assert self.time is not None, "the drift column needs the rows' times"
         tt = (self.time - self.time.mean()) / self.tscale
         e = np.eye(3)
         return self._cols([np.outer(tt, e[k]) for k in range(3)])
@@ -391,7 +392,7 @@ def loo(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
         w = np.where(on.any(axis=1, keepdims=True), on.astype(float), 1.0 / dj**power)
     c = np.einsum("nk,nkc->nc", w, corr) / w.sum(axis=1, keepdims=True)
     e_rrbc = e_rigid - c
-    rms = lambda e: float(np.sqrt(np.mean(np.sum(e[ev] ** 2, axis=1))))  # noqa: E731
+    rms = lambda e: float(np.sqrt(np.mean(np.sum(e[ev] ** 2, axis=1))))
     return rms(e_rigid), rms(e_rrbc)
 
 

@@ -128,7 +128,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             magnitude_mm=float(np.sqrt(max(0.0, rss0 - rss_sc) / wsum)),
         )
         blocks["scale"] = g.scale_col()
-    x_of = lambda names: np.hstack([blocks[k] for k in names])  # noqa: E731
+    x_of = lambda names: np.hstack([blocks[k] for k in names])
     # drift
     rate, t_mean = np.zeros(3), float(np.mean(d.time[inl])) if use_time else 0.0
     dcol_ok = None

@@ -72,7 +72,10 @@ def _check_rms(mset: MeasurementSet) -> tuple[float, float, CheckStatistics, str
     words = None
     if corrected is not None:
         words = extrapolation(Corrected("check", res.checks.ids, corrected.correction, res.checks_coverage))
-    return float(s["rmst_rigid_mm"]), float(s["rmst_rrbc_mm"]), res.statistics(), words
+    stats = res.statistics()
+    if stats is None:
+        return None
+    return float(s["rmst_rigid_mm"]), float(s["rmst_rrbc_mm"]), stats, words
 
 
 def _without_ids(mset: MeasurementSet, drop: set) -> MeasurementSet:

@@ -176,7 +176,7 @@ def _rms(a, b) -> float:
 
 def _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, terms=(), gravity=None, fixed=None) -> dict:
     """Per method, the held-out fiducials' squared errors (H,) mm² over `folds` (`cv_folds`)."""
-    g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])  # noqa: E731
+    g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])
     errs: dict[str, list] = {m: [] for m in METHODS}
     for held in folds:
         keep = np.setdiff1d(np.arange(len(rows_fid)), held)
@@ -350,7 +350,7 @@ def compare(
             return fit_methods(rows_reg, rows_fid, s, b, q, chain, gi, rest, gravity, fixed), rest
 
         fit, terms, refused = drop_unphysical_terms(fit, terms, refit)
-    g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])  # noqa: E731
+    g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])
     rmst = dict.fromkeys(METHODS)
     if len(rows_chk):
         pred = predict_methods(fit, s[rows_chk], q[rows_chk], g_of(rows_chk))

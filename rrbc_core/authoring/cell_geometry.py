@@ -35,7 +35,7 @@ def load_cell_mesh(path):
         raise InputError(why)
     try:
         mesh = _load_mesh_file(p)
-    except Exception as exc:  # trimesh raises many types for unreadable files
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types for unreadable files
         msg = " ".join(str(exc).split())[:160]
         raise InputError(
             f"{p}: cannot read it as a mesh (STL, OBJ, PLY, GLB, 3MF): {type(exc).__name__}: {msg}"

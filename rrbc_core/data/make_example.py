@@ -93,7 +93,7 @@ def make_example(**overrides):
             grid_roles.append("both" if corner else "fiducial")
             grid_labels.append(f"grid r{r + 1} c{c + 1}" + (" corner" if corner else ""))
             grid_pts.append((x, y, z0))
-    grid_pts = np.array(grid_pts)
+    grid_arr = np.array(grid_pts)
     m = p["margin_mm"]
 
     def inside(n):
@@ -104,25 +104,37 @@ def make_example(**overrides):
     targets = inside(p["n_targets"])
     checks = inside(p["n_checks"])
 
-    ids, roles, labels, true_s, robot = [], [], [], [], []
-    for i in range(len(grid_pts)):  # session start: all grid points
-        ids.append(grid_ids[i]), roles.append(grid_roles[i]), labels.append(grid_labels[i])
-        true_s.append(grid_pts[i]), robot.append(robot_truth(grid_pts[i : i + 1])[0] + noise(1)[0])
+    ids, roles, labels, true_rows, robot_rows = [], [], [], [], []
+    for i in range(len(grid_arr)):  # session start: all grid points
+        ids.append(grid_ids[i])
+        roles.append(grid_roles[i])
+        labels.append(grid_labels[i])
+        true_rows.append(grid_arr[i])
+        robot_rows.append(robot_truth(grid_arr[i : i + 1])[0] + noise(1)[0])
     for i in range(len(targets)):
-        ids.append(f"T{i + 1}"), roles.append("target"), labels.append(f"target {i + 1}")
-        true_s.append(targets[i]), robot.append(np.full(3, np.nan))
+        ids.append(f"T{i + 1}")
+        roles.append("target")
+        labels.append(f"target {i + 1}")
+        true_rows.append(targets[i])
+        robot_rows.append(np.full(3, np.nan))
     for i in range(len(checks)):
-        ids.append(f"C{i + 1:02d}"), roles.append("check"), labels.append(f"check {i + 1}")
-        true_s.append(checks[i]), robot.append(robot_truth(checks[i : i + 1])[0])
-    for i in range(len(grid_pts)):  # session end: corners measured again
+        ids.append(f"C{i + 1:02d}")
+        roles.append("check")
+        labels.append(f"check {i + 1}")
+        true_rows.append(checks[i])
+        robot_rows.append(robot_truth(checks[i : i + 1])[0])
+    for i in range(len(grid_arr)):  # session end: corners measured again
         if grid_roles[i] == "both":
-            ids.append(grid_ids[i]), roles.append("both"), labels.append(grid_labels[i] + " repeat")
-            true_s.append(grid_pts[i]), robot.append(robot_truth(grid_pts[i : i + 1])[0] + noise(1)[0])
-    true_s = np.array(true_s)
+            ids.append(grid_ids[i])
+            roles.append("both")
+            labels.append(grid_labels[i] + " repeat")
+            true_rows.append(grid_arr[i])
+            robot_rows.append(robot_truth(grid_arr[i : i + 1])[0] + noise(1)[0])
+    true_s = np.array(true_rows)
     sensor = true_s + noise(len(true_s))
     d = p["decimals"]
     sensor = np.round(sensor, d)
-    robot = np.round(np.array(robot), d)
+    robot = np.round(np.array(robot_rows), d)
     time = np.round(np.arange(len(ids)) * p["seconds_per_row"], 3)
     mset = MeasurementSet(
         ids=tuple(ids),

@@ -142,7 +142,7 @@ class MeasurementSet:
 
     def __post_init__(self) -> None:
         src = str(self.source)
-        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+        set_ = lambda name, value: object.__setattr__(self, name, value)
         set_("source", src)
         set_("ids", tuple(self.ids))
         set_("roles", tuple(self.roles))
@@ -198,7 +198,7 @@ def select_rows(mset: MeasurementSet, rows, source: str | None = None) -> Measur
     """The rows `rows` (indices, in the order given) of a set as a set of their own; extra columns follow the rows;
     `source` names it in messages (default: the set's)."""
     rows = np.asarray(rows, dtype=int)
-    take = lambda seq: tuple(seq[i] for i in rows.tolist())  # noqa: E731
+    take = lambda seq: tuple(seq[i] for i in rows.tolist())
     return MeasurementSet(
         ids=take(mset.ids),
         roles=take(mset.roles),

@@ -225,7 +225,7 @@ class Scene:
     robot_urdf: Path | str | None = None
     robot_tip: str | None = None
     _layout_points: dict = field(default_factory=dict, repr=False)
-    _mesh: object = field(default=None, repr=False)
+    _mesh: Any = field(default=None, repr=False)  # a trimesh.Trimesh given in memory, else read from mesh_path
 
     # --- derived ------------------------------------------------------------------------------------------
     @property

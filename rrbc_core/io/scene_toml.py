@@ -256,7 +256,7 @@ def load_scene(path: str | PathLike) -> Scene:
         raise c.error("scene.mesh", f"mesh file not found: {mesh_path}")
     try:
         mesh = _load_mesh_file(mesh_path)
-    except Exception as exc:  # trimesh raises many types for unreadable files
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types for unreadable files
         raise c.error("scene.mesh", f"cannot load {mesh_rel!r} as a mesh: {exc.__class__.__name__}: {exc}") from None
 
     return Scene(

@@ -17,7 +17,7 @@ and register that cloud to the mesh with open3d ICP.
       inliers, cloud_points, target_points, max_distance_mm, inlier_rmse_point_to_point_mm (open3d's own
       last-stage inlier RMSE against the samples, which includes their spacing)}.
 
-Accuracy (tests/test_visibility.py): on the demo scene, from the true pose perturbed by 2° about the sensor and
+Accuracy (tests/models/test_visibility.py): on the demo scene, from the true pose perturbed by 2° about the sensor and
 10 mm, noise-free clouds give the truth to ~1e-5 mm / 1e-5° (float32 ray casting is the floor); the sampled
 stages alone stop ~0.1-0.3 mm off because of the finite sample spacing near edges.
 """

@@ -16,8 +16,14 @@ from numpy.typing import ArrayLike
 
 from rrbc_core.geometry import points as geometry
 from rrbc_core.option_specs import build_from_registry, check_options, option, option_specs
-from rrbc_core.registration import strategies as st
-from rrbc_core.registration.strategies import Registration
+from rrbc_core.registration.strategies import (
+    Registration,
+    annealing,
+    clustering,
+    combinatorial,
+    least_squares,
+    three_point,
+)
 from rrbc_core.runtime.threads import thread_limited
 
 __all__ = [
@@ -67,7 +73,7 @@ class LeastSquares:
     extras: ClassVar[tuple] = ("weights",)  # data passed per call, not an option
 
     def register(self, p_sensor: ArrayLike, b_robot: ArrayLike, weights: ArrayLike | None = None) -> Registration:
-        return st.least_squares(p_sensor, b_robot, weights=weights)
+        return least_squares(p_sensor, b_robot, weights=weights)
 
 
 @dataclass(frozen=True)
@@ -79,7 +85,7 @@ class ThreePoint:
     extras: ClassVar[tuple] = ()
 
     def register(self, p_sensor: ArrayLike, b_robot: ArrayLike) -> Registration:
-        return st.three_point(p_sensor, b_robot)
+        return three_point(p_sensor, b_robot)
 
 
 @dataclass(frozen=True)
@@ -103,7 +109,7 @@ class Combinatorial:
         check_options(self, "combinatorial")
 
     def register(self, p_sensor: ArrayLike, b_robot: ArrayLike) -> Registration:
-        return st.combinatorial(p_sensor, b_robot, average=self.average, degeneracy_ratio=self.degeneracy_ratio)
+        return combinatorial(p_sensor, b_robot, average=self.average, degeneracy_ratio=self.degeneracy_ratio)
 
 
 @dataclass(frozen=True)
@@ -130,7 +136,7 @@ class Annealing:
         check_options(self, "annealing")
 
     def register(self, p_sensor: ArrayLike, b_robot: ArrayLike, initial: Registration | None = None) -> Registration:
-        return st.annealing(
+        return annealing(
             p_sensor, b_robot, initial=initial, seed=self.seed, iterations=self.iterations, cooling_c=self.cooling_c
         )
 
@@ -152,7 +158,7 @@ class Clustering:
         check_options(self, "clustering")
 
     def register(self, p_sensor: ArrayLike, b_robot: ArrayLike) -> Registration:
-        return st.clustering(p_sensor, b_robot, clusters=self.clusters, seed=self.seed, average=self.average)
+        return clustering(p_sensor, b_robot, clusters=self.clusters, seed=self.seed, average=self.average)
 
 
 Strategy = LeastSquares | ThreePoint | Combinatorial | Annealing | Clustering

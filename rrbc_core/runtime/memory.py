@@ -14,11 +14,12 @@ import ctypes
 import ctypes.util
 import gc
 import threading
+from typing import Any
 
 __all__ = ["release_memory", "release_memory_soon"]
 
 _lock = threading.Lock()
-_trim = None
+_trim: Any = None  # libc's malloc_trim once looked up, False where there is none
 
 
 def _malloc_trim():

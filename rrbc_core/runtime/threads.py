@@ -30,7 +30,12 @@ from __future__ import annotations
 
 import functools
 import threading
+from collections.abc import Callable
 from contextlib import contextmanager
+from typing import ParamSpec, TypeVar
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
 
 #: Threads per BLAS / OpenMP pool while rrbc computes (see the module docstring for why one).
 THREADS = 1
@@ -86,15 +91,15 @@ def limited():
                 _restore = None
 
 
-def thread_limited(fn):
-    """Decorator: run `fn` inside `limited()` (the public entry points of the library)."""
+def thread_limited(fn: Callable[_P, _R]) -> Callable[_P, _R]:
+    """Decorator: run `fn` inside `limited()` (the public entry points of the library). Typed with a ParamSpec, so
+    a type checker sees the wrapped function's own signature."""
 
     @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
+    def wrapper(*args: _P.args, **kwargs: _P.kwargs) -> _R:
         with limited():
             return fn(*args, **kwargs)
 
-    wrapper.__rrbc_thread_limited__ = True
     return wrapper
 
 

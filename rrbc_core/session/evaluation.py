@@ -64,7 +64,7 @@ class Settings:
             if k not in flags:
                 raise InputError(f"unknown setting '{k}'")
             merged[k] = flags[k][0][2].check(merged[k], "setting")
-        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+        set_ = lambda name, value: object.__setattr__(self, name, value)
         set_("registration", str(registration).strip().lower())
         set_("interpolation", str(interpolation).strip().lower())
         for name, v, top in (("noise_scale", noise_scale, SCALE_MAX), ("bias_scale", bias_scale, SCALE_MAX)):

@@ -160,6 +160,8 @@ class ExplorerSession:
         from rrbc_core.correction.stations import correct_stations
 
         def compute():
+            if self.file_mset is None:
+                return None
             try:
                 return correct_stations(self.file_mset, self.settings.method).summary()
             except InputError:

@@ -5,7 +5,7 @@ noise and bias sizes applied (`scaled`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -83,7 +83,7 @@ class MonteCarloPlots:
 class _Scaled:
     """An error term whose displacements are multiplied by `factor` (noise or bias size in the app)."""
 
-    term: object
+    term: Any  # an error term (errormodels._Term)
     factor: float
     kind: str = field(default="")
     random: bool = field(default=False)

@@ -116,7 +116,7 @@ def _ls_idw(
     dev_out,
     fid_sum,
     q_sum,
-):  # pragma: no cover - compiled; tested against the core in tests/test_batch.py
+):  # pragma: no cover - compiled; tested against the core in tests/simulation/test_batch.py
     n_t, n_r = reg_s.shape[0], reg_s.shape[1]
     n_f, n_q = fid_s.shape[1], q.shape[1]
     h = np.empty((3, 3))

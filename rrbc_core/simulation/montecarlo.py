@@ -99,7 +99,11 @@ def work_cell_from_scene(
     ids, roles, pos, owner, yaw = [], [], [], [], []
 
     def add(pid, role, p, y, of=""):
-        ids.append(pid), roles.append(role), pos.append(p), yaw.append(y), owner.append(of)
+        ids.append(pid)
+        roles.append(role)
+        pos.append(p)
+        yaw.append(y)
+        owner.append(of)
 
     fid_ids = set(scene.fiducials.ids)
     reg_ids = set(scene.registration.ids)

@@ -202,7 +202,7 @@ def _fit_sizes(y, lay: Layout, kernels) -> tuple[np.ndarray, float]:
     if not kernels:
         return np.zeros(0), reml(y, lay.x, _cov(lay, [], []))
     lo, hi = np.log(_A_BOUNDS[0]), np.log(_A_BOUNDS[1])
-    f = lambda v: -reml(y, lay.x, _cov(lay, kernels, np.exp(v)))  # noqa: E731
+    f = lambda v: -reml(y, lay.x, _cov(lay, kernels, np.exp(v)))
     best = None
     for start in np.linspace(np.log(0.02), np.log(2.0), 4):
         res = minimize(f, np.full(len(kernels), start), method="L-BFGS-B", bounds=[(lo, hi)] * len(kernels))
@@ -278,7 +278,7 @@ class Prediction:
     replicates: int
 
     def to_json(self) -> dict:
-        tri = lambda t: {"mean": t[0], "lo95": t[1], "hi95": t[2]}  # noqa: E731
+        tri = lambda t: {"mean": t[0], "lo95": t[1], "hi95": t[2]}
         return {
             "rigid_rms_mm": tri(self.rigid_rms_mm),
             "variogram_mm2": [tri(g) for g in self.gamma_mm2],

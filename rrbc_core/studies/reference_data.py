@@ -100,7 +100,7 @@ def correlation_p(r: float, n: int) -> float:
     return float(2.0 * stats.t.sf(t, n - 2))
 
 
-def samples_consistent_with(r: float, p: float, n_range: range = range(10, 400)) -> list[int]:  # noqa: B008 - immutable
+def samples_consistent_with(r: float, p: float, n_range: range = range(10, 400)) -> list[int]:
     """Sample counts n for which a correlation that rounds to r (3 decimals) has a p-value that rounds to p."""
     out = []
     for n in n_range:

@@ -18,7 +18,7 @@ because its cost is evaluated in m² (assumption: the UR interface reports metre
 schedule accepts almost every proposal, and its proposal steps scale with the initial misfit; the rare
 rejections can move one experiment's SA Large 5-point result, but not the distribution over experiments. So a
 model's statistics are simulated once per DIRECTION of its weight vector and scaled analytically;
-`tests/test_reproduction.py` checks this against direct simulation (per experiment and in distribution).
+`tests/studies/test_reproduction.py` checks this against direct simulation (per experiment and in distribution).
 
 Assumptions are data (`Layout.assumptions`), because the site layout, the registration corners, the origin of
 N, the 5th point and the robot placement are only in the paper's Fig. 1.
@@ -35,6 +35,7 @@ from scipy import stats
 from rrbc_core import registration
 from rrbc_core.errors import InputError
 from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, inverse_path, tool_down
+from rrbc_core.registration.strategies import PiecewiseMap
 from rrbc_core.simulation import batch
 from rrbc_core.studies.vanwyk2018_layouts import (  # noqa: F401 - the layouts are part of this module's API
     REPETITIONS,
@@ -138,8 +139,8 @@ def _flatness_basis(points_n: np.ndarray) -> np.ndarray:
     lo, hi = xy.min(0), xy.max(0)
     u = 2 * (xy - lo) / np.where(hi > lo, hi - lo, 1.0) - 1
     x, y = u[:, 0], u[:, 1]
-    p2 = lambda t: 0.5 * (3 * t * t - 1)  # noqa: E731
-    p3 = lambda t: 0.5 * (5 * t**3 - 3 * t)  # noqa: E731
+    p2 = lambda t: 0.5 * (3 * t * t - 1)
+    p3 = lambda t: 0.5 * (5 * t**3 - 3 * t)
     cols = [p2(x), x * y, p2(y), p3(x), p2(x) * y, x * p2(y)]
     b = np.stack(cols, axis=1)
     return b / np.sqrt(np.mean(b**2, axis=0))
@@ -243,8 +244,10 @@ def _clustering_inverse(sensor, readings, queries_robot, query_sites_n, check_re
         for g in range(readings.shape[1]):
             use = check_reg == g
             reg = registration.clustering(sensor, readings[k, g], clusters=2, seed=seed)
-            pieces = reg.mapping.piece_of(query_sites_n[use])
-            out[k, use] = reg.mapping.apply_inverse(queries_robot[k, use], pieces)
+            mapping = reg.mapping
+            assert isinstance(mapping, PiecewiseMap)
+            pieces = mapping.piece_of(query_sites_n[use])
+            out[k, use] = mapping.apply_inverse(queries_robot[k, use], pieces)
     return out
 
 

@@ -222,13 +222,13 @@ class Reproduction:
         def rows(a, peg):
             out = []
             for m, name in enumerate(METHODS):
-                row = {"method": name}
+                row: dict[str, str | float | None] = {"method": name}
                 for s, stat in enumerate(STATISTICS):
                     row[stat] = float(a.fit.mean[s, m])
                     row[stat + "_sd"] = float(a.fit.sd[s, m])
                     row[stat + "_z"] = float(a.fit.z[s, m])
                 row["p"] = reference_data.correlation_p(
-                    float(np.clip(row["r"], -0.999, 0.999)), self.samples_per_method
+                    float(np.clip(float(a.fit.mean[STATISTICS.index("r"), m]), -0.999, 0.999)), self.samples_per_method
                 )
                 ks = main.directions[a.model].values["ks_p"][
                     nearest_direction(main.directions[a.model], a.fit.phi), :, m

@@ -444,7 +444,7 @@ def markdown(rep: Reproduction, command: str) -> str:
     w(
         "- A table's 28 statistics are treated as jointly Gaussian with the simulated mean and covariance; max and "
         "variance are skewed. On tables simulated from a known model the noise sigma of a single table is estimated "
-        "low when bias dominates, so its interval is too narrow (`tests/test_reproduction.py`, a strict xfail)."
+        "low when bias dominates, so its interval is too narrow (`tests/studies/test_reproduction.py`, a strict xfail)."
     )
     w(
         "- Extended models are averaged over random robots / plates / holes (one per simulated experiment); the real "
@@ -452,7 +452,7 @@ def markdown(rep: Reproduction, command: str) -> str:
     )
     w(
         "- Homogeneity (errors scale with the overall perturbation size) is a first-order approximation, checked in "
-        "`tests/test_reproduction.py`; peg predictions use the nearest simulated direction."
+        "`tests/studies/test_reproduction.py`; peg predictions use the nearest simulated direction."
     )
     w("")
     return "\n".join(L) + "\n"

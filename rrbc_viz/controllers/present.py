@@ -12,6 +12,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session import views
 from rrbc_core.session.data_set import check_statistics
 from rrbc_core.session.evaluation import Evaluation
+from rrbc_core.session.results import HeatMap
 
 from .. import tables, teaching
 from ..colors import legend_markdown
@@ -26,7 +27,7 @@ class Presenter:
 
     def __init__(self, ctx: AppContext):
         self.ctx = ctx
-        self.heat_map = None
+        self.heat_map: HeatMap | None = None
 
     def show(self, ev: Evaluation, heat: bool = False, plan: bool = True) -> None:
         """Push `ev` to the scene and the panels. heat: refresh the heat map, the slice and the check statistics now

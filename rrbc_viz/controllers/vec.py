@@ -23,7 +23,7 @@ class VecController:
         self.ctx = ctx
         self.vec_on = False
         self.vec_target = ""
-        self.vec_view = None
+        self.vec_view: vec_view.VecView | None = None
         self._vec_panel_state: tuple | None = None  # what the tab's widgets last showed
 
     def set_vec(self, on: bool, client=None) -> None:

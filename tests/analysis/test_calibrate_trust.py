@@ -80,7 +80,7 @@ def _far_checks(mset, n_fid: int):
     roles[order[:n_fid]] = "fiducial"
     roles[order[-len(order) // 3 :]] = "check"
     keep = np.flatnonzero(roles != "target")
-    pick = lambda a: np.asarray(a)[keep]  # noqa: E731
+    pick = lambda a: np.asarray(a)[keep]
     return replace(
         mset,
         ids=tuple(pick(mset.ids)),

@@ -342,7 +342,7 @@ def test_loo_equals_the_per_point_loop(seed):
         corr = r[j] - (s[j] @ ri.T + ti)
         c = corr[dj <= 1e-12].mean(0) if np.any(dj <= 1e-12) else (dj**-2.0) @ corr / np.sum(dj**-2.0)
         e_rrbc[i] = e_rigid[i] - c
-    rms = lambda e: np.sqrt(np.mean(np.sum(e**2, axis=1)))  # noqa: E731
+    rms = lambda e: np.sqrt(np.mean(np.sum(e**2, axis=1)))
     got = loo(s, r, w)
     assert got[0] == pytest.approx(rms(e_rigid), rel=1e-9)
     assert got[1] == pytest.approx(rms(e_rrbc), rel=1e-9)

@@ -25,7 +25,7 @@ effect and geometry.
 import pytest
 from scipy import stats
 
-from rrbc_core.studies.diagnosis_power import EFFECTS, GEOMETRIES, SIZES, run_one, trial_seed  # noqa: E402
+from rrbc_core.studies.diagnosis_power import EFFECTS, GEOMETRIES, SIZES, run_one, trial_seed
 
 TRIALS = 20  # data sets per (effect, geometry, size)
 OFFSET = 500  # test seeds: trial index OFFSET + k (the study uses k < 100)

@@ -31,7 +31,7 @@ from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.models.errormodels import ErrorModel
 from rrbc_core.models.errorterms import IsotropicNoise
 from rrbc_core.models.visibility import visible_points
-from rrbc_core.studies.planning_study import candidate_grid, seeded_scene  # noqa: E402
+from rrbc_core.studies.planning_study import candidate_grid, seeded_scene
 from tests.paths import ROOT
 
 SCENES = ["demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell"]

@@ -128,7 +128,7 @@ def page_for(browser_context) -> Callable[..., tuple[Any, list[str]]]:
         page.goto(url, wait_until="domcontentloaded", timeout=timeout_s * 1000)
         if not wait:  # caller waits (e.g. opening several tabs that connect concurrently)
             return page, requests
-        remaining = lambda: max(1.0, timeout_s - (time.monotonic() - t0))  # noqa: E731
+        remaining = lambda: max(1.0, timeout_s - (time.monotonic() - t0))
         # The client shows "Inactive" before it first connects, so "no 'Connecting'" alone proves nothing: also
         # require the websocket to have delivered the server's initial messages.
         helpers.wait_for(

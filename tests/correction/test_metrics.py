@@ -394,7 +394,7 @@ def test_rigid_bias_is_absorbed(weights):
     fid = TRUTH.apply(SPREAD_3D)
     tgt = TRUTH.apply(np.vstack([SPREAD_3D, [[900.0, -300.0, 500.0]]]))
     omega, tau = np.array([2e-4, -1e-4, 3e-4]), np.array([0.3, -0.2, 0.5])
-    beta = lambda x: x @ skew(omega).T + tau  # noqa: E731
+    beta = lambda x: x @ skew(omega).T + tau
     w = {"none": None, "scalar": np.arange(1.0, 7.0), "matrix": np.linalg.inv(camera_cov(CAM_FIDUCIALS[:6]))}[weights]
     got = bias_tre(fid, tgt, beta(fid), beta(tgt), weights=w)
     assert np.abs(got).max() < 1e-9 * np.abs(beta(tgt)).max()
@@ -413,7 +413,7 @@ def test_affine_bias_analytical(layout):
     c = fid.mean(0)
     s = np.diag([1.5e-4, -0.8e-4, 2.5e-4])
     omega, tau = np.array([1e-4, 2e-4, -1e-4]), np.array([0.1, 0.0, -0.2])
-    beta = lambda x: (x - c) @ s.T + x @ skew(omega).T + tau  # noqa: E731
+    beta = lambda x: (x - c) @ s.T + x @ skew(omega).T + tau
     tgt = np.vstack([PLATE_TARGETS, [[1200.0, -500.0, 400.0]]])
     got = bias_tre(fid, tgt, beta(fid), beta(tgt))
     np.testing.assert_allclose(got, (tgt - c) @ s.T, rtol=1e-9, atol=1e-12)
@@ -430,7 +430,7 @@ def test_bias_tre_matches_project_registration(weights):
     g0 = np.array([0.05, -0.03, 0.08])
     fid_b = TRUTH.apply(SPREAD_3D)
     tgt_b = TRUTH.apply(np.vstack([SPREAD_3D.mean(0), [900.0, -300.0, 500.0], [-400.0, 600.0, 200.0]]))
-    beta = lambda x: (x - fid_b.mean(0)) @ g.T + g0  # noqa: E731  (robot-frame bias field, mm)
+    beta = lambda x: (x - fid_b.mean(0)) @ g.T + g0
     w = None if weights is None else 1.0 / (1.0 + np.linalg.norm(SPREAD_3D, axis=1) / 500.0)
     # the sensor sees every point displaced by β (expressed in the robot frame); the robot is exact
     sensor = TRUTH.apply_inverse(fid_b + beta(fid_b))

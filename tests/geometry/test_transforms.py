@@ -58,7 +58,7 @@ def test_chordal_mean_matches_scipy_and_is_a_rotation(rs, seed):
     assert np.linalg.det(m) == pytest.approx(1.0)
     ref = Rotation.from_matrix(np.array(rs)).mean(weights=w).as_matrix()
     # the chordal mean is unique when the weighted mean matrix is non-singular; compare the objective
-    obj = lambda r: np.sum(w * np.sum((np.array(rs) - r) ** 2, axis=(1, 2)))  # noqa: E731
+    obj = lambda r: np.sum(w * np.sum((np.array(rs) - r) ** 2, axis=(1, 2)))
     assert obj(m) <= obj(ref) + 1e-9
 
 

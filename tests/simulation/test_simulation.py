@@ -47,7 +47,7 @@ CHECKS = np.array([[0, 0, 0], [200, 100, 50], [-350, 300, 0], [600, -500, 100], 
 def test_noise_only_monte_carlo_matches_fitzpatrick(reg):
     """Isotropic noise σ on both sides: <TRE²> at a check = FLE²/N (1 + Σ d²/3f²) + 3σ_s² (the check itself is
     measured by the sensor), FLE² = 3σ_s² + 3σ_r². Tolerance: Z standard errors of the Monte Carlo mean of TRE²
-    plus the neglected second-order term, bounded by 10 (FLE/f_min)² relative (see tests/test_metrics.py)."""
+    plus the neglected second-order term, bounded by 10 (FLE/f_min)² relative (see tests/correction/test_metrics.py)."""
     sigma_s, sigma_r = 0.05, 0.08
     cell = _cell(ErrorModel(robot=(IsotropicNoise(sigma_r),), sensor=(IsotropicNoise(sigma_s),)), reg, CHECKS)
     measured = measure(cell, np.random.default_rng(11), 4000)

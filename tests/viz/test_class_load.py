@@ -13,7 +13,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
-from class_load import CLICK_GOAL_S, GAP_GOAL_S, class_run  # noqa: E402
+from class_load import CLICK_GOAL_S, GAP_GOAL_S, class_run
 
 
 @pytest.mark.parametrize("per_client,clients", [(False, 6), (True, 4)], ids=["shared", "per-client"])

@@ -2,7 +2,7 @@
 
 What a user sees is read off the handles: the Plan tab's markdown, the colours of the regions of variability and
 their halos, the ghost spheres and their labels, the fiducial gizmos. Buttons are pressed through their viser
-callbacks, drags go through viser's transform-controls handlers (as in tests/test_viz.py).
+callbacks, drags go through viser's transform-controls handlers (as in tests/viz/test_viz.py).
 """
 
 from __future__ import annotations
