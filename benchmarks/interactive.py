@@ -29,7 +29,7 @@ def _drag(app, kind: str, pid: str, steps: int) -> dict:
     counted — those that refresh the heat map (every app.HEAT_INTERVAL_S) and the Plan tab included."""
     group = app.session.layout[kind]
     start = group.positions[group.index(pid)].copy()
-    app.montecarlo.runner.wait_idle(), app.planning.wait_idle()
+    app.montecarlo.runner.wait_idle(), app.plan.wait_idle()
     app.evaluate.handle_drag(kind, pid, start, phase="start")
     times, heat = [], []
     due = time.perf_counter()
@@ -47,7 +47,7 @@ def _drag(app, kind: str, pid: str, steps: int) -> dict:
     app.evaluate.handle_drag(kind, pid, p, phase="end")
     end = time.perf_counter() - t0
     app.evaluate.handle_drag(kind, pid, start, phase="end")
-    app.montecarlo.runner.wait_idle(), app.planning.wait_idle()
+    app.montecarlo.runner.wait_idle(), app.plan.wait_idle()
     times, heat = np.array(times), np.array(heat)
     return {
         "median": float(np.median(times)),
@@ -69,7 +69,7 @@ def _drag_note(steps, kind, pid, app, idle, loaded, samples) -> str:
 
     return (
         f"{steps} drag updates of {kind[:-1]} {pid} at {DRAG_RATE_HZ:.0f} Hz, every update counted; heat map "
-        f"shown ({samples} samples) and the error slice ({app.views.error_slice.plane.n}² grid), the arm, sensors, landing "
+        f"shown ({samples} samples) and the error slice ({app.state.error_slice.plane.n}² grid), the arm, sensors, landing "
         f"bullseye and selected point's card live; {len(app.session.layout['fiducials'].ids)} fiducials, "
         f"{len(app.session.layout['targets'].ids)} targets. idle: {fig(idle)}. busy core: {fig(loaded)}"
     )
@@ -97,7 +97,7 @@ def drag_latency(quick: bool) -> list[dict]:
                 app.heat_samples_per_target = heat_n
                 app.evaluate.set_layer("heatmap", True)
                 app.evaluate.set_layer("slice", True)
-                samples = len(app.present.heat_map.positions)
+                samples = len(app.state.heat_map.positions)
                 for kind, pid in moves:
                     app.views.select(kind, pid)
                     _drag(app, kind, pid, 5)  # warm-up

@@ -8,7 +8,6 @@ call takes the app's lock itself. `client` is the browser tab that asked (`viser
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -23,6 +22,7 @@ if TYPE_CHECKING:
     from rrbc_core.session.explorer import ExplorerSession
 
     from .camera import CellGeometry, View
+    from .picture import ScenePicture
 
 Client = Any  # viser.ClientHandle | None (Any: the panels get it from viser's events)
 
@@ -46,17 +46,16 @@ class EvaluateActions(Protocol):
 class PresentActions(Protocol):
     """Pushes an Evaluation to every scene view and panel (caller holds the lock, inside `server.atomic()`)."""
 
-    heat_map: Any
-
     def show(self, ev: Evaluation, heat: bool = False, plan: bool = True) -> None: ...
+    def draw_scene(self, ev: Evaluation) -> None: ...
+    def build_scene(self, ev: Evaluation) -> None: ...
+    def picture(self) -> ScenePicture: ...
     def update_heat(self) -> None: ...
     def lesson_context(self) -> Any: ...
 
 
 class ViewActions(Protocol):
     """The camera, presentation mode, the see-through cell, the error slice, the selection and the lesson."""
-
-    error_slice: Any
 
     def cell_geometry(self) -> CellGeometry: ...
     def current_view(self) -> View: ...
@@ -76,8 +75,15 @@ class ViewActions(Protocol):
 
 
 class PlanActions(Protocol):
-    """The Plan tab: coverage colours, suggestions and accepting them."""
+    """The Plan tab: the planning state shown (throttled during drags), coverage colours, suggestions and accepting
+    them."""
 
+    def build(self, session: ExplorerSession) -> None: ...
+    def refresh(self, session: ExplorerSession, due: bool = True) -> None: ...
+    def slow(self) -> bool: ...
+    def live_due(self) -> bool: ...
+    def request_background(self, session: ExplorerSession) -> None: ...
+    def wait_idle(self, timeout: float = 30.0) -> bool: ...
     def set_coverage_colours(self, on: bool) -> None: ...
     def suggest_fiducials(
         self, k: int | None = None, client: Client = None, seed: int | None = None
@@ -89,9 +95,6 @@ class PlanActions(Protocol):
 class DiagnoseActions(Protocol):
     """The Diagnose tab: `rrbc diagnose` on the session's data, and whether the verdict shown is stale."""
 
-    diagnosis: Diagnosis | None
-    diagnosis_stale: bool
-
     def run(self, client: Client = None) -> Diagnosis | None: ...
     def check_stale(self) -> None: ...
     def reset(self) -> None: ...
@@ -100,18 +103,13 @@ class DiagnoseActions(Protocol):
 class MonteCarloActions(Protocol):
     """The Monte Carlo tab: runs in the background; Run again, Stop."""
 
-    mc_plots: Any
-
-    def request(self, new_noise: bool = False) -> bool: ...
+    def request(self, new_noise: bool = False, trials: int | None = None) -> bool: ...
     def stop(self) -> None: ...
     def wait_idle(self, timeout: float) -> bool: ...
 
 
 class VecActions(Protocol):
     """The Arm (VEC) tab: VEC beside rigid and RRBC, leaned tools."""
-
-    vec_on: bool
-    vec_view: Any
 
     def set_vec(self, on: bool, client: Client = None) -> None: ...
     def set_varied_registration(self, varied: bool, client: Client = None) -> Evaluation | None: ...
@@ -124,8 +122,6 @@ class VecActions(Protocol):
 
 class AuthoringActions(Protocol):
     """Editing the cell: click-to-add, delete, undo and redo, the sensor, uploads and downloads of the scene."""
-
-    click_mode: str | None
 
     def set_click_mode(self, kind: str | None, region_mm: float | None = None) -> None: ...
     def add_at_ray(self, origin: Any, direction: Any, kind: str | None = None, client: Client = None) -> Any: ...
@@ -178,13 +174,3 @@ class Actions(Protocol):
     def authoring(self) -> AuthoringActions: ...
     @property
     def files(self) -> FileActions: ...
-
-
-class PlanningView(Protocol):
-    """What the Plan tab reads besides `Actions`: the lock its background worker must take to show a result, the live
-    session and the marker size."""
-
-    lock: threading.RLock
-
-    def live_session(self) -> ExplorerSession: ...
-    def marker_mm(self) -> float: ...

@@ -58,36 +58,13 @@ from .controllers.views import PRESENTATION_MARKERS, ViewController
 from .controls import Controls
 from .node_values import Display, nice_down
 from .nodes import SceneNodes
+from .picture import scene_extent
 from .planning_panel import PlanningPanel
 from .slice_nodes import SliceNode
+from .stage import Stage
 from .state import AppState
 
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
-
-
-def _all_points(ev: Evaluation) -> np.ndarray:
-    """Registration points, fiducials and targets (robot frame, mm), stacked."""
-    return np.vstack(
-        [
-            ev.registration_positions.reshape(-1, 3),
-            ev.fiducial_positions.reshape(-1, 3),
-            ev.targets.positions.reshape(-1, 3),
-        ]
-    )
-
-
-class _PlanningView:
-    """`actions.PlanningView` over the context: what the Plan tab reads, nothing else."""
-
-    def __init__(self, ctx: AppContext):
-        self._ctx = ctx
-        self.lock = ctx.lock
-
-    def live_session(self) -> ExplorerSession:
-        return self._ctx.session
-
-    def marker_mm(self) -> float:
-        return float(self._ctx.state.display.marker_mm)
 
 
 class RunningApp:
@@ -97,46 +74,58 @@ class RunningApp:
 
     def __init__(
         self,
-        server,
+        server: Stage,
         loaded: files.Loaded,
         host: str,
         viser_server: viser.ViserServer | None = None,
         library: files.Library | None = None,
     ):
-        viser_server = server if viser_server is None else viser_server
+        if viser_server is None:  # the app draws on the server itself (every tab)
+            assert isinstance(server, viser.ViserServer), "a stage other than the server needs viser_server"
+            viser_server = server
         self.owns_server = server is viser_server
         self.host = host
         self.port = int(viser_server.get_port())
         self.url = f"http://{host if host not in ('0.0.0.0', '::', '') else 'localhost'}:{self.port}"
         self.quiet = True  # stop() hides viser's "Server stopped" line
         self._stopped = False
-        ctx = AppContext(server, viser_server, loaded, library or files.Library.of())
-        ctx.heat_samples_per_target = HEAT_SAMPLES_PER_TARGET
-        ctx.install = self.install
+        # the views first (they call the controllers only when the user acts), then the context, then the controllers
+        nodes = SceneNodes(server, self._on_drag, self._on_point_click)
+        controls = Controls(server, self)
+        ctx = AppContext(
+            server,
+            viser_server,
+            loaded,
+            library or files.Library.of(),
+            nodes=nodes,
+            slice_node=SliceNode(server.scene),
+            camera=CameraDirector(server),
+            controls=controls,
+            app=self,
+            install=self.install,
+            heat_samples_per_target=HEAT_SAMPLES_PER_TARGET,
+        )
         self.ctx = ctx
-        # controllers first: the scene views and panels are handed them
-        self.evaluate = ctx.evaluate = EvaluateController(ctx)
-        self.present = ctx.present = Presenter(ctx)
-        self.views = ctx.views = ViewController(ctx)
-        self.plan = ctx.plan = PlanController(ctx)
-        self.diagnose = ctx.diagnose = DiagnoseController(ctx)
-        self.vec = ctx.vec = VecController(ctx)
-        self.authoring = ctx.authoring = AuthoringController(ctx)
-        self.files = ctx.files = FileController(ctx)
-        self.montecarlo = ctx.montecarlo = MonteCarloController(ctx)
-        ctx.camera = CameraDirector(server)
-        ctx.nodes = SceneNodes(server, self.evaluate.drags.submit, self.views.on_point_click)
-        ctx.slice_node = SliceNode(server.scene)
-        ctx.controls = Controls(server, self, plan_tab=self._build_plan_tab)
+        self.evaluate = EvaluateController(ctx)
+        self.present = Presenter(ctx)
+        self.views = ViewController(ctx)
+        self.plan = PlanController(ctx)
+        self.diagnose = DiagnoseController(ctx)
+        self.vec = VecController(ctx)
+        self.authoring = AuthoringController(ctx)
+        self.files = FileController(ctx)
+        self.montecarlo = MonteCarloController(ctx)
         self.install(loaded, first=True)
         self.files.rescan_files()
         server.on_client_connect(self.views.frame_new_client)
         server.scene.on_click()(self.authoring.on_scene_click)
 
-    def _build_plan_tab(self) -> PlanningPanel:
-        """Build the Plan tab's panel (Controls calls this inside the tab) with the narrow view it needs."""
-        self.ctx.planning = PlanningPanel(self.ctx.server, self, _PlanningView(self.ctx), self.ctx.nodes.paint_regions)
-        return self.ctx.planning
+    def _on_drag(self, kind: str, pid: str, position, phase: str, client=None) -> None:
+        """A gizmo's event (viser's event loop): into the drag queue, handled by its thread."""
+        self.evaluate.drags.submit(kind, pid, position, phase, client=client)
+
+    def _on_point_click(self, kind: str, pid: str, client=None) -> None:
+        self.views.on_point_click(kind, pid, client=client)
 
     # ------------------------------------------------------------------------------------------ what it holds
     @property
@@ -174,6 +163,7 @@ class RunningApp:
 
     @property
     def planning(self) -> PlanningPanel:
+        """The Plan tab's panel."""
         return self.ctx.planning
 
     @property
@@ -204,13 +194,13 @@ class RunningApp:
         self._stopped = True
         self.evaluate.stop()
         self.montecarlo.close()
-        self.ctx.planning.stop()
+        self.plan.stop()
         self.authoring.remove_upload()  # the uploaded mesh's temporary copy (a per-tab app too, when its tab goes)
         upload_spool.close(self.ctx.server.gui)  # uploads still arriving, and what they stored
         if not self.owns_server:
             return
         with contextlib.redirect_stdout(io.StringIO()) if self.quiet else contextlib.nullcontext():
-            self.ctx.server.stop()  # viser prints "(viser) Server stopped" on stdout
+            self.ctx.viser_server.stop()  # viser prints "(viser) Server stopped" on stdout
 
     def install(self, loaded: files.Loaded, first: bool = False) -> None:
         """Make `loaded` the current source: rebuild the scene and resync the panel."""
@@ -223,9 +213,12 @@ class RunningApp:
             st = ctx.state
             st.lesson_index = None
             st.lesson_saved_layers = None
-            ctx.nodes.target_arrows = True
-            self.present.heat_map = None
-            self.montecarlo.mc_plots = None
+            st.lesson_labels = ()
+            st.target_arrows = True
+            st.drag_active = False
+            st.landing = None
+            st.heat_map = None
+            st.mc_plots = None
             st.heat_stale = True
             self.diagnose.reset()
             st.display = self._default_display(ev)
@@ -234,14 +227,10 @@ class RunningApp:
             # the first target; in measured data the first check (what is scored: the headline's numbers)
             first_ids = [p for p in ev.targets.ids if p in ev.check_ids] or list(ev.targets.ids)
             st.selected = ("targets", first_ids[0]) if first_ids else None
-            ctx.nodes.selected = st.selected
             st.camera_preset = OPENING
             session = ctx.session
             with ctx.server.atomic():
-                ctx.nodes.build(session, ev, loaded.mesh, st.display, st.layers)
-                ctx.slice_node.clear()
-                self.views.error_slice = None
-                ctx.planning.build(session)
+                self.present.build_scene(ev)
                 ctx.controls.sync_settings(session.settings, session.kind)
                 ctx.controls.sync_display(st.display, session.kind)
                 ctx.controls.sync_layers(st.layers)
@@ -270,8 +259,7 @@ class RunningApp:
 
     def _default_display(self, ev: Evaluation) -> Display:
         """Marker size from the points' extent; magnification so a typical correction is drawn ~8 % of it."""
-        pts = _all_points(ev)
-        extent = float(np.linalg.norm(pts.max(0) - pts.min(0))) if len(pts) else 1000.0
+        extent = scene_extent(ev)
         marker = float(np.clip(np.round(0.012 * extent * 2) / 2, 0.5, 50.0))
         sizes = np.linalg.norm(ev.corrections[ev.included].reshape(-1, 3), axis=1)
         sizes = sizes[np.isfinite(sizes) & (sizes > 0)]
@@ -292,5 +280,7 @@ class RunningApp:
         whole = preset_view("whole cell", cell).points
         radius = max(0.5 * float(np.linalg.norm(whole.max(0) - whole.min(0))), 10.0)
         # mm: near close enough to look at a region of variability, far enough for the whole cell from afar
-        self.ctx.camera.set_initial(view, near=max(radius * 3e-4, 0.05), far=radius * 30.0)
+        self.ctx.state.initial_camera = self.ctx.camera.set_initial(
+            view, near=max(radius * 3e-4, 0.05), far=radius * 30.0
+        )
         self.ctx.camera.show(view)

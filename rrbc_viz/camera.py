@@ -12,12 +12,15 @@ base: the opening view), a close-up from above on the targets and fiducials, the
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import viser
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.framing import CameraPose, frame_points
+
+if TYPE_CHECKING:
+    from .stage import Stage
 
 #: The floating control panel's width (theme control_width="large": 24 em × 16 px; set explicitly by
 #: `controls.Controls.apply_theme`), and in presentation mode (its text is larger); the gap to the window's edge.
@@ -25,6 +28,13 @@ PANEL_WIDTH_PX = 24 * 16
 PRESENTATION_PANEL_WIDTH_PX = 560
 PANEL_GAP_PX = 24
 PANEL_PX = PANEL_WIDTH_PX + PANEL_GAP_PX
+
+
+def panel_px(presentation: bool) -> float:
+    """What the panel takes of a view's width (its width and a gap, CSS px): a framed view leaves it free."""
+    return float((PRESENTATION_PANEL_WIDTH_PX if presentation else PANEL_WIDTH_PX) + PANEL_GAP_PX)
+
+
 #: The image the initial camera is framed for (tabs report their own size once connected).
 DEFAULT_IMAGE = (1280, 800)
 FOV_Y = np.deg2rad(50.0)
@@ -61,7 +71,7 @@ def _pose_from(view: View, fov_y: float, aspect: float, width_px: float, panel_p
 class CameraDirector:
     """Moves the cameras of the server's tabs (or one tab's) to a `View`."""
 
-    def __init__(self, server: viser.ViserServer):
+    def __init__(self, server: Stage):
         self.server = server
         self.last: dict[int, CameraPose] = {}  # client id -> the pose last sent to it
         self.initial: CameraPose | None = None
@@ -81,12 +91,17 @@ class CameraDirector:
         self.initial = pose
         return pose
 
-    def reframe_initial(self, view: View) -> None:
-        """The initial camera framed again for `view` (the panel's width changed), near and far kept."""
+    def set_panel(self, px: float) -> None:
+        """The panel's width and gap (`panel_px`): what views framed from now on leave free."""
+        self.panel_px = float(px)
+
+    def reframe_initial(self, view: View) -> CameraPose | None:
+        """The initial camera framed again for `view` (the panel's width changed), near and far kept; the pose, or
+        None when there is no initial camera yet."""
         cam = self.server.initial_camera
         if self.initial is None:
-            return
-        self.set_initial(view, cam.near, cam.far)
+            return None
+        return self.set_initial(view, cam.near, cam.far)
 
     def show(self, view: View, clients=None) -> dict[int, CameraPose]:
         """Move the camera of each client in `clients` (default: every connected tab) to `view`, framed for that

@@ -2,7 +2,8 @@
 state, the scene views and panels, and each other — by their narrow interfaces (`actions`), so a controller depends on
 what it calls, never on the app.
 
-Every controller gets the same context; the app (`app.RunningApp`) builds it and fills in the controllers. A
+Every controller gets the same context; the app (`app.RunningApp`) builds the views first, then the context, then
+the controllers (no field is filled in later). A
 controller changes the session and the state only under `lock`, and sends one change's scene updates in one
 `server.atomic()` block."""
 
@@ -11,7 +12,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from rrbc_core.errors import one_line
 from rrbc_core.session.explorer import ExplorerSession
@@ -19,8 +20,11 @@ from rrbc_core.session.explorer import ExplorerSession
 from .state import AppState
 
 if TYPE_CHECKING:
+    import viser
+
     from . import files
     from .actions import (
+        Actions,
         AuthoringActions,
         DiagnoseActions,
         EvaluateActions,
@@ -36,39 +40,79 @@ if TYPE_CHECKING:
     from .nodes import SceneNodes
     from .planning_panel import PlanningPanel
     from .slice_nodes import SliceNode
+    from .stage import Stage
+
+    class Controllers(Actions, Protocol):
+        """The app as its controllers see each other: `actions.Actions` and the presenter."""
+
+        @property
+        def present(self) -> PresentActions: ...
 
 
 @dataclass(eq=False)
 class AppContext:
     """The shared services of one app (module docstring). `server` is where it draws: the viser server (every tab) or
-    one tab's `stage.ClientStage`; `viser_server` the server behind it."""
+    one tab's `stage.ClientStage`; `viser_server` the server behind it. The views (scene nodes, slice, camera, the
+    panels) are built before the controllers and handed in whole; the controllers are reached through `app`, the
+    running app (`app.RunningApp`), by their interfaces."""
 
-    server: Any
-    viser_server: Any
+    server: Stage
+    viser_server: viser.ViserServer
     loaded: files.Loaded
     library: files.Library
+    nodes: SceneNodes
+    slice_node: SliceNode
+    camera: CameraDirector
+    controls: Controls
+    app: Controllers
+    #: make a loaded source the current one (the app's `install`)
+    install: Callable[..., None]
     lock: threading.RLock = field(default_factory=threading.RLock)
     state: AppState = field(default_factory=AppState)
     heat_samples_per_target: int = 200
     guard: Any = None  # access.AccessGuard of the server (None in tests that build an app by hand)
-    # the scene's views and the panels (the app sets them once built)
-    nodes: SceneNodes = None  # type: ignore[assignment]
-    slice_node: SliceNode = None  # type: ignore[assignment]
-    camera: CameraDirector = None  # type: ignore[assignment]
-    controls: Controls = None  # type: ignore[assignment]
-    planning: PlanningPanel = None  # type: ignore[assignment]
+
+    @property
+    def planning(self) -> PlanningPanel:
+        """The Plan tab's panel."""
+        return self.controls.plan
+
     # the controllers, by their interfaces
-    evaluate: EvaluateActions = None  # type: ignore[assignment]
-    present: PresentActions = None  # type: ignore[assignment]
-    views: ViewActions = None  # type: ignore[assignment]
-    plan: PlanActions = None  # type: ignore[assignment]
-    diagnose: DiagnoseActions = None  # type: ignore[assignment]
-    montecarlo: MonteCarloActions = None  # type: ignore[assignment]
-    vec: VecActions = None  # type: ignore[assignment]
-    authoring: AuthoringActions = None  # type: ignore[assignment]
-    files: FileActions = None  # type: ignore[assignment]
-    #: make a loaded source the current one (the app's `install`)
-    install: Callable[..., None] = None  # type: ignore[assignment]
+    @property
+    def evaluate(self) -> EvaluateActions:
+        return self.app.evaluate
+
+    @property
+    def present(self) -> PresentActions:
+        return self.app.present
+
+    @property
+    def views(self) -> ViewActions:
+        return self.app.views
+
+    @property
+    def plan(self) -> PlanActions:
+        return self.app.plan
+
+    @property
+    def diagnose(self) -> DiagnoseActions:
+        return self.app.diagnose
+
+    @property
+    def montecarlo(self) -> MonteCarloActions:
+        return self.app.montecarlo
+
+    @property
+    def vec(self) -> VecActions:
+        return self.app.vec
+
+    @property
+    def authoring(self) -> AuthoringActions:
+        return self.app.authoring
+
+    @property
+    def files(self) -> FileActions:
+        return self.app.files
 
     @property
     def session(self) -> ExplorerSession:

@@ -1,7 +1,7 @@
 """The control panel (shared by every browser tab): one panel class per tab, each owning its widgets.
 
 `ExplorePanel` (results, method, errors), `ViewPanel` (display, layers, heat map), `LearnPanel` (the lesson),
-`MonteCarloPanel`, `DiagnosePanel`, `FilePanel`, and the Plan tab (`planning_panel.PlanningPanel`, built by the app).
+`MonteCarloPanel`, `DiagnosePanel`, `FilePanel`, and the Plan tab (`planning_panel.PlanningPanel`).
 `Controls` lays the tabs out and holds the status line. A panel only forwards user input to the app (through
 `actions.Actions`) and shows what the app hands back; it holds no RRBC state of its own. Programmatic updates
 (`sync_*`) run under the shared `Syncing` flag so that the value callbacks they re-enter (viser runs `on_update`
@@ -28,6 +28,7 @@ from .checks_panel import ChecksPanel
 from .colors import legend_html
 from .diagnosis_panel import PROMPT
 from .node_values import LAYERS, Display
+from .planning_panel import PlanningPanel
 from .selection_panel import Bullseye, SelectionPanel
 from .slice_nodes import SLICE_AXES, SLICE_CHOICES
 from .syncing import Syncing, clamped
@@ -35,7 +36,7 @@ from .vec_panel import VecPanel
 
 if TYPE_CHECKING:
     from .actions import Actions
-    from .planning_panel import PlanningPanel
+    from .stage import Stage
 
 LAYER_LABELS = {
     "mesh": "Work-cell mesh",
@@ -168,9 +169,9 @@ class ExplorePanel:
                 for flag, widget in self.options.items()
             ),
         ):
-            handle.on_update(_forward(handle, syncing, app.evaluate.change_settings, name, cast))
+            handle.on_update(_forward(handle, syncing, lambda **kw: app.evaluate.change_settings(**kw), name, cast))
         self.magnification.on_update(
-            _forward(self.magnification, syncing, app.evaluate.set_display, "magnification", float)
+            _forward(self.magnification, syncing, lambda **kw: app.evaluate.set_display(**kw), "magnification", float)
         )
         self.new_seed.on_click(lambda event: app.evaluate.new_seed(client=event.client))
 
@@ -272,13 +273,13 @@ class ViewPanel:
                 )
 
         self.slice_offset.on_update(
-            _forward(self.slice_offset, syncing, app.evaluate.set_display, "slice_offset", float)
+            _forward(self.slice_offset, syncing, lambda **kw: app.evaluate.set_display(**kw), "slice_offset", float)
         )
         for handle, name, cast in (
             (self.marker, "marker_mm", float),
             (self.region_zoom, "region_zoom", float),
         ):
-            handle.on_update(_forward(handle, syncing, app.evaluate.set_display, name, cast))
+            handle.on_update(_forward(handle, syncing, lambda **kw: app.evaluate.set_display(**kw), name, cast))
 
         @self.heat_value.on_update
         def _(event: viser.GuiEvent) -> None:
@@ -378,13 +379,17 @@ class MonteCarloPanel:
             axes=({"label": "distance from origin (mm)"}, {"label": "mean error (mm)"}),
             aspect=1.4,
         )
-        self.mc_run.on_click(lambda event: app.montecarlo.request(new_noise=True))
+        self.mc_run.on_click(lambda event: app.montecarlo.request(new_noise=True, trials=self.trials()))
         self.mc_stop.on_click(lambda event: app.montecarlo.stop())
 
         @self.mc_trials.on_update
         def _(event: viser.GuiEvent) -> None:
             if not syncing.on:
-                app.montecarlo.request()
+                app.montecarlo.request(trials=self.trials())
+
+    def trials(self) -> int:
+        """The trials the slider shows (a value a tab sent is clamped to the slider's range)."""
+        return int(clamped(self.mc_trials))
 
     def show_info(self, markdown: str) -> None:
         """What ran (trials, setup, time) or why nothing did."""
@@ -512,7 +517,7 @@ class FilePanel:
 class Controls:
     """The control panel: the status line and the tabs, one panel each (module docstring)."""
 
-    def __init__(self, server: viser.ViserServer, app: Actions, plan_tab: Callable[[], PlanningPanel]):
+    def __init__(self, server: Stage, app: Actions):
         self.app = app
         self.syncing = Syncing()
         gui = server.gui
@@ -543,7 +548,7 @@ class Controls:
         with tabs.add_tab("Arm (VEC)", icon=viser.Icon.ROBOT):
             self.vec = VecPanel(gui, app, self.syncing)
         with tabs.add_tab("Plan", icon=viser.Icon.MAP_PIN):
-            plan_tab()  # the app builds the Plan tab's panel inside the tab, and keeps it
+            self.plan = PlanningPanel(server, app)
         with tabs.add_tab("File", icon=viser.Icon.FOLDER_OPEN):
             self.file = FilePanel(gui, app)
             self.authoring = AuthoringPanel(gui, app)
@@ -584,11 +589,6 @@ class Controls:
             mc.mc_hist.data = histogram
         if by_distance is not None:
             mc.mc_dist.data = by_distance
-
-    @property
-    def monte_carlo_trials(self) -> int:
-        """The trials the user asked for."""
-        return int(clamped(self.montecarlo.mc_trials))
 
     # -------------------------------------------------------------------------------------------- syncing
     def quiet(self):

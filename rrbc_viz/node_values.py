@@ -108,9 +108,6 @@ def target_label(pid: str, ev: Evaluation, i: int) -> str:
     return target_labels(ev)[i]
 
 
-RING_SEGMENTS = 36
-
-
 @dataclass(frozen=True)
 class LandingDisplay:
     """The landing bullseye of one target, floating `lift` mm above it (and beside it, away from the robot's base)

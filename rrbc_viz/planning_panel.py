@@ -18,16 +18,13 @@ Measured data have no error model and no candidates: the tab says so and hides i
 
 Nodes: /plan (group), /plan/ghosts/<k> (icosphere) with /plan/ghosts/<k>/label, and per target
 /targets/<id>/gizmo/coverage (a halo that follows the target's gizmo in the browser with no round trip).
-Formatting only here: every number comes from the core.
+The panel owns its widgets and the ghosts' nodes and offers verbs; what it shows is decided by the Plan controller
+(`controllers.plan.PlanController`: the planning state, its throttle and background worker). Formatting only here:
+every number comes from the core.
 """
 
 from __future__ import annotations
 
-import copy
-import threading
-import time
-import traceback
-from collections.abc import Callable
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
@@ -35,24 +32,14 @@ import numpy as np
 import viser
 
 from rrbc_core.analysis.planning_coverage import DEFAULT_REGION_MM
-from rrbc_core.errors import InputError
-from rrbc_core.session import planning_view
 from rrbc_core.session.results import PlanningState
 
 from . import colors
-from .drag_queue import drags_waiting
-from .syncing import clamped
-from .worker import CoalescingWorker
 
 if TYPE_CHECKING:
-    from rrbc_core.session.explorer import ExplorerSession
+    from .actions import Actions
+    from .stage import Stage
 
-    from .actions import Actions, PlanningView
-
-PLAN_INTERVAL_S = 0.25  # least time between planning recomputations while dragging
-PLAN_LIVE_MAX_S = 0.05  # a planning update slower than this runs in the background during drags …
-PLAN_QUIET_S = 0.15  # … once the drag has paused (no update) this long, or ended: computing it while the drag
-#                      goes on would slow every drag update (the worker holds the GIL for much of its time)
 K_MAX = 10
 GHOST_MARKERS = 1.4  # ghost sphere radius, in marker radii (a fiducial is 1)
 PROMPT_SUGGEST = (
@@ -202,19 +189,10 @@ def render_suggestion(result, current: bool = True) -> str:
 
 
 class PlanningPanel:
-    """The Plan tab's widgets (built inside the tab by `Controls`) and its scene nodes (`build` per source)."""
+    """The Plan tab's widgets (built inside the tab by `Controls`) and its ghosts' nodes (module docstring)."""
 
-    def __init__(
-        self,
-        server: viser.ViserServer,
-        app: Actions,
-        view: PlanningView,
-        paint: Callable[[dict | None], None],
-    ):
-        self.server = server
-        self.app = app
-        self.view = view
-        self._paint = paint  # colours the scene's regions and halos (`nodes.SceneNodes.paint_regions`)
+    def __init__(self, server: Stage, app: Actions):
+        self._server = server
         gui = server.gui
         self.info = gui.add_markdown("")
         self.k = gui.add_slider("Fiducials to add (K)", 1, K_MAX, 1, 4)
@@ -242,44 +220,36 @@ class PlanningPanel:
             )
             self.legend = gui.add_markdown(colors.coverage_legend_markdown())
             self.coverage_md = gui.add_markdown("")
-
-        self.state: PlanningState | None = None  # the last planning state shown
-        self.cost_s = 0.0  # seconds the last (uncached) planning update took
-        self._measured = False  # the first computation for the current source was done (its cost is not typical)
-        self.stale = False  # a drag changed the fiducials since the state shown was computed
-        self._time = 0.0
-        self._busy = False  # a Suggest is running
-        self._busy_lock = threading.Lock()
-        self._progress_time = 0.0
         self.ghosts: list = []  # icosphere handles of the suggested fiducials
         self.ghost_labels: list = []
         self._sent: dict = {}  # (id(handle), attr) -> value last assigned
         self._group: viser.FrameHandle | None = None
-        # background planning (slow scenes, during drags); every synchronous refresh makes its work stale
-        self._worker = CoalescingWorker(self._background, PLAN_QUIET_S, name="rrbc-planning")
-
         self._syncing = False
 
         @self.colour.on_update
         def _(event: viser.GuiEvent) -> None:
             if not self._syncing:
-                self.app.plan.set_coverage_colours(bool(self.colour.value))
+                app.plan.set_coverage_colours(bool(self.colour.value))
 
         @self.suggest_button.on_click
         def _suggest(event: viser.GuiEvent) -> None:
-            self.app.plan.suggest_fiducials(client=event.client)
+            app.plan.suggest_fiducials(k=self.chosen_k(), client=event.client)
 
         @self.accept_button.on_click
         def _accept(event: viser.GuiEvent) -> None:
-            self.app.plan.accept_suggestions(client=event.client)
+            app.plan.accept_suggestions(client=event.client)
 
         @self.clear_button.on_click
         def _clear(event: viser.GuiEvent) -> None:
-            self.app.plan.clear_suggestions()
+            app.plan.clear_suggestions()
 
         @self.undo_button.on_click
         def _undo(event: viser.GuiEvent) -> None:
-            self.app.authoring.undo(client=event.client)
+            app.authoring.undo(client=event.client)
+
+    def chosen_k(self) -> int:
+        """The K the slider shows (within 1..K_MAX)."""
+        return int(np.clip(round(float(self.k.value)), 1, K_MAX))
 
     @contextmanager
     def quiet(self):
@@ -291,20 +261,16 @@ class PlanningPanel:
             self._syncing = was
 
     # ------------------------------------------------------------------------------------------ building
-    def build(self, session: ExplorerSession) -> None:
+    def build(self, scene_mode: bool) -> None:
         """(Re)create the tab's nodes for a newly installed source (call after SceneNodes.build, in atomic())."""
         self._sent.clear()
-        self.cost_s, self._measured = 0.0, False
-        self.state = None
-        self.stale = False
         self.ghosts, self.ghost_labels = [], []
         if self._group is not None:
             try:
                 self._group.remove()
             except Exception:  # noqa: BLE001 - already gone
                 pass
-        self._group = self.server.scene.add_frame("/plan", show_axes=False)
-        scene_mode = session.kind == "scene"
+        self._group = self._server.scene.add_frame("/plan", show_axes=False)
         for h in (self.colour, self.accept_button, self.clear_button):
             h.disabled = not scene_mode
             h.visible = scene_mode  # measured data: suggestions are places to measure, not fiducials to add
@@ -320,177 +286,48 @@ class PlanningPanel:
         setattr(handle, attr, value)
         self._sent[key] = value
 
-    # ------------------------------------------------------------------------------------------ refreshing
-    def live_due(self) -> bool:
-        """Whether a drag update should recompute planning now, synchronously (throttled)."""
-        return not self.slow and time.monotonic() - self._time >= PLAN_INTERVAL_S
+    # ------------------------------------------------------------------------------------------ showing
+    def show_planning(self, info: str, coverage: str) -> None:
+        """The tab's lead text (predicted RMST, coverage counts, or why it cannot plan) and the per-target table."""
+        self._assign(self.info, "content", info)
+        self._assign(self.coverage_md, "content", coverage)
 
-    @property
-    def slow(self) -> bool:
-        """The last planning update took longer than PLAN_LIVE_MAX_S: during drags it runs in the background."""
-        return self.cost_s > PLAN_LIVE_MAX_S
+    def show_failure(self, text: str) -> None:
+        """Planning failed: say why; the next state shown is sent whole."""
+        self.info.content = text
+        self.coverage_md.content = ""
+        self._sent.clear()
 
-    def refresh(self, session: ExplorerSession, due: bool = True) -> None:
-        """Recompute (or take from the session's cache) and show the planning state (caller holds the app lock,
-        inside atomic()). due=False marks it stale instead (a drag update between throttled refreshes)."""
-        if session.kind != "scene":
-            self.state = None
-            if not due:
-                return
-            try:
-                plan = planning_view.coverage_plan(session, 0)
-            except InputError as exc:
-                self.info.content = f"Cannot plan: {exc}"
-                self.coverage_md.content = ""
-                return
-            full = int(np.sum(plan.coverage >= 1.0))
-            ev = session.last
-            n_in = int(np.sum(ev.coverage.inside)) if ev.coverage is not None else 0
-            self.info.content = (
-                f"Measured data (no error model, so no predicted RMST). **{n_in} of {len(ev.targets.ids)} targets** "
-                f"inside the fiducials' hull; **{full} of {len(plan.target_ids)} regions** (each taken as a "
-                f"{DEFAULT_REGION_MM:g} mm cube: measured targets carry none) fully inside."
-            )
-            state = PlanningState(plan.target_ids, plan.coverage, None, 0)
-            self.coverage_md.content = render_coverage(state, ev.coverage, ev.targets.ids)
-            return
-        if not due:
-            self.stale = True
-            return
-        self._worker.invalidate()  # a background result requested before this is older: it will be dropped
-        start = time.perf_counter()
-        self._time = time.monotonic()
-        state = self._compute(session)
-        if state is not self.state and not isinstance(state, Exception):  # a cache hit says nothing about the cost
-            cost = time.perf_counter() - start
-            # the first computation for a source pays one-off start-up costs (up to ~5x): it counts at a fifth, so a
-            # scene whose planning is slow even then (the 200-fiducial stress cell) never blocks a drag
-            self.cost_s = cost if self._measured else cost / 5.0
-            self._measured = True
-        self._show_state(session, state)
+    def refresh_suggestion(self, result, current: bool) -> None:
+        """Re-render a suggestion whose ghosts are shown (it may have become stale: Accept only while current)."""
+        if self.ghosts:
+            self._assign(self.suggestion_md, "content", render_suggestion(result, current))
+            self._assign(self.accept_button, "disabled", not current)
 
-    @staticmethod
-    def _compute(session: ExplorerSession):
-        """planning_view.planning_state(session), or the exception that says why not."""
-        try:
-            return planning_view.planning_state(session)
-        except InputError as exc:
-            return exc
-        except Exception as exc:  # noqa: BLE001 - keep serving; say so in the tab
-            traceback.print_exc()
-            return exc
+    def sync_colour(self, on: bool) -> None:
+        """The "Colour regions by coverage" box, set without acting on it."""
+        if bool(self.colour.value) != bool(on):
+            with self.quiet():
+                self.colour.value = bool(on)  # type: ignore[misc]  # viser's stub: a checkbox's value is settable
 
-    def _show_state(self, session: ExplorerSession, state) -> None:
-        self._time = time.monotonic()
-        if isinstance(state, Exception):
-            what = (
-                "Cannot plan"
-                if isinstance(state, InputError)
-                else (f"Planning failed: internal error {type(state).__name__}")
-            )
-            self.info.content = f"⚠ {what}: {' '.join(str(state).split())}"
-            self.coverage_md.content = ""
-            self.state = None
-            self._sent.clear()
-            return
-        self.stale = False
-        self.state = state
-        excluded = sum(1 for pid in session.layout["fiducials"].ids if pid in session.settings.excluded)
-        ev = session.last
-        self._assign(self.info, "content", render_state(state, excluded, session.settings, ev.coverage))
-        self._assign(self.coverage_md, "content", render_coverage(state, ev.coverage, ev.targets.ids))
-        self.apply_colours(session)
-        if session.suggestion is not None and self.ghosts:
-            self._assign(
-                self.suggestion_md,
-                "content",
-                render_suggestion(session.suggestion, planning_view.suggestion_current(session)),
-            )
-            self._assign(self.accept_button, "disabled", not planning_view.suggestion_current(session))
+    def set_busy(self, busy: bool, k: int = 0) -> None:
+        """A Suggest is running (its button off and a note) or not."""
+        self.suggest_button.disabled = busy
+        if busy:
+            self.suggestion_md.content = f"Planning: choosing {k} of the scene's candidate locations…"
 
-    # ------------------------------------------------------------------------------------------ background
-    def request_background(self, session: ExplorerSession) -> None:
-        """Recompute planning on a snapshot of `session` in the worker thread (caller holds the app lock); drag
-        updates of a slow scene do this instead of waiting. Requests coalesce: the newest starts once none has
-        come for PLAN_QUIET_S (the drag paused or ended); a result is shown unless a synchronous refresh came
-        after its request or another source was loaded."""
-        if session.kind != "scene":
-            return
-        self.stale = True
-        self._worker.submit((session, copy.copy(session)))  # the thread starts with the first request
+    def show_progress(self, k: int, extra: str) -> None:
+        """The planner's progress (its last label)."""
+        self.suggestion_md.content = f"Planning: choosing {k} of the scene's candidate locations… {extra}".rstrip()
 
-    def wait_idle(self, timeout: float = 30.0) -> bool:
-        """Block until no background planning is queued or running (tests, scripts). True if idle in time."""
-        return self._worker.wait_idle(timeout)
-
-    def stop(self) -> None:
-        self._worker.stop()
-
-    def _background(self, job, fresh) -> None:
-        """The worker's job: compute on the snapshot, show it if still wanted (under the app lock)."""
-        live, snapshot = job
-        while drags_waiting():  # drags first (any session's): the plan follows when they pause
-            if not fresh():
-                return  # a newer request supersedes this one (or the worker stopped)
-            time.sleep(PLAN_QUIET_S)
-        start = time.perf_counter()
-        state = self._compute(snapshot)
-        cost = time.perf_counter() - start
-        with self.view.lock:
-            if fresh() and self.view.live_session() is live:
-                if not isinstance(state, Exception) and state is not self.state:  # a cache hit: no cost measured
-                    self.cost_s = cost
-                with self.server.atomic():
-                    self._show_state(snapshot, state)
-
-    def apply_colours(self, session: ExplorerSession) -> None:
-        """Regions and halos on the coverage scale when the toggle is on; regions back to their colour when off
-        (the scene's nodes paint them: `nodes.SceneNodes.paint_regions`)."""
-        on = bool(self.colour.value) and self.state is not None
-        if not on:
-            self._paint(None)
-            return
-        state = self.state
-        assert state is not None  # `on` says so
-        self._paint({pid: colors.coverage_color(c) for pid, c in zip(state.target_ids, state.coverage)})
-
-    # ------------------------------------------------------------------------------------------ suggesting
-    def begin(self) -> bool:
-        """Mark a Suggest as running (False if one already is)."""
-        with self._busy_lock:
-            if self._busy:
-                return False
-            self._busy = True
-        self.suggest_button.disabled = True
-        self.suggestion_md.content = f"Planning: choosing {int(clamped(self.k))} of the scene's candidate locations…"
-        return True
-
-    def end(self, session: ExplorerSession) -> None:
-        with self._busy_lock:
-            self._busy = False
-        self.suggest_button.disabled = False
-
-    def progress(self, *args) -> None:
-        """The planner's progress callback: shows its last label (at most 5 times a second)."""
-        now = time.monotonic()
-        if now - self._progress_time < 0.2:
-            return
-        self._progress_time = now
-        label = next((a for a in args if isinstance(a, str)), None)
-        nums = [a for a in args if isinstance(a, (int, float)) and not isinstance(a, bool)]
-        extra = label or (" / ".join(f"{x:g}" for x in nums[:2]) if nums else "")
-        self.suggestion_md.content = (
-            f"Planning: choosing {int(clamped(self.k))} of the scene's candidate locations… {extra}"
-        ).rstrip()
-
-    def _add_ghosts(self, ids, positions) -> None:
+    def _add_ghosts(self, ids, positions, marker_mm: float) -> None:
         """Ghost spheres +1 … +K (labelled with their ids) at `positions` (K, 3), robot frame, mm."""
         self.remove_ghosts()
-        r = self.view.marker_mm()
+        r = marker_mm
         for i, (cid, p) in enumerate(zip(ids, np.asarray(positions, float).reshape(-1, 3))):
             name = f"/plan/ghosts/{i}"
             self.ghosts.append(
-                self.server.scene.add_icosphere(
+                self._server.scene.add_icosphere(
                     name,
                     radius=GHOST_MARKERS * r,
                     color=colors.GHOST,
@@ -502,7 +339,7 @@ class PlanningPanel:
                 )
             )
             self.ghost_labels.append(
-                self.server.scene.add_label(
+                self._server.scene.add_label(
                     f"{name}/label",
                     f"+{i + 1} {cid}",
                     position=(0.0, 0.0, 2.0 * r),
@@ -512,12 +349,6 @@ class PlanningPanel:
                 )
             )
 
-    def sync_colour(self, on: bool) -> None:
-        """The "Colour regions by coverage" box, set without acting on it."""
-        if bool(self.colour.value) != bool(on):
-            with self.quiet():
-                self.colour.value = bool(on)  # type: ignore[misc]  # viser's stub: a checkbox's value is settable
-
     def show_refusal(self, message: str) -> None:
         """Why the last Suggest was refused."""
         self.suggestion_md.content = f"⚠ Cannot suggest: {' '.join(str(message).split())}"
@@ -526,19 +357,19 @@ class PlanningPanel:
         """Enable Undo while the session has an edit to undo."""
         self.undo_button.disabled = not can_undo
 
-    def show_suggestion(self, session: ExplorerSession, result) -> None:
-        """Ghost spheres +1 … +K at the suggested places and the suggestion's text (caller holds the lock). Accept
-        is offered only for a suggestion made for the fiducials as they are (the planner never suggests a set
-        predicted worse than the current one, but a stale suggestion may be)."""
-        self._add_ghosts(result.suggested_ids, result.suggested)
-        self.suggestion_md.content = render_suggestion(result, planning_view.suggestion_current(session))
+    def show_suggestion(self, result, current: bool, marker_mm: float) -> None:
+        """Ghost spheres +1 … +K at the suggested places and the suggestion's text. Accept is offered only for a
+        suggestion made for the fiducials as they are (`current`: the planner never suggests a set predicted worse
+        than the current one, but a stale suggestion may be)."""
+        self._add_ghosts(result.suggested_ids, result.suggested, marker_mm)
+        self.suggestion_md.content = render_suggestion(result, current)
         has = len(self.ghosts) > 0
-        self.accept_button.disabled = not (has and planning_view.suggestion_current(session))
+        self.accept_button.disabled = not (has and current)
         self.clear_button.disabled = not has
 
-    def show_coverage_suggestion(self, plan) -> None:
+    def show_coverage_suggestion(self, plan, marker_mm: float) -> None:
         """Measured data: ghost spheres at the places to measure more fiducials, and what coverage they give."""
-        self._add_ghosts(plan.suggested_ids, plan.suggested)
+        self._add_ghosts(plan.suggested_ids, plan.suggested, marker_mm)
         rows = "\n".join(f"| +{i + 1} | {', '.join(f'{v:.0f}' for v in p)} |" for i, p in enumerate(plan.suggested))
         full = int(np.sum(plan.coverage_after >= 1.0))
         self.suggestion_md.content = (
@@ -559,3 +390,20 @@ class PlanningPanel:
         self.accept_button.disabled = self.clear_button.disabled = True
         if prompt:
             self.suggestion_md.content = PROMPT_SUGGEST
+
+
+def measured_info(n_in: int, n_targets: int, full: int, n_regions: int) -> str:
+    """The lead text for measured data (no error model: coverage only)."""
+    return (
+        f"Measured data (no error model, so no predicted RMST). **{n_in} of {n_targets} targets** "
+        f"inside the fiducials' hull; **{full} of {n_regions} regions** (each taken as a "
+        f"{DEFAULT_REGION_MM:g} mm cube: measured targets carry none) fully inside."
+    )
+
+
+def failure_text(exc: Exception) -> str:
+    """Why the Plan tab shows no state."""
+    from rrbc_core.errors import InputError
+
+    what = "Cannot plan" if isinstance(exc, InputError) else f"Planning failed: internal error {type(exc).__name__}"
+    return f"⚠ {what}: {' '.join(str(exc).split())}"

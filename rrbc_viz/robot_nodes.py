@@ -16,6 +16,8 @@ tracker as one instrument with its frustum; a reference artefact ("ground_truth"
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -267,3 +269,60 @@ class SensorNodes:
                 font_screen_scale=0.7,
                 anchor="bottom-left",
             )
+
+
+#: While a drag is under way the arm is posed at most this often (s); always at the drag's end.
+ARM_DRAG_INTERVAL_S = 0.25
+
+
+class ArmPoser:
+    """Poses an `ArmNodes` where the scene needs it: reaching the bullseye's target from the scene's arm model (its
+    inverse kinematics, throttled to a few times a second during a drag: IK and meshes cost), or at a measured
+    point's joint values. `set_visible(bool)` shows or hides the arm's group (hidden where it cannot reach)."""
+
+    def __init__(self, arm: ArmNodes, set_visible: Callable[[bool], None]):
+        self.arm = arm
+        self._set_visible = set_visible
+        self._key: tuple | None = None  # what the arm was last posed for
+        self._time = -1e18  # when (time.monotonic)
+
+    def reach(self, model, position, magnification: float, tool, bias: float, moving: bool) -> None:
+        """Reach `position` (robot frame, mm) with the tool down or leaned (tool: (tilt, azimuth) degrees), the
+        scene's arm errors at `bias` times their size."""
+        from rrbc_core.errors import InputError
+        from rrbc_core.session.arm import arm_pose
+        from rrbc_core.session.tools import tool_rotation
+
+        key = (tuple(np.round(position, 9)), bias, magnification, tool)
+        if key == self._key:
+            return
+        now = time.monotonic()
+        if moving and now - self._time < ARM_DRAG_INTERVAL_S:
+            return
+        self._key, self._time = key, now
+        rot = None
+        if tool is not None:
+            rot = tool_rotation(float(getattr(model, "tool_yaw_deg", 0.0) or 0.0), *tool)
+        try:
+            pose = arm_pose(model, position, bias, rot)
+        except InputError:
+            self._set_visible(False)
+            return
+        self._set_visible(True)
+        self.arm.show(pose, magnification)
+
+    def at_joints(self, session, selected: tuple[str, str], magnification: float) -> None:
+        """Measured data: the arm at point `selected`'s joint values (hidden where the file has none)."""
+        from rrbc_core.errors import InputError
+        from rrbc_core.session.arm import measured_arm_pose
+
+        if selected == self._key:
+            return
+        self._key = selected
+        try:
+            pose = measured_arm_pose(session, *selected)
+        except InputError:
+            self._set_visible(False)
+            return
+        self._set_visible(True)
+        self.arm.show(pose, magnification)

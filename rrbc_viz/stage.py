@@ -9,8 +9,33 @@ demo). A `ClientStage` wraps one `viser.ClientHandle`: its client-scoped scene a
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import AbstractContextManager
+from typing import Any, Protocol
 
 import viser
+
+
+class Stage(Protocol):
+    """Where an app draws (module docstring): `viser.ViserServer` (every tab) or `ClientStage` (one tab)."""
+
+    @property
+    def scene(self) -> viser.SceneApi: ...
+
+    @property
+    def gui(self) -> viser.GuiApi: ...
+
+    @property
+    def initial_camera(self) -> Any: ...
+
+    def atomic(self) -> AbstractContextManager[Any]: ...
+
+    def flush(self) -> None: ...
+
+    def get_clients(self) -> dict[int, viser.ClientHandle]: ...
+
+    def send_file_download(self, filename: str, content: bytes, **kwargs: Any) -> None: ...
+
+    def on_client_connect(self, callback: Callable[[viser.ClientHandle], Any]) -> Any: ...
 
 
 class _ClientInitialCamera:

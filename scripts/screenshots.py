@@ -16,7 +16,7 @@ Extend SHOTS below. Each entry is (file name, actions); an action is one of
     ("button", "Next")      click the button named "Next" (get_by_role("button"); "Next" also appears in text)
     ("select", ("Label", "option"))   open the dropdown labelled "Label" and choose "option"
     ("drag", (node, a, b))  real mouse drag of gizmo `node`'s X arrow from local x = a to x = b, in gizmo scales
-                            (the app's ``nodes._gizmo_scale()``); waits until the server has the drag's end
+                            (the app's ``nodes.gizmo_scale()``); waits until the server has the drag's end
     ("zoom", {"look_at": (x, y, z), "factor": f})   every tab's camera looks at (x, y, z) mm from f times its
                             initial distance, along the initial viewing direction (like a user zooming in)
     ("call", fn)            call fn(app) on the server (e.g. a drag from Python: app.evaluate.handle_drag(...))
@@ -255,7 +255,7 @@ def click_role(page: Any, role: str, name: str | re.Pattern) -> None:
 def drag_gizmo(page: Any, h: Any, app: Any, node: str, a: float, b: float) -> None:
     """Drag gizmo `node`'s X arrow with the real mouse and wait until the server's handle has moved (one retry
     if the press missed the arrow)."""
-    scale = float(app.nodes._gizmo_scale())
+    scale = float(app.nodes.gizmo_scale())
     h.wait_for_node(page, node, RENDER_TIMEOUT_S)
     handle = app.server.scene.get_handle_by_name(node)
     if handle is None:

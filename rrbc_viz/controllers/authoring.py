@@ -41,13 +41,11 @@ def surface_hit(mesh, origin, direction) -> np.ndarray | None:
 
 
 class AuthoringController:
-    """`actions.AuthoringActions` (module docstring). ``click_mode``: what a click on the cell adds (None: clicks
-    select); ``target_region_mm``: the cube edge of an added target's region."""
+    """`actions.AuthoringActions` (module docstring): what a click adds is in the app's state (`click_mode`,
+    `target_region_mm`)."""
 
     def __init__(self, ctx: AppContext):
         self.ctx = ctx
-        self.click_mode: str | None = None
-        self.target_region_mm = 4.0
         self.uploaded_mesh: Path | None = None  # the mesh uploaded in this session (a saved scene refers to it)
 
     def set_click_mode(self, kind: str | None, region_mm: float | None = None) -> None:
@@ -55,16 +53,16 @@ class AuthoringController:
         "candidates"; `region_mm`: the cube edge of an added target's region."""
         if kind not in {k for _, k in CLICK_MODES}:
             raise InputError(f"unknown click mode {kind!r}")
-        self.click_mode = kind
+        self.ctx.state.click_mode = kind
         if region_mm is not None:
-            self.target_region_mm = float(region_mm)
+            self.ctx.state.target_region_mm = float(region_mm)
         word = dict((k, w) for w, k in CLICK_MODES)[kind]
         self.ctx.controls.authoring.show_mode(
             "Clicks **select** points." if kind is None else f"**Adding {word}s**: click on the cell's mesh."
         )
 
     def on_scene_click(self, event) -> None:
-        if self.click_mode is None:
+        if self.ctx.state.click_mode is None:
             return
         try:
             self.add_at_ray(event.ray_origin, event.ray_direction, client=event.client)
@@ -75,7 +73,7 @@ class AuthoringController:
     def add_at_ray(self, origin, direction, kind: str | None = None, client=None):
         """Add a point of `kind` (default: the click mode) where the ray meets the cell; returns the Evaluation
         or None (a message says why)."""
-        kind = kind or self.click_mode
+        kind = kind or self.ctx.state.click_mode
         if kind is None:
             return None  # clicks select: nothing to add
         with self.ctx.lock:
@@ -88,7 +86,9 @@ class AuthoringController:
             if kind == "registration":
                 hit = hit + [0.0, 0.0, REGISTRATION_LIFT_MM]
             before = set(self._ids(kind))
-            ev = self._author(lambda s: authoring.add_point(s, kind, hit, region_mm=self.target_region_mm), client)
+            ev = self._author(
+                lambda s: authoring.add_point(s, kind, hit, region_mm=self.ctx.state.target_region_mm), client
+            )
             if ev is None:
                 return None
             new = [p for p in self._ids(kind) if p not in before]
@@ -143,12 +143,7 @@ class AuthoringController:
     def redraw(self, ev) -> None:
         """Rebuild the scene's nodes for the session as it is now (caller holds the lock)."""
         with self.ctx.server.atomic():
-            self.ctx.nodes.selected = self.ctx.state.selected
-            self.ctx.nodes.build(
-                self.ctx.session, ev, self.ctx.loaded.mesh, self.ctx.state.display, self.ctx.state.layers
-            )
-            self.ctx.slice_node.clear()
-            self.ctx.planning.build(self.ctx.session)
+            self.ctx.present.build_scene(ev)
             self.ctx.present.show(ev, heat=True)
             self.sync_history()
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from rrbc_core.analysis.diagnosis import Diagnosis
 from rrbc_core.errors import InputError
 from rrbc_core.session import data_set
-from rrbc_core.session.data_set import SessionData, data_key
+from rrbc_core.session.data_set import data_key
 
 from .. import diagnosis_panel
 
@@ -19,8 +19,8 @@ if TYPE_CHECKING:
 
 
 class DiagnoseController:
-    """`actions.DiagnoseActions`. ``diagnosis``: the last verdict shown (None: none or an error); ``diagnosis_stale``:
-    the data changed since; ``diagnosis_data``: the data set it was computed from."""
+    """`actions.DiagnoseActions`: what it shows is in the app's state (`diagnosis`, `diagnosis_data`,
+    `diagnosis_stale`)."""
 
     def __init__(self, ctx: AppContext):
         self.ctx = ctx
@@ -28,9 +28,8 @@ class DiagnoseController:
 
     def reset(self) -> None:
         """Nothing diagnosed (a new source)."""
-        self.diagnosis: Diagnosis | None = None
-        self.diagnosis_stale = False
-        self.diagnosis_data: SessionData | None = None
+        st = self.ctx.state
+        st.diagnosis, st.diagnosis_data, st.diagnosis_stale = None, None, False
         self._diagnosis_key: tuple | None = None
         self._diagnosis_text = ""
 
@@ -63,11 +62,11 @@ class DiagnoseController:
         with self.ctx.lock:
             if self.ctx.session is not session:  # another source was loaded meanwhile
                 return None
-            self.diagnosis = result
-            self.diagnosis_data = data
+            self.ctx.state.diagnosis = result
+            self.ctx.state.diagnosis_data = data
             self._diagnosis_key = key
             self._diagnosis_text = text
-            self.diagnosis_stale = False
+            self.ctx.state.diagnosis_stale = False
             with self.ctx.server.atomic():
                 self.ctx.controls.diagnose.show(text)
             self.check_stale()  # the data changed while it ran: say so at once
@@ -79,8 +78,8 @@ class DiagnoseController:
         """Mark the Diagnose tab's content stale once the data set it was computed from changed (caller holds the
         lock): a change of its key (`data_set.data_key`) — a moved or excluded point, a new seed or size — not a
         method change, which leaves the data as they are."""
-        if self._diagnosis_key is None or self.diagnosis_stale:
+        if self._diagnosis_key is None or self.ctx.state.diagnosis_stale:
             return
         if data_key(self.ctx.session) != self._diagnosis_key:
-            self.diagnosis_stale = True
+            self.ctx.state.diagnosis_stale = True
             self.ctx.controls.diagnose.show(diagnosis_panel.STALE + "\n\n" + self._diagnosis_text)

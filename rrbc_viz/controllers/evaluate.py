@@ -76,9 +76,9 @@ class EvaluateController:
         key = (kind, pid)
         with ctx.lock:
             session = ctx.session
-            ctx.nodes.landing_hold = phase != "end"  # the bullseye keeps its scale until the drag ends
+            ctx.state.drag_active = phase != "end"  # the bullseye keeps its scale until the drag ends
             if phase == "end":  # the drag is over: the app places the handle again (where the session has the point)
-                ctx.nodes.dragging.discard(key)
+                ctx.nodes.drag_ended(kind, pid)
             if phase == "start":
                 self._refused.discard(key)
                 return session.last
@@ -98,12 +98,12 @@ class EvaluateController:
                 and st.heat_cost <= HEAT_LIVE_MAX_S
                 and time.monotonic() - st.heat_time >= HEAT_INTERVAL_S
             )
-            slow_plan = ctx.planning.slow
-            plan_due = not slow_plan and (end or ctx.planning.live_due())
+            slow_plan = ctx.plan.slow()
+            plan_due = not slow_plan and (end or ctx.plan.live_due())
             with ctx.server.atomic():
                 ctx.present.show(ev, heat=bool(heat_due), plan=plan_due)
             if slow_plan:  # a slow scene: planning follows in the background, the drag does not wait
-                ctx.planning.request_background(session)
+                ctx.plan.request_background(session)
             if end and key in self._refused:
                 # a move in this drag was refused: the tab that dragged may have kept its handle where the
                 # refusal happened (its own drag state wins over messages received mid-drag); send the
@@ -126,8 +126,7 @@ class EvaluateController:
                     session.move(kind, pid, before)
                 except InputError:
                     pass
-            if (kind, pid) in ctx.nodes.gizmos:
-                ctx.nodes.snap(kind, pid, before)
+            ctx.nodes.snap(kind, pid, before)
         if key not in self._refused:
             ctx.message(message, client, title=f"Cannot move {pid}")
             self._refused.add(key)
@@ -193,10 +192,8 @@ class EvaluateController:
             if not (new.magnification > 0 and new.marker_mm > 0 and new.region_zoom > 0):
                 raise InputError("magnification, marker_mm and region_zoom must be > 0")
             ctx.state.display = new
-            ctx.nodes.display = new
             with ctx.server.atomic():
-                if "marker_mm" in changes or "region_zoom" in changes:
-                    ctx.nodes.apply_sizes()
+                ctx.nodes.set_display(new)
                 ctx.controls.sync_display(new, ctx.session.kind)
                 heat = any(k in changes for k in ("region_zoom", "heat_value"))
                 ctx.present.show(ctx.session.last, heat=heat)
@@ -213,7 +210,7 @@ class EvaluateController:
             with ctx.server.atomic():
                 ctx.nodes.set_layer(layer, visible)
                 ctx.controls.sync_layers({layer: bool(visible)})
-                if layer == "heatmap" and visible and (ctx.state.heat_stale or ctx.present.heat_map is None):
+                if layer == "heatmap" and visible and (ctx.state.heat_stale or ctx.state.heat_map is None):
                     ctx.present.update_heat()
                 if layer == "slice" and visible:
                     ctx.views.update_slice()
@@ -221,7 +218,7 @@ class EvaluateController:
     # ----------------------------------------------------------------------------------------------- handles
     def gizmo(self, kind: str, pid: str) -> viser.TransformControlsHandle:
         """The drag gizmo of a point (tests and scripts)."""
-        return self.ctx.nodes.gizmos[(KINDS.get(kind, kind), pid)]
+        return self.ctx.nodes.gizmo(KINDS.get(kind, kind), pid)
 
     @staticmethod
     def gizmo_name(kind: str, pid: str) -> str:

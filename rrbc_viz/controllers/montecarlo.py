@@ -16,16 +16,11 @@ if TYPE_CHECKING:
 
 
 class MonteCarloController:
-    """`actions.MonteCarloActions`. ``mc_plots``: the last MonteCarloPlots shown; ``mc_seconds`` how long it took;
-    ``mc_draw``: Run-again presses so far; ``mc_seed``: the noise seed of the last run requested (None: the
-    session's)."""
+    """`actions.MonteCarloActions`: what it shows is in the app's state (`mc_plots`, `mc_seconds`, `mc_draw`,
+    `mc_seed`)."""
 
     def __init__(self, ctx: AppContext):
         self.ctx = ctx
-        self.mc_plots = None
-        self.mc_seconds: float | None = None
-        self.mc_draw = 0
-        self.mc_seed: int | None = None
         self.runner = MonteCarloRunner(self._mc_result, self._mc_started)
 
     def wait_idle(self, timeout: float) -> bool:
@@ -35,11 +30,13 @@ class MonteCarloController:
         self.runner.stop()
 
     # ---------------------------------------------------------------------------------------- Monte Carlo
-    def request(self, new_noise: bool = False) -> bool:
+    def request(self, new_noise: bool = False, trials: int | None = None) -> bool:
         """Queue a Monte Carlo run of the current setup (scene mode); False when there is no error model.
         new_noise ("Run again"): a fresh noise seed, so the run differs from the last; otherwise the noise is
         seeded by the session's seed (the same setup gives the same plots)."""
         with self.ctx.lock:
+            if trials is not None:
+                self.ctx.state.mc_trials = int(trials)
             if self.ctx.session.kind != "scene":
                 self.runner.cancel()
                 self.ctx.controls.montecarlo.show_info(
@@ -51,10 +48,12 @@ class MonteCarloController:
             self.ctx.controls.show_monte_carlo_plots(True)
             seed = None
             if new_noise:
-                self.mc_draw += 1
-                seed = int(np.random.default_rng([self.ctx.session.settings.seed, self.mc_draw]).integers(2**31 - 1))
-            self.mc_seed = seed
-            self.runner.request(snapshot, self.ctx.controls.monte_carlo_trials, seed)
+                self.ctx.state.mc_draw += 1
+                seed = int(
+                    np.random.default_rng([self.ctx.session.settings.seed, self.ctx.state.mc_draw]).integers(2**31 - 1)
+                )
+            self.ctx.state.mc_seed = seed
+            self.runner.request(snapshot, self.ctx.state.mc_trials, seed)
             return True
 
     def stop(self) -> None:
@@ -80,8 +79,8 @@ class MonteCarloController:
         centres, rigid, rrbc = plots.histogram()
         dist, mean_rigid, mean_rrbc, half_rigid, half_rrbc = plots.by_distance()
         with self.ctx.lock, self.ctx.server.atomic():
-            self.mc_plots = plots
-            self.mc_seconds = seconds
+            self.ctx.state.mc_plots = plots
+            self.ctx.state.mc_seconds = seconds
             c.show_monte_carlo_plots(
                 True,
                 (centres, rigid, rrbc),
@@ -101,8 +100,8 @@ class MonteCarloController:
                 f"regions; {s.registration} + {s.interpolation}; noise ×{s.noise_scale:g}, "
                 f"bias ×{s.bias_scale:g} ({seconds:.1f} s); "
                 + (
-                    f"noise draw {self.mc_draw} (**Run again** draws new noise). "
-                    if self.mc_seed is not None
+                    f"noise draw {self.ctx.state.mc_draw} (**Run again** draws new noise). "
+                    if self.ctx.state.mc_seed is not None
                     else "noise seeded by the session's seed (**Run again** draws new noise). "
                 )
                 + "Error vs distance: mean over the check points in each distance bin, with its 95 % interval. "

@@ -12,22 +12,20 @@ from rrbc_core.errors import InputError
 from rrbc_core.session import views
 from rrbc_core.session.data_set import check_statistics
 from rrbc_core.session.evaluation import Evaluation
-from rrbc_core.session.results import HeatMap
 
 from .. import tables, teaching
 from ..colors import legend_markdown
+from ..picture import ScenePicture, scene_extent, scene_picture
 
 if TYPE_CHECKING:
     from ..context import AppContext
 
 
 class Presenter:
-    """`actions.PresentActions`: shows an evaluation everywhere (module docstring). `heat_map`: the last HeatMap
-    shown (None until the heat map layer is first on)."""
+    """`actions.PresentActions`: shows an evaluation everywhere (module docstring)."""
 
     def __init__(self, ctx: AppContext):
         self.ctx = ctx
-        self.heat_map: HeatMap | None = None
 
     def show(self, ev: Evaluation, heat: bool = False, plan: bool = True) -> None:
         """Push `ev` to the scene and the panels. heat: refresh the heat map, the slice and the check statistics now
@@ -35,10 +33,8 @@ class Presenter:
         refresh)."""
         ctx = self.ctx
         session = ctx.session
-        ctx.nodes.bias_scale = float(session.settings.bias_scale) if session.kind == "scene" else 1.0
         ctx.vec.show()  # the Arm tab, and VEC's landings for the bullseye
-        ctx.nodes.target_tools = dict(session.target_tools)
-        ctx.nodes.update(ev)
+        self.draw_scene(ev)
         ctx.controls.show_headline(tables.headline(ev, session.kind))
         ctx.controls.explore.show_results(
             tables.scale_line(ctx.state.display.magnification),
@@ -49,12 +45,35 @@ class Presenter:
             ctx.controls.learn.show_text(teaching.render(ctx.state.lesson_index, ev, self.lesson_context()))
         ctx.state.heat_stale = True
         ctx.diagnose.check_stale()
-        ctx.planning.refresh(session, due=plan)
+        ctx.plan.refresh(session, due=plan)
         ctx.views.show_selection(ev)  # after the Plan tab: the card shows its coverage of the selected target
         if heat:
             self.update_heat()
             ctx.views.update_slice()
             self.update_checks()
+
+    def draw_scene(self, ev: Evaluation) -> None:
+        """Draw `ev` in the 3-D scene as the state says (`picture.scene_picture`; caller holds the lock, inside
+        atomic()); the bullseye shown is remembered in the state."""
+        picture = scene_picture(self.ctx.session, self.ctx.state, ev)
+        self.ctx.state.landing = picture.landing
+        self.ctx.nodes.show(picture)
+
+    def build_scene(self, ev: Evaluation) -> None:
+        """Rebuild the 3-D scene for the session as it is now: a source loaded, the cell edited (caller holds the lock,
+        inside atomic()). The extent the frames are sized from is taken from `ev`."""
+        ctx = self.ctx
+        ctx.state.extent_mm = scene_extent(ev)
+        ctx.state.error_slice = None
+        picture = scene_picture(ctx.session, ctx.state, ev)
+        ctx.state.landing = picture.landing
+        ctx.nodes.build(ctx.session, picture, ctx.loaded.mesh, ctx.state.layers)
+        ctx.slice_node.clear()
+        ctx.plan.build(ctx.session)
+
+    def picture(self) -> ScenePicture:
+        """What the scene shows now (the session's last evaluation in the current state)."""
+        return scene_picture(self.ctx.session, self.ctx.state, self.ctx.session.last)
 
     def update_checks(self) -> None:
         """The Explore tab's check statistics and histogram (`data_set.check_statistics`: rrbc correct on the CSV
@@ -73,15 +92,15 @@ class Presenter:
         if not st.layers.get("heatmap"):
             return
         start = time.perf_counter()
-        self.heat_map = views.heat_map(ctx.session, ctx.heat_samples_per_target)
+        st.heat_map = views.heat_map(ctx.session, ctx.heat_samples_per_target)
         st.heat_cost = time.perf_counter() - start
         st.heat_time = time.monotonic()
         st.heat_stale = False
-        legend = ctx.nodes.update_heatmap(self.heat_map, ctx.session.last)
+        legend = ctx.nodes.update_heatmap(st.heat_map, ctx.session.last)
         ctx.controls.view.show_heat_legend("Nothing to show." if legend is None else legend_markdown(*legend))
 
     def lesson_context(self) -> teaching.LessonContext:
         ctx = self.ctx
         return teaching.LessonContext(
-            ctx.session.kind, ctx.state.display.magnification, dict(ctx.session.regions), ctx.nodes.frame_mag
+            ctx.session.kind, ctx.state.display.magnification, dict(ctx.session.regions), self.picture().frame_mag
         )

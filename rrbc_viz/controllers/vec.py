@@ -16,26 +16,22 @@ if TYPE_CHECKING:
 
 
 class VecController:
-    """`actions.VecActions`. ``vec_on``: VEC compared (the box ticked, and the scene has an arm); ``vec_target``: the
-    target whose tool the tab shows; ``vec_view``: the last VecView shown (None: off, no arm, or refused)."""
+    """`actions.VecActions`: what it shows is in the app's state (`vec_on`, `vec_target`, `vec_view`)."""
 
     def __init__(self, ctx: AppContext):
         self.ctx = ctx
-        self.vec_on = False
-        self.vec_target = ""
-        self.vec_view: vec_view.VecView | None = None
         self._vec_panel_state: tuple | None = None  # what the tab's widgets last showed
 
     def set_vec(self, on: bool, client=None) -> None:
         """Compare with VEC (calibrate the arm on the current data) or stop."""
         with self.ctx.lock:
-            self.vec_on = bool(on) and self.ctx.session.has_arm
+            self.ctx.state.vec_on = bool(on) and self.ctx.session.has_arm
             if on and not self.ctx.session.has_arm:
                 self.ctx.message(vec_panel.NO_ARM, client, title="No arm to calibrate")
             self._vec_panel_state = None  # the box the user ticked may have to be unticked again
             with self.ctx.server.atomic():
                 self.show(client)
-                self.ctx.nodes.update(self.ctx.session.last)  # the bullseyes show (or drop) VEC's landing
+                self.ctx.present.draw_scene(self.ctx.session.last)  # the bullseyes show (or drop) VEC's landing
                 self.ctx.views.show_selection(self.ctx.session.last)
 
     def set_varied_registration(self, varied: bool, client=None):
@@ -46,44 +42,49 @@ class VecController:
     def set_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0, client=None):
         """Reach target `pid` with its tool leaned tilt_deg towards azimuth_deg (degrees)."""
         with self.ctx.lock:
-            self.vec_target = pid
+            self.ctx.state.vec_target = pid
             return self.ctx.evaluate.apply(lambda s: vec_view.set_target_tool(s, pid, tilt_deg, azimuth_deg), client)
 
     def sync_vec_target(self, pid: str) -> None:
         """The tab's target choice changed: show that target's tool on the sliders."""
         with self.ctx.lock:
-            self.vec_target = pid
+            self.ctx.state.vec_target = pid
             with self.ctx.server.atomic():
                 self._sync_panel()
 
     def _sync_panel(self) -> None:
         s = self.ctx.session
         targets = tuple(s.layout["targets"].ids)
-        if self.vec_target not in targets:
-            self.vec_target = targets[0] if targets else ""
-        tool = s.tool_of("targets", self.vec_target) if self.vec_target else (0.0, 0.0)
-        state = (targets, self.vec_target, tool, self.vec_on, getattr(s, "varied_registration", False), s.has_arm)
+        if self.ctx.state.vec_target not in targets:
+            self.ctx.state.vec_target = targets[0] if targets else ""
+        tool = s.tool_of("targets", self.ctx.state.vec_target) if self.ctx.state.vec_target else (0.0, 0.0)
+        state = (
+            targets,
+            self.ctx.state.vec_target,
+            tool,
+            self.ctx.state.vec_on,
+            getattr(s, "varied_registration", False),
+            s.has_arm,
+        )
         if state != self._vec_panel_state:  # a drag re-shows every frame: send the widgets only what changed
             self._vec_panel_state = state
             self.ctx.controls.vec.sync(*state)
 
     def show(self, client=None) -> None:
         """Refresh the tab (caller holds the lock, inside server.atomic()): VEC is computed only when on."""
-        self.vec_on = self.vec_on and self.ctx.session.has_arm
+        self.ctx.state.vec_on = self.ctx.state.vec_on and self.ctx.session.has_arm
         self._sync_panel()
         if not self.ctx.session.has_arm:
-            self.vec_view, text = None, vec_panel.NO_ARM
-        elif not self.vec_on:
-            self.vec_view, text = None, "Tick **Compare with VEC** to calibrate the arm on the current data."
+            self.ctx.state.vec_view, text = None, vec_panel.NO_ARM
+        elif not self.ctx.state.vec_on:
+            self.ctx.state.vec_view, text = None, "Tick **Compare with VEC** to calibrate the arm on the current data."
         else:
             try:
-                self.vec_view = vec_view.vec_view(self.ctx.session)
-                text = vec_panel.render(self.vec_view, self.vec_target)
+                self.ctx.state.vec_view = vec_view.vec_view(self.ctx.session)
+                text = vec_panel.render(self.ctx.state.vec_view, self.ctx.state.vec_target)
             except InputError as exc:
-                self.vec_view, text = None, f"VEC not computed: {exc}"
+                self.ctx.state.vec_view, text = None, f"VEC not computed: {exc}"
             except Exception as exc:  # noqa: BLE001 - keep serving
                 traceback.print_exc()
-                self.vec_view, text = None, f"VEC failed (internal error: {type(exc).__name__}: {exc})"
+                self.ctx.state.vec_view, text = None, f"VEC failed (internal error: {type(exc).__name__}: {exc})"
         self.ctx.controls.vec.show_table(text)
-        v = self.vec_view
-        self.ctx.nodes.vec_landings = None if v is None else {pid: v.robot_vec[i] for i, pid in enumerate(v.ids)}

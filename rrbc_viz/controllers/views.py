@@ -14,25 +14,22 @@ from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import default_plane
 
-from .. import lesson_labels, selection_card, teaching
+from .. import selection_card, teaching
 from ..camera import (
     DEFAULT_IMAGE,
     OBLIQUE,
-    PANEL_GAP_PX,
-    PANEL_WIDTH_PX,
-    PRESENTATION_PANEL_WIDTH_PX,
     PRESETS,
     CellGeometry,
     View,
+    panel_px,
     preset_view,
 )
 from ..colors import legend_markdown
 from ..node_values import LAYERS
+from ..picture import AXES_SHARE
 from ..slice_nodes import SLICE_CHOICES
 
 if TYPE_CHECKING:
-    from rrbc_core.session.slices import ErrorSlice
-
     from ..context import AppContext
 
 SLICE_NOTE = (
@@ -48,11 +45,10 @@ PRESENTATION_MARKERS = 1.5  # markers' size in presentation mode
 
 class ViewController:
     """`actions.ViewActions`: the camera, presentation mode, the see-through cell, the error slice, the selection and
-    the lesson (module docstring). `error_slice`: the last ErrorSlice shown."""
+    the lesson (module docstring)."""
 
     def __init__(self, ctx: AppContext):
         self.ctx = ctx
-        self.error_slice: ErrorSlice | None = None
 
     # --------------------------------------------------------------------------------------------- camera
     def cell_geometry(self) -> CellGeometry:
@@ -84,19 +80,16 @@ class ViewController:
             inc = np.flatnonzero(ev.included)
             mag = self.ctx.state.display.magnification
             parts.append(ev.fiducial_positions[inc] + mag * ev.corrections_robot[inc])
-            if self.ctx.nodes.target_arrows:
+            if self.ctx.state.target_arrows:
                 parts.append(ev.targets.positions + mag * ev.targets.correction_robot)
-        if "sensor" in names and "/frames/sensor_registered" in self.ctx.nodes.nodes:
+        if "sensor" in names:
             # both sensor frames with their axes (a sphere of one axis length around each origin)
-            axes = 0.12 * self.ctx.nodes.extent_mm * 1.3
+            axes = AXES_SHARE * self.ctx.state.extent_mm * 1.3
             d = np.vstack([np.eye(3), -np.eye(3)]) * axes
-            for origin in (
-                np.asarray(self.ctx.nodes.nodes["/frames/sensor_registered"].position, float),
-                cell.sensor_position,
-            ):
+            for origin in (self.ctx.present.picture().registered_position, cell.sensor_position):
                 if origin is not None:
-                    parts.append(origin + d)
-        land = getattr(self.ctx.nodes, "landing", None)
+                    parts.append(np.asarray(origin, float) + d)
+        land = self.ctx.state.landing
         if "landing" in names and land is not None:
             ring = land.ring_mm * land.scale
             parts += [land.anchor, land.rigid, land.rrbc, land.position]
@@ -122,7 +115,7 @@ class ViewController:
             if kind == "targets":
                 i = ev.targets.ids.index(pid)
                 selected = [ev.targets.positions[i]]
-                land = getattr(self.ctx.nodes, "landing", None)
+                land = self.ctx.state.landing
                 if land is not None and self.ctx.state.layers.get("landing") and land.target == pid:
                     ring = land.ring_mm * land.scale
                     selected += [land.anchor, land.rigid, land.rrbc]
@@ -167,19 +160,20 @@ class ViewController:
             if on == self.ctx.state.presentation:
                 return
             self.ctx.state.presentation = on
-            self.ctx.camera.panel_px = (PRESENTATION_PANEL_WIDTH_PX if on else PANEL_WIDTH_PX) + PANEL_GAP_PX
+            self.ctx.camera.set_panel(panel_px(on))
             with self.ctx.server.atomic():
                 self.ctx.controls.apply_theme(on)
                 self.ctx.controls.sync_presentation(on)
                 self.ctx.nodes.set_label_scale(PRESENTATION_LABEL_SCALE if on else 1.0)
                 marker = self.ctx.state.display.marker_mm * (PRESENTATION_MARKERS if on else 1 / PRESENTATION_MARKERS)
                 self.ctx.evaluate.set_display(marker_mm=float(marker))
-                self.ctx.camera.reframe_initial(self.current_view())
+                self.ctx.state.initial_camera = self.ctx.camera.reframe_initial(self.current_view())
                 self.ctx.camera.show(self.current_view())
 
     def set_see_through(self, on: bool) -> None:
         """Draw the work cell see-through (View tab checkbox; lesson steps whose arrows point into surfaces)."""
         with self.ctx.lock:
+            self.ctx.state.see_through = bool(on)
             self.ctx.nodes.set_see_through(on)
             self.ctx.controls.sync_see_through(on)
 
@@ -211,7 +205,7 @@ class ViewController:
         """Recompute and redraw the error slice if its layer is on (caller holds the lock)."""
         if not self.ctx.state.layers.get("slice"):
             return
-        shown = self.error_slice = views.error_slice(self.ctx.session, self.slice_plane())
+        shown = self.ctx.state.error_slice = views.error_slice(self.ctx.session, self.slice_plane())
         value = self.ctx.state.display.slice_value
         values = shown.values[value]
         if not np.any(np.isfinite(values)):
@@ -241,7 +235,7 @@ class ViewController:
             self.ctx.state.selected = sel
             with self.ctx.server.atomic():
                 self.ctx.nodes.set_selected(sel)
-                self.ctx.nodes.update(ev)  # the landing bullseye follows the selected target
+                self.ctx.present.draw_scene(ev)  # the landing bullseye follows the selected target
                 self.show_selection(ev)
 
     def set_point_sort(self, sort: str) -> None:
@@ -264,16 +258,16 @@ class ViewController:
         sel = self.ctx.state.selected
         names = selection_card.point_names(ev, self.ctx.state.point_sort)
         c.sync_selection(names, selection_card.choice_of(sel, names), sel)
-        state = self.ctx.planning.state if self.ctx.planning is not None else None
+        state = self.ctx.state.plan
         fraction = None
         if sel is not None and sel[0] == "targets" and state is not None and sel[1] in state.target_ids:
             fraction = state.coverage_of(sel[1])  # the Plan tab's own number for this target's region
         c.selection.show_card(selection_card.info_card(ev, sel, fraction))
-        land = getattr(self.ctx.nodes, "landing", None)
+        land = self.ctx.state.landing
         target = land.target if land is not None else None  # the target whose bullseye the scene shows
         explore = sel[1] if sel is not None and sel[0] == "targets" else None
         last_step = self.ctx.state.lesson_index == len(teaching.STEPS) - 1
-        vec = (self.ctx.nodes.vec_landings or {}).get(explore) if explore else None
+        vec = self.ctx.state.vec_landings().get(explore) if explore else None
         if explore:
             c.show_bullseye(*selection_card.bullseye_svg(ev, explore, vec), where="explore")
         else:
@@ -297,12 +291,12 @@ class ViewController:
             with self.ctx.server.atomic():
                 for name in LAYERS:
                     self.ctx.evaluate.set_layer(name, name in step.layers)
-                self.ctx.nodes.target_arrows = step.target_arrows
+                self.ctx.state.target_arrows = step.target_arrows
+                self.ctx.state.lesson_labels = tuple(step.labels)
                 self.ctx.nodes.set_lesson_labels(step.labels)
-                if self.ctx.nodes.arm is not None:
-                    self.ctx.nodes.arm.set_marks_visible(False)
+                self.ctx.nodes.set_arm_marks_visible(False)
                 self.set_see_through(step.see_through)
-                self.ctx.nodes.update(self.ctx.session.last)
+                self.ctx.present.draw_scene(self.ctx.session.last)
                 text = teaching.render(index, self.ctx.session.last, self.ctx.present.lesson_context())
                 self.ctx.controls.learn.show_text(text)
                 self.ctx.controls.learn.show_step(index, len(teaching.STEPS))
@@ -318,10 +312,11 @@ class ViewController:
             cam = clients[cid].camera if cid in clients else None
             if cam is not None:
                 size = (float(cam.image_width), float(cam.image_height))
-                lesson_labels.declutter(self.ctx.nodes, pose, size, self.ctx.camera.panel_px)
+                self.ctx.nodes.declutter_lesson_labels(pose, size, panel_px(self.ctx.state.presentation))
                 return
-        if self.ctx.camera.initial is not None:
-            lesson_labels.declutter(self.ctx.nodes, self.ctx.camera.initial, DEFAULT_IMAGE, self.ctx.camera.panel_px)
+        initial = self.ctx.state.initial_camera
+        if initial is not None:
+            self.ctx.nodes.declutter_lesson_labels(initial, DEFAULT_IMAGE, panel_px(self.ctx.state.presentation))
 
     def lesson_step(self, delta: int) -> str:
         """Next (+1) or previous (-1) step; the first press of either starts the lesson at step 1."""
@@ -336,12 +331,12 @@ class ViewController:
             with self.ctx.server.atomic():
                 for name, visible in (saved or {}).items():
                     self.ctx.evaluate.set_layer(name, visible)
-                self.ctx.nodes.target_arrows = True
+                self.ctx.state.target_arrows = True
+                self.ctx.state.lesson_labels = ()
                 self.ctx.nodes.set_lesson_labels(())
-                if self.ctx.nodes.arm is not None:
-                    self.ctx.nodes.arm.set_marks_visible(True)
+                self.ctx.nodes.set_arm_marks_visible(True)
                 self.set_see_through(False)
-                self.ctx.nodes.update(self.ctx.session.last)
+                self.ctx.present.draw_scene(self.ctx.session.last)
                 self.ctx.controls.learn.show_text("Lesson ended. Press **Next** to start again.")
                 self.ctx.controls.learn.show_step(None, len(teaching.STEPS))
                 self.show_selection(self.ctx.session.last)

@@ -73,7 +73,7 @@ def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
 
     app = serve(str(out))
     try:
-        assert app.session.last.targets.ids == scene.target_ids and app.nodes.arm is not None
+        assert app.session.last.targets.ids == scene.target_ids and app.nodes.arm_nodes() is not None
         assert app.session.last.coverage.inside.all()
     finally:
         app.stop()

@@ -93,7 +93,7 @@ def drag_until_moved(app, page, pid: str, from_local: float, to_local: float) ->
     """Drag target `pid`'s X arrow (one retry if the press missed) until the server's target moved; returns the
     server-side displacement (mm, robot frame)."""
     before = server_position(app, "targets", pid)
-    scale = app.nodes._gizmo_scale()
+    scale = app.nodes.gizmo_scale()
     for _attempt in range(2):
         drag_axis(page, f"/targets/{pid}/gizmo", scale, from_local, to_local)
         try:
@@ -179,13 +179,13 @@ def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for
 
     page.get_by_text("Heat map of predicted error", exact=True).click()
     wait_for(
-        lambda: app.state.layers.get("heatmap") and app.present.heat_map is not None,
+        lambda: app.state.layers.get("heatmap") and app.state.heat_map is not None,
         15,
         message="the heat map on",
         page=page,
     )
     # each target's expected colour: the mean predicted error (with RRBC) over its region, on the legend's scale
-    hm = app.present.heat_map
+    hm = app.state.heat_map
     both = np.concatenate([hm.error_rigid, hm.error_rrbc])
     lo, hi = float(np.nanmin(both)), float(np.nanmax(both))
     owner = np.asarray(hm.target)
@@ -215,7 +215,7 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
     app = viser_app(lambda: serve(data_dirs=[tmp_path]))
     page, requests = page_for(app.url)
     wait_until_rendered(page, H1_GIZMO, timeout_s=60)
-    scale = app.nodes._gizmo_scale()
+    scale = app.nodes.gizmo_scale()
     row0 = target_row(page, "H1")
     assert row0 == expected_row(app, "H1") and row0[-1] == "inside", row0
 

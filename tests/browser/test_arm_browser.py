@@ -27,7 +27,7 @@ _JS_URDF_MESHES = """() => Object.keys(window.__viserMutable.nodeRefFromName).fi
 def test_the_ur5_is_drawn_from_its_urdf_meshes_and_posed_on_the_target(viser_app, page_for):
     app = viser_app(lambda: serve())
     page, _ = page_for(app.url)
-    arm = app.nodes.arm
+    arm = app.nodes.arm_nodes()
     assert arm is not None and arm.urdf is not None
     mesh_names = {h.name for h in arm.urdf._meshes}
     wait_for(lambda: mesh_names <= set(page.evaluate(_JS_URDF_MESHES)), 60, message="the arm's meshes", page=page)

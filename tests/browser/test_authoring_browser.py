@@ -47,7 +47,7 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     assert abs(app.session.last.targets.positions[0][2] - 51.0) < 1e-6  # on the slab's top (a hair above it)
     page.get_by_label("Click on the cell adds").click()
     page.get_by_role("option", name="fiducial", exact=True).click()
-    wait_for(lambda: app.authoring.click_mode == "fiducials", 10, message="click mode on the server", page=page)
+    wait_for(lambda: app.state.click_mode == "fiducials", 10, message="click mode on the server", page=page)
     app.views.show_camera("work area")  # the target and the registration points over it
     page.wait_for_timeout(1500)
     n = len(app.session.last.fiducial_ids)

@@ -98,7 +98,7 @@ def _step_objects(app, step) -> dict[str, np.ndarray]:
             inc = np.flatnonzero(ev.included)
             out[name] = ev.fiducial_positions[inc] + app.state.display.magnification * ev.corrections_robot[inc]
         elif name == "landing":
-            land = app.nodes.landing
+            land = app.state.landing
             out[name] = np.array([land.anchor, land.rigid, land.rrbc])
     return out
 
@@ -201,7 +201,7 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
     # accepted; the handle in the page must end there, not where the mouse let go
     app.views.show_camera("whole cell")
     _wait_camera(page, app)
-    grip = node_screen_position(page, "/targets/H1/gizmo", (0.0, 0.0, 0.7 * app.nodes._gizmo_scale()))
+    grip = node_screen_position(page, "/targets/H1/gizmo", (0.0, 0.0, 0.7 * app.nodes.gizmo_scale()))
     drag(page, grip, (grip[0], 5.0), steps=10, step_ms=25)  # each move waits for a frame (software WebGL)
     wait_for(lambda: app.messages, 15.0, message="a refusal message")
     assert "reach" in app.last_message, app.last_message
@@ -256,7 +256,7 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
     page.wait_for_timeout(300)
     image0 = np.array(app.slice_node.handle.image)
     f0 = np.array(app.evaluate.gizmo("fiducials", "F5").position)
-    scale = app.nodes._gizmo_scale()
+    scale = app.nodes.gizmo_scale()
     a = node_screen_position(page, "/fiducials/F5/gizmo", (0.7 * scale, 0.0, 0.0))
     b = node_screen_position(page, "/fiducials/F5/gizmo", (2.5 * scale, 0.0, 0.0))
     drag(page, a, b, steps=8)

@@ -25,7 +25,7 @@ def test_a_slider_value_a_client_sends_is_clamped_on_the_server(app, value, expe
 
 def test_trials_a_client_sends_are_bounded(app):
     _send(app.controls.montecarlo.mc_trials, 200000)
-    assert app.controls.monte_carlo_trials == 1000
+    assert app.state.mc_trials == 1000
     with pytest.raises(InputError, match="trials"):
         views.monte_carlo(app.session, trials=200000)
 

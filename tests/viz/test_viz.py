@@ -50,7 +50,7 @@ def _click(handle) -> None:
 
 
 def _target_arrows(app: RunningApp) -> np.ndarray:
-    return np.asarray(app.nodes.nodes["/corrections/targets"].points, float)
+    return np.asarray(app.nodes.handle("/corrections/targets").points, float)
 
 
 def _assert_arrows_match(app: RunningApp, ev) -> None:
@@ -59,7 +59,7 @@ def _assert_arrows_match(app: RunningApp, ev) -> None:
     np.testing.assert_allclose(pts[:, 0], ev.targets.positions, atol=1e-3)
     np.testing.assert_allclose(pts[:, 1], ev.targets.positions + mag * ev.targets.correction_robot, atol=1e-2)
     inc = np.flatnonzero(ev.included)
-    fpts = np.asarray(app.nodes.nodes["/corrections/fiducials"].points, float)
+    fpts = np.asarray(app.nodes.handle("/corrections/fiducials").points, float)
     assert len(fpts) == len(inc)
     np.testing.assert_allclose(fpts[:, 1], ev.fiducial_positions[inc] + mag * ev.corrections_robot[inc], atol=1e-2)
 
@@ -89,9 +89,9 @@ def test_serve_builds_the_scene_and_panel(app):
         "/heatmap/points",
     ):
         assert app.server.scene.get_handle_by_name(name) is not None, name
-    assert set(app.nodes.regions) == set(ev.targets.ids)
+    assert all(app.nodes.handle(f"/regions/{pid}") is not None for pid in ev.targets.ids)
     _assert_arrows_match(app, ev)
-    np.testing.assert_allclose(np.asarray(app.nodes.nodes["/hull/edges"].points), ev.hull_edges, atol=1e-3)
+    np.testing.assert_allclose(np.asarray(app.nodes.handle("/hull/edges").points), ev.hull_edges, atol=1e-3)
     mag = app.state.display.magnification
     assert (
         f"×{mag:g}" in app.controls.explore.scale.content
@@ -113,7 +113,7 @@ def test_serve_builds_the_scene_and_panel(app):
 # ------------------------------------------------------------------------------------------------- dragging
 def test_drag_target_recomputes_everything(app):
     before = app.session.last
-    label = app.nodes.labels["/targets/H1/gizmo/label"]
+    label = app.nodes.handle("/targets/H1/gizmo/label")
     old_label = label.text
     new = np.array([405.0, -140.0, 15.0])
     assert app.evaluate.handle_drag("targets", "H1", new, "start") is not None
@@ -132,15 +132,15 @@ def test_drag_target_recomputes_everything(app):
     )
     # the landing bullseye of the selected target (H1): truth-anchored offsets at the bullseye's scale, floating
     # above the target, and the same offsets at true size in the panel's SVG
-    land = app.nodes.landing
+    land = app.state.landing
     t = fresh.targets
     assert land.target == "H1" and land.lift > 0
     assert land.anchor[2] == pytest.approx(t.positions[0, 2] + land.lift)
     np.testing.assert_allclose(
-        app.nodes.nodes["/landing/rrbc"].position, land.anchor + land.scale * (t.robot_rrbc[0] - t.truth[0]), atol=1e-6
+        app.nodes.handle("/landing/rrbc").position, land.anchor + land.scale * (t.robot_rrbc[0] - t.truth[0]), atol=1e-6
     )
     np.testing.assert_allclose(
-        app.nodes.nodes["/landing/rigid"].position,
+        app.nodes.handle("/landing/rigid").position,
         land.anchor + land.scale * (t.robot_rigid[0] - t.truth[0]),
         atol=1e-6,
     )
@@ -150,7 +150,7 @@ def test_drag_target_recomputes_everything(app):
     svg = app.controls.selection.bullseye.html.content
     dx = float(re.search(r'data-kind="rrbc" data-dx-mm="([^"]+)"', svg).group(1))
     assert dx == pytest.approx(t.robot_rrbc[0, 0] - t.truth[0, 0], rel=1e-5, abs=1e-9)
-    np.testing.assert_allclose(app.nodes.regions["H1"].position, new)
+    np.testing.assert_allclose(app.nodes.handle("/regions/H1").position, new)
     app.evaluate.handle_drag("targets", "H1", new, "end")
 
 
@@ -170,18 +170,18 @@ def test_drag_fiducial_moves_its_correction_and_hull(app):
     assert ev is not None
     i = ev.fiducial_ids.index("F12")
     assert not np.allclose(ev.corrections[i], ev0.corrections[i])
-    np.testing.assert_allclose(np.asarray(app.nodes.nodes["/hull/edges"].points), ev.hull_edges, atol=1e-3)
+    np.testing.assert_allclose(np.asarray(app.nodes.handle("/hull/edges").points), ev.hull_edges, atol=1e-3)
     _assert_arrows_match(app, app.session.evaluate())
     app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
 
 
 def test_target_outside_the_hull_is_flagged(app):
-    sphere = app.nodes.spheres[("targets", "H1")]
+    sphere = app.nodes.handle("/targets/H1/gizmo/sphere")
     assert tuple(sphere.color) == colors.TARGET
     ev = app.evaluate.handle_drag("targets", "H1", [150.0, -150.0, 300.0], "end")
     assert "H1" in ev.summary["extrapolated"] and bool(ev.targets.extrapolated[0])
     assert tuple(sphere.color) == colors.TARGET_EXTRAPOLATED
-    assert "extrapolated" in app.nodes.labels["/targets/H1/gizmo/label"].text
+    assert "extrapolated" in app.nodes.handle("/targets/H1/gizmo/label").text
     assert "| H1 |" in app.controls.explore.table.content and "⚠ extrapolated |" in app.controls.explore.table.content
     assert "Extrapolated" in app.controls.explore.summary.content
     ev = app.evaluate.handle_drag("targets", "H1", [400.0, -150.0, 15.0], "end")
@@ -190,33 +190,33 @@ def test_target_outside_the_hull_is_flagged(app):
 
 # ------------------------------------------------------------------------------------------------- settings
 def test_selecting_a_fiducial_then_excluding_and_including_it(app):
-    sphere = app.nodes.spheres[("fiducials", "F3")]
+    sphere = app.nodes.handle("/fiducials/F3/gizmo/sphere")
     n = len(app.session.last.fiducial_ids)
     _click(sphere)  # a click selects: F3 alone carries the drag gizmo, its card shows its numbers
     assert app.state.selected == ("fiducials", "F3") and app.controls.selection.choice.value.startswith(
         "fiducial F3 · "
     )
-    assert [key for key, tc in app.nodes.gizmos.items() if not tc.disable_axes] == [("fiducials", "F3")]
+    assert [key for key, tc in app.nodes.gizmo_items().items() if not tc.disable_axes] == [("fiducials", "F3")]
     assert "**Fiducial F3**" in app.controls.selection.info.content and app.controls.selection.exclude.visible
-    assert app.nodes.labels["/fiducials/F3/gizmo/label"].visible  # its label, with the labels layer off
-    assert not app.nodes.labels["/fiducials/F1/gizmo/label"].visible
+    assert app.nodes.handle("/fiducials/F3/gizmo/label").visible  # its label, with the labels layer off
+    assert not app.nodes.handle("/fiducials/F1/gizmo/label").visible
     assert app.session.last.summary["fiducials_used"] == n
     _press(app.controls.selection.exclude)
     ev = app.session.last
     assert "F3" in ev.settings.excluded and ev.summary["fiducials_used"] == n - 1
     assert tuple(sphere.color) == colors.FIDUCIAL_EXCLUDED
     assert f"over {n - 1} of {n} fiducials" in app.controls.explore.summary.content
-    assert len(app.nodes.nodes["/corrections/fiducials"].points) == n - 1
-    assert "excluded" in app.nodes.labels["/fiducials/F3/gizmo/label"].text
+    assert len(app.nodes.handle("/corrections/fiducials").points) == n - 1
+    assert "excluded" in app.nodes.handle("/fiducials/F3/gizmo/label").text
     assert "**excluded**" in app.controls.selection.info.content
     _press(app.controls.selection.exclude)
     assert app.session.last.summary["fiducials_used"] == n and tuple(sphere.color) == colors.FIDUCIAL
     app.controls.selection.choice.value = "target H2"  # picking from the list selects too
     assert app.state.selected == ("targets", "H2") and not app.evaluate.gizmo("targets", "H2").disable_axes
-    assert app.evaluate.gizmo("fiducials", "F3").disable_axes and app.nodes.landing.target == "H2"
+    assert app.evaluate.gizmo("fiducials", "F3").disable_axes and app.state.landing.target == "H2"
     assert "**Target H2**" in app.controls.selection.info.content and app.controls.selection.bullseye.html.visible
     app.controls.selection.choice.value = "none"
-    assert app.state.selected is None and all(tc.disable_axes for tc in app.nodes.gizmos.values())
+    assert app.state.selected is None and all(tc.disable_axes for tc in app.nodes.gizmo_items().values())
     with pytest.raises(InputError, match="no target 'H99'"):
         app.views.select("targets", "H99")
 
@@ -266,10 +266,10 @@ def test_refused_setting_keeps_the_session_and_says_why(app):
 def test_layers_lesson_and_heat_map(app):
     c = app.controls
     c.view.layers["hull"].value = False
-    assert app.nodes.groups["hull"].visible is False
+    assert app.nodes.handle("/hull").visible is False
     c.view.layers["heatmap"].value = True
-    node = app.nodes.nodes["/heatmap/points"]
-    hm = app.present.heat_map
+    node = app.nodes.handle("/heatmap/points")
+    hm = app.state.heat_map
     assert node.visible and len(node.points) == len(hm.positions)
     assert f"{float(np.nanmin(np.r_[hm.error_rigid, hm.error_rrbc])):.4f} mm" in c.view.legend.content
     c.view.heat_value.value = "rigid error"
@@ -278,11 +278,11 @@ def test_layers_lesson_and_heat_map(app):
     c.learn.lesson_next.value = True
     assert app.state.lesson_index == 0 and "Step 1 of 9" in c.learn.lesson.content
     assert c.view.layers["registration"].value and not c.view.layers["targets"].value
-    assert app.nodes.groups["targets"].visible is False
+    assert app.nodes.handle("/targets").visible is False
     for _ in range(5):
         c.learn.lesson_next.value = True
     assert "Step 6 of 9" in c.learn.lesson.content  # fiducial corrections only
-    assert app.nodes.groups["corrections"].visible and not app.nodes.nodes["/corrections/targets"].visible
+    assert app.nodes.handle("/corrections").visible and not app.nodes.handle("/corrections/targets").visible
     ev = app.session.last
     n = np.linalg.norm(ev.corrections[ev.included], axis=1)
     assert f"{n.max():.3f} mm" in c.learn.lesson.content and f"{n.min():.3f} mm" in c.learn.lesson.content
@@ -301,45 +301,45 @@ def test_layers_lesson_and_heat_map(app):
     assert f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
     c.learn.lesson_end.value = True
     assert app.state.lesson_index is None and c.view.layers["heatmap"].value and not c.view.layers["hull"].value
-    assert app.nodes.nodes["/corrections/targets"].visible
+    assert app.nodes.handle("/corrections/targets").visible
 
 
 def test_display_controls_and_heat_map_follow_drags(app):
     c = app.controls
     # the first target starts selected: it alone has a drag handle
     assert app.state.selected == ("targets", "H1")
-    assert [key for key, tc in app.nodes.gizmos.items() if not tc.disable_axes] == [("targets", "H1")]
-    assert all(tc.disable_sliders for key, tc in app.nodes.gizmos.items() if key != ("targets", "H1"))
+    assert [key for key, tc in app.nodes.gizmo_items().items() if not tc.disable_axes] == [("targets", "H1")]
+    assert all(tc.disable_sliders for key, tc in app.nodes.gizmo_items().items() if key != ("targets", "H1"))
     c.view.marker.value = 4.0
-    assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(4.0)
-    assert app.evaluate.gizmo("targets", "H1").scale == pytest.approx(app.nodes._gizmo_scale())
+    assert app.nodes.handle("/fiducials/F1/gizmo/sphere").radius == pytest.approx(4.0)
+    assert app.evaluate.gizmo("targets", "H1").scale == pytest.approx(app.nodes.gizmo_scale())
     c.view.layers["heatmap"].value = True
-    owner = np.array(app.present.heat_map.target) == "H1"
-    centre0 = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner].mean(0)
+    owner = np.array(app.state.heat_map.target) == "H1"
+    centre0 = np.asarray(app.nodes.handle("/heatmap/points").points, float)[owner].mean(0)
     c.view.region_zoom.value = 10.0
-    assert app.nodes.regions["H1"].scale == pytest.approx(10.0)  # H1's region is a box: uniform zoom
-    assert app.nodes.regions["H3"].scale == pytest.approx((6.0, 6.0, 6.0))  # sphere r 0.6 mm, zoomed
-    pts = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner]
+    assert app.nodes.handle("/regions/H1").scale == pytest.approx(10.0)  # H1's region is a box: uniform zoom
+    assert app.nodes.handle("/regions/H3").scale == pytest.approx((6.0, 6.0, 6.0))  # sphere r 0.6 mm, zoomed
+    pts = np.asarray(app.nodes.handle("/heatmap/points").points, float)[owner]
     np.testing.assert_allclose(pts.mean(0), centre0, atol=2.0)
     app.evaluate.handle_drag("targets", "H1", [420.0, -150.0, 15.0], "end")  # the heat map follows at drag end
-    pts = np.asarray(app.nodes.nodes["/heatmap/points"].points, float)[owner]
+    pts = np.asarray(app.nodes.handle("/heatmap/points").points, float)[owner]
     assert abs(pts.mean(0)[0] - 420.0) < 3.0
     hm = views.heat_map(app.session)
-    np.testing.assert_allclose(app.present.heat_map.error_rrbc, hm.error_rrbc)
+    np.testing.assert_allclose(app.state.heat_map.error_rrbc, hm.error_rrbc)
     with pytest.raises(InputError):
         app.evaluate.set_display(handles="both")  # no such option any more: selection decides
 
 
 def test_monte_carlo_plots_follow_the_setup(app):
     assert app.montecarlo.runner.wait_idle(60)
-    first = app.montecarlo.mc_plots
+    first = app.state.mc_plots
     assert first is not None
     centres, rigid, rrbc = first.histogram()
     np.testing.assert_allclose(app.controls.montecarlo.mc_hist.data[1], rigid)
     app.controls.explore.interpolation.value = "tps"
     assert app.montecarlo.runner.wait_idle(60)
-    assert app.montecarlo.mc_plots is not first
-    d, a, b, ha, hb = app.montecarlo.mc_plots.by_distance()
+    assert app.state.mc_plots is not first
+    d, a, b, ha, hb = app.state.mc_plots.by_distance()
     data = app.controls.montecarlo.mc_dist.data
     np.testing.assert_allclose(data[0], d)
     np.testing.assert_allclose(data[2], b)
@@ -350,18 +350,18 @@ def test_monte_carlo_plots_follow_the_setup(app):
 
 def test_run_again_draws_new_noise_and_a_setting_change_does_not(app):
     assert app.montecarlo.runner.wait_idle(60)
-    seeded = app.montecarlo.mc_plots
+    seeded = app.state.mc_plots
     app.montecarlo.request()  # the same setup, seeded by the session's seed: the same numbers
     assert app.montecarlo.runner.wait_idle(60)
-    np.testing.assert_array_equal(app.montecarlo.mc_plots.rigid, seeded.rigid)
+    np.testing.assert_array_equal(app.state.mc_plots.rigid, seeded.rigid)
     _press(app.controls.montecarlo.mc_run)  # Run again
     assert app.montecarlo.runner.wait_idle(60)
-    again = app.montecarlo.mc_plots
+    again = app.state.mc_plots
     assert not np.array_equal(again.rigid, seeded.rigid) and "noise draw 1" in app.controls.montecarlo.mc_info.content
     _press(app.controls.montecarlo.mc_run)
     assert app.montecarlo.runner.wait_idle(60)
     assert (
-        not np.array_equal(app.montecarlo.mc_plots.rigid, again.rigid)
+        not np.array_equal(app.state.mc_plots.rigid, again.rigid)
         and "noise draw 2" in app.controls.montecarlo.mc_info.content
     )
 
@@ -374,7 +374,7 @@ def test_stop_ends_a_running_monte_carlo_at_its_next_chunk_and_keeps_the_last_pl
     from rrbc_core.session import views
 
     assert app.montecarlo.runner.wait_idle(60)
-    before = app.montecarlo.mc_plots
+    before = app.state.mc_plots
     monkeypatch.setattr(views, "MC_CHUNK_TRIALS", 5)
     started = threading.Event()
     real = app.controls.montecarlo.mc_stop
@@ -384,7 +384,7 @@ def test_stop_ends_a_running_monte_carlo_at_its_next_chunk_and_keeps_the_last_pl
     assert real.disabled is False  # Stop is offered while a run is under way
     _press(real)
     assert app.montecarlo.runner.wait_idle(30)
-    assert app.montecarlo.mc_plots is before and real.disabled is True
+    assert app.state.mc_plots is before and real.disabled is True
     assert "stopped" in app.controls.montecarlo.mc_info.content
 
 
@@ -455,7 +455,7 @@ def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
     assert not np.allclose(ev.targets.correction[i], ev0.targets.correction[i])
     assert not np.allclose(ev.targets.correction_std[i], ev0.targets.correction_std[i])
     std = float(np.linalg.norm(ev.targets.correction_std[i]))
-    assert f"± {std:.3f}" in app.nodes.labels["/targets/T1/gizmo/label"].text
+    assert f"± {std:.3f}" in app.nodes.handle("/targets/T1/gizmo/label").text
     assert f"| {std:.3f} |" in c.explore.table.content
     _assert_arrows_match(app, app.session.evaluate())
     # fiducials cannot be moved: refused, the gizmo snaps back, a message says why
@@ -468,7 +468,7 @@ def test_measurement_mode_moves_targets_and_refuses_fiducials(measured):
     assert app.evaluate.handle_drag("fiducials", "F22", f0 + [1.0, 0.0, 0.0], "end") is None
     # heat map in measurement mode: correction size / gp std
     c.view.layers["heatmap"].value = True
-    assert app.present.heat_map is not None and app.nodes.nodes["/heatmap/points"].visible
+    assert app.state.heat_map is not None and app.nodes.handle("/heatmap/points").visible
     c.view.heat_value.value = "correction std (gp)"
     assert "std" in c.view.legend.content
 

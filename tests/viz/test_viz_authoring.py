@@ -41,7 +41,7 @@ def test_clicks_add_points_where_the_ray_meets_the_mesh_and_edits_undo(app):
     ev = app.session.last
     assert len(ev.fiducial_ids) == n_f + 1
     np.testing.assert_allclose(ev.fiducial_positions[-1], [500, 0, 15], atol=1e-3)
-    assert ("fiducials", ev.fiducial_ids[-1]) in app.nodes.gizmos  # drawn
+    assert ("fiducials", ev.fiducial_ids[-1]) in app.nodes.gizmo_items()  # drawn
     panel.mode.value = "registration point"
     _scene_click(app, [300, 300, 900], [0, 0, -1])  # onto the table (z = 0): the point goes 100 mm above it
     np.testing.assert_allclose(app.session.last.registration_positions[-1], [300, 300, 100], atol=1e-3)

@@ -43,10 +43,10 @@ def _tab_lines(app) -> list[str]:
 
 def _assert_tab_is_cli(app, capsys, path, *options) -> None:
     _press(app.controls.diagnose.diagnose)
-    assert app.diagnose.diagnosis is not None, app.controls.diagnose.diagnosis.content
+    assert app.state.diagnosis is not None, app.controls.diagnose.diagnosis.content
     text = _cli(capsys, path, *options)
     assert _tab_lines(app) == text.rstrip("\n").split("\n")
-    assert app.diagnose.diagnosis.to_json() == json.loads(_cli(capsys, path, *options, "--json"))
+    assert app.state.diagnosis.to_json() == json.loads(_cli(capsys, path, *options, "--json"))
 
 
 def _repeats_time_checks(path, seed: int = 3):
@@ -95,12 +95,12 @@ def test_the_tab_shows_what_rrbc_diagnose_prints_for_a_file_as_opened(which, tmp
     app = serve(path, port=0)
     try:
         _assert_tab_is_cli(app, capsys, path)
-        assert app.diagnose.diagnosis_data.measurements is app.session.mset  # the file as opened, every row
+        assert app.state.diagnosis_data.measurements is app.session.mset  # the file as opened, every row
         head = app.controls.diagnose.diagnosis.content.split("\n\n")[0]
         assert "as opened" in head and "Edited" not in head
         if which == "example":
             # the numbers the issue measured on the CLI, now in the tab: noise from the repeats, the field, checks
-            dg = app.diagnose.diagnosis
+            dg = app.state.diagnosis
             assert dg.noise_source == "repeats" and "smooth_field" in dg.names and dg.basis == "checks"
             assert dg.bias_rms_mm > 5 * max(dg.noise_sigma_mm)
     finally:
@@ -115,7 +115,7 @@ def test_edited_measured_data_are_diagnosed_as_edited_and_the_download_reproduce
         _press(app.controls.diagnose.diagnose)
         head = unescape(app.controls.diagnose.diagnosis.content.split("\n\n")[0])
         assert head.startswith("**Edited data.**") and fid[5] in head
-        rows = app.diagnose.diagnosis_data.measurements
+        rows = app.state.diagnosis_data.measurements
         assert fid[5] not in rows.ids and len(rows) < len(app.session.mset)
         name, content = app.files.export("csv")
         path = tmp_path / name
@@ -161,15 +161,15 @@ def test_the_verdict_goes_stale_when_its_data_change_not_when_the_method_does(ap
     fresh = panel.content
     app.evaluate.set_display(magnification=50.0)
     app.evaluate.change_settings(interpolation="tps")
-    assert panel.content == fresh and not app.diagnose.diagnosis_stale
-    verdict = app.diagnose.diagnosis
+    assert panel.content == fresh and not app.state.diagnosis_stale
+    verdict = app.state.diagnosis
     ev = app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "update")  # marked at once, not recomputed
-    assert ev is not None and app.diagnose.diagnosis_stale and app.diagnose.diagnosis is verdict
+    assert ev is not None and app.state.diagnosis_stale and app.state.diagnosis is verdict
     assert panel.content == "**(data changed since — press again)**\n\n" + fresh
     app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
     assert panel.content.count("data changed since") == 1
     _press(app.controls.diagnose.diagnose)
-    assert "data changed since" not in panel.content and not app.diagnose.diagnosis_stale
+    assert "data changed since" not in panel.content and not app.state.diagnosis_stale
 
 
 def test_the_tab_says_why_it_cannot_diagnose_and_a_new_file_clears_it(tmp_path, capsys):
@@ -186,7 +186,7 @@ def test_the_tab_says_why_it_cannot_diagnose_and_a_new_file_clears_it(tmp_path, 
         app.evaluate.toggle_fiducial("P4")
         app.evaluate.toggle_fiducial("P5")  # 4 paired points left: too few
         _press(app.controls.diagnose.diagnose)
-        assert app.diagnose.diagnosis is None and panel.content.startswith("⚠ Cannot diagnose:")
+        assert app.state.diagnosis is None and panel.content.startswith("⚠ Cannot diagnose:")
         # the command line refuses the same download with the same words
         name, content = app.files.export("csv")
         path = tmp_path / name
@@ -196,6 +196,6 @@ def test_the_tab_says_why_it_cannot_diagnose_and_a_new_file_clears_it(tmp_path, 
         err = capsys.readouterr().err.strip().removeprefix("rrbc: error: ")
         assert "at least 5" in err and err.split(": ", 1)[-1] in " ".join(panel.content.split())
         app.files.load(EXAMPLE_CSV)
-        assert panel.content.startswith("Tests the session's data") and app.diagnose.diagnosis is None
+        assert panel.content.startswith("Tests the session's data") and app.state.diagnosis is None
     finally:
         app.stop()

@@ -15,7 +15,8 @@ import pytest
 
 from rrbc_core.session import planning_view
 from rrbc_viz import colors
-from rrbc_viz.planning_panel import PLAN_INTERVAL_S, rmst_line
+from rrbc_viz.controllers.plan import PLAN_INTERVAL_S
+from rrbc_viz.planning_panel import rmst_line
 from rrbc_viz.serve import serve
 from tests.paths import EXAMPLE_CSV, ROOT
 from tests.viz.helpers import _gizmo_drag, _press
@@ -26,7 +27,7 @@ _RMST = re.compile(r"Predicted RMST: rigid \*\*([0-9.]+) ± ([0-9.]+) mm\*\*, RR
 
 def settled(app):
     """Wait for background planning (used when an update is slow, e.g. on a loaded machine); returns app."""
-    assert app.planning.wait_idle(30)
+    assert app.plan.wait_idle(30)
     return app
 
 
@@ -43,7 +44,7 @@ def shown_coverage(app) -> dict[str, str]:
 
 def test_plan_tab_shows_the_sessions_planning(app):
     st = planning_view.planning_state(app.session)
-    assert app.planning.state is st
+    assert app.state.plan is st
     assert rmst_line(st.predicted) in app.planning.info.content
     p = st.predicted
     assert shown_rmst(app) == pytest.approx((p.rigid_mm, p.rigid_std_mm, p.rrbc_mm, p.rrbc_std_mm), abs=5e-4)
@@ -58,13 +59,17 @@ def test_plan_tab_shows_the_sessions_planning(app):
 
 def test_coverage_colours_follow_a_fiducial_drag_out_of_the_hull(app):
     panel = app.planning
-    regions = app.nodes.regions
-    assert tuple(regions["H1"].color) == colors.REGION and not app.nodes.halos["H1"].visible  # toggle off
+    region = lambda pid: app.nodes.handle(f"/regions/{pid}")
+    assert (
+        tuple(region("H1").color) == colors.REGION and not app.nodes.handle("/targets/H1/gizmo/coverage").visible
+    )  # toggle off
     panel.colour.value = True  # the user ticks "Colour regions by coverage"
     full = colors.coverage_color(1.0)
     for pid in app.session.last.targets.ids:
-        assert tuple(regions[pid].color) == full and tuple(app.nodes.halos[pid].color) == full
-        assert app.nodes.halos[pid].visible
+        assert (
+            tuple(region(pid).color) == full and tuple(app.nodes.handle(f"/targets/{pid}/gizmo/coverage").color) == full
+        )
+        assert app.nodes.handle(f"/targets/{pid}/gizmo/coverage").visible
     # drag F1 away (start, updates, end through viser's gizmo handlers): H1's region leaves the hull
     p0 = np.array(app.evaluate.gizmo("fiducials", "F1").position, float)
     _gizmo_drag(app, "fiducials", "F1", [p0 + (np.asarray(F1_AWAY) - p0) * f for f in (0.3, 0.7, 1.0)])
@@ -73,13 +78,13 @@ def test_coverage_colours_follow_a_fiducial_drag_out_of_the_hull(app):
     assert st.coverage_of("H1") < 1.0
     c = colors.coverage_color(st.coverage_of("H1"))
     assert c != full
-    assert tuple(regions["H1"].color) == c and tuple(app.nodes.halos["H1"].color) == c
-    assert tuple(regions["H5"].color) == full  # far from F1: still covered
+    assert tuple(region("H1").color) == c and tuple(app.nodes.handle("/targets/H1/gizmo/coverage").color) == c
+    assert tuple(region("H5").color) == full  # far from F1: still covered
     assert shown_coverage(app)["H1"] != "100 %" and f"⚠ H1 {shown_coverage(app)['H1']}" in panel.info.content
     assert "⚠" in panel.coverage_md.content.split("| H1 |")[1].split("\n")[0]
     # toggle off: the regions get their own colour back, the halos go
     panel.colour.value = False
-    assert tuple(regions["H1"].color) == colors.REGION and not app.nodes.halos["H1"].visible
+    assert tuple(region("H1").color) == colors.REGION and not app.nodes.handle("/targets/H1/gizmo/coverage").visible
 
 
 def test_predicted_rmst_text_changes_while_dragging(app):
@@ -91,7 +96,7 @@ def test_predicted_rmst_text_changes_while_dragging(app):
     assert ev is not None
     settled(app)
     st = planning_view.planning_state(app.session)
-    assert app.planning.state is st and app.planning.info.content != before
+    assert app.state.plan is st and app.planning.info.content != before
     assert shown_rmst(app) != rmst0
     p = st.predicted
     assert shown_rmst(app) == pytest.approx((p.rigid_mm, p.rigid_std_mm, p.rrbc_mm, p.rrbc_std_mm), abs=5e-4)
@@ -99,7 +104,7 @@ def test_predicted_rmst_text_changes_while_dragging(app):
     app.evaluate.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "update")
     app.evaluate.handle_drag("fiducials", "F1", np.add(F1_AWAY, [0.0, 0.0, 10.0]), "end")
     settled(app)
-    assert app.planning.state is planning_view.planning_state(app.session) and not app.planning.stale
+    assert app.state.plan is planning_view.planning_state(app.session) and not app.state.plan_stale
 
 
 def test_suggest_shows_ghosts_accept_adds_fiducials_and_lowers_the_prediction(app):
@@ -215,7 +220,8 @@ def test_measured_data_get_coverage_planning_and_a_scene_brings_the_full_plan_ba
         # loading a scene brings planning with an error model back
         assert app.files.load(ROOT / "scenes" / "peg_in_hole_cell.toml")
         assert not panel.suggest_button.disabled and "Predicted RMST" in panel.info.content
-        assert set(app.nodes.halos) == set(app.session.layout["targets"].ids)
+        ids = app.session.layout["targets"].ids
+        assert all(app.nodes.handle(f"/targets/{pid}/gizmo/coverage") is not None for pid in ids)
     finally:
         app.stop()
 
@@ -223,21 +229,21 @@ def test_measured_data_get_coverage_planning_and_a_scene_brings_the_full_plan_ba
 def test_a_slow_scene_plans_in_the_background_during_drags(app):
     panel = app.planning
     rmst0 = shown_rmst(app)
-    panel.cost_s = 10.0  # as if each planning update took 10 s (a large scene): drags must not wait for it
-    assert panel.slow and not panel.live_due()
+    app.plan.cost_s = 10.0  # as if each planning update took 10 s (a large scene): drags must not wait for it
+    assert app.plan.slow() and not app.plan.live_due()
     p0 = np.array(app.evaluate.gizmo("fiducials", "F1").position, float)
     app.evaluate.handle_drag("fiducials", "F1", p0, "start")
     t0 = time.perf_counter()
     assert app.evaluate.handle_drag("fiducials", "F1", F1_AWAY, "update") is not None
-    assert panel.stale  # the tab still shows the old numbers, marked as following
-    assert panel.wait_idle(30)
+    assert app.state.plan_stale  # the tab still shows the old numbers, marked as following
+    assert app.plan.wait_idle(30)
     st = planning_view.planning_state(app.session)
-    assert panel.state is st and not panel.stale  # the worker's result for the dragged layout is shown
+    assert app.state.plan is st and not app.state.plan_stale  # the worker's result for the dragged layout is shown
     assert shown_rmst(app) != rmst0 and shown_coverage(app)["H1"] != "100 %"
-    assert panel.cost_s < 10.0  # the worker measured the real cost
-    panel.cost_s = 10.0
+    assert app.plan.cost_s < 10.0  # the worker measured the real cost
+    app.plan.cost_s = 10.0
     app.evaluate.handle_drag("fiducials", "F1", p0, "end")  # the end too goes to the background
-    assert panel.wait_idle(30)
+    assert app.plan.wait_idle(30)
     assert shown_rmst(app) == rmst0 and shown_coverage(app)["H1"] == "100 %"
     assert time.perf_counter() - t0 < 30
 
@@ -248,11 +254,11 @@ def test_a_layout_the_planner_refuses_gives_a_message_not_a_crash(app):
     assert app.evaluate.handle_drag("fiducials", "F2", f1, "end") is not None  # two fiducials at one place
     settled(app)
     assert panel.info.content.startswith("⚠ Cannot plan:") and "coincide" in panel.info.content
-    assert panel.state is None and panel.coverage_md.content == ""
+    assert app.state.plan is None and panel.coverage_md.content == ""
     assert app.plan.suggest_fiducials(2) is None
     assert "coincide" in app.last_message and panel.suggestion_md.content.startswith("⚠ Cannot suggest:")
     assert not panel.ghosts and not panel.suggest_button.disabled  # the user can fix it and try again
     app.evaluate.handle_drag("fiducials", "F2", [300.0, 230.0, 0.0], "end")
     settled(app)
-    assert "Predicted RMST: rigid" in panel.info.content and panel.state is not None
+    assert "Predicted RMST: rigid" in panel.info.content and app.state.plan is not None
     assert len(shown_coverage(app)) == 8

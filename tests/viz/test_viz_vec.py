@@ -16,7 +16,7 @@ def test_vec_tab_shows_the_sessions_vec_and_follows_a_leaned_tool(app):
     panel = app.controls.vec
     assert "Compare with VEC" in app.controls.vec.vec_table.content  # off until asked: nothing computed
     app.vec.set_vec(True)
-    assert app.vec.vec_view is not None
+    assert app.state.vec_view is not None
     pid = app.session.layout["targets"].ids[0]
     view = vec_view.vec_view(app.session)
     row = _row(app.controls.vec.vec_table.content, pid)
@@ -50,18 +50,18 @@ def test_a_tilt_out_of_range_is_refused_with_a_message_and_changes_nothing(app):
 
 def test_measured_data_have_no_arm_and_say_so(measured):
     measured.vec.set_vec(True)
-    assert not measured.vec.vec_on and measured.vec.vec_view is None
+    assert not measured.state.vec_on and measured.state.vec_view is None
     assert "no kinematic arm error" in measured.controls.vec.vec_table.content
     assert measured.controls.vec.tilt.disabled
 
 
 def test_the_bullseye_shows_vecs_landing_while_the_comparison_is_on(app):
-    node = app.nodes.nodes["/landing/vec"]
-    assert not node.visible and app.nodes.landing.vec is None
+    node = app.nodes.handle("/landing/vec")
+    assert not node.visible and app.state.landing.vec is None
     app.vec.set_vec(True)
-    land = app.nodes.landing
+    land = app.state.landing
     i = app.session.last.targets.ids.index(land.target)
-    view = app.vec.vec_view
+    view = app.state.vec_view
     # drawn like the other landings: its offset from the truth, times the bullseye's scale
     expected = land.anchor + land.scale * (view.robot_vec[i] - app.session.last.targets.truth[i])
     assert node.visible and np.allclose(node.position, expected) and np.allclose(land.vec, expected)
@@ -75,7 +75,7 @@ def test_the_panel_bullseye_draws_vec_at_true_size(app):
     from rrbc_viz.selection_card import bullseye_svg
 
     app.vec.set_vec(True)
-    ev, view = app.session.last, app.vec.vec_view
+    ev, view = app.session.last, app.state.vec_view
     pid = ev.targets.ids[0]
     svg, caption, key = bullseye_svg(ev, pid, view.robot_vec[0])
     dx = float(re.search(r'data-kind="vec" data-dx-mm="([^"]+)"', svg).group(1))
@@ -86,4 +86,4 @@ def test_the_panel_bullseye_draws_vec_at_true_size(app):
 
 def test_a_refused_comparison_unticks_the_box(measured):
     measured.controls.vec.show.value = True  # the user ticks it; there is no arm
-    assert not measured.vec.vec_on and measured.controls.vec.show.value is False
+    assert not measured.state.vec_on and measured.controls.vec.show.value is False

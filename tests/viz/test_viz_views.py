@@ -96,9 +96,9 @@ def test_camera_presets_show_what_they_name():
 def test_lesson_steps_frame_their_focus_and_switch_the_see_through_cell(app):
     for i, step in enumerate(teaching.STEPS):
         app.views.lesson_go(i)
-        assert app.nodes.see_through == step.see_through
-        assert app.nodes.nodes["/mesh/cell"].visible == (not step.see_through)
-        assert app.nodes.nodes["/mesh/ghost"].visible == step.see_through
+        assert app.state.see_through == step.see_through
+        assert app.nodes.handle("/mesh/cell").visible == (not step.see_through)
+        assert app.nodes.handle("/mesh/ghost").visible == step.see_through
         assert app.controls.view.see_through.value == step.see_through
         view = app.views.current_view()
         if "sensor" in step.focus:
@@ -106,14 +106,14 @@ def test_lesson_steps_frame_their_focus_and_switch_the_see_through_cell(app):
             assert d.min() <= 2 * app.state.display.marker_mm * 1.001
     assert app.controls.learn.bullseye.html.visible  # step 9 shows the bullseye in the Learn tab
     app.views.lesson_stop()
-    assert not app.nodes.see_through and app.nodes.nodes["/mesh/cell"].visible
+    assert not app.state.see_through and app.nodes.handle("/mesh/cell").visible
 
 
 def test_the_error_slice_follows_drags_and_its_controls(app):
     c = app.controls
     assert app.slice_node.handle is None  # off by default
     c.view.layers["slice"].value = True
-    sl = app.views.error_slice
+    sl = app.state.error_slice
     assert sl is not None and sl.plane.axis == "z"
     img0 = np.array(app.slice_node.handle.image)
     assert img0.shape[2] == 4 and "RRBC error" in c.view.slice_legend.content
@@ -121,12 +121,12 @@ def test_the_error_slice_follows_drags_and_its_controls(app):
     app.evaluate.handle_drag("fiducials", "F5", [475.0, -100.0, 45.0], "end")
     assert not np.array_equal(np.array(app.slice_node.handle.image), img0)  # the field follows the drag
     np.testing.assert_allclose(
-        app.views.error_slice.values["rrbc"], views.error_slice(app.session, sl.plane).values["rrbc"]
+        app.state.error_slice.values["rrbc"], views.error_slice(app.session, sl.plane).values["rrbc"]
     )
     c.view.slice_axis.value = "vertical, along x (y)"
-    assert app.views.error_slice.plane.axis == "y" and c.view.slice_offset.min < 0 < c.view.slice_offset.max
+    assert app.state.error_slice.plane.axis == "y" and c.view.slice_offset.min < 0 < c.view.slice_offset.max
     c.view.slice_offset.value = 50.0
-    assert app.views.error_slice.plane.offset_mm == 50.0
+    assert app.state.error_slice.plane.offset_mm == 50.0
     c.view.slice_value.value = "rigid error"
     assert app.state.display.slice_value == "rigid" and "rigid error" in c.view.slice_legend.content
     with pytest.raises(InputError):
@@ -137,14 +137,14 @@ def test_the_arm_reaches_the_selected_target_and_sensors_are_drawn_as_what_they_
     from rrbc_core.io.scene import default_scene_path
     from rrbc_viz.robot_nodes import sensor_cameras
 
-    arm = app.nodes.arm
+    arm = app.nodes.arm_nodes()
     assert arm is not None and arm.pose is not None
     t = app.session.last.targets
     np.testing.assert_allclose(arm.pose.commanded, t.positions[0])
     tip = np.asarray(arm.stylus.position) + 0.5 * arm.stylus.height * np.array([0, 0, -1.0])
     np.testing.assert_allclose(tip, t.positions[0], atol=1e-6)  # the stylus ends at the target
     app.views.select("targets", "H4")
-    np.testing.assert_allclose(app.nodes.arm.pose.commanded, t.positions[3])
+    np.testing.assert_allclose(app.nodes.arm_nodes().pose.commanded, t.positions[3])
     # the default scene's stereo head: two cameras a baseline apart, looking along the sensor's +z
     T = app.session.sensor_to_robot
     cams = sensor_cameras("stereo", T.rotation, T.translation, [475.0, 0.0, 15.0])
@@ -184,7 +184,7 @@ def _world_pose(scene, name: str) -> np.ndarray:
 def test_the_arm_is_the_ur5s_own_description_with_its_meshes_posed_on_the_target(app):
     """The default scene's UR5 drawn from the URDF example-robot-data ships: its meshes are in the scene, and the
     flange frame as the app posed it carries the tool point to the selected target within 1 mm."""
-    arm = app.nodes.arm
+    arm = app.nodes.arm_nodes()
     assert arm is not None and arm.urdf is not None
     scene = app.server.scene
     meshes = [h for h in arm.urdf._meshes if h.name.startswith("/arm/urdf/visual/")]
@@ -205,23 +205,27 @@ def test_presentation_mode_enlarges_text_markers_and_labels_and_goes_back(app):
     from rrbc_viz.controls import NORMAL_CSS, PRESENTATION_CSS
 
     marker = app.state.display.marker_mm
-    label = app.nodes.labels["/targets/H1/gizmo/label"]
+    label = app.nodes.handle("/targets/H1/gizmo/label")
     scale0 = label.font_screen_scale
     app.controls.view.presentation.value = True
     assert app.state.presentation and app.controls.style.content == PRESENTATION_CSS
     assert app.state.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
-    assert app.nodes.spheres[("fiducials", "F1")].radius == pytest.approx(marker * PRESENTATION_MARKERS)
+    assert app.nodes.handle("/fiducials/F1/gizmo/sphere").radius == pytest.approx(marker * PRESENTATION_MARKERS)
     assert label.font_screen_scale == pytest.approx(scale0 * PRESENTATION_LABEL_SCALE)
     # labels at least 24 px on a 720 px tall projector image (viser draws a screen label 12 px per unit of
     # font_screen_scale in an 800 px tall view, proportionally in others)
-    for h in [*app.nodes.labels.values(), app.nodes.nodes["/landing/scale"], app.nodes.arm.marks["label"]]:
+    for h in [
+        *map(app.nodes.handle, app.nodes.label_names()),
+        app.nodes.handle("/landing/scale"),
+        app.nodes.arm_nodes().marks["label"],
+    ]:
         assert h.font_screen_scale * 12 * 720 / 800 >= 24 - 1e-9, h.name
     assert not app.controls.legend_open.visible and app.controls.legend_closed.visible  # the legend closes
     import re
 
     assert app.state.selected == ("targets", "H1")
     assert re.fullmatch(r"H1 \d+\.\d{3} → \d+\.\d{3} mm", label.text), label.text  # short texts
-    assert app.nodes.labels["/targets/H2/gizmo/label"].text == "H2"
+    assert app.nodes.handle("/targets/H2/gizmo/label").text == "H2"
     app.views.set_presentation(True)  # idempotent
     assert app.state.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
     app.controls.view.presentation.value = False
@@ -246,19 +250,19 @@ def test_the_headline_is_the_summarys_rigid_to_rrbc(app, measured):
 
 def test_the_bullseye_keeps_its_scale_during_a_drag_and_refits_after(app):
     """A doubled error must look doubled while dragging: the ring (the drawing scale) is held until the drag ends."""
-    land0 = app.nodes.landing
+    land0 = app.state.landing
     p0 = np.array(app.session.layout["targets"].positions[0], float)
     app.evaluate.handle_drag("targets", "H1", p0, "start")
     rings = []
     for dx in (40.0, 80.0, 120.0):  # H1 moves away from its fiducials: its errors change
         app.evaluate.handle_drag("targets", "H1", p0 + [dx, 0.0, 0.0], "update")
-        rings.append(app.nodes.landing.ring_mm)
-        assert app.nodes.landing.scale == pytest.approx(land0.scale)
+        rings.append(app.state.landing.ring_mm)
+        assert app.state.landing.scale == pytest.approx(land0.scale)
     assert rings == [land0.ring_mm] * 3
     app.evaluate.handle_drag("targets", "H1", p0 + [120.0, 0.0, 0.0], "end")
     t = app.session.last.targets
     biggest = max(np.linalg.norm(t.robot_rigid[0] - t.truth[0]), np.linalg.norm(t.robot_rrbc[0] - t.truth[0]))
-    assert app.nodes.landing.ring_mm >= biggest  # refitted at the end
+    assert app.state.landing.ring_mm >= biggest  # refitted at the end
 
 
 @pytest.mark.parametrize("present", [True, False], ids=["projector", "normal"])
@@ -269,7 +273,7 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
     from rrbc_core.geometry.label_layout import GAP_PX, label_boxes
     from rrbc_viz import teaching
     from rrbc_viz.camera import DEFAULT_IMAGE
-    from rrbc_viz.lesson_labels import label_anchor
+    from rrbc_viz.controllers.views import PRESENTATION_LABEL_SCALE
 
     app.views.set_presentation(present)
     nodes = app.nodes
@@ -277,22 +281,24 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
         app.views.lesson_go(k)
         shown = []
         for kind in step.labels:
-            names = [n for n in nodes.labels if n.startswith(f"/{kind}/")]
-            visible = [n for n in names if nodes.labels[n].visible]
+            names = [n for n in nodes.label_names() if n.startswith(f"/{kind}/")]
+            visible = [n for n in names if nodes.handle(n).visible]
             assert names and len(visible) >= min(3, len(names)), (k + 1, kind, len(visible))
             shown += visible
         if not shown:
             continue
-        anchor = "bottom-center" if nodes.label_scale > 1.0 else "bottom-left"
+        label_scale = PRESENTATION_LABEL_SCALE if present else 1.0
+        anchor = "bottom-center" if label_scale > 1.0 else "bottom-left"
         boxes = label_boxes(
-            np.array([label_anchor(nodes, n) for n in shown]),
-            [nodes.labels[n].text for n in shown],
+            np.array([nodes.label_anchor(n) for n in shown]),
+            [nodes.handle(n).text for n in shown],
             app.ctx.camera.initial,
             DEFAULT_IMAGE,
-            0.75 * nodes.label_scale,
+            0.75 * label_scale,
             anchor,
         )
-        mine = f"/{nodes.selected[0]}/{nodes.selected[1]}/gizmo/label" if nodes.selected else None
+        sel = app.state.selected
+        mine = f"/{sel[0]}/{sel[1]}/gizmo/label" if sel else None
         for i in range(len(shown)):
             a = boxes[i]
             if shown[i] != mine:  # the selected point's label is always shown; the others keep clear of the panel
@@ -302,11 +308,13 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
                 apart = a[2] + GAP_PX <= b[0] or b[2] + GAP_PX <= a[0] or a[3] + GAP_PX <= b[1] or b[3] + GAP_PX <= a[1]
                 assert apart, (k + 1, shown[i], shown[j])
     assert {1, 2, 4, 6} <= {k for k, s in enumerate(teaching.STEPS) if s.labels}  # steps 2, 3, 5 and 7
-    assert not nodes.arm.marks["label"].visible  # the arm's model-error label is not the lesson's: it covered step 9
+    assert (
+        not nodes.arm_nodes().marks["label"].visible
+    )  # the arm's model-error label is not the lesson's: it covered step 9
     app.views.lesson_stop()
-    assert nodes.arm.marks["label"].visible
+    assert nodes.arm_nodes().marks["label"].visible
     if present:
-        assert not any(h.visible for n, h in nodes.labels.items() if n.startswith("/fiducials/"))
+        assert not any(nodes.handle(n).visible for n in nodes.label_names() if n.startswith("/fiducials/"))
 
 
 def test_a_researcher_sees_checks_as_checks_and_only_the_layers_that_apply(measured):
@@ -321,10 +329,13 @@ def test_a_researcher_sees_checks_as_checks_and_only_the_layers_that_apply(measu
     checks = sorted(ev.check_ids)
     assert checks and measured.state.selected == ("targets", [p for p in ev.targets.ids if p in ev.check_ids][0])
     assert measured.controls.selection.info.content.startswith(f"**Check {measured.state.selected[1]}**")
-    assert tuple(measured.nodes.spheres[("targets", checks[0])].color) in (colors.CHECK, colors.TARGET_EXTRAPOLATED)
+    assert tuple(measured.nodes.handle(f"/targets/{checks[0]}/gizmo/sphere").color) in (
+        colors.CHECK,
+        colors.TARGET_EXTRAPOLATED,
+    )
     others = [p for p in ev.targets.ids if p not in ev.check_ids]
     if others:
-        assert tuple(measured.nodes.spheres[("targets", others[0])].color) in (
+        assert tuple(measured.nodes.handle(f"/targets/{others[0]}/gizmo/sphere").color) in (
             colors.TARGET,
             colors.TARGET_EXTRAPOLATED,
         )
