@@ -227,7 +227,6 @@ def test_measured_data_get_coverage_planning_and_a_scene_brings_the_full_plan_ba
 
 
 def test_a_slow_scene_plans_in_the_background_during_drags(app):
-    panel = app.planning
     rmst0 = shown_rmst(app)
     app.plan.cost_s = 10.0  # as if each planning update took 10 s (a large scene): drags must not wait for it
     assert app.plan.slow() and not app.plan.live_due()
