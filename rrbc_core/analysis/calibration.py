@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.geometry.transforms import map_points
 from rrbc_core.models.chain import Chain, rotation
 from rrbc_core.models.loads import GRAVITY, Loads, LoadTerm, deflections, factor_scale, gravity_loads, term_jacobian
 
@@ -110,7 +111,7 @@ class Calibration:
         """T(s) (N, 3) robot frame, mm; with stations, `groups` (N,) says whose transform each row takes."""
         s = np.asarray(s, float).reshape(-1, 3)
         if self.rotations is None or self.translations is None or groups is None:
-            return s @ self.rotation.T + self.translation
+            return map_points(s, self.rotation, self.translation)
         g = np.asarray(groups, int)
         return np.einsum("nij,nj->ni", self.rotations[g], s) + self.translations[g]
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.points import as_points
+from rrbc_core.geometry.transforms import map_points
 from rrbc_core.simulation import batch
 
 #: A sample within this distance (mm) of a coplanar fiducial set's plane (and inside its polygon) is covered.
@@ -181,7 +182,7 @@ class _Registration:
         return cls(a0[0], t0[0], d_aff, net_cov, reg_var, shared)
 
     def apply(self, x: np.ndarray) -> np.ndarray:
-        return x @ self.rot.T + self.trans
+        return map_points(x, self.rot, self.trans)
 
     def variance(self, h: np.ndarray) -> np.ndarray:
         """tr Cov of Σ_β h_β (δA, δt)_β for homogeneous combinations h (..., 4): hᵀ K h (mm²)."""

@@ -51,6 +51,7 @@ def _rotation(z_deg: float, y_deg: float, x_deg: float) -> np.ndarray:
 
 def make_example(**overrides):
     """Return (MeasurementSet, comment lines) of the example; keyword arguments override PARAMETERS."""
+    from rrbc_core.geometry.transforms import map_points
     from rrbc_core.io.measurements import MeasurementSet
 
     p = {**PARAMETERS, **overrides}
@@ -72,11 +73,11 @@ def make_example(**overrides):
         return np.stack(cols, axis=1)
 
     gx, gy = np.meshgrid(np.linspace(-sx / 2, sx / 2, 61), np.linspace(-sy / 2, sy / 2, 46))
-    dense = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, z0)]) @ R.T + t
+    dense = map_points(np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, z0)]), R, t)
     scale = p["bias_rms_mm"] / np.sqrt(np.mean(np.sum(raw_bias(dense) ** 2, axis=1)))
 
     def robot_truth(s):
-        q = s @ R.T + t
+        q = map_points(s, R, t)
         return q + scale * raw_bias(q)
 
     def noise(n):

@@ -4,8 +4,8 @@ Convention (the only one in this project): a transform (R, t) maps sensor-frame 
 
     robot = R @ sensor + t,        sensor = R.T @ (robot - t).
 
-Points are stored as rows (N x 3, mm). `apply` and `apply_inverse` are the one pair that maps points; nothing
-else in the project writes `X @ R.T + t` by hand.
+Points are stored as rows (N x 3, mm). `map_points` (and `RigidTransform.apply` / `apply_inverse` over it) is the
+one place that maps points; nothing else in the project writes `X @ R.T + t` by hand.
 """
 
 from __future__ import annotations
@@ -26,6 +26,12 @@ def _as_points(points) -> np.ndarray:
     if p.shape[-1:] != (3,):
         raise InputError(f"points must have 3 coordinates (last axis of size 3), got shape {p.shape}")
     return p
+
+
+def map_points(points, matrix, translation) -> np.ndarray:
+    """Points as rows (..., 3) mapped by `matrix` (3, 3) and `translation` (3,): matrix @ p + t for each row (the
+    convention, written once; `matrix` is a rotation for a rigid transform, any 3x3 for a linear map)."""
+    return np.asarray(points, float) @ np.asarray(matrix, float).T + translation
 
 
 def project_to_so3(matrix) -> np.ndarray:
@@ -135,8 +141,7 @@ class RigidTransform:
     # --- mapping points -----------------------------------------------------------------------------------
     def apply(self, points) -> np.ndarray:
         """Sensor-frame points (..., 3) -> robot-frame points: R @ p + t."""
-        p = _as_points(points)
-        return p @ self.rotation.T + self.translation
+        return map_points(_as_points(points), self.rotation, self.translation)
 
     def apply_inverse(self, points) -> np.ndarray:
         """Robot-frame points (..., 3) -> sensor-frame points: R.T @ (q - t)."""

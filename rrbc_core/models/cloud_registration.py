@@ -29,7 +29,7 @@ import math
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.geometry.transforms import RigidTransform, project_to_so3, rotation_from_rotvec
+from rrbc_core.geometry.transforms import RigidTransform, map_points, project_to_so3, rotation_from_rotvec
 from rrbc_core.models.visibility import _mesh_arrays, cast_from
 from rrbc_core.registration.strategies import Registration
 
@@ -135,7 +135,7 @@ def _refine_on_mesh(src, vertices, faces, mapping: RigidTransform, max_distance_
     used, converged = 0, False
 
     def closest(rot, trans):
-        p = src @ rot.T + trans
+        p = map_points(src, rot, trans)
         ans = scene.compute_closest_points(o3d.core.Tensor(np.ascontiguousarray(p, dtype=np.float32)))
         q = ans["points"].numpy().astype(float)
         n = ans["primitive_normals"].numpy().astype(float)

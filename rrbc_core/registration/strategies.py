@@ -31,7 +31,13 @@ from numpy.typing import ArrayLike
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry import points as geometry
-from rrbc_core.geometry.transforms import RigidTransform, chordal_mean, project_to_so3, rotation_from_euler_zyx
+from rrbc_core.geometry.transforms import (
+    RigidTransform,
+    chordal_mean,
+    map_points,
+    project_to_so3,
+    rotation_from_euler_zyx,
+)
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -70,7 +76,7 @@ class LinearMap:
 
     def apply(self, points) -> np.ndarray:
         p = np.asarray(points, dtype=float)
-        return p @ self.matrix.T + self.translation
+        return map_points(p, self.matrix, self.translation)
 
     def apply_inverse(self, points) -> np.ndarray:
         q = np.asarray(points, dtype=float) - self.translation
