@@ -1,9 +1,19 @@
 """Test-wide settings: hypothesis runs derandomised (the same examples every run, no example database), so the
-suite is deterministic like every other seeded test here. Set HYPOTHESIS_PROFILE=explore to search afresh."""
+suite is deterministic like every other seeded test here. Set HYPOTHESIS_PROFILE=explore to search afresh.
+
+The test processes run under rrbc's own process policy, as the command line and the app server do: one BLAS thread
+(`rrbc_core.runtime.threads.apply_process_policy`, docs/threads.md; no environment variable). The suite runs on two
+workers on two cores (scripts/test.sh), and tests call library internals that are not entry points: OpenBLAS's
+second, spinning thread would fight the other worker for a core (a calibration test took 9x as long). The policy
+itself, and the entry points' limit in a user's process, are tested in subprocesses (tests/runtime/test_threads.py)."""
 
 import os
 
 from hypothesis import settings
+
+from rrbc_core.runtime.threads import apply_process_policy
+
+apply_process_policy()
 
 settings.register_profile("deterministic", derandomize=True, database=None, deadline=None, print_blob=True)
 settings.register_profile("explore", deadline=None, max_examples=500)

@@ -35,6 +35,7 @@ from rrbc_core.io.joints import joint_values
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.chain import Chain
 from rrbc_core.models.loads import candidate_terms, gravity_loads
+from rrbc_core.runtime.threads import thread_limited
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
 CV_FOLDS = 10
@@ -271,6 +272,7 @@ def drop_unphysical_terms(fit: MethodsFit, terms: tuple, refit) -> tuple[Methods
     return fit, terms, refused
 
 
+@thread_limited
 def compare(
     mset: MeasurementSet,
     robot: str | None = None,

@@ -41,6 +41,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if _HERE in Path(str(item.fspath)).resolve().parents:
             item.add_marker(pytest.mark.browser)
+            # under pytest-xdist (scripts/test.sh: -n 2 --dist loadgroup) every browser test runs on one worker: one
+            # Chromium and one software-WebGL page drawing at a time, the session's browser shared by all of them
+            item.add_marker(pytest.mark.xdist_group("browser"))
 
 
 @pytest.fixture(scope="session")
