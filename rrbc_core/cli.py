@@ -127,6 +127,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="for a measurement CSV with joint columns: the robot's URDF (or ur5, ur10, panda, lift_arm), drawn with "
         "its meshes at the selected point's joint values",
     )
+    v.add_argument(
+        "--simple-arm",
+        action="store_true",
+        help="draw a scene's arm as links and joints instead of its meshes (lighter on a machine without a GPU)",
+    )
     v.add_argument("--tip", default=None, help="with --urdf: the measured link (default: end of the longest chain)")
     v.add_argument("--base", default=None, help="with --urdf: the base link (default: the root link)")
     v.add_argument(
@@ -275,14 +280,15 @@ def _cmd_view(args) -> str:
         urdf=args.urdf,
         tip=args.tip,
         base=args.base,
+        simple_arm=args.simple_arm,
     )
     try:
         signal.signal(signal.SIGTERM, signal.default_int_handler)  # stop cleanly on SIGTERM too
     except ValueError:  # not the main thread
         pass
     mode = "one session per browser tab" if args.per_client else "one session shared by every tab"
-    print(f"rrbc view: serving {app.loaded.label} at {app.url} ({mode}; Ctrl+C to stop)", flush=True)
-    try:
+    try:  # from the line that gives the URL on: Ctrl+C at once (a reader may act on the line) stops cleanly
+        print(f"rrbc view: serving {app.loaded.label} at {app.url} ({mode}; Ctrl+C to stop)", flush=True)
         while True:
             time.sleep(3600)
     except KeyboardInterrupt:

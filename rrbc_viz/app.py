@@ -79,6 +79,7 @@ class RunningApp:
         host: str,
         viser_server: viser.ViserServer | None = None,
         library: files.Library | None = None,
+        arm_meshes: bool = True,
     ):
         if viser_server is None:  # the app draws on the server itself (every tab)
             assert isinstance(server, viser.ViserServer), "a stage other than the server needs viser_server"
@@ -90,7 +91,7 @@ class RunningApp:
         self.quiet = True  # stop() hides viser's "Server stopped" line
         self._stopped = False
         # the views first (they call the controllers only when the user acts), then the context, then the controllers
-        nodes = SceneNodes(server, self._on_drag, self._on_point_click)
+        nodes = SceneNodes(server, self._on_drag, self._on_point_click, arm_meshes)
         controls = Controls(server, self)
         ctx = AppContext(
             server,

@@ -76,8 +76,11 @@ GIZMO_LIMITS = ((-1e7, 1e7),) * 3
 class SceneNodes:
     """Creates the nodes of a session (`build`) and refreshes them from an Evaluation (`update`)."""
 
-    def __init__(self, server: Stage, on_drag: DragCallback, on_point_click: ClickCallback):
+    def __init__(
+        self, server: Stage, on_drag: DragCallback, on_point_click: ClickCallback, arm_meshes: bool = True
+    ) -> None:
         self._server = server
+        self._arm_meshes = arm_meshes  # False: the arm drawn as links and joints (lighter in software rendering)
         self._scene = server.scene
         self._on_drag = on_drag
         self._on_click = on_point_click
@@ -201,7 +204,7 @@ class SceneNodes:
         has_arm = scene is not None and (scene.robot_model in ("ur5", "ur10") or scene.robot_urdf is not None)
         self._session = session
         if has_arm and len(ev.targets.ids):
-            self._arm = ArmNodes(sc, arm_description(scene), self._server)
+            self._arm = ArmNodes(sc, arm_description(scene), self._server, self._arm_meshes)
             self._arm.build()
             self._poser = ArmPoser(self._arm, self._show_arm)
         elif session.kind == "measurements" and session.arm is not None:  # rrbc view data.csv --urdf

@@ -30,9 +30,18 @@ class PerClientApp:
     loaded (checked before the server started)."""
 
     def __init__(
-        self, server: viser.ViserServer, loaded: files.Loaded, source, mesh, host: str, present: bool, library=None
+        self,
+        server: viser.ViserServer,
+        loaded: files.Loaded,
+        source,
+        mesh,
+        host: str,
+        present: bool,
+        library=None,
+        arm_meshes: bool = True,
     ):
         self.server = server
+        self.arm_meshes = arm_meshes
         self.loaded = loaded
         self._source, self._mesh = source, mesh
         self.host = host
@@ -61,7 +70,12 @@ class PerClientApp:
 
         try:
             app = RunningApp(
-                ClientStage(client), self._fresh(), self.host, viser_server=self.server, library=self.library
+                ClientStage(client),
+                self._fresh(),
+                self.host,
+                viser_server=self.server,
+                library=self.library,
+                arm_meshes=self.arm_meshes,
             )
             if self.present:
                 app.views.set_presentation(True)

@@ -61,10 +61,11 @@ class ArmNodes:
     commanded-versus-landed marks. `description` (models.arm_description.ArmDescription) and `stage` (what
     ViserUrdf draws on: the server or one tab) draw the URDF."""
 
-    def __init__(self, scene: viser.SceneApi, description=None, stage=None):
+    def __init__(self, scene: viser.SceneApi, description=None, stage=None, meshes: bool = True):
         self.scene = scene
         self.description = description
         self.stage = stage
+        self.meshes = meshes  # False: links and joints drawn as cylinders (`rrbc view --simple-arm`)
         self.urdf: Any = None  # viser.extras.ViserUrdf of the description
         self.urdf_names: tuple[str, ...] = ()  # the description's actuated joints, in ViserUrdf's order
         self.links: list = []
@@ -103,7 +104,7 @@ class ArmNodes:
     def build(self, radius_mm: float = 38.0) -> None:
         sc = self.scene
         self.radius = radius_mm
-        if self.description is not None and self.stage is not None and self._build_urdf():
+        if self.meshes and self.description is not None and self.stage is not None and self._build_urdf():
             self.stylus = sc.add_cylinder("/arm/stylus", radius=4.0, height=1.0, color=TOOL_RGB, cast_shadow=False)
             self._build_marks()
             return

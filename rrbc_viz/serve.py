@@ -44,13 +44,16 @@ def serve(
     urdf=None,
     tip: str | None = None,
     base: str | None = None,
+    simple_arm: bool = False,
 ):
     """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
     .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
     raises InputError before any server starts. `quiet` hides viser's start-up banner and its "Server stopped"
     line. `urdf` (with `tip`, `base`): the robot of a measurement file, drawn from its URDF at each point's joint
     values (`session.arm.attach_arm`). `per_client`: one independent session per browser tab (per_client.PerClientApp) instead of one shared
-    by all; `present`: start in presentation mode (large text, collapsible panel; View → Presentation mode). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
+    by all; `present`: start in presentation mode (large text, collapsible panel; View → Presentation mode);
+    `simple_arm`: draw a scene's arm as links and joints instead of its URDF meshes (much lighter where the browser
+    renders in software: a drag redraws the whole cell). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
     server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
     apply_process_policy()
     message_guard.install()  # malformed client messages dropped without a traceback (issue 31)
@@ -77,9 +80,9 @@ def serve(
         app: RunningApp | PerClientApp
         if per_client:
             server.gui.configure_theme(show_share_button=False)
-            app = PerClientApp(server, loaded, source, mesh, host, present, library)
+            app = PerClientApp(server, loaded, source, mesh, host, present, library, arm_meshes=not simple_arm)
         else:
-            app = RunningApp(server, loaded, host, library=library)
+            app = RunningApp(server, loaded, host, library=library, arm_meshes=not simple_arm)
             if present:
                 app.views.set_presentation(True)
             server.on_client_disconnect(lambda client: release_memory_soon())  # a tab's buffers: back to the OS

@@ -1,5 +1,10 @@
 """Fixtures for browser tests: Debian's headless Chromium driven by Playwright (sync API) against viser servers.
 
+Chromium draws with software WebGL here, and a drag redraws the whole cell: tests that are not about the arm start
+the app with `serve(simple_arm=True)` (the arm as links and joints, `rrbc view --simple-arm`), which the UR5's meshes
+otherwise dominate; the arm's own test, the VEC tab's and the lesson's (whose points must not be hidden behind the
+arm) draw the meshes.
+
 Chromium comes from `bash scripts/setup.sh --browser` (never `playwright install`). Every test here is marked
 ``browser``; deselect them with ``-m "not browser"``.
 

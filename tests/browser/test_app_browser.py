@@ -151,7 +151,7 @@ def settled_shot(page, clip: dict, timeout_s: float = 20.0) -> bytes:
 
 
 def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for):
-    app = viser_app(lambda: serve())
+    app = viser_app(lambda: serve(simple_arm=True))
     page, requests = page_for(app.url)
 
     # 1) the default scene, drawn: settled and not blank (central half of the view), the mesh mounted with triangles
@@ -212,7 +212,7 @@ def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for
 
 
 def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(viser_app, page_for, tmp_path):
-    app = viser_app(lambda: serve(data_dirs=[tmp_path]))
+    app = viser_app(lambda: serve(data_dirs=[tmp_path], simple_arm=True))
     page, requests = page_for(app.url)
     wait_until_rendered(page, H1_GIZMO, timeout_s=60)
     scale = app.nodes.gizmo_scale()
@@ -288,7 +288,7 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
 
 
 def test_five_tabs_share_one_state(viser_app, page_for):
-    app = viser_app(lambda: serve())
+    app = viser_app(lambda: serve(simple_arm=True))
     # Five tabs connect concurrently. The first draws; the other four are connected clients that receive every
     # scene and GUI message but draw nothing (helpers.UNDRAWN_TAB_SCRIPT): five software-WebGL renders of the
     # cell would take most of a minute.

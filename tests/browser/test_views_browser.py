@@ -181,7 +181,7 @@ _JS_GIZMO_VISIBLE = """(name) => { const m = window.__viserMutable.nodeRefFromNa
 
 
 def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser_app, page_for):
-    app = viser_app(lambda: serve())
+    app = viser_app(lambda: serve(simple_arm=True))
     page, _ = page_for(app.url)
     app.views.show_camera("close-up")
     _wait_camera(page, app)
@@ -228,7 +228,7 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
 
 
 def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_app, page_for):
-    app = viser_app(lambda: serve())
+    app = viser_app(lambda: serve(simple_arm=True))
     page, _ = page_for(app.url)
     app.evaluate.set_layer("slice", True)
     app.views.show_camera("close-up")

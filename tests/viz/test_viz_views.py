@@ -357,3 +357,23 @@ def test_a_researcher_sees_checks_as_checks_and_only_the_layers_that_apply(measu
 def test_the_app_and_a_scene_keep_every_layer(app):
     shown = {n for n, box in app.controls.view.layers.items() if box.visible}
     assert {"mesh", "arm", "sensor", "regions"} <= shown
+
+
+def test_a_simple_arm_is_drawn_as_links_and_joints_and_follows_the_target():
+    """`rrbc view --simple-arm` (`serve(simple_arm=True)`): the scene's arm as links and joints (no URDF meshes to
+    draw in a software-rendered browser), posed on the selected target like the meshes."""
+    from rrbc_viz.serve import serve
+
+    app = serve(simple_arm=True)
+    try:
+        assert app.nodes.handle("/arm/urdf") is None and app.nodes.handle("/arm/link0") is not None
+        t = app.session.last.targets
+        app.views.select("targets", t.ids[1])
+        np.testing.assert_allclose(app.nodes.arm_nodes().pose.commanded, t.positions[1])
+    finally:
+        app.stop()
+    full = serve()
+    try:
+        assert full.nodes.handle("/arm/urdf") is not None and full.nodes.handle("/arm/link0") is None
+    finally:
+        full.stop()
