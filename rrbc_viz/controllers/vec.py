@@ -40,8 +40,17 @@ class VecController:
             return self.ctx.evaluate.apply(lambda s: vec_view.set_varied_registration(s, varied), client)
 
     def set_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0, client=None):
-        """Reach target `pid` with its tool leaned tilt_deg towards azimuth_deg (degrees)."""
+        """Reach target `pid` with its tool leaned tilt_deg towards azimuth_deg (degrees). A slider moved quickly
+        sends many updates, each handled with the slider's latest value: one that changes nothing is not applied
+        again (VEC, the heat map and the Monte Carlo would be recomputed for nothing)."""
         with self.ctx.lock:
+            session = self.ctx.session
+            if pid in session.layout["targets"].ids and session.tool_of("targets", pid) == (
+                float(tilt_deg),
+                float(azimuth_deg),
+            ):
+                self.ctx.state.vec_target = pid
+                return session.last
             self.ctx.state.vec_target = pid
             return self.ctx.evaluate.apply(lambda s: vec_view.set_target_tool(s, pid, tilt_deg, azimuth_deg), client)
 

@@ -31,6 +31,8 @@ def test_vec_tab_shows_the_sessions_vec_and_follows_a_leaned_tool(app):
     truth_before = app.session.last.targets.truth[0].copy()
     app.vec.set_target_tool(pid, 40.0, 0.0)
     after = vec_view.vec_view(app.session)
+    leaned = app.session.last
+    assert app.vec.set_target_tool(pid, 40.0, 0.0) is leaned  # the slider's same value again: nothing recomputed
     row = _row(app.controls.vec.vec_table.content, pid)
     assert row[1] == "40°, 0°" and float(row[3]) == round(float(after.error_rrbc[0]), 3)
     assert after.error_rrbc[0] > before.error_rrbc[0] and after.error_vec[0] < after.error_rrbc[0]
