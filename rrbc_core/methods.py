@@ -131,24 +131,6 @@ class MethodOptions:
                 out[spec.flag] = getattr(obj, spec.name)
         return out
 
-    def with_changes(self, **changes) -> MethodOptions:
-        """A new method with names (``registration``, ``interpolation``) or flag-named options changed; options of
-        a method that is not chosen are kept for when it is (a session's widgets keep their values)."""
-        reg = changes.pop("registration", self.registration_name)
-        interp = changes.pop("interpolation", self.interpolation_name)
-        seed = changes.pop("seed", self.seed)
-        current = self.option_values()
-        merged = {
-            **current,
-            **{k.replace("_", "-") if k.replace("_", "-") in current else k: v for k, v in changes.items()},
-        }
-        flags = method_flags()
-        unknown = sorted(k for k in merged if k not in flags)
-        if unknown:
-            raise InputError(f"unknown method option(s) {', '.join(unknown)}")
-        keep = {k: v for k, v in merged.items() if any(name in (reg, interp) for _, name, _ in flags[k])}
-        return MethodOptions.named(reg, interp, seed=seed, **keep)
-
     # ----------------------------------------------------------------------------------------------- running
     def interpolator(self):
         """The interpolation method object (e.g. `interpolation.IDW(k, power)`), ready to `fit`."""
@@ -158,10 +140,6 @@ class MethodOptions:
         """The interpolation's options by field name (what `interpolation.make_interpolator` and the batch kernels
         take)."""
         return {s.name: getattr(self.interpolation, s.name) for s in option_specs(self.interpolation)}
-
-    def registration_kwargs(self) -> dict:
-        """The strategy's options by field name (what `registration.register` and the batch kernels take)."""
-        return {s.name: getattr(self.registration, s.name) for s in option_specs(self.registration)}
 
     def register(self, sensor, robot) -> registration.Registration:
         """Register paired points, sensor (N, 3) sensor frame and robot (N, 3) robot frame, mm."""

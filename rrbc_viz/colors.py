@@ -25,7 +25,6 @@ LAND_VEC: Rgb = (120, 70, 20)
 LAND_ANCHOR: Rgb = (40, 40, 40)
 LAND_STALK: Rgb = (110, 110, 110)
 LAND_RING: Rgb = (60, 60, 60)
-SELECTION: Rgb = (255, 255, 255)
 
 #: The drag gizmo's axis colours (drei PivotControls' defaults in viser 1.1.1's client: x, y, z). Data colours
 #: keep a CIE76 colour difference of at least MIN_GIZMO_DELTA_E from each (tests/viz check it).
@@ -48,7 +47,6 @@ DATA_COLORS: dict[str, Rgb] = {
     "VEC landing (Arm tab)": LAND_VEC,
     "truth (bullseye centre)": LAND_ANCHOR,
 }
-FRAME_ORIGIN: Rgb = (236, 236, 0)
 NO_VALUE: Rgb = (128, 128, 128)
 
 #: The heat-map scale, low → high (viridis-like stops, perceptually ordered, colour-blind safe).

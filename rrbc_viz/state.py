@@ -84,9 +84,9 @@ class AppState:
     vec_on, vec_target, vec_view
         VEC compared (the box ticked and the source has an arm); the target whose tool the Arm tab shows; the VecView
         last shown (None: off, no arm, or refused).
-    mc_trials, mc_plots, mc_seconds, mc_draw, mc_seed
-        The trials a Monte Carlo run takes (the tab's slider); the Monte Carlo plots last shown and how long they took; Run-again presses so far; the noise seed of the last
-        run requested (None: the session's).
+    mc_trials, mc_plots, mc_draw, mc_seed
+        The trials a Monte Carlo run takes (the tab's slider); the Monte Carlo plots last shown; Run-again presses so
+        far; the noise seed of the last run requested (None: the session's).
     diagnosis, diagnosis_data, diagnosis_stale
         The Diagnose tab's last verdict (None: none or an error), the data set it came from, and whether the data
         changed since.
@@ -123,7 +123,6 @@ class AppState:
     vec_view: VecView | None = None
     mc_trials: int = 200
     mc_plots: MonteCarloPlots | None = None
-    mc_seconds: float | None = None
     mc_draw: int = 0
     mc_seed: int | None = None
     diagnosis: Diagnosis | None = None

@@ -48,11 +48,6 @@ class FieldModel:
     z: np.ndarray
     index: np.ndarray
 
-    @property
-    def field_variance(self) -> np.ndarray:
-        """v_a (3,), mm² per axis."""
-        return self.lam * self.sigma2
-
 
 def _subsample(n: int, seed: int = 0) -> np.ndarray:
     if n <= MAX_POINTS:

@@ -27,8 +27,6 @@ from rrbc_core.correction.warnings import Corrected, extrapolation
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet, select_rows
 
-BASES = ("checks", "leave-one-out")
-
 
 @dataclass(frozen=True)
 class Verdict:

@@ -118,10 +118,6 @@ class RigidTransform:
 
     # --- construction -------------------------------------------------------------------------------------
     @classmethod
-    def identity(cls) -> RigidTransform:
-        return cls(np.eye(3), np.zeros(3))
-
-    @classmethod
     def from_matrix(cls, matrix) -> RigidTransform:
         """From a 4x4 homogeneous matrix [[R, t], [0, 0, 0, 1]]."""
         m = np.asarray(matrix, dtype=float)

@@ -25,7 +25,6 @@ from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.chain import Chain
 
-JOINT_COLUMNS = tuple(f"q{i + 1}" for i in range(6))  # the DH arms' columns, degrees
 CONTINUOUS_MAX_RAD = 4 * math.pi  # a continuous joint's value beyond two turns: likely degrees
 
 

@@ -21,7 +21,7 @@ Two ways it is applied:
   the limit is set when the first call enters and restored when the last one leaves. While a call runs, BLAS
   calls made by other threads of the same process are single-threaded too (the pool is per process).
 
-`blas_threads()` reports the effective pool sizes (what `rrbc info` prints and the tests check).
+The tests check the effective pool sizes with threadpoolctl's own report (tests/runtime/test_threads.py).
 open3d (ray casting, ICP) runs its own TBB pool, which threadpoolctl cannot set; it is used once per command
 for a few hundred rays, not inside interactive loops.
 """
@@ -101,11 +101,3 @@ def thread_limited(fn: Callable[_P, _R]) -> Callable[_P, _R]:
             return fn(*args, **kwargs)
 
     return wrapper
-
-
-def blas_threads() -> list[dict]:
-    """The loaded BLAS/OpenMP runtimes and their current pool sizes: [{"library", "api", "threads"}, ...]."""
-    return [
-        {"library": i["prefix"], "api": i["internal_api"], "threads": int(i["num_threads"])}
-        for i in _get_controller().info()
-    ]

@@ -2,7 +2,7 @@
 scene file (File → Save scene) and the measurement plan (File → Measurement plan). Part of `ExplorerSession`.
 
 Frames and units: robot base frame, mm. Edits apply to scene sessions (measured data are what was measured).
-Every edit, and every drag that calls `checkpoint()` first, can be undone; a new edit clears the redo list.
+Every edit can be undone (a drag is not an edit: it is not in the history); a new edit clears the redo list.
 """
 
 from __future__ import annotations
@@ -69,14 +69,6 @@ def has_unsaved_edits(session: ExplorerSession) -> bool:
         return False
     saved = getattr(session, "saved_fingerprint", None)
     return saved is not None and saved != fingerprint(session)
-
-
-def checkpoint(session: ExplorerSession) -> None:
-    """Remember the session as it is now, so the next change can be undone (the app calls this when a drag
-    starts)."""
-    session.history.undo.append(_state(session))
-    del session.history.undo[:-MAX_HISTORY]
-    session.history.redo.clear()
 
 
 def edit(session: ExplorerSession, change) -> Evaluation:

@@ -16,7 +16,7 @@ if TYPE_CHECKING:
 
 
 class MonteCarloController:
-    """`actions.MonteCarloActions`: what it shows is in the app's state (`mc_plots`, `mc_seconds`, `mc_draw`,
+    """`actions.MonteCarloActions`: what it shows is in the app's state (`mc_trials`, `mc_plots`, `mc_draw`,
     `mc_seed`)."""
 
     def __init__(self, ctx: AppContext):
@@ -80,7 +80,6 @@ class MonteCarloController:
         dist, mean_rigid, mean_rrbc, half_rigid, half_rrbc = plots.by_distance()
         with self.ctx.lock, self.ctx.server.atomic():
             self.ctx.state.mc_plots = plots
-            self.ctx.state.mc_seconds = seconds
             c.show_monte_carlo_plots(
                 True,
                 (centres, rigid, rrbc),
