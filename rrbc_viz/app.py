@@ -43,18 +43,18 @@ import viser
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
-from . import files, upload_spool
+from . import sources, upload_spool
 from .camera import OPENING, CameraDirector, preset_view
 from .context import AppContext
-from .controllers.authoring import AuthoringController
 from .controllers.diagnose import DiagnoseController
+from .controllers.edit import AuthoringController
 from .controllers.evaluate import EvaluateController
-from .controllers.files import FileController
-from .controllers.montecarlo import MonteCarloController
+from .controllers.load import FileController
 from .controllers.plan import PlanController
 from .controllers.present import Presenter
+from .controllers.simulate import MonteCarloController
 from .controllers.vec import VecController
-from .controllers.views import PRESENTATION_MARKERS, ViewController
+from .controllers.viewing import PRESENTATION_MARKERS, ViewController
 from .controls import Controls
 from .node_values import Display, nice_down
 from .nodes import SceneNodes
@@ -75,10 +75,10 @@ class RunningApp:
     def __init__(
         self,
         server: Stage,
-        loaded: files.Loaded,
+        loaded: sources.Loaded,
         host: str,
         viser_server: viser.ViserServer | None = None,
-        library: files.Library | None = None,
+        library: sources.Library | None = None,
         arm_meshes: bool = True,
     ):
         if viser_server is None:  # the app draws on the server itself (every tab)
@@ -97,7 +97,7 @@ class RunningApp:
             server,
             viser_server,
             loaded,
-            library or files.Library.of(),
+            library or sources.Library.of(),
             nodes=nodes,
             slice_node=SliceNode(server.scene),
             camera=CameraDirector(server),
@@ -151,7 +151,7 @@ class RunningApp:
         return self.ctx.viser_server
 
     @property
-    def loaded(self) -> files.Loaded:
+    def loaded(self) -> sources.Loaded:
         return self.ctx.loaded
 
     @property
@@ -203,7 +203,7 @@ class RunningApp:
         with contextlib.redirect_stdout(io.StringIO()) if self.quiet else contextlib.nullcontext():
             self.ctx.viser_server.stop()  # viser prints "(viser) Server stopped" on stdout
 
-    def install(self, loaded: files.Loaded, first: bool = False) -> None:
+    def install(self, loaded: sources.Loaded, first: bool = False) -> None:
         """Make `loaded` the current source: rebuild the scene and resync the panel."""
         ctx = self.ctx
         with ctx.lock:

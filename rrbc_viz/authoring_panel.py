@@ -1,6 +1,6 @@
 """File tab → "Edit the cell": what a click on the cell adds, delete, undo/redo, move the sensor, upload a mesh, and
 the downloads that author a cell (scene file, measurement plan, Slicer markups). Forwards to the app
-(`controllers.authoring.AuthoringController`); holds no state of its own."""
+(`controllers.edit.AuthoringController`); holds no state of its own."""
 
 from __future__ import annotations
 

@@ -22,7 +22,7 @@ from .state import AppState
 if TYPE_CHECKING:
     import viser
 
-    from . import files
+    from . import sources
     from .actions import (
         Actions,
         AuthoringActions,
@@ -58,8 +58,8 @@ class AppContext:
 
     server: Stage
     viser_server: viser.ViserServer
-    loaded: files.Loaded
-    library: files.Library
+    loaded: sources.Loaded
+    library: sources.Library
     nodes: SceneNodes
     slice_node: SliceNode
     camera: CameraDirector

@@ -19,7 +19,7 @@ import viser
 from rrbc_core.runtime.memory import release_memory, release_memory_soon
 from rrbc_core.session.explorer import ExplorerSession
 
-from . import files
+from . import sources
 from .access import AccessGuard
 from .app import RunningApp
 from .stage import ClientStage
@@ -32,7 +32,7 @@ class PerClientApp:
     def __init__(
         self,
         server: viser.ViserServer,
-        loaded: files.Loaded,
+        loaded: sources.Loaded,
         source,
         mesh,
         host: str,
@@ -57,11 +57,11 @@ class PerClientApp:
         server.on_client_connect(self._connect)
         server.on_client_disconnect(self._disconnect)
 
-    def _fresh(self) -> files.Loaded:
+    def _fresh(self) -> sources.Loaded:
         if isinstance(self._source, ExplorerSession):
             s = copy.deepcopy(self._source)
-            return files.Loaded(s, self.loaded.mesh, self.loaded.label)
-        return files.load_source(self._source, self._mesh)
+            return sources.Loaded(s, self.loaded.mesh, self.loaded.label)
+        return sources.load_source(self._source, self._mesh)
 
     def _connect(self, client: viser.ClientHandle) -> None:
         guard = self.guard

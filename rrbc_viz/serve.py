@@ -15,7 +15,7 @@ from rrbc_core.runtime.memory import release_memory_soon
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.session.explorer import ExplorerSession
 
-from . import files, message_guard, upload_spool
+from . import message_guard, sources, upload_spool
 from .access import AccessGuard, new_token, page_url
 from .app import RunningApp
 from .per_client import PerClientApp
@@ -58,10 +58,10 @@ def serve(
     apply_process_policy()
     message_guard.install()  # malformed client messages dropped without a traceback (issue 31)
     if isinstance(source, ExplorerSession):
-        loaded = files.Loaded(source, files.load_mesh(mesh) if mesh else None, f"session {source.name}")
+        loaded = sources.Loaded(source, sources.load_mesh(mesh) if mesh else None, f"session {source.name}")
         source.evaluate()
     else:
-        loaded = files.load_source(source, mesh)
+        loaded = sources.load_source(source, mesh)
     if urdf is not None:  # measured data's robot, posed at each point's joint values (session.arm.attach_arm)
         from rrbc_core.session.arm import attach_arm
 
@@ -69,7 +69,7 @@ def serve(
     elif tip is not None or base is not None:
         raise InputError("--tip and --base choose links of a URDF: give --urdf")
     _check_host(host)
-    library = files.Library.of(data_dirs, source)
+    library = sources.Library.of(data_dirs, source)
     out = io.StringIO() if quiet else None
     with contextlib.redirect_stdout(out) if quiet else contextlib.nullcontext():
         server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)

@@ -1,7 +1,7 @@
 """The error slice in the scene: an image on a plane through the work volume, coloured by the predicted error
 (`rrbc_core.session.slices`), with the fiducials' hull traced on it in white and unreachable points left clear.
 
-Display only: the values come from `rrbc_core.session.views.error_slice`; here they are mapped to colours on the heat-map
+Display only: the values come from `rrbc_core.session.figures.error_slice`; here they are mapped to colours on the heat-map
 scale (rigid and RRBC share one scale, so equal colours mean equal millimetres) and placed in the robot frame.
 """
 

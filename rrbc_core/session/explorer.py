@@ -43,7 +43,7 @@ from rrbc_core.session.tools import VARIED_TILT_DEG, tool_rotation
 
 @dataclass
 class History:
-    """The edit history of a session (`authoring.undo`, `authoring.redo`): states before each edit, newest last."""
+    """The edit history of a session (`edits.undo`, `edits.redo`): states before each edit, newest last."""
 
     undo: list = field(default_factory=list)
     redo: list = field(default_factory=list)
@@ -101,7 +101,7 @@ class ExplorerSession:
         self.stations: tuple[str, ...] = ()  # a file with a group column: its stations (from_measurements)
         self.station: str | None = None  # ... the one open
         self.file_mset = None  # ... and the whole file
-        self.saved_fingerprint: str | None = None  # authoring.fingerprint of what was last opened or saved
+        self.saved_fingerprint: str | None = None  # edits.fingerprint of what was last opened or saved
         self.arm = None  # measured data: the robot's URDF description (session.arm.attach_arm), else None
         self.arm_joints: dict = {}  # ... each point's joint values, (kind, id) -> (I,) rad or mm
         self.arm_spec: tuple | None = None  # ... (urdf, tip, base), kept when another station opens

@@ -10,7 +10,7 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
-from rrbc_core.session import authoring
+from rrbc_core.session import edits
 from rrbc_core.session.evaluation import Evaluation, Group
 from rrbc_core.session.results import PlanningState, _scaled
 
@@ -200,9 +200,7 @@ def accept_suggestions(session: ExplorerSession, which=None) -> Evaluation:
         session.settings = session.settings.replace(excluded=session.settings.excluded - set(new_ids))
 
     try:
-        ev = authoring.edit(
-            session, change
-        )  # one step of the edit history: `undo` takes the accepted fiducials away again
+        ev = edits.edit(session, change)  # one step of the edit history: `undo` takes the accepted fiducials away again
     except InputError:
         session.settings = old_settings
         raise

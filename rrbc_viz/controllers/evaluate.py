@@ -6,7 +6,7 @@ which records the event in the latest-wins queue (`drag_queue.DragQueue`); its t
 moves the point in the session (`ExplorerSession.move`: re-measured through the scene's measurement model, then
 `session.evaluation.evaluate`) and hands the new `Evaluation` to the presenter (`controllers.present.Presenter.show`),
 which pushes it to the scene nodes and every panel in one `server.atomic()` block. At the drag's end the Monte Carlo
-is queued (`controllers.montecarlo`). A move the core refuses snaps the gizmo back to the last accepted place.
+is queued (`controllers.simulate`). A move the core refuses snaps the gizmo back to the last accepted place.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ import time
 from typing import TYPE_CHECKING
 
 from rrbc_core.errors import InputError
-from rrbc_core.session import views
+from rrbc_core.session import figures
 from rrbc_core.session.data_set import check_statistics
 from rrbc_core.session.evaluation import Evaluation
 
@@ -92,7 +92,7 @@ class Presenter:
         if not st.layers.get("heatmap"):
             return
         start = time.perf_counter()
-        st.heat_map = views.heat_map(ctx.session, ctx.heat_samples_per_target)
+        st.heat_map = figures.heat_map(ctx.session, ctx.heat_samples_per_target)
         st.heat_cost = time.perf_counter() - start
         st.heat_time = time.monotonic()
         st.heat_stale = False

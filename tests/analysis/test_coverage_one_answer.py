@@ -23,7 +23,7 @@ from rrbc_core.io.scene import NamedPoints, Region, Target
 from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.models.errormodels import ErrorModel
 from rrbc_core.models.errorterms import IsotropicNoise
-from rrbc_core.session import authoring, planning_view
+from rrbc_core.session import edits, planning_view
 from rrbc_core.session.evaluation import Settings
 from rrbc_core.session.explorer import ExplorerSession
 from rrbc_viz.planning_panel import render_coverage
@@ -118,7 +118,7 @@ def test_every_caller_gives_the_same_verdict(kind, tmp_path, capsys):
     scene_path = tmp_path / "cell.toml"
     session = ExplorerSession.from_scene(scene, Settings(noise_scale=0.0))
     shutil.copy(scene.mesh_path, tmp_path / scene.mesh_path.name)  # a scene opens meshes in its own folder
-    scene_path.write_text(authoring.scene_toml(session))
+    scene_path.write_text(edits.scene_toml(session))
     assert main(["plan", str(scene_path), "--json"]) == 0
     pj = json.loads(capsys.readouterr().out)
     assert [pj["inside_hull_per_target"][i] for i in ids] == expected

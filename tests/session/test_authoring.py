@@ -1,4 +1,4 @@
-"""Editing a scene session (rrbc_core.session.authoring): add and delete points, move the sensor, undo/redo, save
+"""Editing a scene session (rrbc_core.session.edits): add and delete points, move the sensor, undo/redo, save
 the scene (it reloads to the same numbers) and the measurement plan (filled, it reads as a measurement file)."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import read_measurements
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
-from rrbc_core.session import authoring
+from rrbc_core.session import edits
 from rrbc_core.session.explorer import ExplorerSession
 
 
@@ -29,46 +29,46 @@ def _numbers(ev):
 def test_add_delete_undo_redo(session):
     ev0 = session.last
     n_f = len(ev0.fiducial_ids)
-    ev = authoring.add_point(session, "fiducials", [500.0, 150.0, 15.0])
+    ev = edits.add_point(session, "fiducials", [500.0, 150.0, 15.0])
     assert len(ev.fiducial_ids) == n_f + 1 and ev.fiducial_ids[-1] == f"F{n_f + 1}"
-    ev = authoring.add_point(session, "targets", [450.0, 0.0, 15.0], region_mm=6.0)
+    ev = edits.add_point(session, "targets", [450.0, 0.0, 15.0], region_mm=6.0)
     assert ev.targets.ids[-1] == "T9" and session.regions["T9"].kind == "box"
     np.testing.assert_allclose(session.regions["T9"].size, [6, 6, 6])
-    authoring.add_point(session, "candidates", [480.0, 120.0, 15.0])
+    edits.add_point(session, "candidates", [480.0, 120.0, 15.0])
     assert session.candidates.ids[-1] == f"C{len(session.candidates.ids):03d}"
-    ev = authoring.remove_point(session, "fiducials", "F1")
+    ev = edits.remove_point(session, "fiducials", "F1")
     assert "F1" not in ev.fiducial_ids
-    ev = authoring.undo(session)
+    ev = edits.undo(session)
     assert "F1" in ev.fiducial_ids
-    ev = authoring.undo(session)
-    ev = authoring.undo(session)
-    ev = authoring.undo(session)
+    ev = edits.undo(session)
+    ev = edits.undo(session)
+    ev = edits.undo(session)
     assert ev.fiducial_ids == ev0.fiducial_ids and ev.targets.ids == ev0.targets.ids
     np.testing.assert_allclose(ev.targets.error_rrbc, ev0.targets.error_rrbc)  # the same numbers as before
     with pytest.raises(InputError, match="nothing to undo"):
-        authoring.undo(session)
-    ev = authoring.redo(session)
+        edits.undo(session)
+    ev = edits.redo(session)
     assert len(ev.fiducial_ids) == n_f + 1
     # refusals leave the session as it was
     with pytest.raises(InputError, match="taken"):
-        authoring.add_point(session, "targets", [400.0, 0.0, 15.0], pid="F1")
+        edits.add_point(session, "targets", [400.0, 0.0, 15.0], pid="F1")
     with pytest.raises(InputError, match="at least 3"):
         for pid in list(session.layout["registration"].ids):
-            authoring.remove_point(session, "registration", pid)
+            edits.remove_point(session, "registration", pid)
     assert len(session.layout["registration"].ids) == 3
     with pytest.raises(InputError, match="reach"):
-        authoring.add_point(session, "targets", [3000.0, 0.0, 15.0])
+        edits.add_point(session, "targets", [3000.0, 0.0, 15.0])
     assert session.last.targets.ids[-1] != "T9" or len(session.last.targets.ids) == len(ev0.targets.ids)
 
 
 def test_a_saved_scene_reloads_to_the_same_numbers(session, tmp_path):
-    authoring.add_point(session, "fiducials", [500.0, 150.0, 15.0])
-    authoring.add_point(session, "targets", [450.0, 10.0, 15.0], region_mm=3.0)
+    edits.add_point(session, "fiducials", [500.0, 150.0, 15.0])
+    edits.add_point(session, "targets", [450.0, 10.0, 15.0], region_mm=3.0)
     session.move("targets", "H2", [410.0, -40.0, 15.0])
-    authoring.move_sensor(session, [1000.0, -500.0, 1300.0])
+    edits.move_sensor(session, [1000.0, -500.0, 1300.0])
     ev = session.last
     path = tmp_path / "saved.toml"
-    path.write_text(authoring.scene_toml(session), encoding="utf-8")
+    path.write_text(edits.scene_toml(session), encoding="utf-8")
     shutil.copy(session.scene.mesh_path, tmp_path)  # the scene names its mesh; it opens only meshes beside it
     again = ExplorerSession.from_scene(load_scene(path))
     ev2 = again.last
@@ -82,7 +82,7 @@ def test_a_saved_scene_reloads_to_the_same_numbers(session, tmp_path):
 
 
 def test_the_measurement_plan_filled_in_reads_as_a_measurement_file(session, tmp_path):
-    text = authoring.measurement_plan(session)
+    text = edits.measurement_plan(session)
     lines = [ln for ln in text.splitlines() if not ln.startswith("#")]
     header = lines[0].split(",")
     assert header[-3:] == ["planned_x", "planned_y", "planned_z"]

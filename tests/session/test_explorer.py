@@ -11,7 +11,7 @@ from rrbc_core.io.measurements import read_measurements
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.methods import MethodOptions
-from rrbc_core.session import views
+from rrbc_core.session import figures
 from rrbc_core.session.evaluation import Settings, hull_edges
 from rrbc_core.session.explorer import ExplorerSession
 
@@ -47,14 +47,14 @@ def test_export_reproduces_the_sessions_numbers_through_rrbc_correct(scene, tmp_
     ses = ExplorerSession.from_scene(scene, Settings(interpolation="tps"))
     ev = ses.move("targets", "H1", ses.layout["targets"].positions[0] + [3.0, -2.0, 0.0])
     f = tmp_path / "export.csv"
-    write_measurements(f, views.export_measurements(ses))
+    write_measurements(f, figures.export_measurements(ses))
     out = correct_measurements(read_measurements(f), MethodOptions(interpolation="tps")).to_json()
     by_id = {c["id"]: c for c in out["targets"]}
     for i, pid in enumerate(ev.targets.ids):
         np.testing.assert_allclose(by_id[pid]["robot_rrbc"], ev.targets.robot_rrbc[i], atol=1e-9)
     assert len(out["checks"]) == scene.check_points_per_target * len(ev.targets.ids)
     assert all(c["id"].split(".c")[0] in ev.targets.ids for c in out["checks"])
-    js = views.export_json(ses)
+    js = figures.export_json(ses)
     assert js["summary"] == pytest.approx(out["summary"], abs=1e-9)
     assert js["settings"]["interpolation"] == "tps"
 
@@ -128,25 +128,25 @@ def test_measurement_mode_moves_targets_and_refuses_to_move_measured_fiducials()
         ses.move("fiducials", ev.fiducial_ids[0], ev.fiducial_positions[0] + 1.0)
     with pytest.raises(InputError):
         ses.update(noise_scale=2.0)
-    hm = views.heat_map(ses, samples_per_target=20)
+    hm = figures.heat_map(ses, samples_per_target=20)
     assert np.all(np.isnan(hm.error_rigid)) and hm.std_mm is not None
 
 
 def test_heat_map_rrbc_beats_rigid_over_the_regions_and_is_cached(scene):
     ses = ExplorerSession.from_scene(scene)
-    hm = views.heat_map(ses, samples_per_target=100)
+    hm = figures.heat_map(ses, samples_per_target=100)
     assert hm.positions.shape == (100 * len(scene.targets), 3)
     assert np.sqrt(np.mean(hm.error_rrbc**2)) < 0.5 * np.sqrt(np.mean(hm.error_rigid**2))
     for t in scene.targets:  # samples lie inside each region
         sel = np.array(hm.target) == t.id
         assert t.region.contains(hm.positions[sel]).all()
-    hm2 = views.heat_map(ses, samples_per_target=100)
+    hm2 = figures.heat_map(ses, samples_per_target=100)
     np.testing.assert_array_equal(hm.error_rrbc, hm2.error_rrbc)
 
 
 def test_monte_carlo_plots(scene):
     ses = ExplorerSession.from_scene(scene)
-    mc = views.monte_carlo(ses, trials=50, checks_per_target=5)
+    mc = figures.monte_carlo(ses, trials=50, checks_per_target=5)
     centres, a, b = mc.histogram(bins=20)
     assert a.sum() == pytest.approx(1.0) and b.sum() == pytest.approx(1.0)
     assert np.sqrt(np.mean(mc.rrbc**2)) < np.sqrt(np.mean(mc.rigid**2))
@@ -159,7 +159,7 @@ def test_monte_carlo_plots(scene):
     assert d[0] == pytest.approx(mc.distance[first].mean())
     # more noise and no bias: RRBC no longer helps (docs/theory.md §0)
     ses.update(bias_scale=0.0, noise_scale=3.0)
-    mc2 = views.monte_carlo(ses, trials=50, checks_per_target=5)
+    mc2 = figures.monte_carlo(ses, trials=50, checks_per_target=5)
     assert np.sqrt(np.mean(mc2.rrbc**2)) > np.sqrt(np.mean(mc2.rigid**2))
 
 
@@ -167,16 +167,16 @@ def test_monte_carlo_in_chunks_gives_one_batchs_numbers_and_stops_when_asked(sce
     """The app's Monte Carlo runs its trials in chunks, asking `should_stop` before each: the numbers are those of
     one batch (the noise and the seeds are drawn first), and a True answer stops it with `Cancelled` at once."""
     from rrbc_core.errors import Cancelled
-    from rrbc_core.session import views
+    from rrbc_core.session import figures
 
     ses = ExplorerSession.from_scene(scene)
-    chunked = views.monte_carlo(ses, trials=120, checks_per_target=3)  # 50 + 50 + 20
-    monkeypatch.setattr(views, "MC_CHUNK_TRIALS", 10_000)
-    whole = views.monte_carlo(ses, trials=120, checks_per_target=3)
+    chunked = figures.monte_carlo(ses, trials=120, checks_per_target=3)  # 50 + 50 + 20
+    monkeypatch.setattr(figures, "MC_CHUNK_TRIALS", 10_000)
+    whole = figures.monte_carlo(ses, trials=120, checks_per_target=3)
     # the same numbers up to the rounding of batched sums (the compiled kernels group trials differently)
     np.testing.assert_allclose(chunked.rigid, whole.rigid, rtol=0, atol=1e-9)
     np.testing.assert_allclose(chunked.rrbc, whole.rrbc, rtol=0, atol=1e-9)
-    monkeypatch.setattr(views, "MC_CHUNK_TRIALS", 10)
+    monkeypatch.setattr(figures, "MC_CHUNK_TRIALS", 10)
     asked = []
 
     def stop_at_third() -> bool:
@@ -184,7 +184,7 @@ def test_monte_carlo_in_chunks_gives_one_batchs_numbers_and_stops_when_asked(sce
         return len(asked) >= 3
 
     with pytest.raises(Cancelled, match="stopped after 20 of 120 trials"):
-        views.monte_carlo(ses, trials=120, checks_per_target=3, should_stop=stop_at_third)
+        figures.monte_carlo(ses, trials=120, checks_per_target=3, should_stop=stop_at_third)
     assert len(asked) == 3
 
 

@@ -1,4 +1,4 @@
-"""The error slice (rrbc_core.session.slices, rrbc_core.session.views.error_slice): the plane's grid in the robot frame,
+"""The error slice (rrbc_core.session.slices, rrbc_core.session.figures.error_slice): the plane's grid in the robot frame,
 values that mean what they say (no bias and no noise: no error anywhere; at a fiducial: only that fiducial's own
 noise is left), clear where the arm cannot reach, the hull flag against an independent hull test, and the story
 it tells on the default scene (error grows outside the fiducials' hull)."""
@@ -10,7 +10,7 @@ from scipy.spatial import Delaunay
 from rrbc_core.errors import InputError
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
-from rrbc_core.session import views
+from rrbc_core.session import figures
 from rrbc_core.session.explorer import ExplorerSession
 from rrbc_core.session.slices import MAX_GRID, SlicePlane, default_plane
 
@@ -51,7 +51,7 @@ def test_bad_planes_are_refused(kwargs):
 def test_without_bias_or_noise_nothing_is_wrong_anywhere(session):
     session.update(bias_scale=0.0, noise_scale=0.0)
     ev = session.last
-    sl = views.error_slice(session, default_plane(ev.targets.positions, "z", 15.0, n=12))
+    sl = figures.error_slice(session, default_plane(ev.targets.positions, "z", 15.0, n=12))
     reach = np.isfinite(sl.values["rigid"])
     assert reach.mean() > 0.9
     assert np.nanmax(sl.values["rigid"]) < 1e-6 and np.nanmax(sl.values["rrbc"]) < 1e-6
@@ -64,7 +64,7 @@ def test_at_a_fiducial_only_its_own_noise_is_left(session):
     i = list(ev.fiducial_ids).index("F5")
     f = ev.fiducial_positions[i]
     plane = SlicePlane("z", float(f[2]), (f[0] - 50, f[1] - 50), (f[0] + 50, f[1] + 50), n=3)  # centre = F5
-    sl = views.error_slice(session, plane)
+    sl = figures.error_slice(session, plane)
     np.testing.assert_allclose(sl.points[1, 1], f)
     e_rrbc, e_rigid = sl.values["rrbc"][1, 1], sl.values["rigid"][1, 1]
     noise = np.linalg.norm(ev.fiducial_readings.robot[i] - ev.fiducial_readings.truth[i])
@@ -73,12 +73,12 @@ def test_at_a_fiducial_only_its_own_noise_is_left(session):
 
 def test_unreachable_points_are_clear_and_the_hull_flag_matches_an_independent_test(session):
     ev = session.last
-    sl = views.error_slice(session, SlicePlane("y", 0.0, (-200.0, -300.0), (1400.0, 1800.0), n=24))
+    sl = figures.error_slice(session, SlicePlane("y", 0.0, (-200.0, -300.0), (1400.0, 1800.0), n=24))
     far = np.linalg.norm(sl.points, axis=-1) > 1500  # far beyond a UR5's ~950 mm (with its tool)
     assert far.any() and np.all(np.isnan(sl.values["rigid"][far])) and np.all(np.isnan(sl.values["rrbc"][far]))
     assert np.isfinite(sl.values["rigid"]).any()
     plane = default_plane(ev.fiducial_positions, "z", 30.0, margin=0.2, n=30)
-    sl = views.error_slice(session, plane)
+    sl = figures.error_slice(session, plane)
     hull = Delaunay(ev.fiducial_positions[ev.included])
     inside = hull.find_simplex(sl.points.reshape(-1, 3)) >= 0
     # the slice tests the hull in sensor space (readings); away from its surface the two agree
@@ -90,7 +90,7 @@ def test_unreachable_points_are_clear_and_the_hull_flag_matches_an_independent_t
 
 def test_rrbc_error_grows_outside_the_fiducials_hull_on_the_default_scene(session):
     ev = session.last
-    sl = views.error_slice(session, default_plane(ev.fiducial_positions, "z", 15.0, margin=0.35, n=40))
+    sl = figures.error_slice(session, default_plane(ev.fiducial_positions, "z", 15.0, margin=0.35, n=40))
     rrbc, rigid = sl.values["rrbc"], sl.values["rigid"]
     ok = np.isfinite(rrbc)
     inside, outside = ok & sl.inside_hull, ok & ~sl.inside_hull
@@ -98,5 +98,5 @@ def test_rrbc_error_grows_outside_the_fiducials_hull_on_the_default_scene(sessio
     assert np.median(rrbc[inside]) < 0.5 * np.median(rigid[inside])  # RRBC helps inside
     before = rrbc.copy()
     session.move("fiducials", "F5", ev.fiducial_positions[list(ev.fiducial_ids).index("F5")] + [0, 0, 40])
-    after = views.error_slice(session, sl.plane).values["rrbc"]
+    after = figures.error_slice(session, sl.plane).values["rrbc"]
     assert not np.allclose(np.nan_to_num(before), np.nan_to_num(after))  # the field follows the fiducials

@@ -6,7 +6,7 @@ import math
 import pytest
 
 from rrbc_core.errors import InputError
-from rrbc_core.session import views
+from rrbc_core.session import figures
 from rrbc_core.session.evaluation import SCALE_MAX, Settings
 
 
@@ -27,7 +27,7 @@ def test_trials_a_client_sends_are_bounded(app):
     _send(app.controls.montecarlo.mc_trials, 200000)
     assert app.state.mc_trials == 1000
     with pytest.raises(InputError, match="trials"):
-        views.monte_carlo(app.session, trials=200000)
+        figures.monte_carlo(app.session, trials=200000)
 
 
 @pytest.mark.parametrize("field", ["noise_scale", "bias_scale"])

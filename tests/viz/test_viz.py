@@ -20,7 +20,7 @@ import viser
 
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import parse_measurements
-from rrbc_core.session import views
+from rrbc_core.session import figures
 from rrbc_viz import colors
 from rrbc_viz.app import RunningApp
 from rrbc_viz.serve import serve
@@ -324,7 +324,7 @@ def test_display_controls_and_heat_map_follow_drags(app):
     app.evaluate.handle_drag("targets", "H1", [420.0, -150.0, 15.0], "end")  # the heat map follows at drag end
     pts = np.asarray(app.nodes.handle("/heatmap/points").points, float)[owner]
     assert abs(pts.mean(0)[0] - 420.0) < 3.0
-    hm = views.heat_map(app.session)
+    hm = figures.heat_map(app.session)
     np.testing.assert_allclose(app.state.heat_map.error_rrbc, hm.error_rrbc)
     with pytest.raises(InputError):
         app.evaluate.set_display(handles="both")  # no such option any more: selection decides
@@ -371,11 +371,9 @@ def test_stop_ends_a_running_monte_carlo_at_its_next_chunk_and_keeps_the_last_pl
     would have finished, the plots are still those of the last finished run, and the panel says it stopped."""
     import threading
 
-    from rrbc_core.session import views
-
     assert app.montecarlo.runner.wait_idle(60)
     before = app.state.mc_plots
-    monkeypatch.setattr(views, "MC_CHUNK_TRIALS", 5)
+    monkeypatch.setattr(figures, "MC_CHUNK_TRIALS", 5)
     started = threading.Event()
     real = app.controls.montecarlo.mc_stop
     app.montecarlo.runner._on_start = lambda: (app.montecarlo._mc_started(), started.set())
@@ -403,11 +401,11 @@ def test_exports_come_from_the_session(app):
     name, content = app.files.export("csv")
     assert name.endswith(".csv")
     mset = parse_measurements(content.decode("utf-8"), name)
-    ref = views.export_measurements(app.session)
+    ref = figures.export_measurements(app.session)
     assert mset.ids == ref.ids and mset.roles == ref.roles
     np.testing.assert_allclose(mset.sensor, ref.sensor)
     name, content = app.files.export("json")
-    assert json.loads(content) == json.loads(json.dumps(views.export_json(app.session)))
+    assert json.loads(content) == json.loads(json.dumps(figures.export_json(app.session)))
     app.controls.file.download_csv.value = True  # no tab connected: nothing to send, nothing breaks
     app.controls.file.download_json.value = True
 

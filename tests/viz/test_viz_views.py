@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rrbc_core.errors import InputError
-from rrbc_core.session import views
+from rrbc_core.session import figures
 from rrbc_viz import colors, selection_card, teaching
 from rrbc_viz.camera import PRESETS, CellGeometry, preset_view
 from rrbc_viz.node_values import landing_display, nice_up
@@ -121,7 +121,7 @@ def test_the_error_slice_follows_drags_and_its_controls(app):
     app.evaluate.handle_drag("fiducials", "F5", [475.0, -100.0, 45.0], "end")
     assert not np.array_equal(np.array(app.slice_node.handle.image), img0)  # the field follows the drag
     np.testing.assert_allclose(
-        app.state.error_slice.values["rrbc"], views.error_slice(app.session, sl.plane).values["rrbc"]
+        app.state.error_slice.values["rrbc"], figures.error_slice(app.session, sl.plane).values["rrbc"]
     )
     c.view.slice_axis.value = "vertical, along x (y)"
     assert app.state.error_slice.plane.axis == "y" and c.view.slice_offset.min < 0 < c.view.slice_offset.max
@@ -201,7 +201,7 @@ def test_the_arm_is_the_ur5s_own_description_with_its_meshes_posed_on_the_target
 
 
 def test_presentation_mode_enlarges_text_markers_and_labels_and_goes_back(app):
-    from rrbc_viz.controllers.views import PRESENTATION_LABEL_SCALE, PRESENTATION_MARKERS
+    from rrbc_viz.controllers.viewing import PRESENTATION_LABEL_SCALE, PRESENTATION_MARKERS
     from rrbc_viz.controls import NORMAL_CSS, PRESENTATION_CSS
 
     marker = app.state.display.marker_mm
@@ -273,7 +273,7 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
     from rrbc_core.geometry.label_layout import GAP_PX, label_boxes
     from rrbc_viz import teaching
     from rrbc_viz.camera import DEFAULT_IMAGE
-    from rrbc_viz.controllers.views import PRESENTATION_LABEL_SCALE
+    from rrbc_viz.controllers.viewing import PRESENTATION_LABEL_SCALE
 
     app.views.set_presentation(present)
     nodes = app.nodes

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.session import views
+from rrbc_core.session import figures
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.slices import VALUES as SLICE_VALUES
 from rrbc_core.session.slices import default_plane
@@ -205,7 +205,7 @@ class ViewController:
         """Recompute and redraw the error slice if its layer is on (caller holds the lock)."""
         if not self.ctx.state.layers.get("slice"):
             return
-        shown = self.ctx.state.error_slice = views.error_slice(self.ctx.session, self.slice_plane())
+        shown = self.ctx.state.error_slice = figures.error_slice(self.ctx.session, self.slice_plane())
         value = self.ctx.state.display.slice_value
         values = shown.values[value]
         if not np.any(np.isfinite(values)):

@@ -140,7 +140,7 @@ def load_source(source=None, mesh=None) -> Loaded:
 
 
 def _from_scene(scene, label: str) -> Loaded:
-    from rrbc_core.session.authoring import mark_saved
+    from rrbc_core.session.edits import mark_saved
 
     session = ExplorerSession.from_scene(scene)
     session.evaluate()

@@ -8,9 +8,9 @@ import json
 from typing import TYPE_CHECKING
 
 from rrbc_core.errors import InputError
-from rrbc_core.session import authoring, views
+from rrbc_core.session import edits, figures
 
-from .. import files
+from .. import sources
 
 if TYPE_CHECKING:
     from ..context import AppContext
@@ -26,7 +26,7 @@ class FileController:
     def ask_discard_unsaved(self, what: str, again, client) -> bool:
         """True (and a question asked) when the session has edits not saved as a scene: `again()` runs once the user
         agrees to discard them."""
-        if not authoring.has_unsaved_edits(self.ctx.session):
+        if not edits.has_unsaved_edits(self.ctx.session):
             return False
         self.ctx.controls.file.confirm(
             "Unsaved edits",
@@ -48,7 +48,7 @@ class FileController:
         ):
             return False
         try:
-            loaded = files.load_source(source, mesh)
+            loaded = sources.load_source(source, mesh)
         except InputError as exc:
             self.ctx.message(str(exc), client, title="File not loaded")
             return False
@@ -59,7 +59,7 @@ class FileController:
         return True
 
     def load_offered(self, label: str, mesh_label: str | None = None, client=None) -> bool:
-        """Open one of the files the File tab offers (`files.Library`), by its label; anything else is refused."""
+        """Open one of the files the File tab offers (`sources.Library`), by its label; anything else is refused."""
         try:
             path = self.ctx.library.pick(label)
             mesh = None if mesh_label is None else self.ctx.library.pick(mesh_label, meshes=True)
@@ -81,7 +81,7 @@ class FileController:
             if station == self.ctx.session.station:
                 return True
             try:
-                loaded = files.load_station(self.ctx.loaded, station)
+                loaded = sources.load_station(self.ctx.loaded, station)
             except InputError as exc:
                 self.ctx.message(str(exc), client, title="Station not opened")
                 return False
@@ -94,7 +94,7 @@ class FileController:
         ):
             return False
         try:
-            loaded = files.load_upload(name, content)
+            loaded = sources.load_upload(name, content)
         except InputError as exc:
             self.ctx.message(str(exc), client, title="Upload not loaded")
             return False
@@ -109,14 +109,14 @@ class FileController:
         self.ctx.message(why, client, title="Upload refused")
 
     def export(self, what: str) -> tuple[str, bytes]:
-        """(file name, content) of "csv" (views.export_measurements(session) as a measurement file) or "json"
-        (views.export_json(session))."""
+        """(file name, content) of "csv" (figures.export_measurements(session) as a measurement file) or "json"
+        (figures.export_json(session))."""
         with self.ctx.lock:
-            slug = files.slug(self.ctx.session.name)
+            slug = sources.slug(self.ctx.session.name)
             if what == "csv":
                 s = self.ctx.session.settings
-                text = files.measurements_csv(
-                    views.export_measurements(self.ctx.session),
+                text = sources.measurements_csv(
+                    figures.export_measurements(self.ctx.session),
                     comments=[
                         f"exported by the rrbc browser app from {self.ctx.session.name}",
                         f"settings: registration {s.registration}, interpolation {s.interpolation}, noise x{s.noise_scale:g}, "
@@ -126,7 +126,7 @@ class FileController:
                 return f"rrbc-{slug}.csv", text.encode("utf-8")
             if what == "json":
                 return f"rrbc-{slug}-results.json", (
-                    json.dumps(views.export_json(self.ctx.session), indent=2) + "\n"
+                    json.dumps(figures.export_json(self.ctx.session), indent=2) + "\n"
                 ).encode("utf-8")
         raise InputError(f"unknown export '{what}': csv or json")
 

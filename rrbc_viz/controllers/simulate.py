@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..montecarlo import MonteCarloRunner
+from ..montecarlo_runner import MonteCarloRunner
 
 if TYPE_CHECKING:
     from ..context import AppContext

@@ -1,6 +1,6 @@
 """Monte Carlo in the background: the UI never waits for it.
 
-`MonteCarloRunner.request(session_snapshot, trials)` queues a run of `views.monte_carlo(session, trials)` on one worker
+`MonteCarloRunner.request(session_snapshot, trials)` queues a run of `figures.monte_carlo(session, trials)` on one worker
 thread (a `worker.CoalescingWorker`). Requests coalesce: a run starts only once no newer request has come for
 `delay_s` (a slider being dragged asks many times), while a run is under way only the newest request is kept,
 and a result that a newer request has made stale is dropped, so the plots always end on the latest setup. A run
@@ -17,7 +17,7 @@ import traceback
 from collections.abc import Callable
 
 from rrbc_core.errors import Cancelled, InputError
-from rrbc_core.session import views
+from rrbc_core.session import figures
 
 from .drag_queue import drags_waiting
 from .worker import CoalescingWorker
@@ -63,7 +63,7 @@ class MonteCarloRunner:
         start = time.perf_counter()
         plots, error = None, None
         try:
-            plots = views.monte_carlo(session, trials=trials, seed=seed, should_stop=lambda: _between_chunks(fresh))
+            plots = figures.monte_carlo(session, trials=trials, seed=seed, should_stop=lambda: _between_chunks(fresh))
         except Cancelled:
             return  # stopped or superseded: whoever stopped it says so
         except InputError as exc:

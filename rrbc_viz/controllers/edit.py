@@ -1,6 +1,6 @@
 """Authoring a cell in the app: a click on the cell adds the chosen kind of point where the click's ray meets the
 mesh; delete the selected point; undo/redo; move the sensor; upload a mesh; download the scene, the measurement
-plan and Slicer markups. The session does the editing (`rrbc_core.session.authoring`); here the click becomes a
+plan and Slicer markups. The session does the editing (`rrbc_core.session.edits`); here the click becomes a
 point and the scene is redrawn (`AuthoringController`).
 
 Frames and units: robot frame, mm. A registration point goes `REGISTRATION_LIFT_MM` above the clicked surface
@@ -20,9 +20,9 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.models.visibility import cast_from
-from rrbc_core.session import authoring, views
+from rrbc_core.session import edits, figures
 
-from .. import files
+from .. import sources
 from ..authoring_panel import CLICK_MODES, REGISTRATION_LIFT_MM
 
 if TYPE_CHECKING:
@@ -87,7 +87,7 @@ class AuthoringController:
                 hit = hit + [0.0, 0.0, REGISTRATION_LIFT_MM]
             before = set(self._ids(kind))
             ev = self._author(
-                lambda s: authoring.add_point(s, kind, hit, region_mm=self.ctx.state.target_region_mm), client
+                lambda s: edits.add_point(s, kind, hit, region_mm=self.ctx.state.target_region_mm), client
             )
             if ev is None:
                 return None
@@ -112,16 +112,16 @@ class AuthoringController:
                 return None
             kind, pid = self.ctx.state.selected
             self.ctx.state.selected = None
-            return self._author(lambda s: authoring.remove_point(s, kind, pid), client)
+            return self._author(lambda s: edits.remove_point(s, kind, pid), client)
 
     def undo(self, client=None):
-        return self._author(lambda s: authoring.undo(s), client)
+        return self._author(lambda s: edits.undo(s), client)
 
     def redo(self, client=None):
-        return self._author(lambda s: authoring.redo(s), client)
+        return self._author(lambda s: edits.redo(s), client)
 
     def move_sensor(self, position, client=None):
-        return self._author(lambda s: authoring.move_sensor(s, position), client)
+        return self._author(lambda s: edits.move_sensor(s, position), client)
 
     def _author(self, change, client):
         """Apply a structural edit to the session and redraw the scene (points were added or removed)."""
@@ -150,15 +150,15 @@ class AuthoringController:
     def sync_history(self) -> None:
         """Undo and Redo (File tab) and the Plan tab's Undo offered as the session's edit history allows."""
         session = self.ctx.session
-        self.ctx.controls.sync_authoring(authoring.can_undo(session), authoring.can_redo(session))
-        self.ctx.planning.sync_undo(authoring.can_undo(session))
+        self.ctx.controls.sync_authoring(edits.can_undo(session), edits.can_redo(session))
+        self.ctx.planning.sync_undo(edits.can_undo(session))
 
     def upload_mesh(self, name: str, content: bytes, client=None) -> bool:
         """Use an uploaded mesh (any format trimesh reads; robot frame, mm) as the cell's mesh: it is drawn, clicks
         land on it, and a saved scene refers to it (kept in a temporary directory of this server; save the mesh
         beside the downloaded scene)."""
         with tempfile.TemporaryDirectory(prefix="rrbc-upload-") as tmp:
-            src = Path(tmp) / files.safe_file_name(name, Path(str(name)).suffix.lower() or ".stl")
+            src = Path(tmp) / sources.safe_file_name(name, Path(str(name)).suffix.lower() or ".stl")
             src.write_bytes(content)
             return self.upload_mesh_file(name, src, client)
 
@@ -174,7 +174,7 @@ class AuthoringController:
             return False
         with self.ctx.lock:
             d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
-            path = d / files.safe_file_name(name, suffix)  # the user's own name: a saved scene names it so
+            path = d / sources.safe_file_name(name, suffix)  # the user's own name: a saved scene names it so
             shutil.move(str(src), path)
             try:
                 mesh = load_cell_mesh(path)
@@ -182,7 +182,7 @@ class AuthoringController:
                 shutil.rmtree(d, ignore_errors=True)
                 self.ctx.message(str(exc).replace(str(path), str(name)), client, title="Upload refused")
                 return False
-            self.ctx.loaded = files.Loaded(self.ctx.loaded.session, mesh, self.ctx.loaded.label)
+            self.ctx.loaded = sources.Loaded(self.ctx.loaded.session, mesh, self.ctx.loaded.label)
             if self.uploaded_mesh is not None:  # the mesh it replaces: its temporary copy goes
                 shutil.rmtree(self.uploaded_mesh.parent, ignore_errors=True)
             self.uploaded_mesh = path
@@ -216,8 +216,8 @@ class AuthoringController:
         opts = NewSceneOptions(robot=robot, tool_mm=float(scene.tool_mm), sensor_kind=scene.sensor_kind, name=mesh.stem)
         d = Path(tempfile.mkdtemp(prefix="rrbc-mesh-"))
         try:
-            made = empty_scene(mesh, d / f"{files.slug(mesh.stem)}.toml", opts)
-            loaded = files.load_source(made.path)
+            made = empty_scene(mesh, d / f"{sources.slug(mesh.stem)}.toml", opts)
+            loaded = sources.load_source(made.path)
         except InputError as exc:
             shutil.rmtree(d, ignore_errors=True)
             self.ctx.message(str(exc).replace(str(mesh), mesh.name), client, title="No new cell")
@@ -226,7 +226,7 @@ class AuthoringController:
             shutil.rmtree(d, ignore_errors=True)
             self.ctx.message(f"{mesh.name}: no new cell: {type(exc).__name__}", client, title="No new cell")
             return False
-        loaded = files.Loaded(loaded.session, loaded.mesh, f"a new cell on {mesh.name}")
+        loaded = sources.Loaded(loaded.session, loaded.mesh, f"a new cell on {mesh.name}")
         old = self.uploaded_mesh
         self.uploaded_mesh = d / Path(loaded.session.mesh_path).name  # the copy beside the new scene
         self.ctx.install(loaded)
@@ -263,15 +263,15 @@ class AuthoringController:
         from rrbc_core.io.slicer_markups import to_markups
 
         with self.ctx.lock:
-            slug = files.slug(self.ctx.session.name)
+            slug = sources.slug(self.ctx.session.name)
             if what == "scene":
                 mesh = self.uploaded_mesh
-                text = authoring.scene_toml(self.ctx.session, mesh=mesh.name if mesh is not None else None)
+                text = edits.scene_toml(self.ctx.session, mesh=mesh.name if mesh is not None else None)
                 return [(f"{slug}.toml", text.encode("utf-8"))]
             if what == "plan":
-                return [(f"{slug}-measurement-plan.csv", authoring.measurement_plan(self.ctx.session).encode("utf-8"))]
+                return [(f"{slug}-measurement-plan.csv", edits.measurement_plan(self.ctx.session).encode("utf-8"))]
             if what == "slicer":
-                sensor, robot = to_markups(views.export_measurements(self.ctx.session))
+                sensor, robot = to_markups(figures.export_measurements(self.ctx.session))
                 return [
                     (f"{slug}_sensor.mrk.json", (json.dumps(sensor, indent=1) + "\n").encode("utf-8")),
                     (f"{slug}_robot.mrk.json", (json.dumps(robot, indent=1) + "\n").encode("utf-8")),
@@ -287,7 +287,7 @@ class AuthoringController:
         for name, content in out:  # saved at once under their full names (not links in a notification)
             (client or self.ctx.server).send_file_download(name, content, save_immediately=True)
         if what == "scene":
-            authoring.mark_saved(self.ctx.session)
+            edits.mark_saved(self.ctx.session)
             mesh = self.uploaded_mesh.name if self.uploaded_mesh is not None else Path(self.ctx.session.mesh_path).name
             self.ctx.message(
                 f"Saved {out[0][0]}: keep the mesh {mesh} beside it (the scene names it)", client, title="Saved",
