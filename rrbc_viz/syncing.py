@@ -40,3 +40,36 @@ def clamped(handle, fallback: float | None = None) -> float:
     if hi is not None:
         v = min(v, float(hi))
     return v
+
+
+class LatestOnly:
+    """Runs `fn` with the newest arguments only: a call arriving while one runs leaves its arguments and returns at
+    once; when the running call ends, the newest waiting arguments run (those in between are dropped). For controls
+    a user moves quickly (a slider's arrow keys send one update per step) whose every update is expensive."""
+
+    def __init__(self, fn):
+        import threading
+
+        self._fn = fn
+        self._lock = threading.Lock()
+        self._pending: tuple | None = None
+        self._running = False
+
+    def __call__(self, *args, **kwargs) -> None:
+        with self._lock:
+            self._pending = (args, kwargs)
+            if self._running:
+                return
+            self._running = True
+        while True:
+            with self._lock:
+                job, self._pending = self._pending, None
+                if job is None:
+                    self._running = False
+                    return
+            try:
+                self._fn(*job[0], **job[1])
+            except Exception:  # noqa: BLE001 - the caller's thread carries on; the next value still runs
+                import traceback
+
+                traceback.print_exc()

@@ -13,7 +13,7 @@ import viser
 from rrbc_core.session.tools import TILT_MAX_DEG, VARIED_TILT_DEG
 from rrbc_core.session.vec_view import VecView
 
-from .syncing import clamped
+from .syncing import LatestOnly, clamped
 
 if TYPE_CHECKING:
     from .actions import Actions
@@ -88,11 +88,15 @@ class VecPanel:
             if not syncing.on:
                 app.vec.set_varied_registration(bool(self.varied.value), client=event.client)
 
+        def apply_tool(client) -> None:  # the sliders' values when it runs: the newest the user chose
+            if self.target.value:
+                app.vec.set_target_tool(self.target.value, clamped(self.tilt), clamped(self.azimuth), client=client)
+
+        latest = LatestOnly(apply_tool)  # arrow keys send an update per degree: only the newest is computed
+
         def on_tool(event: viser.GuiEvent) -> None:
             if not syncing.on and self.target.value:
-                app.vec.set_target_tool(
-                    self.target.value, clamped(self.tilt), clamped(self.azimuth), client=event.client
-                )
+                latest(event.client)
 
         self.tilt.on_update(on_tool)
         self.azimuth.on_update(on_tool)
