@@ -161,10 +161,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     v.set_defaults(run=_cmd_view)
 
-    from rrbc_core import cli_authoring, cli_reproduce
+    from rrbc_core import cli_authoring, cli_check_model, cli_reproduce
 
     cli_reproduce.add_parsers(sub)
     cli_authoring.add_parsers(sub)
+    cli_check_model.add_parsers(sub)
     return p
 
 

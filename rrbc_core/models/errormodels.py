@@ -255,6 +255,10 @@ class ErrorModel:
         ks = _check_kinds(kinds)
         return ErrorModel(tuple(t for t in self.robot if t.kind in ks), tuple(t for t in self.sensor if t.kind in ks))
 
+    def extended(self, robot=(), sensor=()) -> ErrorModel:
+        """The model with more terms after its own on each side."""
+        return ErrorModel(self.robot + tuple(robot), self.sensor + tuple(sensor))
+
     @property
     def kinds(self) -> tuple[str, ...]:
         return tuple(t.kind for t in self.robot + self.sensor)

@@ -1,0 +1,153 @@
+"""What `rrbc check-model` adds to a scene: the unexplained effects as error terms (docs/check_model.md).
+
+Every added term acts on the ROBOT side, in the robot frame (= the scene frame), mm. That is no loss: a row's rigid
+residual, and a check's error, depend on a robot-side bias β_r and a sensor-side bias β_s only through
+β_r − R β_s (models/measurement.py), so a measured effect written robot-side predicts the same residuals
+whichever instrument carries it, and its numbers read as `diagnose` reports them:
+
+- `scale` (diagnose's `ppm`: robot ≈ (1 + ppm·1e-6) R sensor + t) -> `scale` with that ppm about the points'
+  centroid; `affine` (diagnose's symmetric `matrix` G, which includes any uniform scale) -> `affine` with G about
+  the centroid, and then no separate `scale`;
+- `drift` (diagnose's `rate_mm_per_s`, the rate of change of the residual) -> `drift` with that rate from the
+  file's mean time (a constant offset is the registration's); beside a field, where diagnose gives no rate, the
+  rate is the least-squares slope of the remainder on time;
+- `smooth_field` -> `sampled_field`: the field's smoothed values (the kriging mean of the fitted field model,
+  `diagnosis_field.fit_field`, at up to 500 of the points) with its correlation length; the linear and drift terms
+  written beside it are removed first. A field known at points is uncertain between them: the RMS of its
+  leave-one-out prediction error beyond the fitted noise is added as an `isotropic_noise` term, so that a new
+  point's predicted region holds that uncertainty;
+- `isotropic_noise` -> `isotropic_noise` with the missing sigma;
+- `outliers` -> `outliers` with the share of points flagged and their RMS distance.
+
+Not written (listed with the reason): `kinematic` and `compliance` (their parameters are identified by
+`rrbc calibrate`, not by diagnose) and `anisotropic_noise` (diagnose's axis is not a line of sight).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rrbc_core.analysis.diagnosis import Effect
+from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.models.errormodels import ErrorTerm
+from rrbc_core.models.errorterms import error_model_from_dict
+
+__all__ = ["AddedTerm", "extension_terms"]
+
+
+@dataclass(frozen=True, eq=False)
+class AddedTerm:
+    """One added robot-side term: the effect it stands for, its TOML table, a one-line comment and the term."""
+
+    effect: str
+    table: dict
+    comment: str
+    term: ErrorTerm
+
+
+def _rate(time: np.ndarray, resid: np.ndarray) -> np.ndarray:
+    t = time - np.mean(time)
+    den = float(np.sum(t**2))
+    return np.zeros(3) if den <= 0 else (t @ (resid - resid.mean(axis=0))) / den
+
+
+def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, float, float]:
+    """The `sampled_field` table, its RMS (mm) and the sigma (mm per axis) of its leave-one-out prediction error
+    beyond the noise."""
+    from rrbc_core.analysis.diagnosis_field import fit_field
+
+    fm = fit_field(points, resid - resid.mean(axis=0))
+    smooth = np.empty((len(fm.index), 3))
+    for a in range(3):
+        shrink = fm.lam[a] * fm.d / (fm.lam[a] * fm.d + 1.0)
+        smooth[:, a] = fm.u @ (shrink * fm.z[:, a])
+    # leave-one-out residuals of the field's prediction, per axis: e = [K_λ⁻¹ r]_i / [K_λ⁻¹]_ii, K_λ = λK + I
+    loo = np.empty_like(smooth)
+    for a in range(3):
+        inv = 1.0 / (fm.lam[a] * fm.d + 1.0)
+        loo[:, a] = (fm.u @ (inv * fm.z[:, a])) / np.maximum((fm.u**2) @ inv, 1e-300)
+    excess = float(np.mean(loo**2)) - fm.sigma2  # beyond the noise: the field's error between its points
+    table = {
+        "type": "sampled_field",
+        "points_mm": np.round(fm.points, 4).tolist(),
+        "vectors_mm": np.round(smooth, 6).tolist(),
+        "length_mm": round(float(fm.length_mm), 4),
+    }
+    return table, float(np.sqrt(np.mean(np.sum(smooth**2, axis=1)))), float(np.sqrt(max(excess, 0.0)))
+
+
+def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[list[AddedTerm], list[str]]:
+    """The added terms for `effects` (module docstring), fitted on `remainder` (`scene_check`: sensor = each row's
+    mapped reading in the robot frame, robot = that plus what the model leaves unexplained).
+
+    Returns
+    -------
+    (list of AddedTerm, list of str)
+        The terms in the order written, and one sentence per effect not written.
+    """
+    by = {e.name: e for e in effects}
+    pts = np.asarray(remainder.sensor, float)
+    resid = np.asarray(remainder.robot, float) - pts
+    centre = np.round(pts.mean(axis=0), 3).tolist()
+    time = np.asarray(remainder.time, float)
+    tables: list[tuple[str, dict, str]] = []
+    explained = np.zeros_like(resid)
+    if "affine" in by:
+        g = np.asarray(by["affine"].parameters["matrix"], float)
+        tables.append(
+            ("affine", {"type": "affine", "matrix": g.tolist(), "center_mm": centre}, "diagnose's affine matrix G")
+        )
+        explained += (pts - pts.mean(axis=0)) @ g.T
+    elif "scale" in by:
+        ppm = float(by["scale"].parameters["ppm"])
+        tables.append(("scale", {"type": "scale", "ppm": ppm, "center_mm": centre}, "diagnose's uniform scale"))
+        explained += ppm * 1e-6 * (pts - pts.mean(axis=0))
+    if "drift" in by and np.all(np.isfinite(time)):
+        rate = by["drift"].parameters.get("rate_mm_per_s") or []
+        how = "diagnose's drift rate"
+        if len(rate) != 3:
+            rate, how = _rate(time, resid - explained).tolist(), "the remainder's slope on time (beside the field)"
+        t0 = round(float(np.mean(time)), 3)
+        tables.append(("drift", {"type": "drift", "rate_mm_per_s": [float(v) for v in rate], "t0_s": t0}, how))
+        explained += np.outer(time - t0, rate)
+    if "smooth_field" in by:
+        table, rms, between = _field_table(pts, resid - explained)
+        tables.append(("smooth_field", table, f"the measured field smoothed at its points ({rms:.3g} mm RMS)"))
+        if between > 0:
+            tables.append(
+                (
+                    "smooth_field",
+                    {"type": "isotropic_noise", "sigma_mm": round(between, 6)},
+                    "the field's error between its points (leave-one-out, beyond the noise): a new point's uncertainty",
+                )
+            )
+    if "outliers" in by:
+        ids = set(by["outliers"].parameters.get("ids", []))
+        is_out = np.array([i in ids for i in remainder.ids])
+        n_ids = len(set(remainder.ids))
+        size = float(np.sqrt(np.mean(np.sum(resid[is_out] ** 2, axis=1)))) if is_out.any() else 0.0
+        tables.append(
+            (
+                "outliers",
+                {"type": "outliers", "fraction": round(len(ids) / max(n_ids, 1), 6), "size_mm": round(size, 6)},
+                f"{len(ids)} of {n_ids} points flagged, their RMS distance",
+            )
+        )
+    if "isotropic_noise" in by:
+        sigma = float(by["isotropic_noise"].parameters["sigma_mm"])
+        tables.append(("isotropic_noise", {"type": "isotropic_noise", "sigma_mm": sigma}, "the noise the model lacks"))
+    not_written = []
+    for name, why in (
+        ("kinematic", "its joint-level parameters come from `rrbc calibrate --robot ...`, not from diagnose"),
+        ("compliance", "its joint stiffnesses come from `rrbc calibrate --robot ... --compliance`"),
+        ("anisotropic_noise", "diagnose's noise axis is not a line of sight; add an anisotropic_noise term by hand"),
+    ):
+        if name in by:
+            not_written.append(f"{name}: not written ({why})")
+    added = []
+    for effect, table, how in tables:
+        term = error_model_from_dict({"robot": [table]}, f"check-model's {effect} term").robot[0]
+        added.append(AddedTerm(effect, table, f"added by rrbc check-model for '{effect}': {how}", term))
+    return added, not_written
