@@ -86,9 +86,12 @@ def _text(res, args, written) -> str:
         flag = "   OUTSIDE" if key in outside else ""
         lines.append(f"  {label:<12}{m:>10.4g}   {iv.mean:.4g} [{iv.lo95:.4g}, {iv.hi95:.4g}]{flag}")
     n_out = len(res.outside)
+    ch = res.outside_by_chance
     lines.append(
-        f"rows outside their own 95 % region: {n_out} of {res.n_rows} ({100 * n_out / res.n_rows:.0f} %; about 5 % "
-        "by chance)" + (":" if n_out else "")
+        f"rows outside their own 95 % region: {n_out} of {res.n_rows} (files of the model: {ch.lo95:.0f} to "
+        f"{ch.hi95:.0f}, mean {ch.mean:.1f})"
+        + (" MORE THAN CHANCE" if n_out > ch.hi95 else "")
+        + (":" if n_out else "")
     )
     for p in res.outside[:10]:
         where = f" (group {p.group})" if p.group else ""

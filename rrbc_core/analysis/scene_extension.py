@@ -13,9 +13,11 @@ whichever instrument carries it, and its numbers read as `diagnose` reports them
   rate is the least-squares slope of the remainder on time;
 - `smooth_field` -> `sampled_field`: the field's smoothed values (the kriging mean of the fitted field model,
   `diagnosis_field.fit_field`, at up to 500 of the points) with its correlation length; the linear and drift terms
-  written beside it are removed first. A field known at points is uncertain between them: the RMS of its
-  leave-one-out prediction error beyond the fitted noise is added as an `isotropic_noise` term, so that a new
-  point's predicted region holds that uncertainty;
+  written beside it are removed first, and the field's own linear part over the points (least squares) is written
+  as an `affine` term beside it (the remainder is relative to a registration on a few points: it carries a trend
+  that a zero-mean field would bend towards zero away from its points). A field known at points is uncertain, most between them: a
+  `field_uncertainty` term beside it draws, every trial, from the fitted field model's posterior (its prior
+  variances and noise), so that a prediction holds what the estimate does not know;
 - `isotropic_noise` -> `isotropic_noise` with the missing sigma;
 - `outliers` -> `outliers` with the share of points flagged and their RMS distance.
 
@@ -53,9 +55,9 @@ def _rate(time: np.ndarray, resid: np.ndarray) -> np.ndarray:
     return np.zeros(3) if den <= 0 else (t @ (resid - resid.mean(axis=0))) / den
 
 
-def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, float, float]:
-    """The `sampled_field` table, its RMS (mm) and the sigma (mm per axis) of its leave-one-out prediction error
-    beyond the noise."""
+def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, float, dict]:
+    """The `sampled_field` table (the field's posterior mean at the points), its RMS (mm) and the
+    `field_uncertainty` table (its posterior covariance: the fitted prior variances and noise)."""
     from rrbc_core.analysis.diagnosis_field import fit_field
 
     fm = fit_field(points, resid - resid.mean(axis=0))
@@ -63,19 +65,20 @@ def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, float, fl
     for a in range(3):
         shrink = fm.lam[a] * fm.d / (fm.lam[a] * fm.d + 1.0)
         smooth[:, a] = fm.u @ (shrink * fm.z[:, a])
-    # leave-one-out residuals of the field's prediction, per axis: e = [K_λ⁻¹ r]_i / [K_λ⁻¹]_ii, K_λ = λK + I
-    loo = np.empty_like(smooth)
-    for a in range(3):
-        inv = 1.0 / (fm.lam[a] * fm.d + 1.0)
-        loo[:, a] = (fm.u @ (inv * fm.z[:, a])) / np.maximum((fm.u**2) @ inv, 1e-300)
-    excess = float(np.mean(loo**2)) - fm.sigma2  # beyond the noise: the field's error between its points
     table = {
         "type": "sampled_field",
         "points_mm": np.round(fm.points, 4).tolist(),
         "vectors_mm": np.round(smooth, 6).tolist(),
         "length_mm": round(float(fm.length_mm), 4),
     }
-    return table, float(np.sqrt(np.mean(np.sum(smooth**2, axis=1)))), float(np.sqrt(max(excess, 0.0)))
+    unknown = {
+        "type": "field_uncertainty",
+        "points_mm": table["points_mm"],
+        "length_mm": table["length_mm"],
+        "field_var_mm2": [float(v) for v in fm.lam * fm.sigma2],
+        "noise_var_mm2": float(fm.sigma2),
+    }
+    return table, float(np.sqrt(np.mean(np.sum(smooth**2, axis=1)))), unknown
 
 
 def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[list[AddedTerm], list[str]]:
@@ -113,16 +116,27 @@ def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[l
         tables.append(("drift", {"type": "drift", "rate_mm_per_s": [float(v) for v in rate], "t0_s": t0}, how))
         explained += np.outer(time - t0, rate)
     if "smooth_field" in by:
-        table, rms, between = _field_table(pts, resid - explained)
-        tables.append(("smooth_field", table, f"the measured field smoothed at its points ({rms:.3g} mm RMS)"))
-        if between > 0:
-            tables.append(
-                (
-                    "smooth_field",
-                    {"type": "isotropic_noise", "sigma_mm": round(between, 6)},
-                    "the field's error between its points (leave-one-out, beyond the noise): a new point's uncertainty",
-                )
+        rest = resid - explained
+        x = np.column_stack([np.ones(len(pts)), pts - pts.mean(axis=0)])
+        coef, *_ = np.linalg.lstsq(x, rest, rcond=None)  # (4, 3): the field's offset and linear part
+        lin = coef[1:].T  # displacement = lin @ (x − centre)
+        tables.append(
+            (
+                "smooth_field",
+                {"type": "affine", "matrix": np.round(lin, 9).tolist(), "center_mm": centre},
+                "the field's linear part over these points (a zero-mean field cannot carry a trend)",
             )
+        )
+        table, rms, unknown = _field_table(pts, rest - x @ coef)
+        tables.append(("smooth_field", table, f"the measured field smoothed at its points ({rms:.3g} mm RMS)"))
+        tables.append(
+            (
+                "smooth_field",
+                unknown,
+                "what the smoothed field does not know (its posterior covariance: small near its points, the "
+                "prior's far from them)",
+            )
+        )
     if "outliers" in by:
         ids = set(by["outliers"].parameters.get("ids", []))
         is_out = np.array([i in ids for i in remainder.ids])

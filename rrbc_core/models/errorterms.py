@@ -27,6 +27,7 @@ from rrbc_core.models.errormodels import (
     _Term,
     _vector,
 )
+from rrbc_core.models.fieldterms import FieldUncertainty, SampledField  # noqa: F401 (registered in TERM_TYPES)
 from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, DHParameters, forward, inverse_path, perturbed
 from rrbc_core.models.loads import gravity_loads
 
@@ -282,72 +283,6 @@ class SmoothField(_Term):
     def sample(self, points: PointSet, side: str, rng: np.random.Generator, trials: int) -> np.ndarray:
         _check_trials(trials)
         return self.field(points.frame(self._side(side)))[None]
-
-
-MAX_FIELD_SAMPLES = 2000  # points of a sampled field: its solve is O(M³) once, its evaluation O(P·M)
-
-
-@dataclass(frozen=True)
-class SampledField(_Term):
-    """A fixed smooth vector field known at points (mm), in the side's frame: displacement at x is
-    Σ_j k(x, p_j) α_j with k(x, p) = exp(−|x − p|²/(2 length_mm²)) and α the solution of (K + 1e-6·I) α = vectors_mm,
-    K_ij = k(p_i, p_j): the smooth interpolant through (`points_mm`, `vectors_mm`), going to zero far from them (a
-    Gaussian process's mean). What `rrbc check-model` writes for a smooth field it measured (docs/check_model.md).
-    `points_mm` and `vectors_mm`: lists of [x, y, z], the same length, 1 to 2000. Either side.
-    """
-
-    points_mm: tuple
-    vectors_mm: tuple
-    length_mm: float
-    kind: ClassVar[str] = "sampled_field"
-    random: ClassVar[bool] = False
-    _alpha: np.ndarray = field(init=False, repr=False, compare=False)
-
-    def __post_init__(self):
-        pts = _samples("points_mm", self.points_mm)
-        vec = _samples("vectors_mm", self.vectors_mm)
-        if len(pts) != len(vec):
-            raise InputError(f"points_mm has {len(pts)} points but vectors_mm {len(vec)} vectors: one per point")
-        _set(self, "length_mm", _number("length_mm", self.length_mm, positive=True, unit="mm"))
-        _set(self, "points_mm", tuple(tuple(float(v) for v in p) for p in pts))
-        _set(self, "vectors_mm", tuple(tuple(float(v) for v in p) for p in vec))
-        kmat = self._kernel(pts)
-        alpha = np.linalg.solve(kmat + 1e-6 * np.eye(len(pts)), vec)
-        alpha.setflags(write=False)
-        _set(self, "_alpha", alpha)
-
-    def _kernel(self, x: np.ndarray) -> np.ndarray:
-        p = np.asarray(self.points_mm, float)
-        d2 = np.sum((x[:, None, :] - p[None]) ** 2, axis=-1)
-        return np.exp(-d2 / (2.0 * self.length_mm**2))
-
-    def field(self, x) -> np.ndarray:
-        """The field at points x (P, 3) mm -> (P, 3) mm."""
-        xa = np.atleast_2d(np.asarray(x, dtype=float))
-        out = np.empty(xa.shape)
-        step = 1024  # bounded memory: (step, M, 3) at a time
-        for i in range(0, len(xa), step):
-            out[i : i + step] = self._kernel(xa[i : i + step]) @ self._alpha
-        return out
-
-    def sample(self, points: PointSet, side: str, rng: np.random.Generator, trials: int) -> np.ndarray:
-        _check_trials(trials)
-        return self.field(points.frame(self._side(side)))[None]
-
-
-def _samples(name: str, value) -> np.ndarray:
-    """(M, 3) finite floats from a list of [x, y, z], 1 <= M <= MAX_FIELD_SAMPLES."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a list of [x, y, z] numbers (mm)") from None
-    if arr.ndim != 2 or arr.shape[1] != 3 or not 1 <= len(arr) <= MAX_FIELD_SAMPLES:
-        raise InputError(
-            f"{name} must be a list of 1 to {MAX_FIELD_SAMPLES} [x, y, z] triples (mm), got shape {arr.shape}"
-        )
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"{name} holds a value that is not a finite number")
-    return arr
 
 
 def _arm_joints(kind: str, dh: DHParameters, points: PointSet) -> np.ndarray:
