@@ -247,6 +247,21 @@ def _name(
     return effects, rem, diag
 
 
+def _arm(mset: MeasurementSet, scene, robot: str) -> dict:
+    """diagnose's arm model for the scene's robot when the file has its joint columns: a UR5/UR10 (q1..q6) or the
+    scene's URDF (columns named after its joints); {} otherwise."""
+    if robot != "none":
+        return {"robot": robot, "tool_mm": scene.tool_mm} if "q1" in mset.extra else {}
+    if scene.robot_urdf is None:
+        return {}
+    from rrbc_core.models.arm_description import urdf_arm_description
+
+    chain = urdf_arm_description(scene.robot_urdf, tip=scene.robot_tip, tool_mm=(0.0, 0.0, scene.tool_mm)).chain
+    if not all(c in mset.extra for c in chain.columns):
+        return {}
+    return {"urdf": scene.robot_urdf, "tip": scene.robot_tip, "tool_mm": (0.0, 0.0, scene.tool_mm)}
+
+
 def _time_on_position(rem: MeasurementSet) -> float:
     """R² of the rows' times on their positions (0 without usable times)."""
     t = np.asarray(rem.time, float)
@@ -323,7 +338,7 @@ def check_scene_model(
     model: ErrorModel = scene.error_model
     robot = scene.robot_model if scene.robot_model in ("ur5", "ur10") else "none"
     stations = at_physical_points(mset, file_stations(mset, robot, scene.tool_yaw_deg), model)
-    arm = {"robot": robot, "tool_mm": scene.tool_mm} if robot != "none" and "q1" in mset.extra else {}
+    arm = _arm(mset, scene, robot)
     meas = measured_figures(mset, stations)
     pred = predict(mset, stations, model, trials, seed)
     mean, cov = _moments(pred)
@@ -377,8 +392,8 @@ def check_scene_model(
         )
     if "q1" in mset.extra and not arm:
         limits.append(
-            "the file has joint columns but the scene's robot is not a UR5/UR10: joints were not used for the tool "
-            "orientation and the arm's error was not tested"
+            "the file has q1..q6 columns but the scene's robot is neither a UR5/UR10 nor a URDF with those joints: "
+            "the arm's error was not tested"
         )
     return SceneCheck(
         predicted,

@@ -305,11 +305,11 @@ def _robot_urdf(c: Checker, rb: dict, robot_model: str, toml_path: Path, tool_mm
             'kinematics do not model (set robot.model = "none")',
         )
     from rrbc_core.models.arm_description import urdf_arm_description
-    from rrbc_core.models.urdf import PACKAGED
+    from rrbc_core.models.urdf import BUNDLED, PACKAGED
 
     ref = c.string(rb["urdf"], "robot.urdf")
     tip = c.string(rb["tip"], "robot.tip") if "tip" in rb else None
-    if ref in PACKAGED:
+    if ref in PACKAGED or ref in BUNDLED:
         where: str | Path = ref
     else:
         where = (toml_path.parent / ref).resolve()

@@ -33,15 +33,19 @@ SIDES = ("robot", "sensor")
 VALUE_LIMIT = 1e9  # an error term's parameters are at most this in size (1e300 overflowed into numpy warnings)
 
 
-def _number(name: str, value, *, minimum: float | None = None, positive: bool = False, unit: str = "") -> float:
+def _number(
+    name: str, value, *, minimum: float | None = None, positive: bool = False, unit: str = "", limit: float = 0.0
+) -> float:
+    """A finite number within `limit` (default `VALUE_LIMIT`) in size."""
+    limit = limit or VALUE_LIMIT
     unit_txt = f" ({unit})" if unit else ""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise InputError(f"{name} must be a number{unit_txt}, got {value!r}")
     v = float(value)
     if not np.isfinite(v):
         raise InputError(f"{name} must be finite, got {value!r}")
-    if abs(v) > VALUE_LIMIT:
-        raise InputError(f"{name} must be at most {VALUE_LIMIT:g} in size{unit_txt}, got {value!r}")
+    if abs(v) > limit:
+        raise InputError(f"{name} must be at most {limit:g} in size{unit_txt}, got {value!r}")
     if positive and v <= 0:
         raise InputError(f"{name} must be > 0{unit_txt}, got {value!r}")
     if minimum is not None and v < minimum:

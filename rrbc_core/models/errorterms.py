@@ -390,7 +390,7 @@ class Drift(_Term):
 
     def __post_init__(self):
         _set(self, "rate_mm_per_s", _vector("rate_mm_per_s", self.rate_mm_per_s, 3, unit="mm/s"))
-        _set(self, "t0_s", _number("t0_s", self.t0_s, unit="s"))
+        _set(self, "t0_s", _number("t0_s", self.t0_s, unit="s", limit=1e11))  # a file's times may be UNIX times
 
     def sample(self, points: PointSet, side: str, rng: np.random.Generator, trials: int) -> np.ndarray:
         self._side(side)
