@@ -190,8 +190,11 @@ def _cmd_diagnose(args) -> str:
 
     if not args.alpha < 1:
         raise InputError(f"--alpha must be between 0 and 1, got {args.alpha}")
+    from rrbc_core.io.joints import file_tool
+
     mset = read_measurements(args.measurements)
-    dg = diagnose_stations(mset, alpha=args.alpha, seed=args.seed, tool_mm=args.tool, **robot_model_args(args))
+    tool = args.tool if args.tool is not None else file_tool(mset)
+    dg = diagnose_stations(mset, alpha=args.alpha, seed=args.seed, tool_mm=tool, **robot_model_args(args))
     if args.json:
         return json.dumps(dg.to_json(), allow_nan=False) + "\n"
     if isinstance(dg, StationsDiagnosis):

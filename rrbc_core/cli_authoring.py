@@ -244,10 +244,14 @@ def _cmd_calibrate(args) -> str:
         raise InputError("--backlash and --gravity go with --compliance")
     if args.model is not None and (args.compliance or args.tool is not None):
         raise InputError("--model keeps the saved arm (its tool and load terms): drop --compliance and --tool")
+    from rrbc_core.io.joints import file_tool
+
     model = load_model(args.model) if args.model is not None else None
+    mset = read_measurements(args.measurements)
+    tool = args.tool if args.tool is not None or model is not None else file_tool(mset)
     result = compare(
-        read_measurements(args.measurements),
-        tool=args.tool,
+        mset,
+        tool=tool,
         compliance=args.compliance,
         backlash=args.backlash,
         gravity=args.gravity,

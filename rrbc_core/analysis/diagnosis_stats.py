@@ -403,7 +403,8 @@ def noise_cov(
 
     From repeated measurements (pure error) when present — the rows' deviations from their point's mean, less
     `row_systematic` (R, 3) mm, what the accepted systematic effects (drift, the arm) predict for each row — else
-    from the residuals of a rigid + linear (+ drift) (+ `extra` fields (k, N, 3)) fit, corrected per axis for
+    from the residuals of a rigid + linear (+ drift) (+ the usable directions of `extra` fields (k, N, 3), unless
+    they would leave fewer than max(6, N/2) degrees of freedom: never a saturated fit) fit, corrected per axis for
     what the fit absorbs: E[Σ r rᵀ] = B^½ Σ B^½ approximately, B = Σ (I − H)_ii."""
     s, r, w = d.sensor[inl], d.robot[inl], d.count[inl]
     reg = least_squares(s, r, weights=w)
@@ -424,7 +425,12 @@ def noise_cov(
     if use_time:
         x = np.hstack([x, usable_drift(x, g.drift())[0]])
     if extra is not None:
-        x = np.hstack([x, g._cols(extra[:, inl])])
+        # only the directions of the arm's columns that stand beside the rigid + linear ones: a direction almost
+        # inside them is, beside them, the measured positions' own noise, and fitting it fits the noise (the
+        # estimate fell to 0.6 of the truth; `usable`)
+        wide = np.hstack([x, usable(x, g._cols(extra[:, inl]), kept=1e-4)[0]])
+        if 3 * len(inl) - np.linalg.matrix_rank(wide) >= max(6, len(inl) // 2):
+            x = wide  # else the arm's columns would leave too few degrees of freedom: rigid + linear (+ drift) only
     q = orth(x)
     y = g.vec(r - p)
     rr = (y - q @ (q.T @ y)).reshape(len(inl), 3)

@@ -6,8 +6,10 @@ residual, and a check's error, depend on a robot-side bias β_r and a sensor-sid
 whichever instrument carries it, and its numbers read as `diagnose` reports them:
 
 - `scale` (diagnose's `ppm`: robot ≈ (1 + ppm·1e-6) R sensor + t) -> `scale` with that ppm about the points'
-  centroid; `affine` (diagnose's symmetric `matrix` G, which includes any uniform scale) -> `affine` with G about
-  the centroid, and then no separate `scale`;
+  centroid; `affine` -> `affine` with the whole linear map of position (least squares, beside the drift when drift
+  is named too; its symmetric part is diagnose's `matrix` G, which includes any uniform scale) about the centroid,
+  and then no separate `scale`: the registration absorbs the map's rotation part only where time does not follow
+  position;
 - `drift` (diagnose's `rate_mm_per_s`, the rate of change of the residual) -> `drift` with that rate from the
   file's mean time (a constant offset is the registration's); beside a field, where diagnose gives no rate, the
   rate is the least-squares slope of the remainder on time;
@@ -55,6 +57,16 @@ def _rate(time: np.ndarray, resid: np.ndarray) -> np.ndarray:
     return np.zeros(3) if den <= 0 else (t @ (resid - resid.mean(axis=0))) / den
 
 
+def _linear_fit(pts: np.ndarray, resid: np.ndarray, time: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Least squares of the residuals (N, 3) on an offset, a linear map of position about the centroid and, with
+    `time`, a drift: (the map (3, 3), the rate (3,) mm/s or None)."""
+    cols = [np.ones((len(pts), 1)), pts - pts.mean(axis=0)]
+    if time is not None:
+        cols.append((time - time.mean())[:, None])
+    coef, *_ = np.linalg.lstsq(np.hstack(cols), resid, rcond=None)
+    return coef[1:4].T, (coef[4] if time is not None else None)
+
+
 def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, float, dict]:
     """The `sampled_field` table (the field's posterior mean at the points), its RMS (mm) and the
     `field_uncertainty` table (its posterior covariance: the fitted prior variances and noise)."""
@@ -97,10 +109,19 @@ def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[l
     time = np.asarray(remainder.time, float)
     tables: list[tuple[str, dict, str]] = []
     explained = np.zeros_like(resid)
+    joint_rate = None
     if "affine" in by:
-        g = np.asarray(by["affine"].parameters["matrix"], float)
+        # the whole linear map (its rotation part too) and, beside it, the drift, by one least-squares fit: diagnose's
+        # symmetric G leaves its rotation to the registration, which cannot take it where time follows position
+        g, joint_rate = _linear_fit(pts, resid, time if "drift" in by and np.all(np.isfinite(time)) else None)
         tables.append(
-            ("affine", {"type": "affine", "matrix": g.tolist(), "center_mm": centre}, "diagnose's affine matrix G")
+            (
+                "affine",
+                {"type": "affine", "matrix": np.round(g, 12).tolist(), "center_mm": centre},
+                "the linear map of position (least squares"
+                + (", beside the drift" if joint_rate is not None else "")
+                + "; its symmetric part is diagnose's affine matrix)",
+            )
         )
         explained += (pts - pts.mean(axis=0)) @ g.T
     elif "scale" in by:
@@ -110,7 +131,9 @@ def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[l
     if "drift" in by and np.all(np.isfinite(time)):
         rate = by["drift"].parameters.get("rate_mm_per_s") or []
         how = "diagnose's drift rate"
-        if len(rate) != 3:
+        if joint_rate is not None:
+            rate, how = joint_rate.tolist(), "the drift beside the linear map, fitted with it"
+        elif len(rate) != 3:
             rate, how = _rate(time, resid - explained).tolist(), "the remainder's slope on time (beside the field)"
         t0 = round(float(np.mean(time)), 3)
         tables.append(("drift", {"type": "drift", "rate_mm_per_s": [float(v) for v in rate], "t0_s": t0}, how))

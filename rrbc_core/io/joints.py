@@ -118,3 +118,31 @@ def joint_angles(mset: MeasurementSet) -> np.ndarray | None:
     from rrbc_core.models.kinematics import UR5
 
     return joint_values(mset, Chain.from_dh(UR5, "ur5"))
+
+
+TOOL_COLUMNS = ("tool_x", "tool_y", "tool_z")
+
+
+def file_tool(mset: MeasurementSet) -> tuple[float, float, float] | None:
+    """The tool point (3,) mm in the tip link's (a DH arm's flange's) frame that the file records in its columns
+    `tool_x`, `tool_y`, `tool_z` (what `rrbc simulate --out` writes for a scene with an arm), or None without them.
+    Commands use it when no `--tool` is given.
+
+    Raises
+    ------
+    InputError
+        Only some of the columns, a value that is not a finite number, or rows that disagree (one tool per file).
+    """
+    have = [c for c in TOOL_COLUMNS if c in mset.extra]
+    if not have:
+        return None
+    if len(have) != 3:
+        missing = ", ".join(c for c in TOOL_COLUMNS if c not in have)
+        raise InputError(f"{mset.source}: the tool columns come as tool_x, tool_y, tool_z together; missing {missing}")
+    vals = np.empty((len(mset), 3))
+    for j, col in enumerate(TOOL_COLUMNS):
+        for i in range(len(mset)):
+            vals[i, j] = _cell(mset, col, i, "mm")
+    if len(vals) and np.ptp(vals, axis=0).max() > 1e-6:
+        raise InputError(f"{mset.source}: the tool columns differ between rows; one tool per file (or give --tool)")
+    return (float(vals[0, 0]), float(vals[0, 1]), float(vals[0, 2])) if len(vals) else None

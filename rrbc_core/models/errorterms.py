@@ -27,7 +27,6 @@ from rrbc_core.models.errormodels import (
     _Term,
     _vector,
 )
-from rrbc_core.models.fieldterms import FieldUncertainty, SampledField  # noqa: F401 (registered in TERM_TYPES)
 from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, DHParameters, forward, inverse_path, perturbed
 from rrbc_core.models.loads import gravity_loads
 
@@ -366,12 +365,16 @@ class Compliance(_Term):
         if max(self.joints_rad_per_Nm) > 1e-3:
             raise InputError("joints_rad_per_Nm: at most 1e-3 rad/Nm per joint (real arms: 1e-6 to 1e-4)")
 
-    def displacement(self, points: PointSet) -> np.ndarray:
-        """Reported minus physical position (P, 3) mm, robot frame."""
+    def joints(self, points: PointSet) -> np.ndarray:
+        """The joints (P, 6) rad the controller reads at the physical points: the arm's pose there less its
+        deflection under the load, q − c τ(q)."""
         q = _arm_joints(self.kind, self.dh, points)
         tau = gravity_loads(dh_chain_with_masses(self.dh, self.payload_kg), q).torque
-        commanded = q - np.asarray(self.joints_rad_per_Nm) * tau
-        return forward(self.dh, commanded)[0] - points.robot
+        return q - np.asarray(self.joints_rad_per_Nm) * tau
+
+    def displacement(self, points: PointSet) -> np.ndarray:
+        """Reported minus physical position (P, 3) mm, robot frame."""
+        return forward(self.dh, self.joints(points))[0] - points.robot
 
     def sample(self, points: PointSet, side: str, rng: np.random.Generator, trials: int) -> np.ndarray:
         self._side(side)
@@ -500,3 +503,7 @@ def error_model_to_dict(model: ErrorModel) -> dict:
             for t in model.terms(side)
         ]
     return out
+
+
+# the terms of a field known at points, registered in TERM_TYPES after the ones above (the order messages list)
+from rrbc_core.models.fieldterms import FieldUncertainty, SampledField  # noqa: E402, F401

@@ -38,16 +38,23 @@ def measurement_set(cell: WorkCell, measured: Measured, trial: int = 0) -> Measu
 
 
 def joint_columns(cell: WorkCell) -> dict:
-    """The columns q1..q6 (degrees, as text) of a cell whose robot error model has a kinematic term: the joints at
-    which the (true) arm reaches each point — what the robot measured a registration or fiducial row at, and the
-    configuration it will use for a check or target row. {} when the error model has no kinematic term."""
-    from rrbc_core.models.errorterms import Kinematic
+    """The columns q1..q6 (degrees, as text) of a cell whose robot error model has an arm term (kinematic, else
+    compliance): the joints the controller reads where the (true) arm reaches each point — what the robot measured a
+    registration or fiducial row at, and the configuration it will use for a check or target row — and the tool
+    point in the flange's frame, mm (`tool_x`, `tool_y`, `tool_z`: `io.joints.file_tool`), so that `rrbc diagnose`,
+    `rrbc calibrate` and `rrbc check-model` read the file as it is. {} without an arm term. With both terms the
+    kinematic term's joints are written (the compliance term solves its own)."""
+    from rrbc_core.models.errorterms import Compliance, Kinematic
 
-    arm = [t for t in cell.error_model.robot if isinstance(t, Kinematic)]
+    arm: list[Kinematic | Compliance] = [t for t in cell.error_model.robot if isinstance(t, Kinematic)]
+    arm += [t for t in cell.error_model.robot if isinstance(t, Compliance)]
     if not arm:
         return {}
     q = np.degrees(arm[0].joints(cell.point_set()))
-    return {f"q{j + 1}": tuple(f"{v:.6f}" for v in q[:, j]) for j in range(6)}
+    out = {f"q{j + 1}": tuple(f"{v:.6f}" for v in q[:, j]) for j in range(6)}
+    tool = (0.0, 0.0, float(arm[0].dh.tool_mm))
+    out.update({c: tuple(f"{v:g}" for _ in range(len(q))) for c, v in zip(("tool_x", "tool_y", "tool_z"), tool)})
+    return out
 
 
 def simulated_data(scene: Scene, *, seed: int = 0, layout: str | None = None) -> MeasurementSet:

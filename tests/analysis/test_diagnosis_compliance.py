@@ -1,8 +1,9 @@
 """`rrbc diagnose --urdf` names `compliance` (docs/theory.md §6.6). Hidden effects, seeded: joint compliances and a
 lift column's bending of random size planted on URDF arms (our lift-column arm, the packaged UR5), with and without
 geometric errors; `compliance` is named exactly when planted (and nothing else is named beside it but `kinematic`
-when geometric errors are planted too), with its size within 10 % of the planted deflection's RMS; never on a rigid
-or a geometrically perturbed arm."""
+when geometric errors are planted too), with its size (what it explains beyond the other accepted terms) within 10 %
+of the planted deflection's non-rigid RMS, or at most that beside the kinematic terms; never on a rigid or a
+geometrically perturbed arm."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import pytest
 from rrbc_core.analysis.diagnosis import diagnose
 from rrbc_core.models.loads import deflections, gravity_loads, named_terms
 from rrbc_core.models.urdf import load_urdf
+from rrbc_core.registration.strategies import least_squares
 from tests.support.urdf_arms import chain_measurements
 
 TERMS = {
@@ -50,11 +52,18 @@ def test_compliance_named_when_planted(robot, kin):
         rows = np.array([i for i, r in enumerate(mset.roles) if r != "target"])
         dv, drot = deflections(chain, named_terms(chain, plant), list(plant.values()), gravity_loads(chain, q[rows]))
         moved = chain.kinematics(q[rows], jacobians=False, dv=dv, drot=drot)[0] - chain.forward(q[rows])
-        planted_rms = float(np.sqrt(np.mean(np.sum(moved**2, axis=1))))
+        # its size is what it explains beyond the other accepted terms (issue 36): beyond a rigid transform alone the
+        # planted deflection's non-rigid part; beside the kinematic terms at most that
+        nominal = chain.forward(q[rows])
+        fit = least_squares(nominal, nominal + moved)
+        planted_rms = float(np.sqrt(np.mean(np.sum((nominal + moved - fit.mapping.apply(nominal)) ** 2, axis=1))))
         effect = next(e for e in d.effects if e.name == "compliance")
-        # the estimate's own noise is ~1 % here (0.05 mm noise, ~70 points, deflections of 1–5 mm RMS); the rigid
-        # transform absorbs a few per cent more
-        assert 0.9 * planted_rms < effect.parameters["rms_mm"] < 1.1 * planted_rms, (effect.parameters, planted_rms)
+        size = effect.parameters["rms_mm"]
+        # the estimate's own noise is ~1 % here (0.05 mm noise, ~70 points, deflections of 1–5 mm RMS)
+        if names == ["compliance"]:
+            assert 0.9 * planted_rms < size < 1.1 * planted_rms, (effect.parameters, planted_rms)
+        else:
+            assert 0 < size < 1.1 * planted_rms, (effect.parameters, planted_rms)
 
 
 @pytest.mark.parametrize("robot", ["lift_arm", "ur5"])

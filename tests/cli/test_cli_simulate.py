@@ -141,3 +141,46 @@ def test_out_carries_the_arms_joint_angles_and_diagnose_tests_the_arm(tmp_path, 
     assert abs(float(((m.robot[rows] - reported) ** 2).mean()) ** 0.5 - 0.03) < 0.012
     assert main(["diagnose", str(out), "--tool", "100", "--json"]) == 0
     assert "kinematic" in json.loads(capsys.readouterr().out)["tests"]
+
+
+def test_a_simulated_arm_file_is_read_as_it_is_by_diagnose_and_calibrate(tmp_path):
+    """Issue 36: `simulate --out` writes the joints and the tool (tool_x, tool_y, tool_z) of a scene whose UR5 bends
+    under its own weight; `diagnose --robot ur5` then tests compliance (the packaged UR5 carries its masses) and
+    `calibrate --robot ur5 --compliance` identifies the planted stiffnesses within four standard errors."""
+    import shutil
+
+    (tmp_path / "meshes").mkdir()
+    shutil.copy(ROOT / "scenes" / "meshes" / "demo_workcell.glb", tmp_path / "meshes")
+    text = (ROOT / "scenes" / "demo_workcell.toml").read_text()
+    head, rest = text.split("[[error_model.robot]]", 1)
+    tail = rest[rest.index("[simulation]") :] if "[simulation]" in rest else ""
+    planted = {"joint2.compliance": 1e-4, "joint3.compliance": 8e-5}
+    model = """[[error_model.robot]]
+type = "compliance"
+joints_rad_per_Nm = [0, 1e-4, 8e-5, 0, 0, 0]
+
+[[error_model.robot]]
+type = "isotropic_noise"
+sigma_mm = 0.02
+
+[[error_model.sensor]]
+type = "isotropic_noise"
+sigma_mm = 0.02
+
+"""
+    (tmp_path / "scene.toml").write_text(head + model + tail)
+    data = tmp_path / "d.csv"
+    assert run("simulate", tmp_path / "scene.toml", "--trials", 20, "--out", data).returncode == 0
+    header = next(line for line in data.read_text().splitlines() if not line.startswith("#")).split(",")
+    assert {"q1", "q6", "tool_x", "tool_y", "tool_z"} <= set(header)
+    dg = run("diagnose", data, "--robot", "ur5", "--json")
+    assert dg.returncode == 0, dg.stderr
+    tests = json.loads(dg.stdout)["tests"]
+    assert "kinematic" in tests and "compliance" in tests  # the arm was tested with the file's own tool
+    cal = run("calibrate", data, "--robot", "ur5", "--compliance", "--json")
+    assert cal.returncode == 0, cal.stderr
+    cj = json.loads(cal.stdout)
+    assert set(cj["compliance"]["entered"]) == set(planted)
+    terms = {p["name"]: p for p in cj["parameters"] if p.get("kind") == "compliance"}
+    for name, value in planted.items():
+        assert abs(terms[name]["error"] - value) <= 4 * terms[name]["std_error"], terms[name]

@@ -474,7 +474,16 @@ def test_table_round_trip():
         "outliers",
         "drift",
         "warm_up",
+        "sampled_field",
+        "field_uncertainty",
     }
+    fields = {
+        "robot": [
+            {"type": "sampled_field", "points_mm": [[0.0, 0.0, 0.0], [50.0, 0.0, 0.0]], "vectors_mm": [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], "length_mm": 40.0},
+            {"type": "field_uncertainty", "points_mm": [[0.0, 0.0, 0.0]], "length_mm": 40.0, "field_var_mm2": [0.01, 0.01, 0.0], "noise_var_mm2": 0.001},
+        ]
+    }  # fmt: skip
+    assert error_model_to_dict(error_model_from_dict(fields)) == {**fields, "sensor": []}
 
 
 def test_table_defaults_and_lists():
