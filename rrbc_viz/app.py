@@ -50,12 +50,14 @@ from .controllers.diagnose import DiagnoseController
 from .controllers.edit import AuthoringController
 from .controllers.evaluate import EvaluateController
 from .controllers.load import FileController
+from .controllers.model_check import ModelCheckController
 from .controllers.plan import PlanController
 from .controllers.present import Presenter
 from .controllers.simulate import MonteCarloController
 from .controllers.vec import VecController
 from .controllers.viewing import PRESENTATION_MARKERS, ViewController
 from .controls import Controls
+from .model_check_nodes import ModelCheckNode
 from .node_values import Display, nice_down
 from .nodes import SceneNodes
 from .picture import scene_extent
@@ -100,6 +102,7 @@ class RunningApp:
             library or sources.Library.of(),
             nodes=nodes,
             slice_node=SliceNode(server.scene),
+            check_node=ModelCheckNode(server.scene),
             camera=CameraDirector(server),
             controls=controls,
             app=self,
@@ -112,6 +115,7 @@ class RunningApp:
         self.views = ViewController(ctx)
         self.plan = PlanController(ctx)
         self.diagnose = DiagnoseController(ctx)
+        self.model_check = ModelCheckController(ctx)
         self.vec = VecController(ctx)
         self.authoring = AuthoringController(ctx)
         self.files = FileController(ctx)
@@ -172,6 +176,10 @@ class RunningApp:
         return self.ctx.slice_node
 
     @property
+    def check_node(self) -> ModelCheckNode:
+        return self.ctx.check_node
+
+    @property
     def guard(self):
         return self.ctx.guard
 
@@ -222,6 +230,7 @@ class RunningApp:
             st.mc_plots = None
             st.heat_stale = True
             self.diagnose.reset()
+            self.model_check.reset()
             st.display = self._default_display(ev)
             if st.presentation:
                 st.display = replace(st.display, marker_mm=st.display.marker_mm * PRESENTATION_MARKERS)

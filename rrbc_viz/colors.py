@@ -25,6 +25,9 @@ LAND_VEC: Rgb = (120, 70, 20)
 LAND_ANCHOR: Rgb = (40, 40, 40)
 LAND_STALK: Rgb = (110, 110, 110)
 LAND_RING: Rgb = (60, 60, 60)
+MODEL_INSIDE: Rgb = (95, 95, 95)  # a measured row inside its predicted 95 % region (Model tab)
+MODEL_OUTSIDE: Rgb = (130, 0, 0)  # outside it
+MODEL_MISFIT: Rgb = (25, 25, 25)  # measured minus predicted residual, magnified
 
 #: The drag gizmo's axis colours (drei PivotControls' defaults in viser 1.1.1's client: x, y, z). Data colours
 #: keep a CIE76 colour difference of at least MIN_GIZMO_DELTA_E from each (tests/viz check it).
@@ -46,6 +49,8 @@ DATA_COLORS: dict[str, Rgb] = {
     "RRBC landing": LAND_RRBC,
     "VEC landing (Arm tab)": LAND_VEC,
     "truth (bullseye centre)": LAND_ANCHOR,
+    "measured row inside its predicted region (Model tab)": MODEL_INSIDE,
+    "measured row outside its predicted region (Model tab)": MODEL_OUTSIDE,
 }
 NO_VALUE: Rgb = (128, 128, 128)
 

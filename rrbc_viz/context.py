@@ -29,6 +29,7 @@ if TYPE_CHECKING:
         DiagnoseActions,
         EvaluateActions,
         FileActions,
+        ModelCheckActions,
         MonteCarloActions,
         PlanActions,
         PresentActions,
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
     )
     from .camera import CameraDirector
     from .controls import Controls
+    from .model_check_nodes import ModelCheckNode
     from .nodes import SceneNodes
     from .planning_panel import PlanningPanel
     from .slice_nodes import SliceNode
@@ -62,6 +64,7 @@ class AppContext:
     library: sources.Library
     nodes: SceneNodes
     slice_node: SliceNode
+    check_node: ModelCheckNode
     camera: CameraDirector
     controls: Controls
     app: Controllers
@@ -97,6 +100,10 @@ class AppContext:
     @property
     def diagnose(self) -> DiagnoseActions:
         return self.app.diagnose
+
+    @property
+    def model_check(self) -> ModelCheckActions:
+        return self.app.model_check
 
     @property
     def montecarlo(self) -> MonteCarloActions:

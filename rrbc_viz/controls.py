@@ -25,6 +25,7 @@ from .checks_panel import ChecksPanel
 from .colors import legend_html
 from .diagnosis_panel import PROMPT
 from .file_panel import FilePanel
+from .model_check_panel import ModelCheckPanel
 from .node_values import LAYERS, Display
 from .planning_panel import PlanningPanel
 from .selection_panel import Bullseye, SelectionPanel
@@ -450,6 +451,8 @@ class Controls:
             self.montecarlo = MonteCarloPanel(gui, app, self.syncing)
         with tabs.add_tab("Diagnose", icon=viser.Icon.STETHOSCOPE):
             self.diagnose = DiagnosePanel(gui, app)
+        with tabs.add_tab("Model", icon=viser.Icon.CHECKLIST):
+            self.model_check = ModelCheckPanel(gui, app)
         with tabs.add_tab("Arm (VEC)", icon=viser.Icon.ROBOT):
             self.vec = VecPanel(gui, app, self.syncing)
         with tabs.add_tab("Plan", icon=viser.Icon.MAP_PIN):

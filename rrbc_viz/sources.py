@@ -148,6 +148,11 @@ def _from_scene(scene, label: str) -> Loaded:
     return Loaded(session, scene.load_mesh(), label)
 
 
+def scene_loaded(scene, label: str) -> Loaded:
+    """A scene already in memory (one the app changed: the Model tab's extended scene) as a source."""
+    return _from_scene(scene, label)
+
+
 def _from_measurements(mset: MeasurementSet, mesh, label: str, station: str | None = None) -> Loaded:
     mesh_obj = load_mesh(mesh) if mesh is not None else None
     session = ExplorerSession.from_measurements(mset, mesh_path=None if mesh is None else Path(mesh), station=station)

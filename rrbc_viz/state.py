@@ -16,6 +16,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from rrbc_core.analysis.diagnosis import Diagnosis
+    from rrbc_core.analysis.scene_check import SceneCheck
     from rrbc_core.geometry.framing import CameraPose
     from rrbc_core.session.data_set import SessionData
     from rrbc_core.session.results import HeatMap, MonteCarloPlots, PlanningState
@@ -92,6 +93,9 @@ class AppState:
         changed since.
     click_mode, target_region_mm
         What a click on the cell adds (None: clicks select) and an added target's region (cube edge, mm).
+    model_check, model_check_file, model_check_scene_text
+        The Model tab's last check of the scene's model (None: none or refused), the offered file it was held
+        against, and the open scene's text when it is an extension the tab loaded (None: the scene's own file).
     """
 
     selected: tuple[str, str] | None = None
@@ -130,6 +134,9 @@ class AppState:
     diagnosis_stale: bool = False
     click_mode: str | None = None
     target_region_mm: float = 4.0
+    model_check: SceneCheck | None = None
+    model_check_file: str = ""
+    model_check_scene_text: str | None = None
 
     def vec_landings(self) -> dict[str, np.ndarray]:
         """Target id -> VEC's landing (3,), robot frame mm, while VEC is compared (else empty)."""

@@ -97,6 +97,13 @@ class SceneCheck:
     alpha: float
     limits: tuple[str, ...] = ()
     extended_model: ErrorModel | None = field(default=None, repr=False)
+    #: per row with both readings (file order): its index in the file, its id, its mapped reading (robot frame, mm),
+    #: measured minus predicted mean residual (mm) and z; what the app draws
+    rows: np.ndarray = field(default_factory=lambda: np.zeros(0, int), repr=False)
+    row_ids: tuple[str, ...] = ()
+    points_mm: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    misfit_mm: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    z: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     @property
     def figures_outside(self) -> tuple[str, ...]:
@@ -411,6 +418,11 @@ def check_scene_model(
         float(alpha),
         tuple(limits),
         extended,
+        paired,
+        tuple(mset.ids[i] for i in paired),
+        meas.mapped[0][paired],
+        meas.residual[0][paired] - mean[paired],
+        z[paired],
     )
 
 

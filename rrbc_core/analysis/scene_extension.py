@@ -143,13 +143,14 @@ def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[l
         x = np.column_stack([np.ones(len(pts)), pts - pts.mean(axis=0)])
         coef, *_ = np.linalg.lstsq(x, rest, rcond=None)  # (4, 3): the field's offset and linear part
         lin = coef[1:].T  # displacement = lin @ (x − centre)
-        tables.append(
-            (
-                "smooth_field",
-                {"type": "affine", "matrix": np.round(lin, 9).tolist(), "center_mm": centre},
-                "the field's linear part over these points (a zero-mean field cannot carry a trend)",
+        if "affine" not in by:  # (an affine term written above already holds the whole linear part)
+            tables.append(
+                (
+                    "smooth_field",
+                    {"type": "affine", "matrix": np.round(lin, 9).tolist(), "center_mm": centre},
+                    "the field's linear part over these points (a zero-mean field cannot carry a trend)",
+                )
             )
-        )
         table, rms, unknown = _field_table(pts, rest - x @ coef)
         tables.append(("smooth_field", table, f"the measured field smoothed at its points ({rms:.3g} mm RMS)"))
         tables.append(
