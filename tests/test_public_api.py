@@ -74,6 +74,7 @@ def test_each_exported_function_is_typed(name):
     assert not untyped and sig.return_annotation is not sig.empty, f"{name}: untyped {untyped or 'return'}"
 
 
+@pytest.mark.slow
 def test_a_type_checker_sees_the_signatures_of_thread_limited_entry_points(tmp_path):
     """`@thread_limited` keeps the wrapped function's signature for a type checker (a ParamSpec): a wrong call to a
     public entry point is an error mypy reports, a right one is not."""

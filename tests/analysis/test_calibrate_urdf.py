@@ -118,6 +118,7 @@ def test_registration_rows_first_as_both_work(tmp_path):
     assert all(v is not None for v in out["cv_rmst_mm"].values()) and out["recommended"] in ("vec", "vec_rrbc")
 
 
+@pytest.mark.slow
 def test_bad_joint_columns_are_refused_in_one_line(tmp_path):
     good = _file(tmp_path, "lift", 10).read_text()
     header = good.splitlines()[0].split(",")

@@ -58,6 +58,7 @@ def results():
     return out
 
 
+@pytest.mark.slow
 def test_planted_compliance_is_named_and_recovered(results):
     for robot, seed, plant, field, r in results:
         if not plant:
@@ -158,6 +159,7 @@ def test_a_saved_arm_makes_an_8_point_registration_several_times_better(tmp_path
     assert got["vec"] < got["rigid"] / 3, got
 
 
+@pytest.mark.slow
 def test_bad_models_are_refused_in_one_line(tmp_path):
     chain = load_urdf("lift_arm")
     data = tmp_path / "d.csv"

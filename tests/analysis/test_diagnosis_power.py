@@ -56,6 +56,7 @@ def test_consistency_bounds_are_sane():
     assert not _consistent(8, 20, 1.0) and not _consistent(16, 20, 0.11)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("geom", GEOMETRIES)
 @pytest.mark.parametrize("effect", EFFECTS)
 def test_detection_rate_matches_the_power_study_and_names_are_never_wrong(effect, geom):

@@ -30,6 +30,7 @@ def _on_surface_and_outside(mesh, info, points):
     return d, in_fixture | (points[:, 2] < -0.5)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
     mesh_path, targets_path, info = random_cell(tmp_path, seed)
@@ -95,6 +96,7 @@ def test_other_robots_and_a_given_sensor(tmp_path):
         assert ("kinematic" in kinds) == (robot == "ur10") and ("smooth_field" in kinds) == (robot == "none")
 
 
+@pytest.mark.slow
 def test_a_robot_from_its_urdf(tmp_path):
     """--urdf: a robot the kinematics do not model, named by the scene (a packaged name, or a file in the scene's
     folder with its path from there), posed by the app at the targets."""
@@ -163,6 +165,7 @@ def _bad_cases(tmp_path):
     return cases
 
 
+@pytest.mark.slow
 def test_bad_input_is_refused_in_one_line_with_nothing_written(tmp_path):
     for label, (mesh, targets, words) in _bad_cases(tmp_path).items():
         out = tmp_path / "out" / "x.toml"
@@ -174,6 +177,7 @@ def test_bad_input_is_refused_in_one_line_with_nothing_written(tmp_path):
         assert r.stdout == "" and list(out.parent.iterdir()) == [], label  # nothing, not even a temporary file
 
 
+@pytest.mark.slow
 def test_a_mesh_in_another_folder_is_copied_beside_the_scene(tmp_path):
     """A scene opens only meshes in its own folder or below (issue 16): scene new copies a mesh from elsewhere."""
     src = tmp_path / "cad"
@@ -244,6 +248,7 @@ def test_an_empty_start_on_a_mesh_holds_one_reachable_target_and_no_fiducials(tm
     np.testing.assert_allclose(ev.targets.error_rrbc, ev.targets.error_rigid)
 
 
+@pytest.mark.slow
 def test_an_empty_start_beyond_the_arms_reach_is_refused_with_nothing_written(tmp_path):
     import trimesh
 

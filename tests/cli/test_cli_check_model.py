@@ -66,6 +66,7 @@ def test_the_json_keeps_the_contract_and_a_clean_file_fits(cell_dir):
     assert j["gain"]["folds"] == 3
 
 
+@pytest.mark.slow
 def test_a_misfit_is_found_written_and_the_extended_scene_runs_everywhere(cell_dir):
     out = cell_dir / "extended.toml"
     res = run("check-model", cell_dir / "planted.csv", cell_dir / "scene.toml", "--trials", 60, "--out", out, "--json")
@@ -93,6 +94,7 @@ def test_a_misfit_is_found_written_and_the_extended_scene_runs_everywhere(cell_d
     assert "smooth_field" not in {e["name"] for e in json.loads(again.stdout)["unexplained"]}
 
 
+@pytest.mark.slow
 def test_the_text_says_the_same(cell_dir):
     res = run("check-model", cell_dir / "planted.csv", cell_dir / "scene.toml", "--trials", 60)
     assert res.returncode == 0, res.stderr

@@ -27,6 +27,7 @@ def quick_report(tmp_path_factory):
     return out, json.loads(res.stdout)
 
 
+@pytest.mark.slow
 def test_json_has_the_contract_fields(quick_report):
     _, j = quick_report
     for key in ("measured", "baseline", "extended", "misfit", "cause", "assumptions"):

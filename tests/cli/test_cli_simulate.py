@@ -44,6 +44,7 @@ def test_default_scene_bias_dominates_so_rrbc_visibly_helps():
     assert ls["rmst_rrbc_mm"] < 0.7 * ls["tre_rms_mm"], ls
 
 
+@pytest.mark.slow
 def test_simulate_is_seeded():
     a = run("simulate", ROOT / "scenes" / "peg_in_hole_cell.toml", "--trials", 10, "--seed", 9, "--json")
     b = run("simulate", ROOT / "scenes" / "peg_in_hole_cell.toml", "--trials", 10, "--seed", 9, "--json")

@@ -48,6 +48,7 @@ def test_a_full_disk_gives_one_line_exit_2_and_nothing_written(tmp_path, monkeyp
     assert set(os.listdir(tmp_path)) == before  # neither the file nor its temporary copy
 
 
+@pytest.mark.slow
 def test_a_writer_killed_mid_run_leaves_no_partial_file(tmp_path):
     """`rrbc simulate --out` killed (SIGKILL) at several moments of its run: the destination is absent or whole."""
     dest = tmp_path / "out.csv"

@@ -28,6 +28,7 @@ def real_like_station(seed: int):
     )
 
 
+@pytest.mark.slow
 def test_auto_is_near_the_best_method_at_held_out_checks_and_never_much_worse_than_rigid():
     """Issue 28's bar: within 10 % of the best fixed method at the checks (which auto never sees) in >= 90 % of
     seeded cases, and never more than 5 % worse than rigid."""

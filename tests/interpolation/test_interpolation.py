@@ -424,6 +424,7 @@ def test_flags_on_plate():
     assert extra.tolist() == [False, True]
 
 
+@pytest.mark.slow
 @HYP
 @given(rv=rotvec, h=st.floats(-500.0, 500.0))
 def test_flags_on_tilted_plate(rv, h):

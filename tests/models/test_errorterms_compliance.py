@@ -9,6 +9,7 @@ import json
 import subprocess
 
 import numpy as np
+import pytest
 
 from rrbc_core.models.arm_masses import dh_chain_with_masses
 from rrbc_core.models.errormodels import PointSet
@@ -45,6 +46,7 @@ def test_the_displacement_is_the_load_deflection():
     assert heavier > 1.2 * np.abs(d).mean()
 
 
+@pytest.mark.slow
 def test_a_scene_carries_the_term(tmp_path):
     model = error_model_from_dict({"robot": [{"type": "compliance", "joints_rad_per_Nm": [0, 4e-5, 3e-5, 0, 0, 0]}]})
     assert error_model_from_dict(error_model_to_dict(model)) == model

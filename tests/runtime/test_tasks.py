@@ -111,6 +111,7 @@ def test_monte_carlo_gives_the_same_numbers_on_a_cluster(cluster):
     assert here.to_json() == there.to_json()
 
 
+@pytest.mark.slow
 def test_rrbc_simulate_prints_the_same_bytes_with_and_without_a_scheduler(cluster):
     address, _ = cluster
     args = [*RRBC, "simulate", str(ROOT / "scenes" / "demo_workcell.toml"), "--trials", "20", "--json"]
@@ -123,6 +124,7 @@ def test_rrbc_simulate_prints_the_same_bytes_with_and_without_a_scheduler(cluste
     assert by_env.stdout == local.stdout
 
 
+@pytest.mark.slow
 def test_rrbc_reproduce_prints_the_same_bytes_with_and_without_a_scheduler(cluster):
     """Both studies, small sizes, every stage (the simulations and assessments; the crpi candidates and joint fits;
     the confusion tables in the next test) on two separate workers against one process."""
@@ -138,6 +140,7 @@ def test_rrbc_reproduce_prints_the_same_bytes_with_and_without_a_scheduler(clust
         assert here.stdout == there.stdout and b'"replicates"' in here.stdout
 
 
+@pytest.mark.slow
 def test_the_confusion_tables_are_the_same_on_a_cluster(cluster):
     from rrbc_core.studies import model_fit, reproduction, vanwyk2018
 
@@ -212,6 +215,7 @@ def test_a_worker_killed_mid_run_is_survived(cluster):
     assert np.all(np.diff(out) > 0)
 
 
+@pytest.mark.slow
 def test_a_scheduler_lost_mid_run_is_one_line_and_exit_2():
     """The scheduler is killed while `rrbc simulate` waits on it: one stderr line naming the loss, exit 2, no
     output (the client gives up after its reconnect timeout)."""

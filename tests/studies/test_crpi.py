@@ -137,6 +137,7 @@ def test_the_study_names_per_site_offsets_and_the_kinematic_prediction_misses(tm
     assert "supported" in (tmp_path / "r" / "report.md").read_text(encoding="utf-8")
 
 
+@pytest.mark.slow
 def test_the_joint_fit_with_the_van_wyk_tables():
     """30 simulated experiments per direction (the default run uses 100): the points decide the noise (the joint
     sigma within 10 % of their pooled repeatability) and the per-site model explains both data sets better than

@@ -1,6 +1,7 @@
 """The reproduction's orchestration: registrations per experiment, RRBC on the plate, the cause sentence."""
 
 import numpy as np
+import pytest
 
 from rrbc_core.studies import reproduction as rp
 
@@ -40,6 +41,7 @@ def test_rrbc_gain_helps_against_bias_more_than_against_noise():
     assert noisy["rmst_rigid_mm"] > 0.2 * np.sqrt(3) * 0.9  # the fresh reading's own noise is in the error
 
 
+@pytest.mark.slow
 def test_run_reports_progress_up_to_its_total_and_closes_the_bar():
     from rrbc_core.studies import vanwyk2018
 

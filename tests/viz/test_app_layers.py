@@ -14,7 +14,19 @@ from tests.paths import ROOT
 #: the views as the controllers reach them through the context (`context.AppContext`)
 VIEWS = {"nodes", "slice_node", "check_node", "camera", "controls", "planning"}
 #: the control panel's tabs and folders (each a panel class with its own verbs)
-PANELS = {"selection", "explore", "checks", "view", "learn", "montecarlo", "diagnose", "model_check", "vec", "file", "authoring"}
+PANELS = {
+    "selection",
+    "explore",
+    "checks",
+    "view",
+    "learn",
+    "montecarlo",
+    "diagnose",
+    "model_check",
+    "vec",
+    "file",
+    "authoring",
+}
 CONTROLLERS = sorted((ROOT / "rrbc_viz" / "controllers").glob("*.py")) + [ROOT / "rrbc_viz" / "app.py"]
 
 

@@ -16,6 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from class_load import CLICK_GOAL_S, GAP_GOAL_S, class_run
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("per_client,clients", [(False, 6), (True, 4)], ids=["shared", "per-client"])
 def test_every_dragging_client_keeps_moving_and_a_click_after_is_answered(per_client, clients):
     res = class_run(per_client, clients=clients, seconds=4.0)

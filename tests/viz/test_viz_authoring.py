@@ -233,6 +233,7 @@ def test_a_new_cell_from_an_uploaded_mesh_starts_empty_framed_on_it_and_saves_wi
     assert b"bench_v3" not in content
 
 
+@pytest.mark.slow
 def test_a_new_cell_on_a_mesh_the_arm_cannot_reach_is_refused_and_nothing_changes(app):
     import trimesh
 

@@ -125,6 +125,7 @@ def test_edited_measured_data_are_diagnosed_as_edited_and_the_download_reproduce
         app.stop()
 
 
+@pytest.mark.slow
 def test_a_scenes_tab_is_rrbc_diagnose_of_its_download_which_is_what_rrbc_simulate_writes(tmp_path, capsys):
     app = serve(port=0)
     try:

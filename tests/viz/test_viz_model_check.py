@@ -43,6 +43,7 @@ def _tab_lines(text: str) -> list[str]:
     return out
 
 
+@pytest.mark.slow
 def test_the_tab_is_the_command_and_extending_loads_the_extended_scene(folder, capsys, monkeypatch):
     app = serve(DEMO, port=0, data_dirs=[folder])
     try:
