@@ -254,6 +254,20 @@ def _name(
     return effects, rem, diag
 
 
+def _file_arm(mset: MeasurementSet, scene, robot: str):
+    """The scene's arm (its spec for `armterms.arm_chain`) and the file's joint values for it (R, I), or (spec or
+    None, None) when the scene has no arm or the file none of its columns."""
+    from rrbc_core.io.joints import joint_values
+    from rrbc_core.models.armterms import arm_chain
+
+    urdf = "" if scene.robot_urdf is None else str(scene.robot_urdf)
+    if not urdf and robot == "none":
+        return None, None
+    spec = {"urdf": urdf, "tip": scene.robot_tip or "", "robot": "" if urdf else robot}
+    spec["tool_mm"] = (0.0, 0.0, float(scene.tool_mm))
+    return spec, joint_values(mset, arm_chain(**spec))
+
+
 def _arm(mset: MeasurementSet, scene, robot: str) -> dict:
     """diagnose's arm model for the scene's robot when the file has its joint columns: a UR5/UR10 (q1..q6) or the
     scene's URDF (columns named after its joints); {} otherwise."""
@@ -344,7 +358,8 @@ def check_scene_model(
     trials, folds = int(trials), int(folds)
     model: ErrorModel = scene.error_model
     robot = scene.robot_model if scene.robot_model in ("ur5", "ur10") else "none"
-    stations = at_physical_points(mset, file_stations(mset, robot, scene.tool_yaw_deg), model)
+    spec, q = _file_arm(mset, scene, robot)
+    stations = at_physical_points(mset, file_stations(mset, robot, scene.tool_yaw_deg, q), model)
     arm = _arm(mset, scene, robot)
     meas = measured_figures(mset, stations)
     pred = predict(mset, stations, model, trials, seed)
@@ -382,13 +397,16 @@ def check_scene_model(
                 stations_off.append(st.name)
 
     effects, rem, _ = _name(mset, meas, mean, cov, paired, model, alpha, seed, arm)
-    added, not_written = extension_terms(effects, rem)
+    added, not_written = extension_terms(effects, rem, None if q is None else (spec, q[paired]))
     extended = model.extended(robot=[t.term for t in added])
     follows = list(dict.fromkeys(FOLLOWS[e.name] for e in effects if e.name in FOLLOWS))
     if stations_off:
         follows.append("station")
 
-    gain = _score(mset, stations, meas, model, mean, cov, z, paired, trials, folds, seed, alpha, arm, bool(added))
+    joints = None if q is None else (spec, q)
+    gain = _score(
+        mset, stations, meas, model, mean, cov, z, paired, trials, folds, seed, alpha, arm, joints, bool(added)
+    )
     limits = []
     r2 = _time_on_position(rem)
     if r2 > 0.5 and {"drift", "scale", "affine"} & {e.name for e in effects}:
@@ -426,7 +444,7 @@ def check_scene_model(
     )
 
 
-def _score(mset, stations, meas, model, mean, cov, z, paired, trials, folds, seed, alpha, arm, extend) -> dict:
+def _score(mset, stations, meas, model, mean, cov, z, paired, trials, folds, seed, alpha, arm, joints, extend) -> dict:
     """The out-of-sample score (module docstring)."""
     held, by = _folds(mset, paired, folds, seed)
     miss = np.linalg.norm(meas.residual[0] - mean, axis=1)
@@ -438,7 +456,7 @@ def _score(mset, stations, meas, model, mean, cov, z, paired, trials, folds, see
         terms: list = []
         if extend and len(np.unique(np.asarray(mset.ids, dtype=object)[train])) >= 5:
             effects, rem, _ = _name(mset, meas, mean, cov, train, model, alpha, seed + k + 1, arm)
-            terms, _ = extension_terms(effects, rem)
+            terms, _ = extension_terms(effects, rem, None if joints is None else (joints[0], joints[1][train]))
         if not terms:
             after_err.append(miss[test])
             after_in.append(z[test] <= Z95)

@@ -35,7 +35,8 @@ import numpy as np
 
 from rrbc_core.analysis.diagnosis import Effect
 from rrbc_core.io.measurements import MeasurementSet
-from rrbc_core.models.errormodels import ErrorTerm
+from rrbc_core.models.armterms import ArmErrors
+from rrbc_core.models.errormodels import ErrorTerm, PointSet
 from rrbc_core.models.errorterms import error_model_from_dict
 
 __all__ = ["AddedTerm", "extension_terms"]
@@ -93,9 +94,36 @@ def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, float, di
     return table, float(np.sqrt(np.mean(np.sum(smooth**2, axis=1)))), unknown
 
 
-def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[list[AddedTerm], list[str]]:
+def _arm_table(by: dict, resid: np.ndarray, arm) -> tuple[dict, str]:
+    """The `arm_errors` table for a named kinematic / compliance effect: `rrbc calibrate`'s identification
+    (`calibration.calibrate`) of the arm's parameters and the named load terms from the remainder, as the pseudo
+    sensor readings FK(q) − remainder (robot frame) against the nominal arm at the rows' joints."""
+    from rrbc_core.analysis.calibration import calibrate
+    from rrbc_core.models.armterms import arm_chain
+    from rrbc_core.models.loads import named_terms
+
+    spec, q = arm
+    chain = arm_chain(**spec)
+    names = list(by["compliance"].parameters.get("terms", [])) if "compliance" in by else []
+    terms = named_terms(chain, names) if names else ()
+    cal = calibrate(chain, q, chain.forward(q) - resid, terms=terms)
+    params = {n: float(v) for n, v in zip(chain.param_names, cal.delta) if np.isfinite(v) and abs(v) > 1e-12}
+    loads = {t.name: float(c) for t, c in zip(cal.terms, cal.coef) if np.isfinite(c)}
+    table: dict = {"type": "arm_errors", "parameters": params}
+    if loads:
+        table["loads"] = loads
+    what = " and ".join(n for n in ("kinematic", "compliance") if n in by)
+    return (
+        table,
+        f"rrbc calibrate's identification of the arm's {what} error from what the model leaves ({cal.rank} combinations)",
+    )
+
+
+def extension_terms(effects: list[Effect], remainder: MeasurementSet, arm=None) -> tuple[list[AddedTerm], list[str]]:
     """The added terms for `effects` (module docstring), fitted on `remainder` (`scene_check`: sensor = each row's
-    mapped reading in the robot frame, robot = that plus what the model leaves unexplained).
+    mapped reading in the robot frame, robot = that plus what the model leaves unexplained). `arm`: (the arm's
+    spec for `armterms.arm_chain`, the rows' joint values (N, I)) when the file has the scene's arm's joints: a
+    named kinematic or compliance effect is then written as an `arm_errors` term.
 
     Returns
     -------
@@ -109,6 +137,11 @@ def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[l
     time = np.asarray(remainder.time, float)
     tables: list[tuple[str, dict, str]] = []
     explained = np.zeros_like(resid)
+    if arm is not None and ("kinematic" in by or "compliance" in by):  # first: diagnose judged the rest beside it
+        table, how = _arm_table(by, resid, arm)
+        tables.append(("kinematic" if "kinematic" in by else "compliance", table, how))
+        arm_term = ArmErrors(**{k: v for k, v in table.items() if k != "type"}).on_arm(**arm[0])
+        explained += arm_term.displacement(PointSet(pts, pts, np.zeros(len(pts)), joints=arm[1]))
     joint_rate = None
     if "affine" in by:
         # the whole linear map (its rotation part too) and, beside it, the drift, by one least-squares fit: diagnose's
@@ -178,14 +211,16 @@ def extension_terms(effects: list[Effect], remainder: MeasurementSet) -> tuple[l
         tables.append(("isotropic_noise", {"type": "isotropic_noise", "sigma_mm": sigma}, "the noise the model lacks"))
     not_written = []
     for name, why in (
-        ("kinematic", "its joint-level parameters come from `rrbc calibrate --robot ...`, not from diagnose"),
-        ("compliance", "its joint stiffnesses come from `rrbc calibrate --robot ... --compliance`"),
+        ("kinematic", "the file has no joint columns of the scene's arm; `rrbc calibrate` identifies it"),
+        ("compliance", "the file has no joint columns of the scene's arm; `rrbc calibrate --compliance` does"),
         ("anisotropic_noise", "diagnose's noise axis is not a line of sight; add an anisotropic_noise term by hand"),
     ):
-        if name in by:
+        if name in by and (arm is None or name == "anisotropic_noise"):
             not_written.append(f"{name}: not written ({why})")
     added = []
     for effect, table, how in tables:
         term = error_model_from_dict({"robot": [table]}, f"check-model's {effect} term").robot[0]
+        if isinstance(term, ArmErrors) and arm is not None:
+            term = term.on_arm(**arm[0])
         added.append(AddedTerm(effect, table, f"added by rrbc check-model for '{effect}': {how}", term))
     return added, not_written

@@ -128,7 +128,9 @@ def _physical(reading: np.ndarray, st: Station, error_model: ErrorModel, exact: 
         return reading
     p = reading
     for _ in range(2):
-        pts = PointSet(p, st.transform.apply_inverse(p), st.points.time, st.points.tool_rotation, st.joint_seed)
+        pts = PointSet(
+            p, st.transform.apply_inverse(p), st.points.time, st.points.tool_rotation, st.joint_seed, st.points.joints
+        )
         bias_r = st.model(error_model).bias(pts)[1]
         p = np.where(exact[:, None], reading - bias_r, reading)
     return p
@@ -141,13 +143,18 @@ def at_physical_points(mset: MeasurementSet, stations: list[Station], error_mode
     for st in stations:
         exact = roles[st.rows] != "target"
         p = _physical(st.points.robot, st, error_model, exact)
-        pts = PointSet(p, st.transform.apply_inverse(p), st.points.time, st.points.tool_rotation, st.joint_seed)
+        pts = PointSet(
+            p, st.transform.apply_inverse(p), st.points.time, st.points.tool_rotation, st.joint_seed, st.points.joints
+        )
         out.append(Station(st.name, st.rows, st.transform, pts, st.joint_seed))
     return out
 
 
-def file_stations(mset: MeasurementSet, robot_model: str = "none", tool_yaw_deg: float = 0.0) -> list[Station]:
-    """The file's stations with their fitted transforms and physical points (module docstring).
+def file_stations(
+    mset: MeasurementSet, robot_model: str = "none", tool_yaw_deg: float = 0.0, joints: np.ndarray | None = None
+) -> list[Station]:
+    """The file's stations with their fitted transforms and physical points (module docstring); `joints` (R, I): the
+    arm's joint values the file recorded (the chain's inputs, rad or mm), carried to the points for `arm_errors`.
 
     Raises
     ------
@@ -172,7 +179,14 @@ def file_stations(mset: MeasurementSet, robot_model: str = "none", tool_yaw_deg:
         mapping = RigidTransform(fit.rotation, fit.translation)
         physical = np.where(paired[rows, None], mset.robot[rows], mapping.apply(mset.sensor[rows]))
         seed = None if q is None else q[rows[0]]
-        pts = PointSet(physical, mapping.apply_inverse(physical), time[rows], rotations[rows], seed)
+        pts = PointSet(
+            physical,
+            mapping.apply_inverse(physical),
+            time[rows],
+            rotations[rows],
+            seed,
+            None if joints is None else joints[rows],
+        )
         out.append(Station(name, rows, mapping, pts, seed))
     return out
 

@@ -226,6 +226,7 @@ def load_scene(path: str | PathLike) -> Scene:
     # [error_model] -----------------------------------------------------------------------------------------
     em_table = c.table(doc.get("error_model", {}), "error_model")
     error_model = _with_tool(_error_model(c, em_table), em_table, tool_mm, robot_model, c.source)
+    error_model = _on_arm(c, error_model, robot_model, robot_urdf, robot_tip, tool_mm)
 
     # every point within the arm's reach, said here by file, field and id (issue 16: the kinematic term's own
     # message could only give point indices, later, with no file)
@@ -476,6 +477,30 @@ def _with_tool(model, table: dict, tool_mm: float, robot_model: str = "ur5", sou
             )
         if isinstance(term, (Kinematic, Compliance)) and not own_dh:
             term = dataclasses.replace(term, dh=ROBOT_DH[robot_model].with_tool(tool_mm))
+        terms.append(term)
+    return ErrorModel(robot=tuple(terms), sensor=model.sensor)
+
+
+def _on_arm(c: Checker, model, robot_model: str, urdf, tip, tool_mm: float):
+    """Every `arm_errors` term that names no arm of its own is on the scene's (robot.urdf, else robot.model)."""
+    from rrbc_core.models.armterms import ArmErrors
+
+    terms = []
+    for k, term in enumerate(model.robot):
+        if isinstance(term, ArmErrors):
+            try:
+                term = term.on_arm(
+                    urdf="" if urdf is None else str(urdf),
+                    tip=tip or "",
+                    robot=robot_model if robot_model in ROBOT_DH else "",
+                    tool_mm=(0.0, 0.0, float(tool_mm)),
+                )
+            except InputError as exc:
+                raise c.error(f"error_model.robot[{k}] (arm_errors)", str(exc)) from None
+            if not term.urdf and not term.robot:
+                raise c.error(
+                    f"error_model.robot[{k}] (arm_errors)", "needs an arm: robot.model ur5/ur10, or robot.urdf"
+                )
         terms.append(term)
     return ErrorModel(robot=tuple(terms), sensor=model.sensor)
 

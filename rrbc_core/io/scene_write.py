@@ -43,6 +43,11 @@ class SceneSpec:
     comments: dict = field(default_factory=dict)
 
 
+def _key(k: str) -> str:
+    """A TOML key: bare when it can be, else a quoted string."""
+    return k if k and all(c.isascii() and (c.isalnum() or c in "_-") for c in k) else _value(k)
+
+
 def _value(v) -> str:
     """A TOML value: string, bool, integer, float (shortest round-trip repr), list or inline table."""
     if isinstance(v, str):
@@ -63,8 +68,8 @@ def _value(v) -> str:
         return _value(v.tolist())
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + " }"
+    if isinstance(v, dict):  # a key that is not bare (a dotted parameter name) is quoted, not nested
+        return "{ " + ", ".join(f"{_key(str(k))} = {_value(x)}" for k, x in v.items()) + " }"
     raise InputError(f"cannot write {type(v).__name__} in a scene file")
 
 

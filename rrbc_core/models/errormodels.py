@@ -106,6 +106,8 @@ class PointSet:
     (sensor at the origin of its frame, viewing along +z). time: (P,) measurement times, s.
     tool_rotation: (P, 3, 3) (or one (3, 3) for all) tool orientation the robot uses at each point, robot
     frame; needed by the kinematic term. joint_seed: (6,) rad, IK seed that picks the configuration branch.
+    joints: (P, I) the arm's joint values a file recorded at each point (the chain's inputs, rad or mm), or None:
+    the `arm_errors` term then solves them.
     """
 
     robot: np.ndarray
@@ -113,6 +115,7 @@ class PointSet:
     time: np.ndarray
     tool_rotation: np.ndarray | None = None
     joint_seed: np.ndarray | None = None
+    joints: np.ndarray | None = None
 
     def __post_init__(self):
         r = np.asarray(self.robot, dtype=float)
@@ -129,6 +132,9 @@ class PointSet:
             _set(self, "tool_rotation", _points_array("tool_rotation", rot, (p, 3, 3)))
         if self.joint_seed is not None:
             _set(self, "joint_seed", _points_array("joint_seed", self.joint_seed, (6,)))
+        if self.joints is not None:
+            q = np.asarray(self.joints, dtype=float)
+            _set(self, "joints", _points_array("joints", q, (p, q.shape[-1] if q.ndim == 2 else -1)))
 
     def __len__(self) -> int:
         return len(self.robot)
@@ -140,7 +146,8 @@ class PointSet:
     def subset(self, i: int) -> PointSet:
         """The one point `i` as a PointSet of length 1."""
         rot = None if self.tool_rotation is None else self.tool_rotation[i : i + 1]
-        return PointSet(self.robot[i : i + 1], self.sensor[i : i + 1], self.time[i : i + 1], rot, self.joint_seed)
+        q = None if self.joints is None else self.joints[i : i + 1]
+        return PointSet(self.robot[i : i + 1], self.sensor[i : i + 1], self.time[i : i + 1], rot, self.joint_seed, q)
 
 
 # --- the protocol ------------------------------------------------------------------------------------------

@@ -74,8 +74,11 @@ class SessionData:
         """`analysis.diagnosis.diagnose` of these data with the arm's model: what `diagnose_command` prints."""
         from rrbc_core.analysis.diagnosis import diagnose
 
+        from rrbc_core.io.joints import file_tool
+
         robot = None if self.robot == "ur5" else self.robot  # as the printed command says it (ur5 is the default)
-        return diagnose(self.measurements, alpha=alpha, seed=seed, robot=robot, tool_mm=self.tool_mm)
+        tool = self.tool_mm if self.tool_mm else file_tool(self.measurements)  # as the command reads the file's
+        return diagnose(self.measurements, alpha=alpha, seed=seed, robot=robot, tool_mm=tool)
 
 
 def session_data(session: ExplorerSession) -> SessionData:

@@ -44,8 +44,18 @@ def joint_columns(cell: WorkCell) -> dict:
     point in the flange's frame, mm (`tool_x`, `tool_y`, `tool_z`: `io.joints.file_tool`), so that `rrbc diagnose`,
     `rrbc calibrate` and `rrbc check-model` read the file as it is. {} without an arm term. With both terms the
     kinematic term's joints are written (the compliance term solves its own)."""
+    from rrbc_core.models.armterms import ArmErrors
     from rrbc_core.models.errorterms import Compliance, Kinematic
 
+    chained = [t for t in cell.error_model.robot if isinstance(t, ArmErrors)]
+    if chained:  # the arm's own columns (a URDF's joint names in ROS units, or q1..q6 in degrees) and its tool
+        term = chained[0]
+        chain = term.chain
+        qa = term.joints(cell.point_set())
+        cols = {inp.column: tuple(repr(float(v)) for v in qa[:, i] / inp.scale) for i, inp in enumerate(chain.inputs)}
+        tool_cols = zip(("tool_x", "tool_y", "tool_z"), chain.tool)
+        cols.update({c: tuple(f"{float(v):g}" for _ in range(len(qa))) for c, v in tool_cols})
+        return cols
     arm: list[Kinematic | Compliance] = [t for t in cell.error_model.robot if isinstance(t, Kinematic)]
     arm += [t for t in cell.error_model.robot if isinstance(t, Compliance)]
     if not arm:

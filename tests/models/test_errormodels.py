@@ -474,6 +474,7 @@ def test_table_round_trip():
         "outliers",
         "drift",
         "warm_up",
+        "arm_errors",
         "sampled_field",
         "field_uncertainty",
     }
