@@ -68,6 +68,7 @@ class ArmErrors(_Term):
     random: ClassVar[bool] = False
     sides: ClassVar[tuple[str, ...]] = ("robot",)
     _model: tuple = field(init=False, repr=False, compare=False, default=())
+    _solved: dict = field(init=False, repr=False, compare=False, default_factory=dict)  # points -> joints (few)
 
     def __post_init__(self):
         for name in ("parameters", "loads"):
@@ -134,7 +135,10 @@ class ArmErrors(_Term):
             raise InputError("the arm_errors term has no arm: give the scene a robot (robot.model or robot.urdf)")
         if points.joints is not None:
             return np.asarray(points.joints, float)
-        from rrbc_core.models.arm_description import ArmDescription, reach
+        key = np.asarray(points.robot, float).tobytes()
+        if key in self._solved:
+            return self._solved[key]
+        from rrbc_core.models.arm_description import ArmDescription, _limits, reach
 
         chain = self._model[0]
         desc = ArmDescription(Path(chain.source or "arm"), chain, np.eye(3), np.zeros(3))
@@ -146,7 +150,11 @@ class ArmErrors(_Term):
             p_true, _, jac = self._true(q, jacobians=True)
             assert jac is not None
             r = points.robot - p_true
-            q = q + np.einsum("nij,nj->ni", np.linalg.pinv(jac), r)
+            q = np.clip(q + np.einsum("nij,nj->ni", np.linalg.pinv(jac), r), *_limits(chain))
+        q.setflags(write=False)
+        if len(self._solved) >= 8:  # a few point sets (a scene's, a drag's) are asked for again and again
+            self._solved.pop(next(iter(self._solved)))
+        self._solved[key] = q
         return q
 
     def displacement(self, points: PointSet) -> np.ndarray:

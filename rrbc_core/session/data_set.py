@@ -73,7 +73,6 @@ class SessionData:
     def diagnose(self, alpha: float = 0.01, seed: int = 0):
         """`analysis.diagnosis.diagnose` of these data with the arm's model: what `diagnose_command` prints."""
         from rrbc_core.analysis.diagnosis import diagnose
-
         from rrbc_core.io.joints import file_tool
 
         robot = None if self.robot == "ur5" else self.robot  # as the printed command says it (ur5 is the default)
