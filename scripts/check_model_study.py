@@ -245,8 +245,10 @@ def report(sim: list[dict], real_rows: list[dict] | None, commit: str | None) ->
         "a robot-side `drift` with that rate and it means the same thing (a sensor-side drift of rate v shows in "
         "diagnose as −R v); a smooth field as a `sampled_field` (its smoothed values at the points) with its linear "
         "part as an `affine` term and a `field_uncertainty` term (the field estimate's posterior: what a prediction "
-        "does not know between and at the points). `kinematic`, `compliance` and `anisotropic_noise` are named but "
-        "not written: their parameters come from `rrbc calibrate`.",
+        "does not know between and at the points); `kinematic` and `compliance`, when the file has the arm's joints, "
+        "as an `arm_errors` term: `rrbc calibrate`'s identification (`analysis.calibration.calibrate`) of the arm's "
+        "parameters and the named load terms from what the model leaves. `anisotropic_noise` is named but not "
+        "written.",
         "5. **Score.** K folds (the stations when the file has at least two, else the points): the naming and "
         "extending are repeated without each fold, and the extended model predicts the held-out rows. The "
         "prediction error is the RMS over held-out rows of |measured − predicted mean residual|; the coverage the "
@@ -319,9 +321,10 @@ def report(sim: list[dict], real_rows: list[dict] | None, commit: str | None) ->
             )
         out += [
             "",
-            "The arm's own errors (kinematic, compliance: the data sets' authors calibrate the arm) are named but not "
-            "written by check-model: `rrbc calibrate --urdf ... --compliance` identifies them (docs/calibration.md). "
-            "The gain above is the written terms' alone.",
+            "The arm's own errors (kinematic, compliance: the data sets' authors calibrate the arm) are written as "
+            "an `arm_errors` term (`rrbc calibrate`'s model, identified from what the noise-only model leaves); the "
+            "parameters of a redundant arm identified on one data set are combinations these poses see, not each "
+            "joint's own error (docs/calibration.md).",
         ]
     return out
 
