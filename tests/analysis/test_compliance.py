@@ -76,6 +76,7 @@ def test_planted_compliance_is_named_and_recovered(results):
             assert abs(z) < Z_MAX, (robot, seed, name, est[name], value)
 
 
+@pytest.mark.slow
 def test_compliance_is_not_named_where_none_is_planted(results):
     for robot, seed, plant, _, r in results:
         if not plant:
@@ -121,6 +122,7 @@ def saved_arm(tmp_path_factory):
 PLANT_11 = _plant("lift_arm", 11)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n_reg", [4, 8])
 def test_a_saved_arm_comes_within_20_percent_of_a_full_calibration(tmp_path, saved_arm, n_reg):
     """On a new file of the same arm (4 or 8 registration points and 40 fiducials) only the transform is fitted:

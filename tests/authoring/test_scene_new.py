@@ -80,6 +80,7 @@ def test_a_generated_cell_goes_from_mesh_to_corrected_data(tmp_path, seed):
         app.stop()
 
 
+@pytest.mark.slow
 def test_other_robots_and_a_given_sensor(tmp_path):
     mesh_path, targets_path, info = random_cell(tmp_path, 3)
     for robot in ("ur10", "none"):

@@ -43,6 +43,7 @@ def test_json_has_the_contract_fields(quick_report):
     assert len(j["assumptions"]) >= 5
 
 
+@pytest.mark.slow
 def test_measured_rows_in_the_json_are_the_published_numbers(quick_report):
     _, j = quick_report
     published = {r.method: r for r in reference_data.vanwyk2018()}

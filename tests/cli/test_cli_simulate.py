@@ -144,6 +144,7 @@ def test_out_carries_the_arms_joint_angles_and_diagnose_tests_the_arm(tmp_path, 
     assert "kinematic" in json.loads(capsys.readouterr().out)["tests"]
 
 
+@pytest.mark.slow
 def test_a_simulated_arm_file_is_read_as_it_is_by_diagnose_and_calibrate(tmp_path):
     """Issue 36: `simulate --out` writes the joints and the tool (tool_x, tool_y, tool_z) of a scene whose UR5 bends
     under its own weight; `diagnose --robot ur5` then tests compliance (the packaged UR5 carries its masses) and
