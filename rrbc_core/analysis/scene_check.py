@@ -254,6 +254,15 @@ def _name(
     return effects, rem, diag
 
 
+def _not_at_points(scene, mset: MeasurementSet, exc: InputError) -> str:
+    """Why the scene's model cannot be simulated at the file's points, naming both."""
+    name = getattr(scene, "path", None) or getattr(scene, "name", "the scene")
+    return (
+        f"{name}: its error model cannot be evaluated at the points of {mset.source} ({' '.join(str(exc).split())}); "
+        "is this the scene of the cell those data were measured in?"
+    )
+
+
 def _file_arm(mset: MeasurementSet, scene, robot: str):
     """The scene's arm (its spec for `armterms.arm_chain`) and the file's joint values for it (R, I), or (spec or
     None, None) when the scene has no arm or the file none of its columns."""
@@ -359,10 +368,19 @@ def check_scene_model(
     model: ErrorModel = scene.error_model
     robot = scene.robot_model if scene.robot_model in ("ur5", "ur10") else "none"
     spec, q = _file_arm(mset, scene, robot)
-    stations = at_physical_points(mset, file_stations(mset, robot, scene.tool_yaw_deg, q), model)
+    stations = file_stations(mset, robot, scene.tool_yaw_deg, q)
+    try:
+        stations = at_physical_points(mset, stations, model)
+    except InputError as exc:
+        raise InputError(_not_at_points(scene, mset, exc)) from None
     arm = _arm(mset, scene, robot)
     meas = measured_figures(mset, stations)
-    pred = predict(mset, stations, model, trials, seed)
+    try:
+        pred = predict(mset, stations, model, trials, seed)
+    except InputError as exc:
+        if "--trials" in str(exc):
+            raise
+        raise InputError(_not_at_points(scene, mset, exc)) from None
     mean, cov = _moments(pred)
     z = _z(meas.residual[0], mean, cov)
     paired = np.flatnonzero(np.isfinite(z))

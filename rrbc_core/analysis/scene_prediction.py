@@ -9,8 +9,8 @@ reading mapped by the fit); its tool points down at the scene's yaw, or, with jo
 is the orientation those joints give. The measurement model (`models.measurement`) reads every point `trials`
 times; check rows keep the truth as their robot value (the measurement-file format), target rows none.
 
-Every trial, and the file itself, is scored by one function (`figures`): per station the least-squares
-registration of its registration rows, RRBC (IDW k = 4, p = 2) from its fiducial rows to its check rows
+Every trial, and the file itself, is scored by one function (`figures`): per station (rows repeated under one id
+averaged into one point, as `rrbc correct` does) the least-squares registration of its registration rows, RRBC (IDW k = 4, p = 2) from its fiducial rows to its check rows
 (`simulation.batch.rrbc_batch`, equal to `rrbc correct`'s pipeline), the rigid residual of every row with a robot
 value, and the pooled FRE and check RMS. So a measured figure and its predicted distribution are computed alike.
 """
@@ -24,7 +24,7 @@ import numpy as np
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.io.groups import GROUP_COLUMN, has_groups
-from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.io.measurements import MeasurementSet, select_rows
 from rrbc_core.models.errormodels import ErrorModel, PointSet
 from rrbc_core.models.measurement import MeasurementModel
 from rrbc_core.registration.strategies import least_squares
@@ -168,14 +168,14 @@ def file_stations(
     rotations, q = _tool_rotations(mset, robot_model, tool_yaw_deg)
     out = []
     for name, rows in _station_rows(mset):
-        reg = rows[np.isin(roles[rows], REGISTRATION_ROLES) & paired[rows]]
         where = f"{mset.source}" + (f", group {name!r}" if name else "")
-        if len(reg) < 3:
+        reg_pts = select_rows(mset, rows).points("registration")  # repeated rows averaged, as `rrbc correct` does
+        if len(reg_pts.ids) < 3:
             raise InputError(
-                f"{where}: {len(reg)} registration rows (role registration or both) with robot values; "
+                f"{where}: {len(reg_pts.ids)} registration points (role registration or both) with robot values; "
                 "the prediction needs at least 3 per station"
             )
-        fit = least_squares(mset.sensor[reg], mset.robot[reg]).mapping
+        fit = least_squares(reg_pts.sensor, reg_pts.robot).mapping
         mapping = RigidTransform(fit.rotation, fit.translation)
         physical = np.where(paired[rows, None], mset.robot[rows], mapping.apply(mset.sensor[rows]))
         seed = None if q is None else q[rows[0]]
@@ -215,31 +215,44 @@ def figures(mset: MeasurementSet, stations: list[Station], sensor: np.ndarray, r
     mapped = np.full((trials, n_rows, 3), np.nan)
     fre_ss, n_reg = np.zeros(trials), 0
     rig_ss, rr_ss, n_chk, any_fid = np.zeros(trials), np.zeros(trials), 0, True
+    ids = np.asarray(mset.ids, dtype=object)
+
+    def by_id(arr: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """(T, K, 3): the rows' values averaged per distinct id (repeated rows are one point, as `rrbc correct`)."""
+        _, inv = np.unique(ids[rows], return_inverse=True)
+        k = int(inv.max()) + 1 if len(inv) else 0
+        out = np.zeros((k, arr.shape[0], 3))  # point-major, so that add.at takes one index array
+        np.add.at(out, inv, np.swapaxes(arr[:, rows], 0, 1))
+        return np.swapaxes(out, 0, 1) / np.bincount(inv, minlength=k)[None, :, None]
+
     for st in stations:
         r = st.rows
         role = roles[r]
         ok = role != "target"
         reg, fid, chk = r[np.isin(role, REGISTRATION_ROLES)], r[np.isin(role, FIDUCIAL_ROLES)], r[role == "check"]
         any_fid &= len(fid) > 0
+        reg_s, reg_b = by_id(sensor, reg), by_id(robot, reg)
+        chk_s, chk_b = by_id(sensor, chk), by_id(robot, chk)
         out = rrbc_batch(
             "least-squares",
             "idw" if len(fid) else "none",
-            sensor[:, reg],
-            robot[:, reg],
-            sensor[:, fid],
-            robot[:, fid],
-            sensor[:, r],
+            reg_s,
+            reg_b,
+            by_id(sensor, fid),
+            by_id(robot, fid),
+            np.concatenate([sensor[:, r], reg_s, chk_s], axis=1),
             hull="none",
         )
-        mapped[:, r] = out["robot_rigid"]
-        resid[:, r[ok]] = robot[:, r[ok]] - out["robot_rigid"][:, ok]
-        fre_ss += np.sum(resid[:, reg] ** 2, axis=(1, 2))
-        n_reg += len(reg)
+        n, k = len(r), reg_s.shape[1]
+        rigid = out["robot_rigid"]
+        mapped[:, r] = rigid[:, :n]
+        resid[:, r[ok]] = robot[:, r[ok]] - rigid[:, :n][:, ok]
+        fre_ss += np.sum((reg_b - rigid[:, n : n + k]) ** 2, axis=(1, 2))
+        n_reg += k
         if len(chk):
-            at = np.isin(r, chk)
-            rig_ss += np.sum((robot[:, chk] - out["robot_rigid"][:, at]) ** 2, axis=(1, 2))
-            rr_ss += np.sum((robot[:, chk] - out["robot_rrbc"][:, at]) ** 2, axis=(1, 2))
-            n_chk += len(chk)
+            rig_ss += np.sum((chk_b - rigid[:, n + k :]) ** 2, axis=(1, 2))
+            rr_ss += np.sum((chk_b - out["robot_rrbc"][:, n + k :]) ** 2, axis=(1, 2))
+            n_chk += chk_s.shape[1]
     return Figures(
         resid,
         np.sqrt(fre_ss / n_reg),

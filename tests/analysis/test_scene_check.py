@@ -257,3 +257,42 @@ def test_bad_arguments_are_refused(scene):
         check_scene_model(m, scene, trials=5)
     with pytest.raises(InputError, match="folds"):
         check_scene_model(m, scene, folds=1)
+
+
+def test_repeated_rows_are_one_point_as_rrbc_correct_has_them(scene):
+    """Registration points and fiducials measured twice (repeated ids): the figures are still rrbc correct's own, and
+    a station with fewer than 3 distinct registration points is refused in one line."""
+    from rrbc_core.io.measurements import MeasurementSet
+
+    m = _file(scene, seed=4)
+    again = [i for i, r in enumerate(m.roles) if r in ("registration", "fiducial")]
+    rows = list(range(len(m))) + again
+    noise = np.random.default_rng(4).normal(0, 0.02, (len(rows), 3))
+    rep = MeasurementSet(
+        tuple(m.ids[i] for i in rows),
+        tuple(m.roles[i] for i in rows),
+        m.sensor[rows] + noise,
+        m.robot[rows],
+        m.time[rows],
+        tuple(0 for _ in rows),
+        "repeats",
+        {k: tuple(v[i] for i in rows) for k, v in m.extra.items()},
+    )
+    fig = measured_figures(rep, file_stations(rep, "ur5", scene.tool_yaw_deg))
+    res = correct_measurements(rep)
+    assert fig.rmst_rigid[0] == pytest.approx(res.summary()["rmst_rigid_mm"], abs=1e-9)
+    assert fig.rmst_rrbc[0] == pytest.approx(res.summary()["rmst_rrbc_mm"], abs=1e-9)
+    assert fig.fre[0] == pytest.approx(res.registration.fre_rms_mm, abs=1e-9)
+    two = [i for i, r in enumerate(m.roles) if r != "registration"] + [0, 1]
+    few = MeasurementSet(
+        tuple(m.ids[i] for i in two),
+        tuple(m.roles[i] for i in two),
+        m.sensor[two],
+        m.robot[two],
+        m.time[two],
+        tuple(0 for _ in two),
+        "few",
+        {k: tuple(v[i] for i in two) for k, v in m.extra.items()},
+    )
+    with pytest.raises(InputError, match="2 registration points"):
+        file_stations(few, "ur5", scene.tool_yaw_deg)
