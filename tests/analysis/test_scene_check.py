@@ -296,3 +296,47 @@ def test_repeated_rows_are_one_point_as_rrbc_correct_has_them(scene):
     )
     with pytest.raises(InputError, match="2 registration points"):
         file_stations(few, "ur5", scene.tool_yaw_deg)
+
+
+def test_a_station_whose_sensor_moved_is_the_one_named(scene):
+    """Two stations of the demo cell (the sensor placed twice); in the second, the sensor is bumped after its
+    registration points were measured (a random small rotation and shift, seeded): that station's rows miss, the
+    other's do not, and the misfit is said to follow the station; folds are the stations."""
+    from scipy.spatial.transform import Rotation
+
+    from rrbc_core.geometry.transforms import RigidTransform
+    from rrbc_core.io.measurements import MeasurementSet
+
+    rng = np.random.default_rng(3640)
+    turn = Rotation.from_rotvec([0.0, 0.0, 0.35]).as_matrix()
+    centre = np.array([475.0, 0.0, 0.0])
+    pose = scene.sensor_to_robot
+    moved_pose = RigidTransform(turn @ pose.rotation, turn @ (pose.translation - centre) + centre)
+    parts = []
+    for k, sc in enumerate((scene, dataclasses.replace(scene, sensor_to_robot=moved_pose))):
+        m = measured_data(work_cell_from_scene(sc, seed=k), 70 + k)
+        if k == 1:  # bumped once its registration rows were read
+            bump = Rotation.from_rotvec(rng.normal(0, 1, 3) * 2e-4).as_matrix()
+            late = np.array([r != "registration" for r in m.roles])
+            s = m.sensor.copy()
+            s[late] = s[late] @ bump.T + rng.normal(0, 1, 3) * 0.15
+            m = dataclasses.replace(m, sensor=s)
+        parts.append((m, f"s{k + 1}"))
+    cat = lambda f: np.concatenate([f(m) for m, _ in parts])
+    extra = {key: sum((m.extra[key] for m, _ in parts), ()) for key in parts[0][0].extra}
+    extra["group"] = sum(((g,) * len(m) for m, g in parts), ())
+    both = MeasurementSet(
+        sum((m.ids for m, _ in parts), ()),
+        sum((m.roles for m, _ in parts), ()),
+        cat(lambda m: m.sensor),
+        cat(lambda m: m.robot),
+        cat(lambda m: m.time),
+        tuple(0 for _ in range(sum(len(m) for m, _ in parts))),
+        "two stations",
+        extra,
+    )
+    r = check_scene_model(both, scene, trials=TRIALS, folds=FOLDS, seed=0)
+    assert r.stations_off == ("s2",), r.stations_off
+    assert "station" in r.follows
+    assert r.gain["fold_by"] == "station" and r.gain["folds"] == 2
+    assert all(p.group == "s2" for p in r.outside[: len(r.outside) // 2])  # the worst rows are the bumped station's
