@@ -16,7 +16,7 @@ def add_parsers(sub) -> None:
         "check-model",
         help="hold a scene's error model against a measured file: misfit, its cause, an extended scene, the gain",
         description="Simulate the scene's error model at the measured file's own points, compare the measured "
-        "figures and each row with their predicted 95 %% ranges, name what the model leaves unexplained (diagnose's "
+        "figures and each row with their predicted 95 % ranges, name what the model leaves unexplained (diagnose's "
         "tests), write the scene extended by it (--out) and score the extension on held-out folds "
         "(docs/check_model.md).",
     )

@@ -12,6 +12,8 @@ import viser
 from .diagnosis_panel import escape
 
 if TYPE_CHECKING:
+    from rrbc_core.analysis.scene_check import SceneCheck
+
     from .actions import Actions
 
 NO_FILE = "(no measurement file offered)"
@@ -25,12 +27,34 @@ PROMPT = (
 NOT_A_SCENE = "Open a scene first (File tab): the Model tab holds a scene's error model against a measurement file."
 
 
-def render(lines: list[str], head: str = "") -> str:
-    """The command's lines as Markdown: the figures' table in a code block, each other line a paragraph."""
+#: how the tab says where the rest is and how the extension is written (`scene_check_text.check_lines`' hints)
+APP_HINTS = {
+    "more": "dark red in the scene",
+    "write": "**Extend the model** loads it, **Download extended scene** saves it",
+}
+_FIGURES = (("fre_mm", "FRE"), ("rmst_rigid_mm", "rigid RMST"), ("rmst_rrbc_mm", "RRBC RMST"))
+
+
+def figures_table(res: SceneCheck) -> str:
+    """The measured figures beside their predicted means and 95 % ranges, as a Markdown table (the panel is too
+    narrow for the command's fixed-width lines)."""
+    rows = ["| | measured | predicted | 95 % range | |", "| --- | ---: | ---: | --- | --- |"]
+    outside = set(res.figures_outside)
+    for key, label in _FIGURES:
+        iv, m = res.predicted[key], res.measured[key]
+        if iv is None or m is None:
+            rows.append(f"| {label} | - | - | no such rows | |")
+            continue
+        flag = "**OUTSIDE**" if key in outside else "inside"
+        rows.append(f"| {label} | {m:.4g} | {iv.mean:.4g} | {iv.lo95:.4g} – {iv.hi95:.4g} | {flag} |")
+    return "\n".join(rows)
+
+
+def render(res: SceneCheck, lines: list[str], head: str = "") -> str:
+    """The tab's Markdown: the command's first line, the figures as a table (`figures_table`), then the command's
+    other lines (`check_lines` with `APP_HINTS`), each a paragraph."""
     table_end = next((i for i, line in enumerate(lines) if line.startswith("rows outside")), 1)
-    body = [escape(lines[0])] if lines else []
-    if table_end > 1:
-        body.append("```\n" + "\n".join(lines[1:table_end]) + "\n```")
+    body = [escape(lines[0]), figures_table(res)] if lines else []
     body += [escape(line) for line in lines[table_end:]]
     return "\n\n".join(([head] if head else []) + body)
 
@@ -65,11 +89,12 @@ class ModelCheckPanel:
         """Select a file (tests, and the check run again after extending)."""
         self._file.value = label
 
-    def show(self, markdown: str, extendable: bool = False) -> None:
-        """The check's lines (`render`), or a prompt; whether *Extend* and the download apply."""
+    def show(self, markdown: str, extendable: bool = False, downloadable: bool | None = None) -> None:
+        """The check's lines (`render`), or a prompt; whether *Extend* and the download apply (the download: by
+        default when *Extend* does)."""
         self._text.content = markdown
         self._extend.disabled = not extendable
-        self._download.disabled = not extendable
+        self._download.disabled = not (extendable if downloadable is None else downloadable)
 
     def text(self) -> str:
         """What the tab shows (tests)."""

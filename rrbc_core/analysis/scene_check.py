@@ -257,9 +257,10 @@ def _name(
 def _not_at_points(scene, mset: MeasurementSet, exc: InputError) -> str:
     """Why the scene's model cannot be simulated at the file's points, naming both."""
     name = getattr(scene, "path", None) or getattr(scene, "name", "the scene")
+    detail = " ".join(str(exc).split())
     return (
-        f"{name}: its error model cannot be evaluated at the points of {mset.source} ({' '.join(str(exc).split())}); "
-        "is this the scene of the cell those data were measured in?"
+        f"{name}: its error model cannot be evaluated at the points of {mset.source}: is this the scene of the cell "
+        f"those data were measured in? ({detail[:300]}{'…' if len(detail) > 300 else ''})"
     )
 
 

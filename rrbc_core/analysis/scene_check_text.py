@@ -10,9 +10,17 @@ __all__ = ["check_lines"]
 _FIGURES = (("fre_mm", "FRE"), ("rmst_rigid_mm", "rigid RMST"), ("rmst_rrbc_mm", "RRBC RMST"))
 
 
-def check_lines(res: SceneCheck, data: str, scene: str, written: str | None = None) -> list[str]:
+#: how the command says where the rest is and how to write the extension; the app says it its own way
+CLI_HINTS = {"more": "--json lists all", "write": "give --out EXTENDED.toml to write it"}
+
+
+def check_lines(
+    res: SceneCheck, data: str, scene: str, written: str | None = None, hints: dict | None = None
+) -> list[str]:
     """The lines `rrbc check-model` prints (and the app's Model tab shows): `data` and `scene` name the files,
-    `written` the extended scene written (None: not written)."""
+    `written` the extended scene written (None: not written); `hints` (`CLI_HINTS` by default) where the rows not
+    listed are and how the extension is written."""
+    hints = CLI_HINTS if hints is None else hints
     lines = [
         f"check-model: {data} against the error model of {scene} "
         f"({res.trials} trials; {res.n_rows} rows with both readings compared)",
@@ -38,7 +46,7 @@ def check_lines(res: SceneCheck, data: str, scene: str, written: str | None = No
         where = f" (group {p.group})" if p.group else ""
         lines.append(f"  {p.id}{where}: z {p.z:.3g}, {p.miss_mm:.3g} mm from its predicted residual")
     if n_out > 10:
-        lines.append(f"  … and {n_out - 10} more (--json lists all)")
+        lines.append(f"  … and {n_out - 10} more ({hints['more']})")
     if res.follows:
         lines.append(f"the misfit follows: {', '.join(res.follows)}")
     if res.stations_off:
@@ -51,8 +59,7 @@ def check_lines(res: SceneCheck, data: str, scene: str, written: str | None = No
     if res.added:
         names = ", ".join(t.table["type"] for t in res.added)
         lines.append(
-            f"extended model (robot-side terms): {names}; "
-            + (f"written to {written}" if written else "give --out EXTENDED.toml to write it")
+            f"extended model (robot-side terms): {names}; " + (f"written to {written}" if written else hints["write"])
         )
     lines += [f"  {s}" for s in res.not_written]
     g = res.gain

@@ -72,11 +72,16 @@ class ModelCheckController:
                 return None
             st = self.ctx.state
             st.model_check, st.model_check_file = result, label
+            extended = st.model_check_scene_text is not None
             if result is not None:
                 scene_name = Path(str(getattr(scene, "path", "") or session.name)).name
-                text = model_check_panel.render(check_lines(result, Path(label).name, scene_name), head)
+                if extended:
+                    scene_name = f"{scene_name} as extended here"
+                lines = check_lines(result, Path(label).name, scene_name, hints=model_check_panel.APP_HINTS)
+                text = model_check_panel.render(result, lines, head)
             with self.ctx.server.atomic():
-                self.ctx.controls.model_check.show(text, extendable=result is not None and bool(result.added))
+                added = result is not None and bool(result.added)
+                self.ctx.controls.model_check.show(text, extendable=added, downloadable=added or extended)
                 self.show_rows()
         if result is None:
             self.ctx.message("the model was not checked: see the Model tab", client, title="Not checked")
@@ -135,11 +140,12 @@ class ModelCheckController:
         return extended_scene_text(text, [(t.table, t.comment) for t in r.added], header)
 
     def extended_text(self) -> tuple[str, bytes]:
-        """(file name, content) of the scene extended by the last check: its text with the terms appended (as
-        `rrbc check-model --out` writes it)."""
+        """(file name, content) of the scene extended by the last check (its text with the terms appended, as
+        `rrbc check-model --out` writes it), or of the extended scene the tab loaded."""
         with self.ctx.lock:
             r, label = self.ctx.state.model_check, self.ctx.state.model_check_file
-            if r is None or not r.added or self.ctx.session.kind != "scene":
+            loaded = self.ctx.state.model_check_scene_text is not None
+            if r is None or not (r.added or loaded) or self.ctx.session.kind != "scene":
                 raise InputError("nothing to download: check a scene's model against a file first")
             text = self._scene_text(r, label)
             stem = Path(str(getattr(self.ctx.session.scene, "path", None) or "scene")).stem

@@ -43,7 +43,9 @@ def test_the_model_tab_checks_names_draws_and_extends(viser_app, page_for, tmp_p
     iv, measured = r.predicted["rmst_rigid_mm"], r.measured["rmst_rigid_mm"]
     assert f"{measured:.4g}" in body and f"{iv.lo95:.4g}" in body and f"{iv.hi95:.4g}" in body
     assert "OUTSIDE" in body and "smooth_field" in body
-    wait_for(lambda: node_exists(page, "/model_check/rows"), 20, message="the compared rows in the 3-D view", page=page)
+    wait_for(
+        lambda: node_exists(page, "/model_check/outside"), 20, message="the rows outside in the 3-D view", page=page
+    )
 
     page.get_by_role("button", name="Extend the model", exact=True).click()
     page.get_by_text("Extended model loaded", exact=False).first.wait_for(state="visible", timeout=120_000)

@@ -11,6 +11,7 @@ import tomllib
 import numpy as np
 import pytest
 
+from rrbc_core.analysis.scene_check_text import check_lines
 from rrbc_core.cli import main
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.io.scene_toml import load_scene
@@ -35,12 +36,8 @@ def folder(tmp_path_factory):
 
 
 def _tab_lines(text: str) -> list[str]:
-    out = []
-    for p in text.split("\n\n"):
-        if p.startswith("**"):
-            continue  # a heading the app adds (the extension's gain)
-        out += p[4:-4].split("\n") if p.startswith("```\n") else [unescape(p)]
-    return out
+    """The tab's paragraphs as plain text, without the heading the app adds (an extension's gain)."""
+    return [unescape(p) for p in text.split("\n\n") if not p.startswith("**")]
 
 
 @pytest.mark.slow
@@ -59,9 +56,16 @@ def test_the_tab_is_the_command_and_extending_loads_the_extended_scene(folder, c
         assert json.loads(json.dumps(result.to_json())) == cli
         assert main(["check-model", str(folder / "planted.csv"), DEMO.name]) == 0
         text = capsys.readouterr().out.rstrip("\n").split("\n")
+        assert text == check_lines(result, str(folder / "planted.csv"), DEMO.name)  # the command's lines
+        # the tab: the same lines (its own hints), the figures as a table of the same numbers
         tab = _tab_lines(app.controls.model_check.text())
-        assert tab[0] == text[0].replace(str(folder / "planted.csv"), "planted.csv")
-        assert tab[1:] == text[1:]
+        same = check_lines(result, "planted.csv", DEMO.name, hints=model_check_panel.APP_HINTS)
+        rest = next(i for i, line in enumerate(same) if line.startswith("rows outside"))
+        assert tab[0] == same[0] and tab[2:] == same[rest:]
+        assert tab[1] == unescape(model_check_panel.figures_table(result))
+        for key in ("fre_mm", "rmst_rigid_mm", "rmst_rrbc_mm"):
+            iv = result.predicted[key]
+            assert f"{result.measured[key]:.4g} | {iv.mean:.4g} | {iv.lo95:.4g} – {iv.hi95:.4g}" in tab[1]
         # every compared row drawn; the outside ones are the JSON's
         assert app.check_node.shown() == result.n_rows == len(result.z)
         assert int(np.sum(result.z > 2.7955)) == len(cli["outside"])
@@ -80,10 +84,10 @@ def test_the_tab_is_the_command_and_extending_loads_the_extended_scene(folder, c
         assert shown.startswith("**Extended model loaded**") and "smooth_field" not in {
             e.name for e in again.unexplained
         }
-        # the extension's download carries both the first terms and any new ones
-        if again.added:
-            _, content2 = app.model_check.download()
-            assert content2.decode().startswith(content.decode().rstrip("\n"))
+        assert "as extended here" in shown  # the re-check says which model it held
+        # the loaded extension can be downloaded: the first terms, and any new ones after them
+        _, content2 = app.model_check.download()
+        assert content2.decode().startswith(content.decode().rstrip("\n"))
     finally:
         app.stop()
 
