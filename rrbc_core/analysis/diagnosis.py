@@ -3,7 +3,7 @@
 Starting from a rigid sensor→robot fit plus isotropic noise, the diagnosis tests, in this order:
 outliers (generalised ESD on deleted studentised residuals of a rigid+affine(+drift)(+arm) model), uniform scale
 (similarity vs rigid), affine beyond scale (full linear map vs similarity; only the identifiable terms), drift
-(residuals vs time), with joint values in the file the arm's kinematic error (its chain's Jacobian columns beyond the
+(residuals vs time), a scale that changes with time (reported in `scale` as `ppm_per_s`), with joint values in the file the arm's kinematic error (its chain's Jacobian columns beyond the
 accepted terms, `diagnosis_arm`), smooth field (Moran's I of the residuals, k-nearest-neighbour weights, parametric
 bootstrap) and anisotropic noise (sphericity likelihood ratio of the noise covariance). All model tests are nested
 F-tests of the linearised residual model (docs/theory.md §6.1). False alarms are controlled family-wise: each of
@@ -198,9 +198,9 @@ def diagnose(
     if not use_time:
         limits.append("no usable time column: drift was not tested")
     repeats = bool(np.any(d.count > 1))
-    # the family: outliers, scale, affine, [drift], [kinematic], [compliance], smooth_field, anisotropic_noise, each
-    # at alpha/m
-    m_tests = 5 + int(use_time) + int(arm is not None) + int(arm is not None and arm.load_fields is not None)
+    # the family: outliers, scale, affine, [drift], [scale_rate], [kinematic], [compliance], smooth_field,
+    # anisotropic_noise, each at alpha/m
+    m_tests = 5 + 2 * int(use_time) + int(arm is not None) + int(arm is not None and arm.load_fields is not None)
     a_each = alpha / m_tests
     all_idx = np.arange(n_all)
     extra = None

@@ -74,6 +74,45 @@ class Pass:
     c_delta: np.ndarray | None = None  # the load terms' scaled coefficients when compliance is accepted
 
 
+def _scale_rate(g: Geometry, y: np.ndarray, blocks: dict, found: dict, tests: dict, x_of, a_each, wsum, t_mean):
+    """A scale that changes with time (a thermal ramp): the column (t − t̄)·(p − p̄) beside everything accepted,
+    tested like the others; accepted, it is reported in `scale` as `ppm_per_s` (ppm per second about `t0_s`, the
+    rows' mean time) beside the scale at t0 (`ppm`, 0 when no constant scale was accepted)."""
+    assert g.time is not None  # called only with times
+    tt = (g.time - g.time.mean()) / g.tscale
+    raw = g._cols([tt[:, None] * g.u])
+    x_acc = x_of(blocks)
+    col = usable(x_acc, raw)[0]
+    if not col.shape[1]:
+        return
+    p_sr, _, nu_sr, f_sr, rss_a, rss_sr, _ = ftest(y, x_acc, np.hstack([x_acc, col]))
+    tests["scale_rate"] = p_sr
+    if p_sr >= a_each:
+        return
+    coef = fit(y, np.hstack([x_acc, raw]))[0][-1]
+    unit = 1e6 / (g.scale * g.tscale)  # a coefficient (mm) in ppm/s
+    rate = float(coef) * unit
+    beside = raw[:, 0] - orth(x_acc) @ (orth(x_acc).T @ raw[:, 0])  # the column's part no accepted term holds
+    se = float(np.sqrt(rss_sr / max(nu_sr, 1) / max(float(beside @ beside), 1e-300))) * unit
+    old = found.get("scale")
+    params = {"ppm": 0.0, **(old.parameters if old is not None else {})}
+    params.update({"ppm_per_s": rate, "ppm_per_s_standard_error": se, "t0_s": t_mean})
+    text = (
+        f"the scale between the frames changes with time at {rate:+.4g} ± {se:.2g} ppm/s (a thermal ramp): the column "
+        f"(t − t̄)(p − p̄) beside the accepted terms reduces the residual sum of squares from {rss_a:.3g} to "
+        f"{rss_sr:.3g} (F(1, {nu_sr}) = {f_sr:.3g}, p {fmt_p(p_sr)}); ppm is the scale at t0_s, the rows' mean time."
+    )
+    size = float(np.sqrt(max(0.0, rss_a - rss_sr) / wsum))
+    found["scale"] = Effect(
+        "scale",
+        params,
+        old.p_value if old is not None else p_sr,
+        (old.evidence + " " if old is not None else "") + text[0].upper() + text[1:],
+        magnitude_mm=(old.magnitude_mm if old is not None else 0.0) + size,
+    )
+    blocks["scale_rate"] = col
+
+
 def _honest_arm_sizes(g: Geometry, y: np.ndarray, blocks: dict, found: dict, wsum: float) -> None:
     """The sizes of the accepted arm effects (kinematic, compliance) as what each explains beyond every other
     accepted term: the RMS (weighted, in mm, unwhitened) of the fit's change when it is left out, like scale's and
@@ -181,6 +220,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
                 magnitude_mm=float(np.sqrt(max(0.0, rss_a - rss_d) / wsum)),
             )
             blocks["drift"] = dcol_ok
+        _scale_rate(g, y, blocks, found, tests, x_of, a_each, wsum, t_mean)
     # the arm (joint angles in the file)
     delta = c_delta = c_map = None
     rejudged = []

@@ -10,6 +10,8 @@ whichever instrument carries it, and its numbers read as `diagnose` reports them
   is named too; its symmetric part is diagnose's `matrix` G, which includes any uniform scale) about the centroid,
   and then no separate `scale`: the registration absorbs the map's rotation part only where time does not follow
   position;
+- a scale that changes with time (diagnose's `scale` with `ppm_per_s`, about `t0_s`) -> `scale` with `ppm_per_s` and
+  `t0_s` (with `ppm` 0 beside an `affine` term, which holds the constant part);
 - `drift` (diagnose's `rate_mm_per_s`, the rate of change of the residual) -> `drift` with that rate from the
   file's mean time (a constant offset is the registration's); beside a field, where diagnose gives no rate, the
   rate is the least-squares slope of the remainder on time;
@@ -159,8 +161,15 @@ def extension_terms(effects: list[Effect], remainder: MeasurementSet, arm=None) 
         explained += (pts - pts.mean(axis=0)) @ g.T
     elif "scale" in by:
         ppm = float(by["scale"].parameters["ppm"])
-        tables.append(("scale", {"type": "scale", "ppm": ppm, "center_mm": centre}, "diagnose's uniform scale"))
+        table = {"type": "scale", "ppm": ppm, "center_mm": centre}
+        tables.append(("scale", table, "diagnose's uniform scale"))
         explained += ppm * 1e-6 * (pts - pts.mean(axis=0))
+    if "scale" in by and "ppm_per_s" in by["scale"].parameters and np.all(np.isfinite(time)):
+        ppm_s, t_ref = float(by["scale"].parameters["ppm_per_s"]), float(by["scale"].parameters["t0_s"])
+        if "affine" in by or not tables or tables[-1][0] != "scale":  # the constant part is the affine's
+            tables.append(("scale", {"type": "scale", "ppm": 0.0, "center_mm": centre}, "diagnose's scale rate"))
+        tables[-1][1].update({"ppm_per_s": ppm_s, "t0_s": round(t_ref, 3)})
+        explained += (ppm_s * 1e-6 * (time - t_ref))[:, None] * (pts - pts.mean(axis=0))
     if "drift" in by and np.all(np.isfinite(time)):
         rate = by["drift"].parameters.get("rate_mm_per_s") or []
         how = "diagnose's drift rate"

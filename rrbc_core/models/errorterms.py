@@ -195,21 +195,27 @@ class Outliers(_Term):
 # --- deterministic terms -----------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Scale(_Term):
-    """Scale error: displacement = ppm·1e-6·(x − center_mm), x in the side's frame (mm). Either side."""
+    """Scale error: displacement = (ppm + ppm_per_s·(t − t0_s))·1e-6·(x − center_mm), x in the side's frame (mm), t
+    the point's time (s): a constant scale, or one that changes with time (a thermal ramp). Either side."""
 
     ppm: float
     center_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ppm_per_s: float = 0.0
+    t0_s: float = 0.0
     kind: ClassVar[str] = "scale"
     random: ClassVar[bool] = False
 
     def __post_init__(self):
         _set(self, "ppm", _number("ppm", self.ppm, unit="parts per million"))
         _set(self, "center_mm", _vector("center_mm", self.center_mm, 3, unit="mm"))
+        _set(self, "ppm_per_s", _number("ppm_per_s", self.ppm_per_s, unit="parts per million per second"))
+        _set(self, "t0_s", _number("t0_s", self.t0_s, unit="s", limit=1e11))
 
     def sample(self, points: PointSet, side: str, rng: np.random.Generator, trials: int) -> np.ndarray:
         x = points.frame(self._side(side))
         _check_trials(trials)
-        return (self.ppm * 1e-6 * (x - np.asarray(self.center_mm)))[None]
+        ppm = self.ppm + self.ppm_per_s * (np.asarray(points.time, float) - self.t0_s)
+        return (ppm[:, None] * 1e-6 * (x - np.asarray(self.center_mm)))[None]
 
 
 @dataclass(frozen=True)

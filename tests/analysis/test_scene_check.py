@@ -340,3 +340,24 @@ def test_a_station_whose_sensor_moved_is_the_one_named(scene):
     assert "station" in r.follows
     assert r.gain["fold_by"] == "station" and r.gain["folds"] == 2
     assert all(p.group == "s2" for p in r.outside[: len(r.outside) // 2])  # the worst rows are the bumped station's
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_scale_that_changes_with_time_is_named_with_its_rate_and_written(scene, seed):
+    """A thermal ramp: the scale grows by 800-1200 ppm over the session (random sign), times shuffled. diagnose names
+    `scale` with `ppm_per_s` within four of its standard errors; check-model writes a scale term with that rate."""
+    from rrbc_core.analysis.diagnosis import diagnose
+
+    rng = np.random.default_rng(3650 + seed)
+    t = _cell(scene).time
+    rate = float(rng.choice([-1, 1]) * rng.uniform(800, 1200) / np.ptp(t))
+    terms = [Scale(ppm=0.0, ppm_per_s=rate, t0_s=float(t.mean()))]
+    m = _file(scene, terms, seed=80 + seed, shuffle_time=seed)
+    d = diagnose(m, robot="ur5", tool_mm=scene.tool_mm)
+    sc = next(e for e in d.effects if e.name == "scale").parameters
+    assert abs(sc["ppm_per_s"] - rate) <= 4 * sc["ppm_per_s_standard_error"], (sc, rate)
+    r = check_scene_model(m, scene, trials=TRIALS, folds=FOLDS, seed=seed)
+    _flagged_and_gain(r)
+    written = [t.table for t in r.added if t.table["type"] == "scale"]
+    assert len(written) == 1 and np.sign(written[0]["ppm_per_s"]) == np.sign(rate), written
+    _second_files_inside(scene, r, terms, 0, seed)
