@@ -51,7 +51,7 @@ def _drift(rng, span):
     return Drift(rate_mm_per_s=tuple(v / np.linalg.norm(v) * rng.uniform(0.4, 0.8) / span))
 
 
-def scenarios(span: float) -> dict:
+def scenarios(span: float, t_mid: float) -> dict:
     """name -> (planted terms from a generator, times shuffled, the names that count as found)."""
     return {
         "clean (the scene's own model)": (lambda rng: [], False, set()),
@@ -65,6 +65,9 @@ def scenarios(span: float) -> dict:
                                      seed=int(rng.integers(1000)))], False, {"smooth_field"}),
         "drift + scale, times shuffled": (lambda rng: [_drift(rng, span), Scale(ppm=600.0)], True,
                                           {"drift", "scale", "affine"}),
+        "scale ramp 800-1200 ppm over the session (thermal), times shuffled": (
+            lambda rng: [Scale(ppm=0.0, ppm_per_s=float(rng.choice([-1, 1]) * rng.uniform(800, 1200) / span),
+                               t0_s=t_mid)], True, {"scale"}),
     }  # fmt: skip
 
 
@@ -82,9 +85,10 @@ def _second_files(scene, cell, ext) -> tuple[int, int]:
 
 def simulated() -> list[dict]:
     scene = load_scene(default_scene_path())
-    span = float(np.ptp(work_cell_from_scene(scene, seed=0).time))
+    times = work_cell_from_scene(scene, seed=0).time
+    span, t_mid = float(np.ptp(times)), float(np.mean(times))
     rows = []
-    for name, (make, shuffle, wanted) in scenarios(span).items():
+    for name, (make, shuffle, wanted) in scenarios(span, t_mid).items():
         for seed in range(SEEDS):
             rng = np.random.default_rng(7000 + seed)
             terms = make(rng)

@@ -141,6 +141,21 @@ class Geometry:
         return self._cols([np.outer(tt, e[k]) for k in range(3)])
 
 
+TIME_FOLLOWS_POSITION = 0.5  # R² of the rows' times on their positions beyond which time and position are confounded
+
+
+def time_on_position(points: np.ndarray, time: np.ndarray) -> float:
+    """R² (0..1) of the rows' times (N,) on their positions (N, 3) mm (an affine fit); 0 without usable times. Beyond
+    `TIME_FOLLOWS_POSITION` the measurement order follows position: an effect of time cannot be told from one of
+    position."""
+    t = np.asarray(time, float)
+    if len(t) < 5 or not np.all(np.isfinite(t)) or np.ptp(t) <= 0:
+        return 0.0
+    x = np.column_stack([np.ones(len(t)), np.asarray(points, float)])
+    coef, *_ = np.linalg.lstsq(x, t, rcond=None)
+    return float(1.0 - np.sum((t - x @ coef) ** 2) / np.sum((t - t.mean()) ** 2))
+
+
 def fit(y: np.ndarray, x: np.ndarray):
     """Least squares of y on the columns x along the directions its rank counts (normalised columns, singular
     values above 1e-8 of the largest): the fit and the F-tests' degrees of freedom agree even for nearly dependent

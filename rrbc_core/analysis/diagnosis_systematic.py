@@ -18,6 +18,7 @@ from rrbc_core.analysis.diagnosis_stats import (
     BOOTSTRAP_EXACT_POINTS,
     BOOTSTRAP_LARGE,
     DRIFT_KEPT,
+    TIME_FOLLOWS_POSITION,
     Geometry,
     fit,
     ftest,
@@ -25,6 +26,7 @@ from rrbc_core.analysis.diagnosis_stats import (
     moran_bootstrap,
     moran_weights,
     orth,
+    time_on_position,
     usable,
     usable_drift,
 )
@@ -220,7 +222,14 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
                 magnitude_mm=float(np.sqrt(max(0.0, rss_a - rss_d) / wsum)),
             )
             blocks["drift"] = dcol_ok
-        _scale_rate(g, y, blocks, found, tests, x_of, a_each, wsum, t_mean)
+        r2 = time_on_position(p, g.time) if g.time is not None else 0.0
+        if r2 > TIME_FOLLOWS_POSITION:
+            limits.append(
+                f"time follows position in these data ({r2:.2f} of the times' variance is a linear function of "
+                "position): a scale that changes with time cannot be told from an effect of position and was not tested"
+            )
+        else:
+            _scale_rate(g, y, blocks, found, tests, x_of, a_each, wsum, t_mean)
     # the arm (joint angles in the file)
     delta = c_delta = c_map = None
     rejudged = []

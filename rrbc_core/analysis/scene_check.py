@@ -30,6 +30,7 @@ import numpy as np
 from scipy import stats
 
 from rrbc_core.analysis.diagnosis import Diagnosis, Effect, diagnose
+from rrbc_core.analysis.diagnosis_stats import TIME_FOLLOWS_POSITION
 from rrbc_core.analysis.scene_extension import AddedTerm, extension_terms
 from rrbc_core.analysis.scene_prediction import (
     Figures,
@@ -294,13 +295,10 @@ def _arm(mset: MeasurementSet, scene, robot: str) -> dict:
 
 
 def _time_on_position(rem: MeasurementSet) -> float:
-    """R² of the rows' times on their positions (0 without usable times)."""
-    t = np.asarray(rem.time, float)
-    if not np.all(np.isfinite(t)) or np.ptp(t) <= 0:
-        return 0.0
-    x = np.column_stack([np.ones(len(t)), np.asarray(rem.sensor, float)])
-    coef, *_ = np.linalg.lstsq(x, t, rcond=None)
-    return float(1.0 - np.sum((t - x @ coef) ** 2) / np.sum((t - t.mean()) ** 2))
+    """R² of the rows' times on their positions (`diagnosis_stats.time_on_position`: the one rule)."""
+    from rrbc_core.analysis.diagnosis_stats import time_on_position
+
+    return time_on_position(np.asarray(rem.sensor, float), np.asarray(rem.time, float))
 
 
 def _folds(mset: MeasurementSet, paired: np.ndarray, k: int, seed: int) -> tuple[list[np.ndarray], str]:
@@ -428,7 +426,7 @@ def check_scene_model(
     )
     limits = []
     r2 = _time_on_position(rem)
-    if r2 > 0.5 and {"drift", "scale", "affine"} & {e.name for e in effects}:
+    if r2 > TIME_FOLLOWS_POSITION and {"drift", "scale", "affine"} & {e.name for e in effects}:
         limits.append(
             f"time follows position in this file ({r2:.2f} of the time's variance is a linear function of position): "
             "a drift cannot be told from a linear map of position, so how drift, scale and affine share the misfit "

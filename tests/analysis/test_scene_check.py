@@ -219,6 +219,12 @@ def test_time_that_follows_position_is_said(scene):
     assert r.unexplained
     if {"drift", "affine", "scale"} & {e.name for e in r.unexplained}:
         assert any("time follows position" in s for s in r.limits), r.limits
+    # diagnose does not test a scale that changes with time where time follows position, and says so
+    from rrbc_core.analysis.diagnosis import diagnose
+
+    d = diagnose(m, robot="ur5", tool_mm=scene.tool_mm)
+    assert "scale_rate" not in d.tests
+    assert any("scale that changes with time cannot be told" in s for s in d.limits), d.limits
 
 
 # ---------------------------------------------------------------------------------------------- the term
