@@ -171,13 +171,9 @@ def test_a_scale_the_scene_lacks_is_named_sized_and_written(scene, seed):
     r = check_scene_model(m, scene, trials=TRIALS, folds=FOLDS, seed=seed)
     _flagged_and_gain(r)
     eff = {e.name: e for e in r.unexplained}
-    assert "scale" in eff or "affine" in eff, list(eff)
-    if "scale" in eff:
-        est, se = eff["scale"].parameters["ppm"], eff["scale"].parameters["ppm_standard_error"]
-        assert abs(est - ppm) <= 4 * se, (est, ppm, se)
-    else:  # the linear map's mean diagonal is the scale
-        g = np.asarray(eff["affine"].parameters["matrix"])
-        assert np.trace(g) / 3 * 1e6 == pytest.approx(ppm, rel=0.35)
+    assert "scale" in eff and "affine" not in eff, list(eff)
+    est, se = eff["scale"].parameters["ppm"], eff["scale"].parameters["ppm_standard_error"]
+    assert abs(est - ppm) <= 4 * se, (est, ppm, se)
     _second_files_inside(scene, r, terms, 0)
 
 
