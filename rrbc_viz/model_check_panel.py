@@ -32,20 +32,17 @@ APP_HINTS = {
     "more": "dark red in the scene",
     "write": "**Extend the model** loads it, **Download extended scene** saves it",
 }
-_FIGURES = (("fre_mm", "FRE"), ("rmst_rigid_mm", "rigid RMST"), ("rmst_rrbc_mm", "RRBC RMST"))
 
 
 def figures_table(res: SceneCheck) -> str:
     """The measured figures beside their predicted means and 95 % ranges, as a Markdown table (the panel is too
     narrow for the command's fixed-width lines)."""
     rows = ["| | measured | predicted | 95 % range | |", "| --- | ---: | ---: | --- | --- |"]
-    outside = set(res.figures_outside)
-    for key, label in _FIGURES:
-        iv, m = res.predicted[key], res.measured[key]
+    for label, m, iv, out in res.figure_rows():
         if iv is None or m is None:
             rows.append(f"| {label} | - | - | no such rows | |")
             continue
-        flag = "**OUTSIDE**" if key in outside else "inside"
+        flag = "**OUTSIDE**" if out else "inside"
         rows.append(f"| {label} | {m:.4g} | {iv.mean:.4g} | {iv.lo95:.4g} – {iv.hi95:.4g} | {flag} |")
     return "\n".join(rows)
 

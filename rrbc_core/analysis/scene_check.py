@@ -114,6 +114,13 @@ class SceneCheck:
             if iv is not None and self.measured.get(k) is not None and not iv.contains(self.measured[k])
         )
 
+    def figure_rows(self) -> list[tuple[str, float | None, Interval | None, bool]]:
+        """(label, measured, predicted interval, outside it) for the FRE and the rigid and RRBC check RMS: what the
+        command's table and the app's show (None where the file has no such rows)."""
+        outside = set(self.figures_outside)
+        labels = (("fre_mm", "FRE"), ("rmst_rigid_mm", "rigid RMST"), ("rmst_rrbc_mm", "RRBC RMST"))
+        return [(label, self.measured[k], self.predicted[k], k in outside) for k, label in labels]
+
     @property
     def model_fits(self) -> bool:
         """Every figure inside its interval, no more rows outside than the model's files show (95 %), nothing
@@ -279,17 +286,12 @@ def _file_arm(mset: MeasurementSet, scene, robot: str):
     return spec, joint_values(mset, arm_chain(**spec))
 
 
-def _arm(mset: MeasurementSet, scene, robot: str) -> dict:
-    """diagnose's arm model for the scene's robot when the file has its joint columns: a UR5/UR10 (q1..q6) or the
-    scene's URDF (columns named after its joints); {} otherwise."""
+def _arm(mset: MeasurementSet, scene, robot: str, q) -> dict:
+    """diagnose's arm model for the scene's robot when the file has its joint columns (`q`, from `_file_arm`): a
+    UR5/UR10 (q1..q6) or the scene's URDF (columns named after its joints); {} otherwise."""
     if robot != "none":
         return {"robot": robot, "tool_mm": scene.tool_mm} if "q1" in mset.extra else {}
-    if scene.robot_urdf is None:
-        return {}
-    from rrbc_core.models.arm_description import urdf_arm_description
-
-    chain = urdf_arm_description(scene.robot_urdf, tip=scene.robot_tip, tool_mm=(0.0, 0.0, scene.tool_mm)).chain
-    if not all(c in mset.extra for c in chain.columns):
+    if scene.robot_urdf is None or q is None:
         return {}
     return {"urdf": scene.robot_urdf, "tip": scene.robot_tip, "tool_mm": (0.0, 0.0, scene.tool_mm)}
 
@@ -372,7 +374,7 @@ def check_scene_model(
         stations = at_physical_points(mset, stations, model)
     except InputError as exc:
         raise InputError(_not_at_points(scene, mset, exc)) from None
-    arm = _arm(mset, scene, robot)
+    arm = _arm(mset, scene, robot, q)
     meas = measured_figures(mset, stations)
     try:
         pred = predict(mset, stations, model, trials, seed)

@@ -7,9 +7,6 @@ from rrbc_core.analysis.scene_check import SceneCheck
 
 __all__ = ["check_lines"]
 
-_FIGURES = (("fre_mm", "FRE"), ("rmst_rigid_mm", "rigid RMST"), ("rmst_rrbc_mm", "RRBC RMST"))
-
-
 #: how the command says where the rest is and how to write the extension; the app says it its own way
 CLI_HINTS = {"more": "--json lists all", "write": "give --out EXTENDED.toml to write it"}
 
@@ -26,13 +23,11 @@ def check_lines(
         f"({res.trials} trials; {res.n_rows} rows with both readings compared)",
         f"  {'':<12}{'measured':>10}   predicted mean [95 % range]",
     ]
-    outside = set(res.figures_outside)
-    for key, label in _FIGURES:
-        iv, m = res.predicted[key], res.measured[key]
+    for label, m, iv, out in res.figure_rows():
         if iv is None or m is None:
             lines.append(f"  {label:<12}{'-':>10}   (no such rows in the file)")
             continue
-        flag = "   OUTSIDE" if key in outside else ""
+        flag = "   OUTSIDE" if out else ""
         lines.append(f"  {label:<12}{m:>10.4g}   {iv.mean:.4g} [{iv.lo95:.4g}, {iv.hi95:.4g}]{flag}")
     n_out = len(res.outside)
     ch = res.outside_by_chance
