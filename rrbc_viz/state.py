@@ -85,6 +85,9 @@ class AppState:
     vec_on, vec_target, vec_view
         VEC compared (the box ticked and the source has an arm); the target whose tool the Arm tab shows; the VecView
         last shown (None: off, no arm, or refused).
+    vec_tool_asked
+        (target, tilt, azimuth) the user last chose on the tool sliders while it is not yet applied (None: none
+        waiting): the sliders show it, not the applied tool, so a slider moved with the keys does not jump back.
     mc_trials, mc_plots, mc_draw, mc_seed
         The trials a Monte Carlo run takes (the tab's slider); the Monte Carlo plots last shown; Run-again presses so
         far; the noise seed of the last run requested (None: the session's).
@@ -125,6 +128,7 @@ class AppState:
     vec_on: bool = False
     vec_target: str = ""
     vec_view: VecView | None = None
+    vec_tool_asked: tuple[str, float, float] | None = None
     mc_trials: int = 200
     mc_plots: MonteCarloPlots | None = None
     mc_draw: int = 0

@@ -96,6 +96,7 @@ class VecPanel:
 
         def on_tool(event: viser.GuiEvent) -> None:
             if not syncing.on and self.target.value:
+                app.vec.ask_target_tool(self.target.value, clamped(self.tilt), clamped(self.azimuth))
                 latest(event.client)
 
         self.tilt.on_update(on_tool)

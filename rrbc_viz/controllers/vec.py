@@ -39,6 +39,13 @@ class VecController:
         with self.ctx.lock:
             return self.ctx.evaluate.apply(lambda s: vec_view.set_varied_registration(s, varied), client)
 
+    def ask_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0) -> None:
+        """The user chose this tool on the sliders; `set_target_tool` applies it when the running computation ends.
+        Until then the sliders are shown this value, not the applied one: a slider moved with the arrow keys while
+        an earlier value is computed would otherwise be set back under the user's keys. Takes no lock (one
+        assignment): it is called while the previous value's computation holds it."""
+        self.ctx.state.vec_tool_asked = (str(pid), float(tilt_deg), float(azimuth_deg))
+
     def set_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0, client=None):
         """Reach target `pid` with its tool leaned tilt_deg towards azimuth_deg (degrees). A slider moved quickly
         sends many updates, each handled with the slider's latest value: one that changes nothing is not applied
@@ -50,9 +57,17 @@ class VecController:
                 float(azimuth_deg),
             ):
                 self.ctx.state.vec_target = pid
+                if self.ctx.state.vec_tool_asked == (pid, float(tilt_deg), float(azimuth_deg)):
+                    self.ctx.state.vec_tool_asked = None
                 return session.last
             self.ctx.state.vec_target = pid
-            return self.ctx.evaluate.apply(lambda s: vec_view.set_target_tool(s, pid, tilt_deg, azimuth_deg), client)
+            out = self.ctx.evaluate.apply(lambda s: vec_view.set_target_tool(s, pid, tilt_deg, azimuth_deg), client)
+            if self.ctx.state.vec_tool_asked == (pid, float(tilt_deg), float(azimuth_deg)):
+                self.ctx.state.vec_tool_asked = None  # applied (or refused): the sliders show the session's tool
+            if out is None:
+                with self.ctx.server.atomic():
+                    self._sync_panel()
+            return out
 
     def sync_vec_target(self, pid: str) -> None:
         """The tab's target choice changed: show that target's tool on the sliders."""
@@ -67,6 +82,9 @@ class VecController:
         if self.ctx.state.vec_target not in targets:
             self.ctx.state.vec_target = targets[0] if targets else ""
         tool = s.tool_of("targets", self.ctx.state.vec_target) if self.ctx.state.vec_target else (0.0, 0.0)
+        asked = self.ctx.state.vec_tool_asked
+        if asked is not None and asked[0] == self.ctx.state.vec_target:
+            tool = (asked[1], asked[2])  # chosen on the sliders, not yet applied: do not set them back
         state = (
             targets,
             self.ctx.state.vec_target,

@@ -89,3 +89,23 @@ def test_the_panel_bullseye_draws_vec_at_true_size(app):
 def test_a_refused_comparison_unticks_the_box(measured):
     measured.controls.vec.show.value = True  # the user ticks it; there is no arm
     assert not measured.state.vec_on and measured.controls.vec.show.value is False
+
+
+def test_a_tool_slider_moved_while_an_earlier_value_computes_is_not_set_back(app):
+    """Arrow keys send a value per degree; while 5° is computed the user has reached 12°: showing 5° when it lands
+    would set the slider back under the user's keys (and the next key would go on from 5°)."""
+    panel = app.controls.vec
+    app.vec.set_vec(True)
+    pid = app.session.layout["targets"].ids[0]
+    app.vec.ask_target_tool(pid, 5.0, 0.0)
+    app.vec.ask_target_tool(pid, 12.0, 0.0)  # the newest choice, waiting while 5° computes
+    app.vec.set_target_tool(pid, 5.0, 0.0)
+    assert app.session.tool_of("targets", pid) == (5.0, 0.0)
+    assert panel.tilt.value == 12.0
+    app.vec.set_target_tool(pid, 12.0, 0.0)  # the waiting value runs
+    assert app.session.tool_of("targets", pid) == (12.0, 0.0) and panel.tilt.value == 12.0
+    assert app.state.vec_tool_asked is None
+    # a refused value is not left on the slider: it shows the tool the session holds
+    app.vec.ask_target_tool(pid, TILT_MAX_DEG + 5, 0.0)
+    assert app.vec.set_target_tool(pid, TILT_MAX_DEG + 5, 0.0) is None
+    assert panel.tilt.value == 12.0 and app.state.vec_tool_asked is None
