@@ -7,11 +7,13 @@ the measurement file (sensor_* sensor frame, robot_* robot frame).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
+from rrbc_core.correction.bounds import Bounds, correction_bounds
 from rrbc_core.correction.check_statistics import CheckStatistics, check_statistics
 from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.correction.warnings import Corrected, correction_warnings
@@ -20,6 +22,7 @@ from rrbc_core.interpolation.auto import AutoChoice
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
 from rrbc_core.methods import MethodOptions
+from rrbc_core.models.instrument import Instrument
 from rrbc_core.runtime.threads import thread_limited
 
 
@@ -50,6 +53,42 @@ class CorrectionResult:
     checks_coverage: Coverage | None = None
     #: with `--interpolation auto`: what cross-validation over the fiducials chose (`interpolation.auto.AutoChoice`)
     choice: AutoChoice | None = None
+    #: the rows corrected (for the bounds' noise estimate from repeats) and the instrument given (None: estimated)
+    data: MeasurementSet | None = None
+    instrument: Instrument | None = None
+
+    @cached_property
+    def bounds(self) -> Bounds:
+        """Each target's and check's 95 % bound, covariance and budget, rigid and RRBC (`correction.bounds`),
+        computed on first use."""
+        reg_pts = self.data.points("registration") if self.data is not None else None
+        reg_sensor = reg_pts.sensor if reg_pts is not None else np.zeros((0, 3))
+        reg_count = reg_pts.count if reg_pts is not None else np.ones(0)
+        method = self.choice.method if self.choice is not None else self.options.interpolator()
+        points = {
+            kind: (group.sensor, group.count, np.zeros(len(group)) if cp is None else cp.off_plane_mm)
+            for kind, group, cp in (
+                ("targets", self.targets, self.targets_corrected),
+                ("checks", self.checks, self.checks_corrected),
+            )
+        }
+        return correction_bounds(
+            self.data,
+            self.registration.mapping,
+            reg_sensor,
+            reg_count,
+            self.fiducials.sensor,
+            self.fiducials.count,
+            self.fiducial_corrections,
+            method,
+            self.options.interpolation_name != "none",
+            points,
+            self.instrument,
+            np.asarray(self.registration.residuals, float).reshape(-1, 3),
+            np.isin(
+                np.asarray(self.fiducials.ids, dtype=object), np.asarray(reg_pts.ids if reg_pts else (), dtype=object)
+            ),
+        )
 
     def interpolation_json(self) -> dict:
         """The ``interpolation`` JSON: the method and its options; with ``auto`` the method chosen, ``selected_by``,
@@ -75,7 +114,8 @@ class CorrectionResult:
 
     def warnings(self) -> tuple[str, ...]:
         """One-line warnings on this correction (`correction.warnings.correction_warnings`: wild corrections,
-        conflicting nearly coincident fiducials, extrapolated targets and checks)."""
+        conflicting nearly coincident fiducials, extrapolated targets and checks), then the bounds' (`bounds`: points
+        given no bound and why, an instrument the data contradict)."""
         points = [
             Corrected(kind, group.ids, cp.correction, cov)
             for kind, group, cp, cov in (
@@ -84,7 +124,9 @@ class CorrectionResult:
             )
             if cp is not None
         ]
-        return correction_warnings(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points)
+        return correction_warnings(
+            self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points
+        ) + tuple(self.bounds.warnings)
 
     def to_json(self) -> dict:
         """The JSON object of `rrbc correct --json` (docs/cli.md)."""
@@ -98,18 +140,30 @@ class CorrectionResult:
                 {"id": i, "sensor": s.tolist(), "correction_mm": e.tolist()}
                 for i, s, e in zip(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections)
             ],
-            "targets": _points_json(self.targets, self.targets_corrected),
-            "checks": _points_json(self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc),
+            "targets": _points_json(self.targets, self.targets_corrected, bounds=self.bounds, kind="targets"),
+            "checks": _points_json(
+                self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc, bounds=self.bounds, kind="checks"
+            ),
             "summary": self.summary(),
             "check_statistics": None if (st := self.statistics()) is None else st.to_json(),
+            "bounds": self.bounds.to_json(),
             "warnings": list(self.warnings()),
         }
 
 
-def _points_json(group: PointGroup, corrected: CorrectedPoints | None, err_rigid=None, err_rrbc=None) -> list:
+def _points_json(
+    group: PointGroup,
+    corrected: CorrectedPoints | None,
+    err_rigid=None,
+    err_rrbc=None,
+    bounds: Bounds | None = None,
+    kind: str = "targets",
+) -> list:
     rows: list[dict] = []
     if corrected is None:
         return rows
+    pb = getattr(bounds, kind) if bounds is not None else None
+    pb_rigid = getattr(bounds, kind + "_rigid") if bounds is not None else None
     for k, pid in enumerate(group.ids):
         row = {
             "id": pid,
@@ -128,12 +182,17 @@ def _points_json(group: PointGroup, corrected: CorrectedPoints | None, err_rigid
             row["error_rigid_mm"] = float(err_rigid[k])
             row["error_rrbc_mm"] = float(err_rrbc[k])
             row["rrbc_worse"] = bool(err_rrbc[k] > err_rigid[k])
+        if pb is not None and pb_rigid is not None:
+            row.update(pb.row_json(k))
+            row.update(pb_rigid.row_json(k, "_rigid"))
         rows.append(row)
     return rows
 
 
 @thread_limited
-def correct_measurements(mset: MeasurementSet, options: MethodOptions | None = None) -> CorrectionResult:
+def correct_measurements(
+    mset: MeasurementSet, options: MethodOptions | None = None, instrument: Instrument | None = None
+) -> CorrectionResult:
     """RRBC on a measurement set: register, correct the fiducials, interpolate to the targets and checks, score.
 
     Parameters
@@ -142,6 +201,9 @@ def correct_measurements(mset: MeasurementSet, options: MethodOptions | None = N
         Registration, fiducial (or both), target and check rows (`read_measurements`).
     options : MethodOptions, optional
         The registration strategy and interpolation (default: least squares + IDW, k = 4, p = 2).
+    instrument : Instrument, optional
+        The sensor's and robot's reading noise for the per-point bounds (`CorrectionResult.bounds`; default:
+        estimated from the data, `correction.bounds.estimate_noise`).
 
     Returns
     -------
@@ -183,5 +245,19 @@ def correct_measurements(mset: MeasurementSet, options: MethodOptions | None = N
     c_cov = assess_coverage(fid.sensor, checks.sensor) if len(fid.ids) and len(checks.ids) else None
     choice = getattr(fitted, "choice", None)
     return CorrectionResult(
-        options, reg, fid, corr, targets, t_corr, checks, c_corr, err_rigid, err_rrbc, t_cov, c_cov, choice
+        options,
+        reg,
+        fid,
+        corr,
+        targets,
+        t_corr,
+        checks,
+        c_corr,
+        err_rigid,
+        err_rrbc,
+        t_cov,
+        c_cov,
+        choice,
+        mset,
+        instrument,
     )

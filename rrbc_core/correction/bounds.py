@@ -1,0 +1,525 @@
+"""How far each corrected point may be off: a 95 % bound on its 3-D error, its covariance and the budget it is made of.
+
+For a point the robot is sent to (a target's or check's corrected position, robot frame) the error is the sum of
+three parts, each with a covariance (robot frame, mm²; docs/uncertainty.md derives them):
+
+* **instrument**: the point's own readings. Its sensor reading (`models.instrument.Instrument.sensor_cov`, rotated
+  into the robot frame) and the robot's own noise where it goes (per-axis σ_r), divided by the number of readings
+  averaged for it.
+* **registration**: the least-squares transform's uncertainty from the registration points' noise, propagated to
+  the point (first order, rotation vector and translation). RRBC's corrections carry the same transform error at the
+  fiducials with the opposite sign, so for RRBC what is left is the transform's error at the point less its
+  interpolated error at the fiducials: G(p) = [−[R (p − F(p))]×, (1 − w(p)) I], with F the interpolator applied to
+  the fiducials' own positions and w to ones (exact for interpolators that are linear in their values).
+* **interpolation**: the correction's own error there. K-fold cross-validation over the fiducials (the folds of
+  `interpolation.auto`) gives each held-out fiducial's error r_i at its distance d_i from the nearest fiducial left
+  in. Its expected square is modelled as E|r|² = A + B d²: A = 2 ν, with ν a fiducial's own noise (3-D variance,
+  from the instrument), is the held-out fiducial's own noise and about one neighbour's carried into the prediction
+  (what a point on a fiducial gets); B is the mean of (|r_i|² − A)/d_i² (least squares weighted for a spread that
+  grows as d², clipped at 0). A regular grid's fiducials are all about one spacing from the rest, so A and B cannot
+  both be fitted: A is fixed by the noise. At a point d(p) from its nearest fiducial the interpolation's variance is
+  ν + B d(p)² (the point's own noise is the instrument's part), with the shape of the residuals' mean r rᵀ: it grows
+  away from the fiducials, outside their hull and off their plane. Off coplanar (or collinear) fiducials the folds
+  see nothing of the field's change with height, and a smooth interpolator's in-plane error (curvature) says little
+  about it; a point h off the plane adds g² h², g² the field's mean squared rate of change along the plane
+  (`field_slope`): the field is assumed to change off the plane as it does along it, which such data cannot test.
+  For rigid (no correction) it is the correction not made: the fiducials' mean |correction|² less their noise.
+
+The bound is the radius holding 95 % of a normal error with that covariance (a scaled χ² matched in mean and variance
+to the sum of the eigenvalues' χ²₁ terms; exact for an isotropic covariance). Where the bound cannot be trusted it is
+NaN (null in JSON) with a warning: fewer than `MIN_FIDUCIALS` fiducials to cross-validate.
+
+The noise, when no instrument is given, is estimated from the data (`estimate_noise`): from repeated readings of a
+point when the file has them, else from the fiducials' nearest-neighbour differences at zero distance (the nugget).
+Units mm; frames as in the measurement file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.optimize import nnls
+from scipy.spatial import cKDTree
+from scipy.stats import chi2
+
+from rrbc_core.errors import InputError
+from rrbc_core.interpolation.auto import folds_of
+from rrbc_core.models.instrument import Instrument
+
+#: fewer fiducials than this: no cross-validation, so no RRBC bound (a warning says so)
+MIN_FIDUCIALS = 6
+#: the bound's probability
+LEVEL = 0.95
+BUDGET_KEYS = ("instrument", "registration", "interpolation", "arm")
+
+
+def bound95(cov: np.ndarray, level: float = LEVEL) -> np.ndarray:
+    """(M,): the radius r with P(|e| ≤ r) = level for e ~ N(0, cov), cov (M, 3, 3) mm² (module docstring)."""
+    lam = np.clip(np.linalg.eigvalsh(np.asarray(cov, float)), 0.0, None)
+    s1, s2 = lam.sum(axis=1), (lam**2).sum(axis=1)
+    ok = s1 > 0
+    out = np.zeros(len(lam))
+    scale = s2[ok] / s1[ok]
+    dof = s1[ok] ** 2 / s2[ok]
+    out[ok] = np.sqrt(scale * chi2.ppf(level, dof))
+    return out
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(N, 3, 3): [v]× for v (N, 3)."""
+    z = np.zeros(len(v))
+    return np.stack(
+        [
+            np.stack([z, -v[:, 2], v[:, 1]], axis=1),
+            np.stack([v[:, 2], z, -v[:, 0]], axis=1),
+            np.stack([-v[:, 1], v[:, 0], z], axis=1),
+        ],
+        axis=1,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class PointBounds:
+    """Bounds of M points: `bound95_mm` (M,) (NaN: not given), `cov_mm2` (M, 3, 3) robot frame, and `budget_mm`
+    {name: (M,)} the RMS contribution (sqrt of the trace of its covariance) of each source that applies."""
+
+    bound95_mm: np.ndarray
+    cov_mm2: np.ndarray
+    budget_mm: dict[str, np.ndarray]
+
+    def row_json(self, k: int, suffix: str = "") -> dict:
+        """Point k's keys for a JSON row: ``bound95{suffix}_mm``, ``budget{suffix}_mm``, ``cov{suffix}_mm2``."""
+        b = float(self.bound95_mm[k])
+        if not np.isfinite(b):
+            return {f"bound95{suffix}_mm": None, f"budget{suffix}_mm": None, f"cov{suffix}_mm2": None}
+        return {
+            f"bound95{suffix}_mm": b,
+            f"budget{suffix}_mm": {n: float(v[k]) for n, v in self.budget_mm.items()},
+            f"cov{suffix}_mm2": self.cov_mm2[k].tolist(),
+        }
+
+
+@dataclass(frozen=True)
+class CVProfile:
+    """The interpolation's cross-validated error against distance: E|r|² = a_mm2 + b * d² (d mm), from `n`
+    held-out fiducials over `folds` folds; `noise_mm2` the part the held-out fiducials' own noise explains (taken
+    out); `shape` (3, 3) the residuals' mean r rᵀ over its trace (robot frame)."""
+
+    a_mm2: float
+    b: float
+    noise_mm2: float
+    n: int
+    folds: int
+    rms_mm: float
+    shape: np.ndarray = field(compare=False)
+    tail: float = 1.0
+
+    def variance(self, d: np.ndarray) -> np.ndarray:
+        """(M,): the interpolation's 3-D variance at distances d (M,) from the nearest fiducial, mm² (the model's
+        A + B d² less the held-out fiducial's own noise)."""
+        return np.maximum(self.a_mm2 + self.b * np.asarray(d, float) ** 2 - self.noise_mm2, 0.0)
+
+    def to_json(self) -> dict:
+        return {
+            "a_mm2": self.a_mm2,
+            "b_per_mm2": self.b,
+            "noise_mm2": self.noise_mm2,
+            "fiducials": self.n,
+            "folds": self.folds,
+            "cv_rms_mm": self.rms_mm,
+            "tail_factor": self.tail,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Bounds:
+    """A correction's per-point bounds: the instrument used (its figures' sources), the interpolation's
+    cross-validation profile (None: not cross-validated), the bounds of the RRBC and rigid positions of the targets
+    and checks (None where there are no such points), and warnings."""
+
+    instrument: Instrument
+    profile: CVProfile | None
+    targets: PointBounds | None
+    checks: PointBounds | None
+    targets_rigid: PointBounds | None
+    checks_rigid: PointBounds | None
+    warnings: tuple[str, ...] = ()
+
+    def to_json(self) -> dict:
+        """``bounds`` in the JSON of `rrbc correct` (docs/cli.md)."""
+        return {
+            "level": LEVEL,
+            "instrument": self.instrument.to_json(),
+            "interpolation_profile": None if self.profile is None else self.profile.to_json(),
+        }
+
+
+def fold_distances(fid_sensor: np.ndarray) -> np.ndarray:
+    """(F,): each fiducial's distance (sensor frame, mm) from the nearest fiducial outside its fold
+    (`interpolation.auto.folds_of`): how far the cross-validation predicts it from."""
+    n = len(fid_sensor)
+    fold = folds_of(n)
+    dist = np.empty(n)
+    for f in range(int(fold.max()) + 1):
+        test = fold == f
+        dist[test] = cKDTree(fid_sensor[~test]).query(fid_sensor[test])[0]
+    return dist
+
+
+def tested_distance(fid_sensor: np.ndarray) -> float | None:
+    """The distance (mm) up to which the fiducials' cross-validation tests a prediction: the 90th percentile of
+    `fold_distances`; None with fewer than 3 fiducials (nothing tested, no limit applied)."""
+    if len(fid_sensor) < 3:
+        return None
+    return float(np.percentile(fold_distances(fid_sensor), 90))
+
+
+def _rigid_error(c_robot, fid_registered, reg_residuals, n_reg: int, fid_noise: float):
+    """Rigid's uncorrected error (the correction not made): its 3-D variance beyond a fiducial's own noise, its shape
+    (3, 3) and the tail factor (the fiducials' 95th percentile of |c| against a normal error's), from the fiducials'
+    corrections c (F, 3) robot frame, those that are registration points too scaled by n/(n − 2) (their correction is
+    a fit residual, smaller than a point's error by that factor); without fiducials, from the registration residuals.
+    (None, I/3, 1) when neither holds enough."""
+    if len(c_robot):
+        c = np.asarray(c_robot, float)
+        scale = np.where(np.asarray(fid_registered, bool), n_reg / max(n_reg - 2, 1), 1.0)
+    elif reg_residuals is not None and len(reg_residuals) > 3:
+        c = np.asarray(reg_residuals, float)
+        scale = np.full(len(c), len(c) / (len(c) - 2))
+        fid_noise = 0.0  # already inside the residuals' spread
+    else:
+        return None, np.eye(3) / 3, 1.0
+    sq = scale * np.sum(c**2, axis=1)
+    v = max(float(np.mean(sq)) - fid_noise, 0.0)
+    s = (c * scale[:, None]).T @ c
+    shape = s / np.trace(s) if np.trace(s) > 0 else np.eye(3) / 3
+    tail = 1.0
+    total = v + fid_noise
+    if len(c) >= MIN_FIDUCIALS and total > 0:
+        z = np.sqrt(sq / total)
+        tail = max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
+    return v, shape, tail
+
+
+def _fit_quadratic(d2: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Non-negative (a, b) of y ≈ a + b·d2 (least squares)."""
+    scale = max(float(np.max(d2)), 1e-12)
+    (a, b), _ = nnls(np.column_stack([np.ones_like(d2), d2 / scale]), y)
+    return float(a), float(b) / scale
+
+
+def estimate_noise(
+    data, rotation: np.ndarray, fid_sensor: np.ndarray, fid_corr: np.ndarray
+) -> tuple[float, str] | None:
+    """The per-axis variance of one row's readings, sensor's and robot's together in the robot frame (mm²), and
+    where it came from; None when the data hold no estimate.
+
+    From repeats (ids read more than once among the rows with robot readings: the spread of each id's T-free
+    difference R s − b about its mean, pooled) when there are at least 3 degrees of freedom; else from the fiducials'
+    nearest-neighbour differences of their corrections, |R(c_i − c_j)|² ≈ 2·3σ² + B d² (the intercept at d = 0),
+    when their distances spread over at least a factor 2; else (a grid's do not: no intercept can be read) the
+    closest quarter of those pairs' mean |R(c_i − c_j)|² / 6, an upper bound (the field's own change is in it). None
+    with fewer than 3 fiducials and no repeats.
+    """
+    if data is not None:
+        rows = np.flatnonzero(np.isfinite(data.robot).all(axis=1))
+        ids = np.asarray(data.ids, dtype=object)[rows]
+        diff = data.sensor[rows] @ np.asarray(rotation).T - data.robot[rows]
+        uniq, inv, counts = np.unique(ids, return_inverse=True, return_counts=True)
+        dof = int(np.sum(counts - 1))
+        if dof >= 3:
+            mean = np.zeros((len(uniq), 3))
+            np.add.at(mean, inv, diff)
+            mean /= counts[:, None]
+            ss = float(np.sum((diff - mean[inv]) ** 2))
+            return ss / (3 * dof), f"estimated from repeated readings ({dof} degrees of freedom)"
+    n = len(fid_sensor)
+    if n < 3:
+        return None
+    dist, j = cKDTree(fid_sensor).query(fid_sensor, k=2)
+    pairs = {tuple(sorted((i, int(j[i, 1])))) for i in range(n)}
+    ii, jj = np.array(sorted(pairs)).T
+    d2 = np.sum((fid_sensor[ii] - fid_sensor[jj]) ** 2, axis=1)
+    y = np.sum((fid_corr[ii] - fid_corr[jj]) ** 2, axis=1)
+    if n >= MIN_FIDUCIALS and np.max(d2) >= 4 * max(float(np.min(d2)), 1e-12):
+        a, _ = _fit_quadratic(d2, y)
+        return a / 6.0, f"estimated from the fiducials' nearest-neighbour differences ({len(ii)} pairs)"
+    # a grid (one spacing: no intercept to read) or few fiducials: the closest quarter of the pairs bounds it above
+    close = d2 <= np.percentile(d2, 25)
+    return (
+        float(np.mean(y[close])) / 6.0,
+        f"not estimable (no repeats; the fiducials' spacing too even to read): the most the closest "
+        f"{int(close.sum())} fiducial pairs' differences allow, an upper bound",
+    )
+
+
+def field_slope(fid_sensor: np.ndarray, fid_corr_robot: np.ndarray, noise_mm2: float) -> float:
+    """g² (mm²/mm²): the mean squared rate of change of the correction field, from the fiducials' nearest-neighbour
+    pairs, mean of (|c_i − c_j|² − 2ν)/d², clipped at 0 (ν a fiducial's own 3-D noise variance). What a point off
+    coplanar (or collinear) fiducials is taken to see over its height h: variance g² h²."""
+    n = len(fid_sensor)
+    if n < 2:
+        return 0.0
+    dist, j = cKDTree(fid_sensor).query(fid_sensor, k=2)
+    d = dist[:, 1]
+    ok = d > 1e-9
+    if not np.any(ok):
+        return 0.0
+    y = np.sum((fid_corr_robot - fid_corr_robot[j[:, 1]]) ** 2, axis=1)
+    return max(float(np.mean((y[ok] - 2 * noise_mm2) / d[ok] ** 2)), 0.0)
+
+
+def complete_instrument(
+    inst: Instrument | None, estimate: tuple[float, str] | None, sensor_var_at_fid: float
+) -> Instrument:
+    """The instrument with every figure filled in: without one, the estimate is the sensor's per-axis σ (the robot's
+    included); with one whose robot noise is unknown, the robot's is what the estimate leaves beyond the sensor's
+    (0 without an estimate)."""
+    if inst is None or inst.name == "estimated":
+        robot = None if inst is None else inst.robot_mm
+        if estimate is None:
+            return Instrument(
+                name="estimated",
+                robot_mm=robot,
+                source="not estimable (no repeats, too few fiducials): taken as 0",
+                robot_source="given (--robot-noise-mm)" if robot is not None else "included in the sensor's figure",
+            )
+        var, why = estimate
+        if robot is not None:
+            return Instrument(
+                name="estimated",
+                sigma_mm=float(np.sqrt(max(var - robot**2, 0.0))),
+                robot_mm=robot,
+                source=f"{why}, less the robot's given noise",
+                robot_source="given (--robot-noise-mm)",
+            )
+        return Instrument(
+            name="estimated",
+            sigma_mm=float(np.sqrt(var)),
+            source=why + " (the sensor's and the robot's noise together)",
+            robot_source="included in the sensor's figure",
+        )
+    if inst.robot_mm is not None:
+        return inst
+    if estimate is None:
+        return replace(inst, robot_mm=0.0, robot_source="not estimable (no repeats, too few fiducials): taken as 0")
+    var, why = estimate
+    robot = float(np.sqrt(max(var - sensor_var_at_fid, 0.0)))
+    return replace(inst, robot_mm=robot, robot_source=f"{why}, less the instrument's noise")
+
+
+def own_cov(inst: Instrument, rotation: np.ndarray, p_sensor: np.ndarray, count) -> np.ndarray:
+    """(M, 3, 3): the covariance of a point's own readings in the robot frame, mm² (module docstring)."""
+    r = np.asarray(rotation, float)
+    c = np.einsum("ij,njk,lk->nil", r, inst.sensor_cov(p_sensor), r) + inst.robot_var() * np.eye(3)
+    return c / np.asarray(count, float).reshape(-1, 1, 1)
+
+
+def registration_theta_cov(rotation: np.ndarray, reg_sensor: np.ndarray, row_cov: np.ndarray) -> np.ndarray:
+    """(6, 6): the covariance of the least-squares transform's rotation vector (rad, robot frame, about its origin)
+    and translation (mm), from the registration points' sensor readings (N, 3) and their rows' noise covariances
+    (N, 3, 3) robot frame (sandwich form: H⁻¹ Σ Jᵢᵀ Cᵢ Jᵢ H⁻¹)."""
+    q = np.asarray(reg_sensor, float) @ np.asarray(rotation, float).T
+    jac = np.concatenate([-_skew(q), np.broadcast_to(np.eye(3), (len(q), 3, 3))], axis=2)  # (N, 3, 6)
+    h = np.einsum("nij,nik->jk", jac, jac)
+    m = np.einsum("nij,nik,nkl->jl", jac, row_cov, jac)
+    hinv = np.linalg.pinv(h)
+    return hinv @ m @ hinv
+
+
+def point_registration_cov(
+    rotation: np.ndarray, lever_sensor: np.ndarray, weight: np.ndarray, theta_cov: np.ndarray
+) -> np.ndarray:
+    """(M, 3, 3): G θ Gᵀ with G = [−[R lever]×, weight·I] (lever (M, 3) sensor frame, weight (M,))."""
+    q = np.asarray(lever_sensor, float) @ np.asarray(rotation, float).T
+    g = np.concatenate([-_skew(q), np.asarray(weight, float)[:, None, None] * np.eye(3)], axis=2)
+    return np.einsum("mij,jk,mlk->mil", g, theta_cov, g)
+
+
+def cv_profile(
+    method, fid_sensor: np.ndarray, fid_corr: np.ndarray, rotation: np.ndarray, noise_mm2: float
+) -> CVProfile | None:
+    """The interpolation's K-fold cross-validation profile (`CVProfile`), None when a fold cannot be fitted."""
+    n = len(fid_sensor)
+    fold = folds_of(n)
+    err = np.empty_like(fid_corr)
+    dist = np.empty(n)
+    for f in range(int(fold.max()) + 1):
+        test = fold == f
+        try:
+            err[test] = method.fit(fid_sensor[~test], fid_corr[~test]).predict(fid_sensor[test]).values - fid_corr[test]
+        except InputError:
+            return None
+        dist[test] = cKDTree(fid_sensor[~test]).query(fid_sensor[test])[0]
+    if not np.all(np.isfinite(err)):
+        return None
+    r = err @ np.asarray(rotation, float).T
+    sq = np.sum(r**2, axis=1)
+    a = 2.0 * float(noise_mm2)  # the held-out fiducial's own noise and (about) one neighbour's carried into it
+    near = dist > 1e-9
+    b = max(float(np.mean((sq[near] - a) / dist[near] ** 2)), 0.0) if np.any(near) else 0.0
+    s = r.T @ r
+    shape = s / np.trace(s) if np.trace(s) > 0 else np.eye(3) / 3
+    # the tail the fiducials show: their 95th percentile of |r| / sqrt(A + B d²) against a normal error's
+    model = a + b * dist**2
+    ok = model > 0
+    tail = 1.0
+    if np.count_nonzero(ok) >= MIN_FIDUCIALS:
+        z = np.sqrt(sq[ok] / model[ok])
+        tail = max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
+    return CVProfile(
+        a * tail**2, b * tail**2, float(noise_mm2), n, int(fold.max()) + 1, float(np.sqrt(np.mean(sq))), shape, tail
+    )
+
+
+def _assemble(parts: dict[str, np.ndarray], withheld: np.ndarray) -> PointBounds:
+    """The bounds of the parts' sum; NaN where `withheld` (M,)."""
+    cov = sum(parts.values())
+    assert isinstance(cov, np.ndarray)
+    budget = {k: np.sqrt(np.maximum(np.trace(v, axis1=1, axis2=2), 0.0)) for k, v in parts.items()}
+    b = bound95(cov)
+    b[withheld] = np.nan
+    return PointBounds(b, cov, budget)
+
+
+def _no_bounds(m: int) -> PointBounds:
+    return PointBounds(np.full(m, np.nan), np.full((m, 3, 3), np.nan), {})
+
+
+def correction_bounds(
+    data,
+    mapping,
+    reg_sensor: np.ndarray,
+    reg_count: np.ndarray,
+    fid_sensor: np.ndarray,
+    fid_count: np.ndarray,
+    fid_corr: np.ndarray,
+    method,
+    interpolating: bool,
+    points: dict[str, tuple[np.ndarray, np.ndarray]],
+    instrument: Instrument | None = None,
+    reg_residuals: np.ndarray | None = None,
+    fid_registered: np.ndarray | None = None,
+) -> Bounds:
+    """Per-point bounds of a correction (module docstring).
+
+    Parameters
+    ----------
+    data : MeasurementSet or None
+        The rows (for repeats).
+    mapping : SensorToRobot
+        The registration's mapping (its rotation R is used).
+    reg_sensor, reg_count : (N, 3), (N,)
+        Registration points' sensor readings (sensor frame, mm) and how many rows each averages.
+    fid_sensor, fid_count, fid_corr : (F, 3), (F,), (F, 3)
+        Fiducials' sensor readings, row counts and corrections (sensor frame, mm).
+    method : interpolation method object
+        What corrects (its `fit` is used for the folds and for F and w).
+    interpolating : bool
+        False for ``none`` (the corrected position is the rigid one).
+    points : {"targets": (sensor (M, 3), count (M,), off_plane_mm (M,)), "checks": ...}
+        The points to bound: their sensor readings, row counts and distances from the fiducials' plane or line (0
+        for a 3-D fiducial set; `interpolation.hull`).
+    instrument : Instrument, optional
+        The reading noise (default: estimated from the data).
+    reg_residuals : (N, 3), optional
+        The registration's residuals (robot frame, mm): rigid's uncorrected error when there are no fiducials.
+    fid_registered : (F,) bool, optional
+        Which fiducials are registration points too (default none).
+    """
+    rot = np.asarray(mapping.rotation, float)
+    fid_sensor, fid_corr = np.asarray(fid_sensor, float).reshape(-1, 3), np.asarray(fid_corr, float).reshape(-1, 3)
+    n_fid = len(fid_sensor)
+    fid_registered = np.zeros(n_fid, bool) if fid_registered is None else np.asarray(fid_registered, bool)
+    warnings: list[str] = []
+    estimate = estimate_noise(data, rot, fid_sensor, fid_corr @ rot.T)
+    sensor_var = (
+        float(np.mean(np.trace(instrument.sensor_cov(fid_sensor), axis1=1, axis2=2)) / 3)
+        if instrument is not None and n_fid
+        else 0.0
+    )
+    inst = complete_instrument(instrument, estimate, sensor_var)
+    if estimate is not None and instrument is not None and instrument.name != "estimated" and n_fid:
+        if sensor_var > 4 * estimate[0]:
+            warnings.append(
+                f"the instrument's stated noise ({np.sqrt(sensor_var):.3g} mm per axis at the fiducials) is more than "
+                f"twice what the data show ({np.sqrt(estimate[0]):.3g} mm, {estimate[1]}): the bounds are wider than "
+                "these data need"
+            )
+    theta = registration_theta_cov(rot, reg_sensor, own_cov(inst, rot, reg_sensor, reg_count))
+    fid_noise = float(np.mean(np.trace(own_cov(inst, rot, fid_sensor, fid_count), axis1=1, axis2=2))) if n_fid else 0.0
+    c_robot = fid_corr @ rot.T
+    v_rigid, shape_rigid, tail_rigid = _rigid_error(c_robot, fid_registered, reg_residuals, len(reg_sensor), fid_noise)
+    if v_rigid is None:
+        v_rigid = 0.0
+        warnings.append("no fiducials and too few registration points: rigid's bound holds the noise only")
+
+    profile, fw = None, None
+    if interpolating:
+        if n_fid < MIN_FIDUCIALS:
+            warnings.append(
+                f"no RRBC bound: {n_fid} fiducials are too few to cross-validate the correction "
+                f"(at least {MIN_FIDUCIALS})"
+            )
+        else:
+            profile = cv_profile(method, fid_sensor, fid_corr, rot, fid_noise)
+            if profile is None:
+                warnings.append("no RRBC bound: the correction could not be cross-validated over the fiducials")
+            else:
+                try:
+                    fw = (method.fit(fid_sensor, fid_sensor), method.fit(fid_sensor, np.ones_like(fid_sensor)))
+                except InputError:
+                    fw = None
+    tree = cKDTree(fid_sensor) if n_fid else None
+    tested = tested_distance(fid_sensor)
+    slope = field_slope(fid_sensor, c_robot, fid_noise) if n_fid else 0.0
+    out: dict[str, PointBounds | None] = {}
+    for name, (p, count, off_plane) in points.items():
+        p = np.asarray(p, float).reshape(-1, 3)
+        if len(p) == 0:
+            out[name], out[name + "_rigid"] = None, None
+            continue
+        h = np.asarray(off_plane, float)
+        d = tree.query(p)[0] if tree is not None else np.zeros(len(p))
+        beyond = (d > tested) | (h > tested) if tested is not None else np.zeros(len(p), bool)
+        if np.any(beyond):
+            warnings.append(
+                f"no bound for {int(beyond.sum())} of {len(p)} {name}: farther from the fiducials or off their plane "
+                f"than the {tested:.4g} mm their cross-validation tested (the error there is not in the data)"
+            )
+        v_off = slope * h**2  # off coplanar (collinear) fiducials: the field's change over the height
+        own = own_cov(inst, rot, p, count)
+        rigid_int = (tail_rigid**2 * (v_rigid + v_off))[:, None, None] * shape_rigid
+        rigid = _assemble(
+            {
+                "instrument": own,
+                "registration": point_registration_cov(rot, p, np.ones(len(p)), theta),
+                "interpolation": rigid_int,
+            },
+            beyond,
+        )
+        out[name + "_rigid"] = rigid
+        if not interpolating:
+            out[name] = rigid
+            continue
+        if profile is None or tree is None:
+            out[name] = _no_bounds(len(p))
+            continue
+        if fw is not None:
+            lever = p - fw[0].predict(p).values
+            weight = 1.0 - fw[1].predict(p).values.mean(axis=1)
+        else:  # the transform's error at the point, not cancelled (wider)
+            lever, weight = p, np.ones(len(p))
+        reg = point_registration_cov(rot, lever, weight, theta)
+        interp = (profile.variance(d) + profile.tail**2 * v_off)[:, None, None] * profile.shape
+        out[name] = _assemble({"instrument": own, "registration": reg, "interpolation": interp}, beyond)
+    return Bounds(
+        inst,
+        profile,
+        out.get("targets"),
+        out.get("checks"),
+        out.get("targets_rigid"),
+        out.get("checks_rigid"),
+        tuple(warnings),
+    )
