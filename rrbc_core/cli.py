@@ -16,9 +16,11 @@ import time
 from rrbc_core.cli_options import (
     Parser,
     UsageError,
+    add_instrument_options,
     add_method_options,
     add_robot_model_options,
     advance,
+    instrument_of,
     non_negative_int,
     option_dest,
     positive_float,
@@ -45,6 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--registration", default="least-squares", choices=list(registration.STRATEGIES))
     c.add_argument("--interpolation", default="idw", choices=list(interpolation.METHODS))
     add_method_options(c)
+    add_instrument_options(c)
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(run=_cmd_correct)
 
@@ -177,7 +180,7 @@ def _cmd_correct(args) -> str:
     mset = read_measurements(args.measurements)
     flags = {flag: getattr(args, option_dest(flag)) for flag in method_flags() if flag != "seed"}
     opts = MethodOptions.named(args.registration, args.interpolation, seed=args.seed, **flags)
-    result = correct_stations(mset, opts)
+    result = correct_stations(mset, opts, instrument_of(args))
     if args.json:
         return json.dumps(result.to_json(), allow_nan=False) + "\n"
     return stations_text(result) if isinstance(result, StationsResult) else correct_text(result)

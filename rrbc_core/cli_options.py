@@ -172,3 +172,29 @@ def scheduler_option(parser, what: str) -> None:
         "scheduler address such as tcp://127.0.0.1:8786 (default: $RRBC_SCHEDULER, else auto: the first task runs "
         "here and, if the rest would take a minute or more, they go to a local cluster); the numbers do not change",
     )
+
+
+def add_instrument_options(parser) -> None:
+    """The per-point bounds' reading noise (`models.instrument`): a preset instrument and figures that override it;
+    without any, the noise is estimated from the data."""
+    from rrbc_core.models.instrument import INSTRUMENTS
+
+    parser.add_argument(
+        "--instrument",
+        choices=list(INSTRUMENTS),
+        default=None,
+        help="the sensor, for the bounds' noise (docs/uncertainty.md; default: estimated from the data)",
+    )
+    parser.add_argument("--sensor-noise-mm", type=float, default=None, help="the sensor's per-axis noise σ, mm")
+    parser.add_argument("--distance-noise-mm", type=float, default=None, help="a polar sensor's distance σ, mm")
+    parser.add_argument("--angle-noise-urad", type=float, default=None, help="a polar sensor's angle σ, µrad")
+    parser.add_argument("--robot-noise-mm", type=float, default=None, help="the robot's per-axis noise σ, mm")
+
+
+def instrument_of(args):
+    """The `Instrument` the instrument flags describe, or None (estimated from the data)."""
+    from rrbc_core.models.instrument import instrument_from_flags
+
+    return instrument_from_flags(
+        args.instrument, args.sensor_noise_mm, args.distance_noise_mm, args.angle_noise_urad, args.robot_noise_mm
+    )

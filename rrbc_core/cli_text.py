@@ -37,20 +37,24 @@ def correct_text(result) -> str:
     lines.append(f"  {'id':<12} {'e_x':>9} {'e_y':>9} {'e_z':>9} {'|e|':>9}")
     for pid, e in zip(result.fiducials.ids, result.fiducial_corrections):
         lines.append(f"  {pid:<12} {fmt_vec(e)} {np.linalg.norm(e):9.4f}")
-    for title, group, cp, checks, cov in (
-        ("targets", result.targets, result.targets_corrected, False, result.targets_coverage),
-        ("checks", result.checks, result.checks_corrected, True, result.checks_coverage),
+    bounds = result.bounds
+    for title, group, cp, checks, cov, pb in (
+        ("targets", result.targets, result.targets_corrected, False, result.targets_coverage, bounds.targets),
+        ("checks", result.checks, result.checks_corrected, True, result.checks_coverage, bounds.checks),
     ):
         if cp is None:
             continue
         lines.append("")
         head = f"  {'id':<12} {'corr_x':>9} {'corr_y':>9} {'corr_z':>9}   {'robot_rrbc_x':>12} {'robot_rrbc_y':>12} {'robot_rrbc_z':>12}"
+        head += f" {'bound95':>8}"
         if checks:
             head += f" {'err_rigid':>9} {'err_rrbc':>9}"
         lines.append(f"{title} ({len(group.ids)}): correction (sensor frame) and corrected robot position, mm")
         lines.append(head)
         for k, pid in enumerate(group.ids):
             row = f"  {pid:<12} {fmt_vec(cp.correction[k])}   {fmt_vec(cp.robot_rrbc[k], 12, 4)}"
+            b = float(pb.bound95_mm[k]) if pb is not None else float("nan")
+            row += f" {b:8.4f}" if np.isfinite(b) else f" {'-':>8}"
             if checks:
                 row += f" {result.error_rigid[k]:9.4f} {result.error_rrbc[k]:9.4f}"
             if checks and result.error_rrbc[k] > result.error_rigid[k]:
@@ -58,6 +62,7 @@ def correct_text(result) -> str:
             if cp.extrapolated[k]:
                 row += "  extrapolated" + (f": {cov.describe(k)}" if cov is not None else "")
             lines.append(row)
+    lines += bound_lines(result)
     s = result.summary()
     lines.append("")
     if s["rmst_rigid_mm"] is None:
@@ -72,6 +77,32 @@ def correct_text(result) -> str:
         lines += result.statistics().lines()
     lines += warning_lines(result.warnings())
     return "\n".join(lines) + "\n"
+
+
+def bound_lines(result) -> list[str]:
+    """What the bound column is and rests on (`CorrectionResult.bounds`), and the budget's RMS over the points."""
+    b = result.bounds
+    inst = b.instrument
+    lines = [
+        "",
+        "bound95: 95 % bound on the 3-D error of the corrected position (mm; '-': none, see the warnings)",
+        f"  instrument: {inst.name}, {inst.source}; robot: "
+        + ("-" if inst.robot_mm is None else f"{inst.robot_mm:.4g} mm")
+        + f" ({inst.robot_source})",
+    ]
+    if b.profile is not None:
+        p = b.profile
+        lines.append(
+            f"  interpolation: {p.folds}-fold cross-validation over {p.n} fiducials, RMS {p.rms_mm:.4f} mm"
+            + (f", tail factor {p.tail:.2f}" if p.tail > 1 else "")
+        )
+    for title, pb in (("targets", b.targets), ("checks", b.checks)):
+        if pb is None or not np.any(np.isfinite(pb.bound95_mm)):
+            continue
+        ok = np.isfinite(pb.bound95_mm)
+        parts = ", ".join(f"{k} {np.sqrt(np.mean(v[ok] ** 2)):.4f}" for k, v in pb.budget_mm.items())
+        lines.append(f"  budget over the {title} (RMS, mm): {parts}")
+    return lines
 
 
 def stations_text(result) -> str:

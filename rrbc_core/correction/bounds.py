@@ -397,7 +397,7 @@ def correction_bounds(
     fid_corr: np.ndarray,
     method,
     interpolating: bool,
-    points: dict[str, tuple[np.ndarray, np.ndarray]],
+    points: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
     instrument: Instrument | None = None,
     reg_residuals: np.ndarray | None = None,
     fid_registered: np.ndarray | None = None,

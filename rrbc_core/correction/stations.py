@@ -18,6 +18,7 @@ from rrbc_core.correction.pipeline import CorrectionResult, correct_measurements
 from rrbc_core.io.groups import has_groups, split_groups
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.methods import MethodOptions
+from rrbc_core.models.instrument import Instrument
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,7 +88,9 @@ class StationsResult:
         }
 
 
-def correct_stations(mset: MeasurementSet, options: MethodOptions | None = None) -> CorrectionResult | StationsResult:
+def correct_stations(
+    mset: MeasurementSet, options: MethodOptions | None = None, instrument: Instrument | None = None
+) -> CorrectionResult | StationsResult:
     """`correct_measurements` per station of a file with a `group` column, else on the whole file.
 
     Parameters
@@ -96,6 +99,8 @@ def correct_stations(mset: MeasurementSet, options: MethodOptions | None = None)
         A validated set (`read_measurements` checks each station has three usable registration points).
     options : MethodOptions, optional
         As for `correct_measurements`, the same for every station.
+    instrument : Instrument, optional
+        The reading noise for the per-point bounds (default: estimated from each station's data).
 
     Returns
     -------
@@ -104,8 +109,8 @@ def correct_stations(mset: MeasurementSet, options: MethodOptions | None = None)
     """
     options = MethodOptions() if options is None else options
     if not has_groups(mset):
-        return correct_measurements(mset, options)
+        return correct_measurements(mset, options, instrument)
     parts = split_groups(mset)
     return StationsResult(
-        tuple(g for g, _ in parts), tuple(correct_measurements(m, options) for _, m in parts), options
+        tuple(g for g, _ in parts), tuple(correct_measurements(m, options, instrument) for _, m in parts), options
     )
