@@ -45,6 +45,7 @@ from scipy.stats import chi2
 
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.auto import folds_of
+from rrbc_core.interpolation.hull import covered
 from rrbc_core.models.instrument import Instrument
 
 #: fewer fiducials than this: no cross-validation, so no RRBC bound (a warning says so)
@@ -114,16 +115,20 @@ class CVProfile:
     rms_mm: float
     shape: np.ndarray = field(compare=False)
     tail: float = 1.0
+    b_outside: float = 0.0
 
-    def variance(self, d: np.ndarray) -> np.ndarray:
-        """(M,): the interpolation's 3-D variance at distances d (M,) from the nearest fiducial, mm² (the model's
-        A + B d² less the held-out fiducial's own noise)."""
-        return np.maximum(self.a_mm2 + self.b * np.asarray(d, float) ** 2 - self.noise_mm2, 0.0)
+    def variance(self, d: np.ndarray, inside=True) -> np.ndarray:
+        """(M,): the interpolation's 3-D variance at distances d (M,) from the nearest fiducial, inside the
+        fiducials' hull or not (`inside`, (M,) bool), mm² (the model's A + B d² less the held-out fiducial's own
+        noise; B `b` inside, `b_outside` outside)."""
+        b = np.where(np.asarray(inside, bool), self.b, self.b_outside)
+        return np.maximum(self.a_mm2 + b * np.asarray(d, float) ** 2 - self.noise_mm2, 0.0)
 
     def to_json(self) -> dict:
         return {
             "a_mm2": self.a_mm2,
             "b_per_mm2": self.b,
+            "b_outside_per_mm2": self.b_outside,
             "noise_mm2": self.noise_mm2,
             "fiducials": self.n,
             "folds": self.folds,
@@ -203,9 +208,11 @@ def _rigid_error(c_robot, fid_registered, reg_residuals, n_reg: int, fid_noise: 
 
 
 def _fit_quadratic(d2: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """Non-negative (a, b) of y ≈ a + b·d2 (least squares)."""
-    scale = max(float(np.max(d2)), 1e-12)
-    (a, b), _ = nnls(np.column_stack([np.ones_like(d2), d2 / scale]), y)
+    """Non-negative (a, b) of y ≈ a + b·d2, least squares weighted by 1/d2² (y's spread grows as d2: the closest
+    pairs say most about a), i.e. y/d2 ≈ a/d2 + b. d2 > 0."""
+    d2 = np.maximum(d2, 1e-12)
+    scale = float(np.median(d2))
+    (a, b), _ = nnls(np.column_stack([scale / d2, np.ones_like(d2)]), y / d2 * scale)
     return float(a), float(b) / scale
 
 
@@ -242,11 +249,12 @@ def estimate_noise(
     ii, jj = np.array(sorted(pairs)).T
     d2 = np.sum((fid_sensor[ii] - fid_sensor[jj]) ** 2, axis=1)
     y = np.sum((fid_corr[ii] - fid_corr[jj]) ** 2, axis=1)
+    close = d2 <= np.percentile(d2, 25)  # the closest quarter of the pairs bounds the noise above
     if n >= MIN_FIDUCIALS and np.max(d2) >= 4 * max(float(np.min(d2)), 1e-12):
-        a, _ = _fit_quadratic(d2, y)
+        a, _ = _fit_quadratic(d2[d2 > 0], y[d2 > 0]) if np.any(d2 > 0) else (float(np.mean(y)), 0.0)
+        a = min(a, float(np.mean(y[close])))
         return a / 6.0, f"estimated from the fiducials' nearest-neighbour differences ({len(ii)} pairs)"
-    # a grid (one spacing: no intercept to read) or few fiducials: the closest quarter of the pairs bounds it above
-    close = d2 <= np.percentile(d2, 25)
+    # a grid (one spacing: no intercept to read) or few fiducials
     return (
         float(np.mean(y[close])) / 6.0,
         f"not estimable (no repeats; the fiducials' spacing too even to read): the most the closest "
@@ -345,6 +353,7 @@ def cv_profile(
     fold = folds_of(n)
     err = np.empty_like(fid_corr)
     dist = np.empty(n)
+    inside = np.empty(n, bool)
     for f in range(int(fold.max()) + 1):
         test = fold == f
         try:
@@ -352,25 +361,52 @@ def cv_profile(
         except InputError:
             return None
         dist[test] = cKDTree(fid_sensor[~test]).query(fid_sensor[test])[0]
+        inside[test] = covered(fid_sensor[~test], fid_sensor[test])
     if not np.all(np.isfinite(err)):
         return None
     r = err @ np.asarray(rotation, float).T
     sq = np.sum(r**2, axis=1)
-    a = 2.0 * float(noise_mm2)  # the held-out fiducial's own noise and (about) one neighbour's carried into it
     near = dist > 1e-9
-    b = max(float(np.mean((sq[near] - a) / dist[near] ** 2)), 0.0) if np.any(near) else 0.0
+    d2 = dist[near] ** 2
+    if np.count_nonzero(near) >= MIN_FIDUCIALS and np.max(d2) >= 4 * np.min(d2):
+        a, b = _fit_quadratic(d2, sq[near])  # distances spread: the folds' own intercept
+    else:  # one spacing (a grid): the held-out fiducial's noise and about one neighbour's carried into it
+        a = 2.0 * float(noise_mm2)
+        b = max(float(np.mean((sq[near] - a) / d2)), 0.0) if np.any(near) else 0.0
+    # held out inside the rest's hull (interpolated) or outside (extrapolated): each its own rate when it has 3
+    slopes = []
+    for group in (inside & near, ~inside & near):
+        k = np.count_nonzero(group)
+        slopes.append(max(float(np.mean((sq[group] - a) / dist[group] ** 2)), 0.0) if k >= 3 else b)
+    b_in, b_out = slopes[0], max(slopes[1], slopes[0])
     s = r.T @ r
     shape = s / np.trace(s) if np.trace(s) > 0 else np.eye(3) / 3
     # the tail the fiducials show: their 95th percentile of |r| / sqrt(A + B d²) against a normal error's
-    model = a + b * dist**2
+    model = a + np.where(inside, b_in, b_out) * dist**2
     ok = model > 0
     tail = 1.0
     if np.count_nonzero(ok) >= MIN_FIDUCIALS:
         z = np.sqrt(sq[ok] / model[ok])
         tail = max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
+    t2 = tail**2
     return CVProfile(
-        a * tail**2, b * tail**2, float(noise_mm2), n, int(fold.max()) + 1, float(np.sqrt(np.mean(sq))), shape, tail
+        a * t2,
+        b_in * t2,
+        float(noise_mm2),
+        n,
+        int(fold.max()) + 1,
+        float(np.sqrt(np.mean(sq))),
+        shape,
+        tail,
+        b_out * t2,
     )
+
+
+def _onto_plane(fid_sensor: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The points p (M, 3) moved onto the fiducials' best-fit plane (their height off it is counted apart)."""
+    c = fid_sensor.mean(axis=0)
+    normal = np.linalg.svd(fid_sensor - c)[2][-1]
+    return p - np.outer((p - c) @ normal, normal)
 
 
 def _assemble(parts: dict[str, np.ndarray], withheld: np.ndarray) -> PointBounds:
@@ -512,7 +548,8 @@ def correction_bounds(
         else:  # the transform's error at the point, not cancelled (wider)
             lever, weight = p, np.ones(len(p))
         reg = point_registration_cov(rot, lever, weight, theta)
-        interp = (profile.variance(d) + profile.tail**2 * v_off)[:, None, None] * profile.shape
+        inside = covered(fid_sensor, _onto_plane(fid_sensor, p) if np.any(h > 0) else p)
+        interp = (profile.variance(d, inside) + profile.tail**2 * v_off)[:, None, None] * profile.shape
         out[name] = _assemble({"instrument": own, "registration": reg, "interpolation": interp}, beyond)
     return Bounds(
         inst,
