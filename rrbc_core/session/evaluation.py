@@ -12,6 +12,7 @@ import numpy as np
 
 from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
+from rrbc_core.correction.bounds import Bounds, PointBounds, correction_bounds
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
@@ -203,6 +204,90 @@ class Evaluation:
     choice: AutoChoice | None = None
     #: the targets that are a measurement file's check rows (scored against their robot values)
     check_ids: frozenset = frozenset()
+    #: each target's 95 % bound, covariance and budget, RRBC's and rigid's, in the targets' order
+    #: (`correction.bounds`, as `rrbc correct` gives them); None without targets
+    bounds: TargetBounds | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class TargetBounds:
+    """The targets' bounds in the layout's order: `rrbc` and `rigid` (`correction.bounds.PointBounds`, (M,) each)
+    and what they rest on (`correction.bounds.Bounds`: the instrument, the cross-validation profile)."""
+
+    rrbc: PointBounds
+    rigid: PointBounds
+    source: Bounds
+
+
+def _counts(data, role: str, ids) -> np.ndarray:
+    """(M,): how many of `data`'s rows of `role` (`MeasurementSet.rows`) each id has (1 without data or rows)."""
+    if data is None:
+        return np.ones(len(ids))
+    rows = data.rows(role)
+    n: dict[str, int] = {}
+    for i in rows:
+        n[data.ids[i]] = n.get(data.ids[i], 0) + 1
+    return np.array([max(n.get(pid, 1), 1) for pid in ids], float)
+
+
+def _target_bounds(
+    data,
+    T_robot_sensor,
+    reg,
+    reg_ids,
+    reg_r,
+    fid_ids,
+    fid_r,
+    e_sensor,
+    included,
+    method,
+    s,
+    tg,
+    tgt_r,
+    coverage,
+    check_ids,
+):
+    """`correction.bounds.correction_bounds` on the session's points, the file's check rows bounded as checks and
+    the rest as targets (as `rrbc correct` splits them), then put back in the targets' order."""
+    fid_in = [pid for pid, k in zip(fid_ids, included) if k]
+    is_check = np.array([pid in check_ids for pid in tg.ids], bool)
+    off = coverage.off_plane_mm if coverage is not None else np.zeros(len(tg.ids))
+    tgt_counts = _counts(data, "target", tg.ids)
+    if data is not None:
+        tgt_counts[is_check] = _counts(data, "check", [pid for pid, c in zip(tg.ids, is_check) if c])
+    points = {
+        kind: (tgt_r.sensor[sel], tgt_counts[sel], np.asarray(off, float)[sel])
+        for kind, sel in (("targets", ~is_check), ("checks", is_check))
+    }
+    b = correction_bounds(
+        data,
+        T_robot_sensor,
+        reg_r.sensor,
+        _counts(data, "registration", reg_ids),
+        fid_r.sensor[included],
+        _counts(data, "fiducial", fid_in),
+        e_sensor[included],
+        method,
+        s.interpolation != "none",
+        points,
+        None,
+        np.asarray(reg.residuals, float).reshape(-1, 3),
+        np.isin(np.asarray(fid_in, dtype=object), np.asarray(reg_ids, dtype=object)),
+    )
+    m = len(tg.ids)
+
+    def merged(a: PointBounds | None, c: PointBounds | None) -> PointBounds:
+        bound, cov = np.full(m, np.nan), np.full((m, 3, 3), np.nan)
+        budget: dict[str, np.ndarray] = {}
+        for part, sel in ((a, ~is_check), (c, is_check)):
+            if part is None:
+                continue
+            bound[sel], cov[sel] = part.bound95_mm, part.cov_mm2
+            for k, v in part.budget_mm.items():
+                budget.setdefault(k, np.full(m, np.nan))[sel] = v
+        return PointBounds(bound, cov, budget)
+
+    return TargetBounds(merged(b.targets, b.checks), merged(b.targets_rigid, b.checks_rigid), b)
 
 
 def hull_edges(points) -> np.ndarray:
@@ -260,7 +345,7 @@ def _display_rotation(mapping) -> np.ndarray:
 
 
 def evaluate(
-    settings: Settings, layout: dict, readings: dict, cached=None, check_ids: frozenset = frozenset()
+    settings: Settings, layout: dict, readings: dict, cached=None, check_ids: frozenset = frozenset(), data=None
 ) -> Evaluation:
     """The nine RRBC steps on a layout: register, correct the included fiducials, interpolate, correct the targets,
     score them against their truth where known. A pure function of its inputs.
@@ -278,6 +363,8 @@ def evaluate(
         caches for the registration and the fitted interpolator); default: compute every time.
     check_ids : frozenset of str, optional
         The targets that are a file's check rows: the warnings call them checks, as `rrbc correct` does.
+    data : MeasurementSet, optional
+        The file's rows when the session is a measured file: the bounds read its repeats (`correction.bounds`).
     """
     cached = cached or (lambda name, key, compute: compute())
     s = settings
@@ -340,6 +427,28 @@ def evaluate(
     warnings = _warnings(fids.ids, fid_r.sensor, e_sensor, included, targets, coverage, check_ids)
     if not len(fids.ids) and s.interpolation != "none":  # a new cell: nothing to interpolate yet
         warnings = (NO_FIDUCIALS_WARNING,) + warnings
+    bounds = None
+    if len(tg.ids):
+        choice = getattr(fitted, "choice", None)
+        method = choice.method if choice is not None else s.interpolator()
+        bounds = _target_bounds(
+            data,
+            T_robot_sensor,
+            reg,
+            layout["registration"].ids,
+            reg_r,
+            fids.ids,
+            fid_r,
+            e_sensor,
+            included,
+            method,
+            s,
+            tg,
+            tgt_r,
+            coverage,
+            check_ids,
+        )
+        warnings = warnings + bounds.source.warnings
     return Evaluation(
         s,
         reg,
@@ -359,6 +468,7 @@ def evaluate(
         warnings,
         getattr(fitted, "choice", None),
         frozenset(check_ids),
+        bounds,
     )
 
 

@@ -1,0 +1,71 @@
+"""One answer everywhere (issue 37, item 3): the bounds the app shows for a measured file's targets and checks are
+`rrbc correct`'s, computed by the same core function; a drag changes them."""
+
+import numpy as np
+import pytest
+
+from rrbc_core.correction.pipeline import correct_measurements
+from rrbc_core.io.groups import split_groups
+from rrbc_core.session.explorer import ExplorerSession
+from rrbc_core.simulation.field_data import field_measurements
+from rrbc_core.simulation.station_data import station_measurements
+
+
+def _by_id(res):
+    out = {}
+    for group, pb, pr in (
+        (res.targets, res.bounds.targets, res.bounds.targets_rigid),
+        (res.checks, res.bounds.checks, res.bounds.checks_rigid),
+    ):
+        if pb is None:
+            continue
+        for k, pid in enumerate(group.ids):
+            out[pid] = (pb.bound95_mm[k], pr.bound95_mm[k], {n: v[k] for n, v in pb.budget_mm.items()})
+    return out
+
+
+@pytest.mark.parametrize("repeats", [False, True])
+def test_the_sessions_bounds_are_rrbc_corrects(repeats):
+    mset = field_measurements(21, repeats=repeats, n_checks=30)
+    session = ExplorerSession.from_measurements(mset)
+    ev = session.evaluate()
+    expected = _by_id(correct_measurements(mset, session.settings.method))
+    assert ev.bounds is not None and len(ev.targets.ids) == len(expected)
+    for k, pid in enumerate(ev.targets.ids):
+        b, br, budget = expected[pid]
+        got = ev.bounds.rrbc.bound95_mm[k]
+        assert (np.isnan(b) and np.isnan(got)) or got == pytest.approx(b, rel=1e-9)
+        assert ev.bounds.rigid.bound95_mm[k] == pytest.approx(br, rel=1e-9, nan_ok=True)
+        if np.isfinite(b):
+            assert {n: ev.bounds.rrbc.budget_mm[n][k] for n in budget} == pytest.approx(budget, rel=1e-9)
+    assert ev.warnings == correct_measurements(mset, session.settings.method).warnings()
+
+
+def test_a_station_and_a_dragged_fiducial():
+    mset = station_measurements(41, stations=2, eval_fiducials=0.5)
+    session = ExplorerSession.from_measurements(mset, station="station2")
+    ev = session.evaluate()
+    alone = correct_measurements(dict(split_groups(mset))["station2"], session.settings.method)
+    exp = _by_id(alone)
+    assert [ev.bounds.rrbc.bound95_mm[k] for k, pid in enumerate(ev.targets.ids)] == pytest.approx(
+        [exp[pid][0] for pid in ev.targets.ids], nan_ok=True
+    )
+    # a target moved away from the fiducials: its bound widens or, beyond what they test, is withheld
+    pid = ev.targets.ids[0]
+    moved = session.move("targets", pid, session.layout["targets"].positions[0] + np.array([0.0, 0.0, 250.0]))
+    k = moved.targets.ids.index(pid)
+    b0, b1 = ev.bounds.rrbc.bound95_mm[0], moved.bounds.rrbc.bound95_mm[k]
+    assert np.isnan(b1) or b1 > b0
+
+
+def test_dragging_a_fiducial_in_a_scene_changes_the_targets_bounds():
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_core.io.scene_toml import load_scene
+
+    session = ExplorerSession.from_scene(load_scene(default_scene_path()))
+    ev = session.evaluate()
+    assert ev.bounds is not None and np.any(np.isfinite(ev.bounds.rrbc.bound95_mm))
+    fid = session.layout["fiducials"].ids[0]
+    pos = session.layout["fiducials"].positions[0] + np.array([60.0, -40.0, 0.0])
+    after = session.move("fiducials", fid, pos).bounds.rrbc
+    assert not np.allclose(np.nan_to_num(after.bound95_mm), np.nan_to_num(ev.bounds.rrbc.bound95_mm))
