@@ -116,6 +116,7 @@ class CVProfile:
     shape: np.ndarray = field(compare=False)
     tail: float = 1.0
     b_outside: float = 0.0
+    distances: np.ndarray | None = field(default=None, compare=False)  # (n,) each held-out fiducial's d
 
     def variance(self, d: np.ndarray, inside=True) -> np.ndarray:
         """(M,): the interpolation's 3-D variance at distances d (M,) from the nearest fiducial, inside the
@@ -172,12 +173,13 @@ def fold_distances(fid_sensor: np.ndarray) -> np.ndarray:
     return dist
 
 
-def tested_distance(fid_sensor: np.ndarray) -> float | None:
+def tested_distance(fid_sensor: np.ndarray, distances: np.ndarray | None = None) -> float | None:
     """The distance (mm) up to which the fiducials' cross-validation tests a prediction: the 90th percentile of
-    `fold_distances`; None with fewer than 3 fiducials (nothing tested, no limit applied)."""
+    `fold_distances` (given as `distances` when already computed); None with fewer than 3 fiducials (nothing
+    tested, no limit applied)."""
     if len(fid_sensor) < 3:
         return None
-    return float(np.percentile(fold_distances(fid_sensor), 90))
+    return float(np.percentile(fold_distances(fid_sensor) if distances is None else distances, 90))
 
 
 def _rigid_error(c_robot, fid_registered, reg_residuals, n_reg: int, fid_noise: float):
@@ -357,11 +359,12 @@ def cv_profile(
     for f in range(int(fold.max()) + 1):
         test = fold == f
         try:
-            err[test] = method.fit(fid_sensor[~test], fid_corr[~test]).predict(fid_sensor[test]).values - fid_corr[test]
+            pred = method.fit(fid_sensor[~test], fid_corr[~test]).predict(fid_sensor[test])
         except InputError:
             return None
+        err[test] = pred.values - fid_corr[test]
         dist[test] = cKDTree(fid_sensor[~test]).query(fid_sensor[test])[0]
-        inside[test] = covered(fid_sensor[~test], fid_sensor[test])
+        inside[test] = ~np.asarray(pred.extrapolated, bool)  # the one hull test (`interpolation.hull`)
     if not np.all(np.isfinite(err)):
         return None
     r = err @ np.asarray(rotation, float).T
@@ -464,6 +467,58 @@ def correction_bounds(
     fid_registered : (F,) bool, optional
         Which fiducials are registration points too (default none).
     """
+    basis = bounds_basis(
+        data,
+        mapping,
+        reg_sensor,
+        reg_count,
+        fid_sensor,
+        fid_count,
+        fid_corr,
+        method,
+        interpolating,
+        instrument,
+        reg_residuals,
+        fid_registered,
+    )
+    return bound_points(basis, points)
+
+
+@dataclass(frozen=True, eq=False)
+class BoundsBasis:
+    """What the bounds need from the registration and the fiducials alone (`bounds_basis`): computed once for a
+    set of fiducials, reused for any points (`bound_points`; the app's target drags). Robot frame, mm."""
+
+    instrument: Instrument
+    rotation: np.ndarray
+    theta: np.ndarray  # (6, 6) the transform's covariance
+    fid_sensor: np.ndarray
+    interpolating: bool
+    profile: CVProfile | None
+    fitted: tuple | None  # the interpolator fitted to the fiducials' positions and to ones (F, w)
+    tested_mm: float | None
+    slope: float
+    v_rigid: float
+    shape_rigid: np.ndarray
+    tail_rigid: float
+    warnings: tuple[str, ...]
+
+
+def bounds_basis(
+    data,
+    mapping,
+    reg_sensor: np.ndarray,
+    reg_count: np.ndarray,
+    fid_sensor: np.ndarray,
+    fid_count: np.ndarray,
+    fid_corr: np.ndarray,
+    method,
+    interpolating: bool,
+    instrument: Instrument | None = None,
+    reg_residuals: np.ndarray | None = None,
+    fid_registered: np.ndarray | None = None,
+) -> BoundsBasis:
+    """The registration's and the fiducials' part of the bounds (`correction_bounds` for the parameters)."""
     rot = np.asarray(mapping.rotation, float)
     fid_sensor, fid_corr = np.asarray(fid_sensor, float).reshape(-1, 3), np.asarray(fid_corr, float).reshape(-1, 3)
     n_fid = len(fid_sensor)
@@ -507,9 +562,39 @@ def correction_bounds(
                     fw = (method.fit(fid_sensor, fid_sensor), method.fit(fid_sensor, np.ones_like(fid_sensor)))
                 except InputError:
                     fw = None
+    return BoundsBasis(
+        inst,
+        rot,
+        theta,
+        fid_sensor,
+        interpolating,
+        profile,
+        fw,
+        tested_distance(fid_sensor, None if profile is None else profile.distances),
+        field_slope(fid_sensor, c_robot, fid_noise) if n_fid else 0.0,
+        v_rigid,
+        shape_rigid,
+        tail_rigid,
+        tuple(warnings),
+    )
+
+
+def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]) -> Bounds:
+    """The bounds of `points` {"targets": (sensor (M, 3), count (M,), off_plane_mm (M,)), "checks": ...} from a
+    basis (`bounds_basis`)."""
+    inst, rot, theta, fid_sensor, profile, fw = (
+        basis.instrument,
+        basis.rotation,
+        basis.theta,
+        basis.fid_sensor,
+        basis.profile,
+        basis.fitted,
+    )
+    interpolating, tested, slope = basis.interpolating, basis.tested_mm, basis.slope
+    v_rigid, shape_rigid, tail_rigid = basis.v_rigid, basis.shape_rigid, basis.tail_rigid
+    warnings = list(basis.warnings)
+    n_fid = len(fid_sensor)
     tree = cKDTree(fid_sensor) if n_fid else None
-    tested = tested_distance(fid_sensor)
-    slope = field_slope(fid_sensor, c_robot, fid_noise) if n_fid else 0.0
     out: dict[str, PointBounds | None] = {}
     for name, (p, count, off_plane) in points.items():
         p = np.asarray(p, float).reshape(-1, 3)

@@ -12,7 +12,7 @@ import numpy as np
 
 from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
-from rrbc_core.correction.bounds import Bounds, PointBounds, correction_bounds
+from rrbc_core.correction.bounds import Bounds, PointBounds, bound_points, bounds_basis
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
@@ -231,6 +231,7 @@ def _counts(data, role: str, ids) -> np.ndarray:
 
 
 def _target_bounds(
+    cached,
     data,
     T_robot_sensor,
     reg,
@@ -248,7 +249,8 @@ def _target_bounds(
     check_ids,
 ):
     """`correction.bounds.correction_bounds` on the session's points, the file's check rows bounded as checks and
-    the rest as targets (as `rrbc correct` splits them), then put back in the targets' order."""
+    the rest as targets (as `rrbc correct` splits them), then put back in the targets' order. The registration's and
+    fiducials' part (`bounds_basis`) is `cached`: a target's drag recomputes only the points' part."""
     fid_in = [pid for pid, k in zip(fid_ids, included) if k]
     is_check = np.array([pid in check_ids for pid in tg.ids], bool)
     off = coverage.off_plane_mm if coverage is not None else np.zeros(len(tg.ids))
@@ -259,21 +261,38 @@ def _target_bounds(
         kind: (tgt_r.sensor[sel], tgt_counts[sel], np.asarray(off, float)[sel])
         for kind, sel in (("targets", ~is_check), ("checks", is_check))
     }
-    b = correction_bounds(
-        data,
-        T_robot_sensor,
-        reg_r.sensor,
-        _counts(data, "registration", reg_ids),
-        fid_r.sensor[included],
-        _counts(data, "fiducial", fid_in),
-        e_sensor[included],
-        method,
-        s.interpolation != "none",
-        points,
-        None,
-        np.asarray(reg.residuals, float).reshape(-1, 3),
-        np.isin(np.asarray(fid_in, dtype=object), np.asarray(reg_ids, dtype=object)),
+    fid_counts = _counts(data, "fiducial", fid_in)
+    reg_counts = _counts(data, "registration", reg_ids)
+    key = (
+        repr(method),
+        s.interpolation,
+        reg_r.sensor.tobytes(),
+        reg_r.robot.tobytes(),
+        fid_r.sensor[included].tobytes(),
+        e_sensor[included].tobytes(),
+        fid_counts.tobytes(),
+        reg_counts.tobytes(),
+        id(data),
     )
+    basis = cached(
+        "bounds",
+        key,
+        lambda: bounds_basis(
+            data,
+            T_robot_sensor,
+            reg_r.sensor,
+            reg_counts,
+            fid_r.sensor[included],
+            fid_counts,
+            e_sensor[included],
+            method,
+            s.interpolation != "none",
+            None,
+            np.asarray(reg.residuals, float).reshape(-1, 3),
+            np.isin(np.asarray(fid_in, dtype=object), np.asarray(reg_ids, dtype=object)),
+        ),
+    )
+    b = bound_points(basis, points)
     m = len(tg.ids)
 
     def merged(a: PointBounds | None, c: PointBounds | None) -> PointBounds:
@@ -432,6 +451,7 @@ def evaluate(
         choice = getattr(fitted, "choice", None)
         method = choice.method if choice is not None else s.interpolator()
         bounds = _target_bounds(
+            cached,
             data,
             T_robot_sensor,
             reg,
