@@ -28,6 +28,7 @@ LAND_RING: Rgb = (60, 60, 60)
 MODEL_INSIDE: Rgb = (95, 95, 95)  # a measured row inside its predicted 95 % region (Model tab)
 MODEL_OUTSIDE: Rgb = (130, 0, 0)  # outside it
 MODEL_MISFIT: Rgb = (25, 25, 25)  # measured minus predicted residual, magnified
+BOUND: Rgb = (205, 170, 120)  # a target's 95 % bound (the "bounds" layer)
 
 #: The drag gizmo's axis colours (drei PivotControls' defaults in viser 1.1.1's client: x, y, z). Data colours
 #: keep a CIE76 colour difference of at least MIN_GIZMO_DELTA_E from each (tests/viz check it).
@@ -42,6 +43,7 @@ DATA_COLORS: dict[str, Rgb] = {
     "check (measured data)": CHECK,
     "target outside the hull (extrapolated)": TARGET_EXTRAPOLATED,
     "region of variability": REGION,
+    "95 % bound of a target (true size)": BOUND,
     "fiducials' hull": HULL,
     "correction at a fiducial": CORRECTION_FIDUCIAL,
     "correction at a target": CORRECTION_TARGET,

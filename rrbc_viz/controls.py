@@ -48,6 +48,7 @@ LAYER_LABELS = {
     "hull": "Fiducials' hull",
     "targets": "Targets",
     "regions": "Regions of variability",
+    "bounds": "95 % bounds of the targets (true size)",
     "landing": "Landing points (rigid vs RRBC)",
     "labels": "Labels",
     "heatmap": "Heat map of predicted error",

@@ -23,6 +23,7 @@ LAYERS = (
     "hull",
     "targets",
     "regions",
+    "bounds",
     "landing",
     "labels",
     "heatmap",

@@ -19,6 +19,7 @@ Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's)
     /targets/<id>/gizmo                transform controls, translation only (drag a target)
     /targets/<id>/gizmo/sphere         the target (magenta when extrapolated), …/label
     /regions/<id>                      translucent box / icosphere with per-axis scale
+    /bounds/<id>                       translucent ellipsoid: the target's 95 % bound at true size (bound_nodes)
     /landing/anchor, /landing/rigid, /landing/rrbc   the landing bullseye of the selected target (LandingDisplay),
     /landing/lines, /landing/rings, /landing/scale   floating above it: stalk, offsets, scale rings, ring label
     /heatmap/points                    point cloud, float32: the samples, in their region (true size × region zoom)
@@ -43,6 +44,7 @@ from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
 from . import colors, lesson_labels
+from .bound_nodes import BoundNodes
 from .frame_nodes import FrameNodes
 from .heatmap_nodes import HeatMapNodes
 from .landing_nodes import LandingNodes
@@ -110,6 +112,7 @@ class SceneNodes:
         self._bullseye = LandingNodes(self._scene)  # the selected target's landing bullseye
         self._frames = FrameNodes(self._scene)  # the robot's and the sensor's frames
         self._regions = RegionNodes(self._scene)  # the targets' regions of variability and coverage halos
+        self._bounds = BoundNodes(self._scene)  # the targets' 95 % bound ellipsoids
 
     # ------------------------------------------------------------------------------------------ inspecting
     def handle(self, name: str) -> Any:
@@ -159,6 +162,7 @@ class SceneNodes:
         self._spheres.clear()
         self._labels.clear()
         self._regions.clear()
+        self._bounds.clear()
         self._nodes.clear()
         self._heat.clear()
         self._bullseye.clear()
@@ -257,6 +261,7 @@ class SceneNodes:
 
         # regions of variability ------------------------------------------------------------------------
         self._regions.build(session.regions, ev.targets.ids, ev.targets.positions, display.region_zoom)
+        self._bounds.build(ev.targets.ids)
 
         # landing bullseye of one target (filled by update) --------------------------------------------------
         if len(ev.targets.ids):
@@ -414,6 +419,7 @@ class SceneNodes:
                 self._assign(self._gizmos[("targets", pid)], "position", tuple(t.positions[i]))
             self._assign(self._labels[f"{gizmo_name('targets', pid)}/label"], "text", texts[i])
             self._regions.move(pid, t.positions[i], self._assign)
+        self._bounds.show(t.ids, t.positions, picture.bound_rotations, picture.bound_axes, self._assign)
         tarrows = self._nodes["/corrections/targets"]
         if len(t.ids):
             tarrows.points = np.stack([t.positions, t.positions + mag * t.correction_robot], axis=1).astype(np.float32)
@@ -525,6 +531,8 @@ class SceneNodes:
             missing.add("sensor")
         if not self._regions.any():
             missing.add("regions")
+        if self._session is not None and not len(self._session.layout["targets"].ids):
+            missing.add("bounds")
         return tuple(n for n in LAYERS if n not in missing)
 
     def set_lesson_labels(self, kinds: tuple[str, ...]) -> None:

@@ -51,6 +51,9 @@ class ScenePicture:
         The leaned tool of the bullseye's target (None: tool down).
     drag_active : bool
         A drag is under way (the arm follows at most a few times a second).
+    bound_rotations, bound_axes : (M, 3, 3), (M, 3)
+        Each target's 95 % bound ellipsoid (`rrbc_core.correction.bounds.PointBounds.ellipsoids` of its RRBC
+        position's covariance): axes' rotation and semi-axes, mm (NaN: no bound).
     """
 
     ev: Evaluation
@@ -65,6 +68,8 @@ class ScenePicture:
     bias_scale: float = 1.0
     tool: tuple[float, float] | None = None
     drag_active: bool = False
+    bound_rotations: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)), repr=False)
+    bound_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
 
 
 def scene_extent(ev: Evaluation) -> float:
@@ -97,6 +102,10 @@ def scene_picture(session: ExplorerSession, state: AppState, ev: Evaluation) -> 
     mapping = ev.registration.mapping
     frame_mag = frame_magnification(true_pose, mapping, AXES_SHARE * state.extent_mm, display.magnification)
     reg_wxyz, reg_position = registered_frame_pose(true_pose, mapping, frame_mag)
+    if ev.bounds is not None:
+        bound_rot, bound_axes = ev.bounds.rrbc.ellipsoids()
+    else:
+        bound_rot, bound_axes = np.zeros((len(t.ids), 3, 3)), np.full((len(t.ids), 3), np.nan)
     return ScenePicture(
         ev=ev,
         selected=state.selected,
@@ -110,4 +119,6 @@ def scene_picture(session: ExplorerSession, state: AppState, ev: Evaluation) -> 
         bias_scale=float(session.settings.bias_scale) if session.kind == "scene" else 1.0,
         tool=None if tool is None else (float(tool[0]), float(tool[1])),
         drag_active=state.drag_active,
+        bound_rotations=bound_rot,
+        bound_axes=bound_axes,
     )

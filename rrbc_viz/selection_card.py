@@ -89,6 +89,31 @@ def _hull_line(ev: Evaluation, i: int, region_fraction: float | None) -> str:
     return f"- ⚠ {words}: extrapolated" if not ev.coverage.inside[i] else f"- {words}"
 
 
+BAR_CELLS = 14  # a budget bar's full width, in characters
+
+
+def budget_lines(ev: Evaluation, i: int) -> list[str]:
+    """Target i's 95 % bound (RRBC's, rigid's beside it) and its budget as bars, each source's RMS contribution
+    against the largest (`Evaluation.bounds`, as `rrbc correct` gives them); or why there is none."""
+    b = ev.bounds
+    if b is None:
+        return []
+    bound = float(b.rrbc.bound95_mm[i])
+    rigid = float(b.rigid.bound95_mm[i])
+    rigid_words = f"; rigid {rigid:.3f} mm" if np.isfinite(rigid) else ""
+    if not np.isfinite(bound):
+        why = next((w for w in b.source.warnings if w.startswith("no ")), "the data cannot back one here")
+        return [f"- 95 % bound: none{rigid_words.replace(';', ' (')}{')' if rigid_words else ''} — {why}"]
+    parts = {k: float(v[i]) for k, v in b.rrbc.budget_mm.items()}
+    top = max(max(parts.values()), 1e-12)
+    width = max(len(k) for k in parts)
+    lines = [f"- 95 % bound **{bound:.3f} mm** (RRBC{rigid_words}); its budget, RMS mm:"]
+    for k, v in parts.items():
+        n = int(round(BAR_CELLS * v / top))
+        lines.append(f"  `{k:<{width}} {'█' * n}{'░' * (BAR_CELLS - n)} {v:.3f}`")
+    return lines
+
+
 def info_card(ev: Evaluation, selected: tuple[str, str] | None, region_fraction: float | None = None) -> str:
     """Markdown: the selected point's numbers (or how to select one)."""
     if selected is None:
@@ -104,6 +129,7 @@ def info_card(ev: Evaluation, selected: tuple[str, str] | None, region_fraction:
             + (f" ± {float(np.linalg.norm(t.correction_std[i])):.3f} (1σ)" if t.correction_std is not None else ""),
             f"- error rigid **{_mm(t.error_rigid[i])}** → RRBC **{_mm(t.error_rrbc[i])}**",
             _hull_line(ev, i, region_fraction),
+            *budget_lines(ev, i),
         ]
         return "\n".join(lines)
     i = ev.fiducial_ids.index(pid)

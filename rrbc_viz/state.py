@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from rrbc_core.session.vec_view import VecView
 
 #: Layers shown when a source is loaded: all but labels, the heat map and the error slice.
-DEFAULT_LAYERS = {name: name not in ("labels", "heatmap", "slice") for name in LAYERS}
+DEFAULT_LAYERS = {name: name not in ("labels", "heatmap", "slice", "bounds") for name in LAYERS}
 
 
 @dataclass

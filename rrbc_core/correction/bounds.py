@@ -67,6 +67,22 @@ def bound95(cov: np.ndarray, level: float = LEVEL) -> np.ndarray:
     return out
 
 
+def bound_ellipsoids(cov: np.ndarray, level: float = LEVEL) -> tuple[np.ndarray, np.ndarray]:
+    """The `level` region of a normal error with covariance cov (M, 3, 3) mm², as ellipsoids: their axes' rotation
+    (M, 3, 3; columns the axes, a proper rotation) and semi-axes (M, 3) mm, sqrt(λ χ²₃(level)) along eigenvector
+    λ. For an isotropic error it is the sphere of radius `bound95` (level 0.95). Rows with a NaN covariance give
+    NaN semi-axes (no bound: nothing to draw)."""
+    c = np.asarray(cov, float).reshape(-1, 3, 3)
+    ok = np.all(np.isfinite(c), axis=(1, 2))
+    lam = np.full((len(c), 3), np.nan)
+    rot = np.broadcast_to(np.eye(3), (len(c), 3, 3)).copy()
+    if np.any(ok):
+        w, v = np.linalg.eigh(c[ok])
+        v[np.linalg.det(v) < 0, :, 2] *= -1  # a proper rotation
+        lam[ok], rot[ok] = np.clip(w, 0.0, None), v
+    return rot, np.sqrt(lam * chi2.ppf(level, 3))
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
     """(N, 3, 3): [v]× for v (N, 3)."""
     z = np.zeros(len(v))
@@ -88,6 +104,12 @@ class PointBounds:
     bound95_mm: np.ndarray
     cov_mm2: np.ndarray
     budget_mm: dict[str, np.ndarray]
+
+    def ellipsoids(self, level: float = LEVEL) -> tuple[np.ndarray, np.ndarray]:
+        """`bound_ellipsoids` of the points' covariances, NaN semi-axes where no bound is given."""
+        rot, axes = bound_ellipsoids(self.cov_mm2, level)
+        axes[~np.isfinite(self.bound95_mm)] = np.nan
+        return rot, axes
 
     def row_json(self, k: int, suffix: str = "") -> dict:
         """Point k's keys for a JSON row: ``bound95{suffix}_mm``, ``budget{suffix}_mm``, ``cov{suffix}_mm2``."""

@@ -215,3 +215,19 @@ def test_given_figures_override_a_preset_and_say_so():
     inst = instrument_from_flags("tracker", angle_noise_urad=10.0, robot_noise_mm=0.03)
     assert inst.angle_urad == 10.0 and inst.distance_mm == preset("tracker").distance_mm
     assert "--angle-noise-urad given" in inst.source and inst.robot_mm == 0.03
+
+
+def test_the_drawn_ellipsoid_is_the_covariances_95_percent_region_and_the_bound_when_isotropic():
+    from rrbc_core.correction.bounds import bound_ellipsoids
+
+    rng = np.random.default_rng(11)
+    q = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    cov = q @ np.diag([0.04, 0.01, 0.0025]) @ q.T
+    rot, axes = bound_ellipsoids(np.stack([cov, 0.09 * np.eye(3), np.full((3, 3), np.nan)]))
+    assert np.allclose(np.linalg.det(rot[:2]), 1.0)
+    # each axis's end lies on x' C^-1 x = chi2_3(0.95)
+    for k in range(3):
+        x = rot[0][:, k] * axes[0][k]
+        assert x @ np.linalg.solve(cov, x) == pytest.approx(chi2.ppf(0.95, 3))
+    assert np.allclose(axes[1], bound95((0.09 * np.eye(3))[None])[0])
+    assert np.all(np.isnan(axes[2]))
