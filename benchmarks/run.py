@@ -23,6 +23,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))  # run from a checkout without installing
 
 import big_inputs  # noqa: E402
+import bounds_cost  # noqa: E402
 import class_load  # noqa: E402
 import interactive  # noqa: E402
 import montecarlo  # noqa: E402
@@ -42,6 +43,7 @@ BENCHMARKS = [
     interactive.diagnose_command,
     interactive.calibrate_urdf,
     interactive.auto_interpolation,
+    bounds_cost.correct_bounds,
     big_inputs.big_inputs,
     reproduce_speed.reproduce_speed,
 ]

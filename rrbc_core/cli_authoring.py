@@ -294,7 +294,28 @@ def _cmd_calibrate(args) -> str:
         + " (angles rad, lengths mm)"
     )
     lines += compliance_lines(result)
+    lines += calibrate_bound_lines(result)
     return "\n".join(lines) + "\n"
+
+
+def calibrate_bound_lines(result: dict) -> list[str]:
+    """The targets' 95 % bound per method (mm; '-' where none) and what the bounds rest on."""
+    from rrbc_core.analysis.vec_compare import METHODS
+
+    if not result["targets"]:
+        return []
+    inst = result["bounds"]["instrument"]
+    lines = [
+        "",
+        "targets: 95 % bound on the 3-D error of each method's command (mm; '-': none)",
+        f"  {'id':<12}" + "".join(f" {m:>9}" for m in METHODS),
+    ]
+    for row in result["targets"]:
+        b = row["bound95_mm"]
+        lines.append(f"  {row['id']:<12}" + "".join(f" {'-' if b[m] is None else f'{b[m]:.4f}':>9}" for m in METHODS))
+    lines.append(f"  noise: {inst['sigma_mm']:.4g} mm per axis, {inst['source']}")
+    lines += [f"warning: {w}" for w in result["bounds"]["warnings"]]
+    return lines
 
 
 def compliance_lines(result: dict) -> list[str]:

@@ -46,7 +46,12 @@ contribution of each source), for RRBC's position and for rigid's (`bound95_rigi
   registration point's correction is a fit residual, scaled up by n/(n - 2)).
 - Off coplanar (or collinear) fiducials nothing measures the field's change with height: a point h off their plane
   adds g² h², with g² the field's mean squared rate of change along the plane (assumed the same across it).
-- **arm** (VEC in `rrbc calibrate`): not yet given (see the issue's note).
+- **arm** (VEC and VEC+RRBC in `rrbc calibrate`, `rrbc_core/analysis/vec_bounds.py`): the identified parameters'
+  covariance (the arm's and each station's transform, on the combinations the poses identify) carried to the
+  point. `rrbc calibrate`'s other parts follow the same rules with its own folds and IDW; its noise is the smaller
+  of the fiducials' nearest-neighbour bound and the arm fit's residual (or repeats). The coverage below is
+  `rrbc correct`'s; `rrbc calibrate`'s is held by a test on seeded arm files
+  (`tests/analysis/test_vec_bounds.py`).
 
 The bound is the radius holding 95 % of a normal error with the summed covariance: a scaled χ² matched in mean and
 variance to the eigenvalues' terms, exact for an isotropic error; over random covariances its own error is at most

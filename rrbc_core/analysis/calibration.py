@@ -88,6 +88,9 @@ class Calibration:
     coef_se: np.ndarray = field(default_factory=lambda: np.zeros(0))
     coef_identifiable: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     gravity: tuple = GRAVITY
+    #: the covariance of every identified parameter (P + T + 6G: the chain's, the load terms', each transform's
+    #: rotation vector and translation) in their own units (rad, mm, rad/Nm), on the identified combinations only
+    param_cov: np.ndarray | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -114,6 +117,22 @@ class Calibration:
             return map_points(s, self.rotation, self.translation)
         g = np.asarray(groups, int)
         return np.einsum("nij,nj->ni", self.rotations[g], s) + self.translations[g]
+
+    def prediction_cov(self, q, s, groups=None) -> np.ndarray:
+        """(D, 3, 3) mm², robot frame: what the identified parameters' uncertainty (`param_cov`) leaves in
+        T(s) − FK(q) at rows with joint values q (D, I) and sensor readings s (D, 3) (with stations, `groups` (D,)):
+        the arm model's part of a VEC command's error there. Zeros without `param_cov`."""
+        qa = np.asarray(q, float)
+        sa = np.asarray(s, float).reshape(-1, 3)
+        if self.param_cov is None or not len(sa):
+            return np.zeros((len(sa), 3, 3))
+        rot = self.rotations if self.rotations is not None else self.rotation[None]
+        t = self.translations if self.translations is not None else self.translation[None]
+        g = np.zeros(len(sa), int) if groups is None or self.rotations is None else np.asarray(groups, int)
+        loads = gravity_loads(self.chain, qa, self.gravity) if self.terms else None
+        _, j = _system(self.chain, qa, sa, self.delta, rot, t, g, self.terms, self.coef, loads)
+        jj = j.reshape(len(sa), 3, -1)
+        return np.einsum("nik,kl,njl->nij", jj, self.param_cov, jj)
 
     def forward(self, q) -> np.ndarray:
         """Where the identified arm's tool point is at inputs q (N, I), robot frame, mm (its load terms included)."""
@@ -296,6 +315,7 @@ def calibrate(
         coef_se=np.where(alone[n_p:k0], se[n_p:k0], np.nan),
         coef_identifiable=alone[n_p:k0],
         gravity=tuple(float(v) for v in (GRAVITY if gravity is None else gravity)),
+        param_cov=cov,
     )
 
 

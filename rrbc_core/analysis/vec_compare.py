@@ -29,6 +29,7 @@ import numpy as np
 
 from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
 from rrbc_core.analysis.robot_model import require_model, robot_chain
+from rrbc_core.analysis.vec_bounds import bounds_json, method_bounds
 from rrbc_core.errors import InputError
 from rrbc_core.io.groups import GROUP_COLUMN, group_names, has_groups
 from rrbc_core.io.joints import joint_values
@@ -393,14 +394,21 @@ def compare(
         and cal.kinematic_p_value < KINEMATIC_ALPHA
         and min(cv_values["vec"], cv_values["vec_rrbc"]) < KINEMATIC_MARGIN * cv_values["rrbc"]
     )
-    targets = []
-    if len(rows_tgt):
-        pred = predict_methods(fit, s[rows_tgt], q[rows_tgt], g_of(rows_tgt))
-        for k, i in enumerate(rows_tgt):
-            row = {"id": mset.ids[i], **{m: pred[m][k].tolist() for m in METHODS}}
-            if gi is not None:
-                row["group"] = names[gi[i]]
-            targets.append(row)
+    rows_pts = np.concatenate([rows_tgt, rows_chk]).astype(int)
+    pbounds, instrument, bound_warnings = method_bounds(
+        mset, fit, folds, sq, rows_reg, rows_fid, rows_pts, s, b, q, gi, _idw_by_group
+    )
+    targets: list[dict] = []
+    check_points: list[dict] = []
+    pred_pts = predict_methods(fit, s[rows_pts], q[rows_pts], g_of(rows_pts)) if len(rows_pts) else {}
+    for k, i in enumerate(rows_pts):
+        row = {"id": mset.ids[i], **{m: pred_pts[m][k].tolist() for m in METHODS}}
+        if gi is not None:
+            row["group"] = names[gi[i]]
+        if k >= len(rows_tgt):
+            row["error_mm"] = {m: float(np.linalg.norm(pred_pts[m][k] - b[i])) for m in METHODS}
+        row.update(bounds_json(pbounds, k))
+        (targets if k < len(rows_tgt) else check_points).append(row)
     angular = chain.angular
     if save_model is not None:
         from rrbc_core.analysis.saved_model import from_calibration
@@ -485,4 +493,6 @@ def compare(
             f"VEC's cross-validated RMST below {KINEMATIC_MARGIN:g} × RRBC's",
         },
         "targets": targets,
+        "check_points": check_points,
+        "bounds": {"level": 0.95, "instrument": instrument, "warnings": bound_warnings},
     }

@@ -390,7 +390,14 @@ def cv_profile(
     if not np.all(np.isfinite(err)):
         return None
     r = err @ np.asarray(rotation, float).T
-    sq = np.sum(r**2, axis=1)
+    return profile_from_squares(np.sum(r**2, axis=1), dist, inside, noise_mm2, r, int(fold.max()) + 1)
+
+
+def profile_from_squares(sq, dist, inside, noise_mm2: float, r=None, folds: int = 0) -> CVProfile:
+    """The `CVProfile` of held-out squared 3-D errors sq (H,) mm² at distances dist (H,) mm from the nearest
+    fiducial left in, inside the rest's hull or not (`inside` (H,) bool), with a fiducial's own noise `noise_mm2`
+    (module docstring); `r` (H, 3) the errors themselves for the shape (robot frame; isotropic without)."""
+    sq, dist, inside = np.asarray(sq, float), np.asarray(dist, float), np.asarray(inside, bool)
     near = dist > 1e-9
     d2 = dist[near] ** 2
     if np.count_nonzero(near) >= MIN_FIDUCIALS and np.max(d2) >= 4 * np.min(d2):
@@ -404,7 +411,7 @@ def cv_profile(
         k = np.count_nonzero(group)
         slopes.append(max(float(np.mean((sq[group] - a) / dist[group] ** 2)), 0.0) if k >= 3 else b)
     b_in, b_out = slopes[0], max(slopes[1], slopes[0])
-    s = r.T @ r
+    s = r.T @ r if r is not None else np.eye(3)
     shape = s / np.trace(s) if np.trace(s) > 0 else np.eye(3) / 3
     # the tail the fiducials show: their 95th percentile of |r| / sqrt(A + B d²) against a normal error's
     model = a + np.where(inside, b_in, b_out) * dist**2
@@ -418,12 +425,13 @@ def cv_profile(
         a * t2,
         b_in * t2,
         float(noise_mm2),
-        n,
-        int(fold.max()) + 1,
-        float(np.sqrt(np.mean(sq))),
+        len(sq),
+        folds,
+        float(np.sqrt(np.mean(sq))) if len(sq) else 0.0,
         shape,
         tail,
         b_out * t2,
+        dist,
     )
 
 

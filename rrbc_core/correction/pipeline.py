@@ -112,7 +112,7 @@ class CorrectionResult:
         c = self.checks_corrected
         return check_statistics(self.checks.ids, c.robot_rigid, c.robot_rrbc, self.checks.robot)
 
-    def warnings(self) -> tuple[str, ...]:
+    def warnings(self, with_bounds: bool = True) -> tuple[str, ...]:
         """One-line warnings on this correction (`correction.warnings.correction_warnings`: wild corrections,
         conflicting nearly coincident fiducials, extrapolated targets and checks), then the bounds' (`bounds`: points
         given no bound and why, an instrument the data contradict)."""
@@ -126,11 +126,13 @@ class CorrectionResult:
         ]
         return correction_warnings(
             self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points
-        ) + tuple(self.bounds.warnings)
+        ) + (tuple(self.bounds.warnings) if with_bounds else ())
 
-    def to_json(self) -> dict:
-        """The JSON object of `rrbc correct --json` (docs/cli.md)."""
+    def to_json(self, with_bounds: bool = True) -> dict:
+        """The JSON object of `rrbc correct --json` (docs/cli.md); `with_bounds` False leaves the per-point bounds out
+        (what they cost: benchmarks/bounds_cost.py)."""
         reg = self.registration
+        bounds = self.bounds if with_bounds else None
         reg_json = {"method": reg.method, **reg.mapping.as_dict(), "fre_rms_mm": reg.fre_rms_mm}
         reg_json.update(self.options.registration_json())  # the strategy's options (a seeded one's seed)
         return {
@@ -140,14 +142,14 @@ class CorrectionResult:
                 {"id": i, "sensor": s.tolist(), "correction_mm": e.tolist()}
                 for i, s, e in zip(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections)
             ],
-            "targets": _points_json(self.targets, self.targets_corrected, bounds=self.bounds, kind="targets"),
+            "targets": _points_json(self.targets, self.targets_corrected, bounds=bounds, kind="targets"),
             "checks": _points_json(
-                self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc, bounds=self.bounds, kind="checks"
+                self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc, bounds=bounds, kind="checks"
             ),
             "summary": self.summary(),
             "check_statistics": None if (st := self.statistics()) is None else st.to_json(),
-            "bounds": self.bounds.to_json(),
-            "warnings": list(self.warnings()),
+            **({"bounds": bounds.to_json()} if bounds is not None else {}),
+            "warnings": list(self.warnings(with_bounds)),
         }
 
 
