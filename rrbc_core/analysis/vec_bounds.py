@@ -142,11 +142,11 @@ def method_bounds(
     return out, instrument, warnings
 
 
-def bounds_json(bounds: dict, k: int) -> dict:
-    """Point k's ``bound95_mm``, ``budget_mm`` and ``cov_mm2``, each {method: value or null}."""
-    rows = {name: pb.row_json(k) for name, pb in bounds.items()}
-    return {
-        "bound95_mm": {n: r["bound95_mm"] for n, r in rows.items()},
-        "budget_mm": {n: r["budget_mm"] for n, r in rows.items()},
-        "cov_mm2": {n: r["cov_mm2"] for n, r in rows.items()},
-    }
+def bounds_rows(bounds: dict) -> list[dict]:
+    """Each point's ``bound95_mm``, ``budget_mm`` and ``cov_mm2``, each {method: value or null}."""
+    per = {name: pb.rows_json() for name, pb in bounds.items()}
+    n = len(next(iter(per.values()))) if per else 0
+    return [
+        {key: {name: per[name][k][key] for name in per} for key in ("bound95_mm", "budget_mm", "cov_mm2")}
+        for k in range(n)
+    ]

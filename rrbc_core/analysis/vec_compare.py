@@ -29,7 +29,7 @@ import numpy as np
 
 from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
 from rrbc_core.analysis.robot_model import require_model, robot_chain
-from rrbc_core.analysis.vec_bounds import bounds_json, method_bounds
+from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
 from rrbc_core.errors import InputError
 from rrbc_core.io.groups import GROUP_COLUMN, group_names, has_groups
 from rrbc_core.io.joints import joint_values
@@ -400,6 +400,7 @@ def compare(
     )
     targets: list[dict] = []
     check_points: list[dict] = []
+    brows = bounds_rows(pbounds)
     pred_pts = predict_methods(fit, s[rows_pts], q[rows_pts], g_of(rows_pts)) if len(rows_pts) else {}
     for k, i in enumerate(rows_pts):
         row = {"id": mset.ids[i], **{m: pred_pts[m][k].tolist() for m in METHODS}}
@@ -407,7 +408,7 @@ def compare(
             row["group"] = names[gi[i]]
         if k >= len(rows_tgt):
             row["error_mm"] = {m: float(np.linalg.norm(pred_pts[m][k] - b[i])) for m in METHODS}
-        row.update(bounds_json(pbounds, k))
+        row.update(brows[k])
         (targets if k < len(rows_tgt) else check_points).append(row)
     angular = chain.angular
     if save_model is not None:

@@ -111,16 +111,29 @@ class PointBounds:
         axes[~np.isfinite(self.bound95_mm)] = np.nan
         return rot, axes
 
-    def row_json(self, k: int, suffix: str = "") -> dict:
-        """Point k's keys for a JSON row: ``bound95{suffix}_mm``, ``budget{suffix}_mm``, ``cov{suffix}_mm2``."""
-        b = float(self.bound95_mm[k])
-        if not np.isfinite(b):
-            return {f"bound95{suffix}_mm": None, f"budget{suffix}_mm": None, f"cov{suffix}_mm2": None}
-        return {
-            f"bound95{suffix}_mm": b,
-            f"budget{suffix}_mm": {n: float(v[k]) for n, v in self.budget_mm.items()},
-            f"cov{suffix}_mm2": self.cov_mm2[k].tolist(),
-        }
+    def row_json(self, k: int, suffix: str = "", cov: bool = True) -> dict:
+        """Point k's keys for a JSON row: ``bound95{suffix}_mm``, ``budget{suffix}_mm`` and, with `cov`,
+        ``cov{suffix}_mm2`` (`rows_json` gives every point's at once)."""
+        return self.rows_json(suffix, cov)[k]
+
+    def rows_json(self, suffix: str = "", cov: bool = True) -> list[dict]:
+        """Every point's `row_json`, built from whole arrays (a million rows stay cheap)."""
+        bounds = self.bound95_mm.tolist()
+        covs = self.cov_mm2.tolist() if cov else None
+        names = list(self.budget_mm)
+        budgets = list(zip(*(self.budget_mm[n].tolist() for n in names))) if names else [()] * len(bounds)
+        out = []
+        for k, b in enumerate(bounds):
+            if b != b:  # NaN: no bound
+                row: dict = {f"bound95{suffix}_mm": None, f"budget{suffix}_mm": None}
+                if cov:
+                    row[f"cov{suffix}_mm2"] = None
+            else:
+                row = {f"bound95{suffix}_mm": b, f"budget{suffix}_mm": dict(zip(names, budgets[k]))}
+                if covs is not None:
+                    row[f"cov{suffix}_mm2"] = covs[k]
+            out.append(row)
+        return out
 
 
 @dataclass(frozen=True)

@@ -124,9 +124,9 @@ class CorrectionResult:
             )
             if cp is not None
         ]
-        return correction_warnings(
-            self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points
-        ) + (tuple(self.bounds.warnings) if with_bounds else ())
+        return correction_warnings(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points) + (
+            tuple(self.bounds.warnings) if with_bounds else ()
+        )
 
     def to_json(self, with_bounds: bool = True) -> dict:
         """The JSON object of `rrbc correct --json` (docs/cli.md); `with_bounds` False leaves the per-point bounds out
@@ -166,27 +166,36 @@ def _points_json(
         return rows
     pb = getattr(bounds, kind) if bounds is not None else None
     pb_rigid = getattr(bounds, kind + "_rigid") if bounds is not None else None
+    b_rows = pb.rows_json() if pb is not None else None
+    b_rigid_rows = pb_rigid.rows_json("_rigid", cov=False) if pb_rigid is not None else None
+    c = corrected  # whole arrays to lists once: a million rows stay cheap
+    sensor, corr, rigid, rrbc = (a.tolist() for a in (c.sensor, c.correction, c.robot_rigid, c.robot_rrbc))
+    extra = c.extrapolated.tolist()
+    std = c.correction_std.tolist() if c.correction_std is not None else None
+    off = c.off_plane_mm.tolist()
+    if err_rigid is not None:
+        truth, e_rigid, e_rrbc = group.robot.tolist(), np.asarray(err_rigid).tolist(), np.asarray(err_rrbc).tolist()
     for k, pid in enumerate(group.ids):
         row = {
             "id": pid,
-            "sensor": corrected.sensor[k].tolist(),
-            "correction_mm": corrected.correction[k].tolist(),
-            "robot_rigid": corrected.robot_rigid[k].tolist(),
-            "robot_rrbc": corrected.robot_rrbc[k].tolist(),
-            "extrapolated": bool(corrected.extrapolated[k]),
+            "sensor": sensor[k],
+            "correction_mm": corr[k],
+            "robot_rigid": rigid[k],
+            "robot_rrbc": rrbc[k],
+            "extrapolated": bool(extra[k]),
         }
-        if corrected.correction_std is not None:
-            row["correction_std_mm"] = corrected.correction_std[k].tolist()
-        if corrected.off_plane_mm[k] > 0:
-            row["off_plane_mm"] = float(corrected.off_plane_mm[k])
+        if std is not None:
+            row["correction_std_mm"] = std[k]
+        if off[k] > 0:
+            row["off_plane_mm"] = off[k]
         if err_rigid is not None:
-            row["robot_truth"] = group.robot[k].tolist()
-            row["error_rigid_mm"] = float(err_rigid[k])
-            row["error_rrbc_mm"] = float(err_rrbc[k])
-            row["rrbc_worse"] = bool(err_rrbc[k] > err_rigid[k])
-        if pb is not None and pb_rigid is not None:
-            row.update(pb.row_json(k))
-            row.update(pb_rigid.row_json(k, "_rigid"))
+            row["robot_truth"] = truth[k]
+            row["error_rigid_mm"] = e_rigid[k]
+            row["error_rrbc_mm"] = e_rrbc[k]
+            row["rrbc_worse"] = e_rrbc[k] > e_rigid[k]
+        if b_rows is not None and b_rigid_rows is not None:
+            row.update(b_rows[k])
+            row.update(b_rigid_rows[k])
         rows.append(row)
     return rows
 
