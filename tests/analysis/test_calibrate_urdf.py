@@ -48,7 +48,10 @@ def _file(tmp_path, arm, seed, **kw):
     return path
 
 
-@pytest.mark.parametrize("arm,seed", [("panda", 1), ("ur5", 2), ("lift", 3)])
+@pytest.mark.parametrize(
+    "arm,seed",
+    [pytest.param("panda", 1, marks=pytest.mark.slow), ("ur5", 2), pytest.param("lift", 3, marks=pytest.mark.slow)],
+)
 def test_joint_and_origin_errors_vec_reaches_the_noise_floor_and_is_recommended(tmp_path, arm, seed):
     size = float(np.random.default_rng(seed).uniform(0.7, 2.0))
     path = _file(tmp_path, arm, seed, kin_size=size)

@@ -84,6 +84,7 @@ def test_compliance_is_not_named_where_none_is_planted(results):
             assert r["compliance"]["candidates"]  # the data could have shown it
 
 
+@pytest.mark.slow
 def test_the_recommendation_is_the_best_on_held_out_checks(results):
     hits = 0
     for _, _, _, _, r in results:
@@ -149,6 +150,7 @@ def test_a_saved_arm_comes_within_20_percent_of_a_full_calibration(tmp_path, sav
     assert reused["rmst_mm"]["vec"] < reused["rmst_mm"]["rigid"] / 3
 
 
+@pytest.mark.slow
 def test_a_saved_arm_makes_an_8_point_registration_several_times_better(tmp_path, saved_arm):
     """A station measured with its 8 registration points only (no fiducials: nothing else to calibrate from)."""
     later = chain_measurements(

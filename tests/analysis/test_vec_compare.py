@@ -37,7 +37,16 @@ def test_kinematic_errors_vec_reaches_the_noise_floor_and_is_recommended(tmp_pat
     assert out["recommended"] in ("vec", "vec_rrbc") and out["kinematic_error"]["claimed"]
     assert rm["vec"] < 1.4 * FLOOR and rm["vec"] < 0.25 * rm["rigid"], (rm, FLOOR)
     assert set(out["cv_rmst_mm"]) == {"rigid", "rrbc", "vec", "vec_rrbc"}
-    assert len(out["targets"]) == 3 and set(out["targets"][0]) == {"id", "rigid", "rrbc", "vec", "vec_rrbc"}
+    assert len(out["targets"]) == 3 and set(out["targets"][0]) == {
+        "id",
+        "rigid",
+        "rrbc",
+        "vec",
+        "vec_rrbc",
+        "bound95_mm",
+        "budget_mm",
+        "cov_mm2",
+    }
     assert out["identifiable"]["rank"] > 10 and any(p["identifiable"] for p in out["parameters"])
     text = _calibrate(path)
     assert text.returncode == 0 and "recommended" in text.stdout

@@ -17,7 +17,7 @@ def run(*args, timeout=300):
     return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
 
 
-@pytest.mark.parametrize("scene", SCENES)
+@pytest.mark.parametrize("scene", [SCENES[0], *(pytest.param(s, marks=pytest.mark.slow) for s in SCENES[1:])])
 def test_scene_simulates_and_its_data_pass_through_correct(tmp_path, scene):
     out = tmp_path / f"{scene}.csv"
     res = run("simulate", ROOT / "scenes" / f"{scene}.toml", "--trials", 30, "--seed", 5, "--out", out, "--json")

@@ -78,7 +78,9 @@ def test_rrbc_takes_out_the_registrations_error_at_a_fiducial():
     assert np.median(b.checks.budget_mm["registration"]) < 0.5 * np.median(b.checks_rigid.budget_mm["registration"])
 
 
-@pytest.mark.parametrize("method", ["idw", "tps", "auto", "none"])
+@pytest.mark.parametrize(
+    "method", ["idw", pytest.param("tps", marks=pytest.mark.slow), pytest.param("auto", marks=pytest.mark.slow), "none"]
+)
 def test_bounds_hold_on_held_out_checks_of_real_like_stations(method):
     """Stations of a lift-column robot (`simulation.station_data`: a smooth field per station, fiducials around the
     checks), sizes drawn per seed as real cells have them. Between 90 and 99 % of the bounded checks lie within their

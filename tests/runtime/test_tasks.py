@@ -198,6 +198,7 @@ def test_a_local_cluster_of_n_workers_and_a_bad_n():
     assert run_tasks(abs, [-1, 2, -3], scheduler="local:1") == [1, 2, 3]
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_run_is_survived(cluster):
     """Eight 0.4 s tasks on two workers; one worker is killed after the first results: the other finishes every
     task (the scheduler reruns the lost ones) and the results come back complete and in order."""
