@@ -105,6 +105,13 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument(
         "--seed", type=int, default=0, help="seed of the region samples and the random baseline (default 0)"
     )
+    pl.add_argument(
+        "--tolerance",
+        type=float,
+        default=None,
+        metavar="MM",
+        help="find the fewest candidates bringing every target's 95 %% bound under MM (docs/uncertainty.md)",
+    )
     pl.add_argument("--json", action="store_true", help="print one JSON object")
     pl.set_defaults(run=_cmd_plan)
 
@@ -258,6 +265,13 @@ def _cmd_plan(args) -> str:
     from rrbc_core.io.scene_toml import load_scene
 
     scene = load_scene(args.scene)
+    if args.tolerance is not None:
+        from rrbc_core.session.tolerance_plan import plan_to_tolerance, tolerance_text
+
+        if args.add:
+            raise InputError("--tolerance finds how many fiducials are needed: drop --add")
+        tres = plan_to_tolerance(scene, args.tolerance)
+        return json.dumps(tres.to_json(), allow_nan=False) + "\n" if args.json else tolerance_text(tres)
     bar = progress_bar(2 * args.add + 2, "planning")
     try:
         res = plan(scene, args.add, seed=args.seed, progress=lambda n, label: advance(bar, n, label))

@@ -345,7 +345,7 @@ def complete_instrument(
             source=why + " (the sensor's and the robot's noise together)",
             robot_source="included in the sensor's figure",
         )
-    if inst.robot_mm is not None:
+    if inst.robot_mm is not None or inst.covariances is not None:
         return inst
     if estimate is None:
         return replace(inst, robot_mm=0.0, robot_source="not estimable (no repeats, too few fiducials): taken as 0")
@@ -357,7 +357,7 @@ def complete_instrument(
 def own_cov(inst: Instrument, rotation: np.ndarray, p_sensor: np.ndarray, count) -> np.ndarray:
     """(M, 3, 3): the covariance of a point's own readings in the robot frame, mm² (module docstring)."""
     r = np.asarray(rotation, float)
-    c = np.einsum("ij,njk,lk->nil", r, inst.sensor_cov(p_sensor), r) + inst.robot_var() * np.eye(3)
+    c = np.einsum("ij,njk,lk->nil", r, inst.sensor_cov(p_sensor), r) + inst.robot_cov(p_sensor)
     return c / np.asarray(count, float).reshape(-1, 1, 1)
 
 

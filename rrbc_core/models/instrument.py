@@ -19,7 +19,8 @@ instead (`with_overrides`), and without an instrument the noise is estimated fro
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -70,10 +71,15 @@ class Instrument:
     robot_mm: float | None = None
     source: str = ""
     robot_source: str = ""
+    #: a model's own noise instead of the figures: p_sensor (N, 3) -> (sensor (N, 3, 3) sensor frame, robot
+    #: (N, 3, 3) robot frame) covariances, mm² (a scene's error model: `scene_instrument`)
+    covariances: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = field(default=None, compare=False)
 
     def sensor_cov(self, p_sensor) -> np.ndarray:
         """(N, 3, 3): the covariance of one sensor reading at points p_sensor (N, 3), sensor frame, mm²."""
         p = np.asarray(p_sensor, float).reshape(-1, 3)
+        if self.covariances is not None:
+            return self.covariances(p)[0]
         if not self.polar:
             return np.broadcast_to(self.sigma_mm**2 * np.eye(3), (len(p), 3, 3)).copy()
         r = np.linalg.norm(p, axis=1)
@@ -86,6 +92,14 @@ class Instrument:
     def robot_var(self) -> float:
         """The robot's per-axis variance, mm² (0 when not known)."""
         return float(self.robot_mm or 0.0) ** 2
+
+    def robot_cov(self, p_sensor) -> np.ndarray:
+        """(N, 3, 3): the covariance of the robot's reading of the points p_sensor (N, 3) (sensor frame), robot
+        frame, mm²."""
+        p = np.asarray(p_sensor, float).reshape(-1, 3)
+        if self.covariances is not None:
+            return self.covariances(p)[1]
+        return np.broadcast_to(self.robot_var() * np.eye(3), (len(p), 3, 3)).copy()
 
     def to_json(self) -> dict:
         """``instrument`` in the JSON of `rrbc correct` (docs/cli.md)."""
@@ -173,3 +187,22 @@ def instrument_from_flags(
     if r is not None:
         inst = replace(inst, robot_mm=r, robot_source="given (--robot-noise-mm)")
     return inst
+
+
+def scene_instrument(model, sensor_to_robot) -> Instrument:
+    """A scene's own noise as the bounds' instrument: its error model's random terms (`models.measurement.
+    MeasurementModel.noise_covariance`) at each point, placed in the robot frame by the scene's true sensor pose
+    `sensor_to_robot` (tool down, time 0)."""
+
+    def covariances(p_sensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p_robot = sensor_to_robot.apply(p_sensor)
+        pts = model.points(p_robot, np.eye(3), np.zeros(len(p_robot)))
+        return model.noise_covariance(pts)
+
+    return Instrument(
+        name="scene",
+        source="the scene's error model (its noise terms at each point)",
+        robot_mm=None,
+        robot_source="the scene's error model",
+        covariances=covariances,
+    )

@@ -247,6 +247,7 @@ def _target_bounds(
     tgt_r,
     coverage,
     check_ids,
+    instrument=None,
 ):
     """`correction.bounds.correction_bounds` on the session's points, the file's check rows bounded as checks and
     the rest as targets (as `rrbc correct` splits them), then put back in the targets' order. The registration's and
@@ -273,6 +274,8 @@ def _target_bounds(
         fid_counts.tobytes(),
         reg_counts.tobytes(),
         id(data),
+        s.noise_scale,
+        None if instrument is None else instrument.name,
     )
     basis = cached(
         "bounds",
@@ -287,7 +290,7 @@ def _target_bounds(
             e_sensor[included],
             method,
             s.interpolation != "none",
-            None,
+            instrument,
             np.asarray(reg.residuals, float).reshape(-1, 3),
             np.isin(np.asarray(fid_in, dtype=object), np.asarray(reg_ids, dtype=object)),
         ),
@@ -364,7 +367,13 @@ def _display_rotation(mapping) -> np.ndarray:
 
 
 def evaluate(
-    settings: Settings, layout: dict, readings: dict, cached=None, check_ids: frozenset = frozenset(), data=None
+    settings: Settings,
+    layout: dict,
+    readings: dict,
+    cached=None,
+    check_ids: frozenset = frozenset(),
+    data=None,
+    instrument=None,
 ) -> Evaluation:
     """The nine RRBC steps on a layout: register, correct the included fiducials, interpolate, correct the targets,
     score them against their truth where known. A pure function of its inputs.
@@ -384,6 +393,8 @@ def evaluate(
         The targets that are a file's check rows: the warnings call them checks, as `rrbc correct` does.
     data : MeasurementSet, optional
         The file's rows when the session is a measured file: the bounds read its repeats (`correction.bounds`).
+    instrument : Instrument, optional
+        The bounds' reading noise (a scene's own, `models.instrument.scene_instrument`; default: estimated).
     """
     cached = cached or (lambda name, key, compute: compute())
     s = settings
@@ -467,6 +478,7 @@ def evaluate(
             tgt_r,
             coverage,
             check_ids,
+            instrument,
         )
         warnings = warnings + bounds.source.warnings
     return Evaluation(

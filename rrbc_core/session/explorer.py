@@ -376,7 +376,12 @@ class ExplorerSession:
         """Measure what changed (scene mode) and run `evaluation.evaluate` on the layout as it is now."""
         readings = {kind: self._readings_for(kind) for kind in ("registration", "fiducials", "targets")}
         checks = frozenset(self.mset.points("check").ids) if self.mset is not None else frozenset()
-        self._last = evaluate(self.settings, self.layout, readings, self.cached, checks, self.mset)
+        instrument = None
+        if self.kind == "scene":  # the scene's own noise terms are the instrument
+            from rrbc_core.models.instrument import scene_instrument
+
+            instrument = scene_instrument(self.measurement_model(), self.sensor_to_robot)
+        self._last = evaluate(self.settings, self.layout, readings, self.cached, checks, self.mset, instrument)
         return self._last
 
     def cached(self, name: str, key, compute):
