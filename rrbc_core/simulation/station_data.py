@@ -96,3 +96,20 @@ def station_measurements(
         source=source,
         extra={"group": tuple(groups)} if group_column else {},
     )
+
+
+def drawn_stations(seed: int, sizes_seed: int | None = None) -> MeasurementSet:
+    """Two stations with half of each station's evaluation points as fiducials around the others, their sizes drawn
+    as real cells have them (30-80 evaluation points, bias 0.5, 2 or 5 mm, correlation length 150-600 mm, robot
+    noise 0.02, 0.1 or 0.3 mm) from `sizes_seed` (default `seed`): the bounds' coverage files
+    (`studies.bounds_study`, tests/correction/test_bounds.py)."""
+    rng = np.random.default_rng(seed if sizes_seed is None else sizes_seed)
+    return station_measurements(
+        seed,
+        stations=2,
+        n_eval=int(rng.integers(30, 80)),
+        bias_mm=float(rng.choice([0.5, 2.0, 5.0])),
+        length_mm=float(rng.uniform(150, 600)),
+        robot_noise_mm=float(rng.choice([0.02, 0.1, 0.3])),
+        eval_fiducials=0.5,
+    )

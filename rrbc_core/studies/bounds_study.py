@@ -86,26 +86,13 @@ def _collect(msets, method: str, stations: bool = False) -> dict:
 def simulated(seeds: int = SEEDS) -> list[dict]:
     """Rows for the seeded simulations."""
     from rrbc_core.simulation.field_data import field_measurements
-    from rrbc_core.simulation.station_data import station_measurements
+    from rrbc_core.simulation.station_data import drawn_stations
 
     rows = []
     for name, shape in FIELD_SHAPES.items():
         msets = [field_measurements(1000 + s, **shape) for s in range(seeds)]
         rows += [{"data": name, "method": m, **_collect(msets, m)} for m in METHODS]
-    stations = []
-    for s in range(seeds):
-        rng = np.random.default_rng(s)
-        stations.append(
-            station_measurements(
-                2000 + s,
-                stations=2,
-                n_eval=int(rng.integers(30, 80)),
-                bias_mm=float(rng.choice([0.5, 2.0, 5.0])),
-                length_mm=float(rng.uniform(150, 600)),
-                robot_noise_mm=float(rng.choice([0.02, 0.1, 0.3])),
-                eval_fiducials=0.5,
-            )
-        )
+    stations = [drawn_stations(2000 + s, s) for s in range(seeds)]
     rows += [{"data": "real-like stations", "method": m, **_collect(stations, m, True)} for m in METHODS]
     return rows
 

@@ -17,7 +17,7 @@ from rrbc_core.methods import MethodOptions
 from rrbc_core.models.instrument import instrument_from_flags, preset
 from rrbc_core.registration import register
 from rrbc_core.simulation.field_data import field_measurements
-from rrbc_core.simulation.station_data import station_measurements
+from rrbc_core.simulation.station_data import drawn_stations
 
 #: the two-moment (scaled χ²) radius's own error for three terms, at most (measured over random covariances with
 #: 200 000 draws each: 0.0024; docs/uncertainty.md)
@@ -88,16 +88,7 @@ def test_bounds_hold_on_held_out_checks_of_real_like_stations(method):
     percentile error (sharp); at most a tenth of the checks go unbounded."""
     pairs, sharp, withheld, total = [], [], 0, 0
     for seed in range(8):
-        rng = np.random.default_rng(seed)
-        m = station_measurements(
-            seed,
-            stations=2,
-            n_eval=int(rng.integers(30, 80)),
-            bias_mm=float(rng.choice([0.5, 2.0, 5.0])),
-            length_mm=float(rng.uniform(150, 600)),
-            robot_noise_mm=float(rng.choice([0.02, 0.1, 0.3])),
-            eval_fiducials=0.5,
-        )
+        m = drawn_stations(seed)
         res = correct_stations(m, MethodOptions.named("least-squares", method))
         e = np.concatenate([st.error_rrbc for st in res.stations])
         b = np.concatenate([st.bounds.checks.bound95_mm for st in res.stations])
