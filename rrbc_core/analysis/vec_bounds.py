@@ -22,13 +22,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rrbc_core.correction.bounds import (
-    LEVEL,
-    PointBounds,
-    bound95,
+    assemble_bounds,
     estimate_noise,
+    no_bounds,
     point_registration_cov,
     profile_from_squares,
     registration_theta_cov,
+    tested_from,
 )
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
@@ -87,13 +87,13 @@ def method_bounds(
     instrument = {"name": "estimated", "kind": "cartesian", "sigma_mm": float(np.sqrt(var)), "source": why}
     own = np.broadcast_to(var * np.eye(3), (m, 3, 3)).copy()
     warnings: list[str] = []
-    none = PointBounds(np.full(m, np.nan), np.full((m, 3, 3), np.nan), {})
+    none = no_bounds(m)
     if not folds or not len(rows_fid):
         warnings.append("no bound: no fiducials to cross-validate the methods over")
         return dict.fromkeys(METHODS, none), instrument, warnings
     dist = _held_distances(folds, rows_fid, s, g)
     finite = np.isfinite(dist)
-    tested = float(np.percentile(dist[finite], 90)) if finite.any() else 0.0
+    tested = tested_from(dist)
     gp = g[rows_pts]
     sp = s[rows_pts]
     # distance of each point from its station's nearest fiducial
@@ -133,12 +133,7 @@ def method_bounds(
             parts["registration"] = reg if name == "rigid" else reg_rrbc
         else:
             parts["arm"] = arm
-        cov = sum(parts.values())
-        assert isinstance(cov, np.ndarray)
-        bound = bound95(cov, LEVEL)
-        bound[beyond] = np.nan
-        budget = {k: np.sqrt(np.maximum(np.trace(v, axis1=1, axis2=2), 0.0)) for k, v in parts.items()}
-        out[name] = PointBounds(bound, cov, budget)
+        out[name] = assemble_bounds(parts, beyond)
     return out, instrument, warnings
 
 

@@ -53,6 +53,8 @@ MIN_FIDUCIALS = 6
 #: the bound's probability
 LEVEL = 0.95
 BUDGET_KEYS = ("instrument", "registration", "interpolation", "arm")
+#: a point is bounded up to this percentile of the folds' held-out distances (`tested_from`)
+TESTED_PERCENTILE = 90
 
 
 def bound95(cov: np.ndarray, level: float = LEVEL) -> np.ndarray:
@@ -214,7 +216,15 @@ def tested_distance(fid_sensor: np.ndarray, distances: np.ndarray | None = None)
     tested, no limit applied)."""
     if len(fid_sensor) < 3:
         return None
-    return float(np.percentile(fold_distances(fid_sensor) if distances is None else distances, 90))
+    return tested_from(fold_distances(fid_sensor) if distances is None else distances)
+
+
+def tested_from(distances: np.ndarray) -> float:
+    """The distance the folds tested (mm): the `TESTED_PERCENTILE`th percentile of the held-out points' distances
+    from the nearest fiducial left in (the finite ones; 0 without any)."""
+    d = np.asarray(distances, float)
+    d = d[np.isfinite(d)]
+    return float(np.percentile(d, TESTED_PERCENTILE)) if len(d) else 0.0
 
 
 def _rigid_error(c_robot, fid_registered, reg_residuals, n_reg: int, fid_noise: float):
@@ -236,12 +246,20 @@ def _rigid_error(c_robot, fid_registered, reg_residuals, n_reg: int, fid_noise: 
     v = max(float(np.mean(sq)) - fid_noise, 0.0)
     s = (c * scale[:, None]).T @ c
     shape = s / np.trace(s) if np.trace(s) > 0 else np.eye(3) / 3
-    tail = 1.0
     total = v + fid_noise
-    if len(c) >= MIN_FIDUCIALS and total > 0:
-        z = np.sqrt(sq / total)
-        tail = max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
+    tail = tail_factor(sq, np.full(len(sq), total), shape) if total > 0 else 1.0
     return v, shape, tail
+
+
+def tail_factor(sq: np.ndarray, model: np.ndarray, shape: np.ndarray) -> float:
+    """The tail the samples show, at least 1: the 95th percentile of |r| / sqrt(model), squared errors sq (H,)
+    against their modelled 3-D variances model (H,), over a normal error's with the covariance's `shape` (3, 3);
+    1 with fewer than `MIN_FIDUCIALS` usable samples."""
+    ok = model > 0
+    if np.count_nonzero(ok) < MIN_FIDUCIALS:
+        return 1.0
+    z = np.sqrt(sq[ok] / model[ok])
+    return max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
 
 
 def _fit_quadratic(d2: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -427,12 +445,7 @@ def profile_from_squares(sq, dist, inside, noise_mm2: float, r=None, folds: int 
     s = r.T @ r if r is not None else np.eye(3)
     shape = s / np.trace(s) if np.trace(s) > 0 else np.eye(3) / 3
     # the tail the fiducials show: their 95th percentile of |r| / sqrt(A + B d²) against a normal error's
-    model = a + np.where(inside, b_in, b_out) * dist**2
-    ok = model > 0
-    tail = 1.0
-    if np.count_nonzero(ok) >= MIN_FIDUCIALS:
-        z = np.sqrt(sq[ok] / model[ok])
-        tail = max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
+    tail = tail_factor(sq, a + np.where(inside, b_in, b_out) * dist**2, shape)
     t2 = tail**2
     return CVProfile(
         a * t2,
@@ -455,7 +468,7 @@ def _onto_plane(fid_sensor: np.ndarray, p: np.ndarray) -> np.ndarray:
     return p - np.outer((p - c) @ normal, normal)
 
 
-def _assemble(parts: dict[str, np.ndarray], withheld: np.ndarray) -> PointBounds:
+def assemble_bounds(parts: dict[str, np.ndarray], withheld: np.ndarray) -> PointBounds:
     """The bounds of the parts' sum; NaN where `withheld` (M,)."""
     cov = sum(parts.values())
     assert isinstance(cov, np.ndarray)
@@ -465,7 +478,8 @@ def _assemble(parts: dict[str, np.ndarray], withheld: np.ndarray) -> PointBounds
     return PointBounds(b, cov, budget)
 
 
-def _no_bounds(m: int) -> PointBounds:
+def no_bounds(m: int) -> PointBounds:
+    """M points without a bound (NaN)."""
     return PointBounds(np.full(m, np.nan), np.full((m, 3, 3), np.nan), {})
 
 
@@ -655,7 +669,7 @@ def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndar
         v_off = slope * h**2  # off coplanar (collinear) fiducials: the field's change over the height
         own = own_cov(inst, rot, p, count)
         rigid_int = (tail_rigid**2 * (v_rigid + v_off))[:, None, None] * shape_rigid
-        rigid = _assemble(
+        rigid = assemble_bounds(
             {
                 "instrument": own,
                 "registration": point_registration_cov(rot, p, np.ones(len(p)), theta),
@@ -668,7 +682,7 @@ def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndar
             out[name] = rigid
             continue
         if profile is None or tree is None:
-            out[name] = _no_bounds(len(p))
+            out[name] = no_bounds(len(p))
             continue
         if fw is not None:
             lever = p - fw[0].predict(p).values
@@ -678,7 +692,7 @@ def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndar
         reg = point_registration_cov(rot, lever, weight, theta)
         inside = covered(fid_sensor, _onto_plane(fid_sensor, p) if np.any(h > 0) else p)
         interp = (profile.variance(d, inside) + profile.tail**2 * v_off)[:, None, None] * profile.shape
-        out[name] = _assemble({"instrument": own, "registration": reg, "interpolation": interp}, beyond)
+        out[name] = assemble_bounds({"instrument": own, "registration": reg, "interpolation": interp}, beyond)
     return Bounds(
         inst,
         profile,

@@ -219,14 +219,23 @@ class TargetBounds:
     source: Bounds
 
 
-def _counts(data, role: str, ids) -> np.ndarray:
-    """(M,): how many of `data`'s rows of `role` (`MeasurementSet.rows`) each id has (1 without data or rows)."""
-    if data is None:
-        return np.ones(len(ids))
-    rows = data.rows(role)
-    n: dict[str, int] = {}
-    for i in rows:
-        n[data.ids[i]] = n.get(data.ids[i], 0) + 1
+ROLES_COUNTED = ("registration", "fiducial", "target", "check")
+
+
+def row_counts(data) -> dict[str, dict[str, int]]:
+    """{role: {id: rows}}: how many of `data`'s rows of each role (`MeasurementSet.rows`) each id has."""
+    out: dict[str, dict[str, int]] = {}
+    for role in ROLES_COUNTED:
+        n: dict[str, int] = {}
+        for i in data.rows(role).tolist():
+            n[data.ids[i]] = n.get(data.ids[i], 0) + 1
+        out[role] = n
+    return out
+
+
+def _counts(counts: dict | None, role: str, ids) -> np.ndarray:
+    """(M,): each id's rows of `role` (`row_counts`; 1 without data or rows)."""
+    n = counts.get(role, {}) if counts is not None else {}
     return np.array([max(n.get(pid, 1), 1) for pid in ids], float)
 
 
@@ -255,15 +264,16 @@ def _target_bounds(
     fid_in = [pid for pid, k in zip(fid_ids, included) if k]
     is_check = np.array([pid in check_ids for pid in tg.ids], bool)
     off = coverage.off_plane_mm if coverage is not None else np.zeros(len(tg.ids))
-    tgt_counts = _counts(data, "target", tg.ids)
-    if data is not None:
-        tgt_counts[is_check] = _counts(data, "check", [pid for pid, c in zip(tg.ids, is_check) if c])
+    counts = cached("row_counts", id(data), lambda: row_counts(data)) if data is not None else None
+    tgt_counts = _counts(counts, "target", tg.ids)
+    if counts is not None:
+        tgt_counts[is_check] = _counts(counts, "check", [pid for pid, c in zip(tg.ids, is_check) if c])
     points = {
         kind: (tgt_r.sensor[sel], tgt_counts[sel], np.asarray(off, float)[sel])
         for kind, sel in (("targets", ~is_check), ("checks", is_check))
     }
-    fid_counts = _counts(data, "fiducial", fid_in)
-    reg_counts = _counts(data, "registration", reg_ids)
+    fid_counts = _counts(counts, "fiducial", fid_in)
+    reg_counts = _counts(counts, "registration", reg_ids)
     key = (
         repr(method),
         s.interpolation,
