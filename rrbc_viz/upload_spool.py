@@ -178,9 +178,7 @@ class _Spool:
         with self.lock:
             t = self.active.pop(uuid, None)
             self.refused[uuid] = client_id
-        if t is not None:
-            os.close(t.fd)
-            shutil.rmtree(t.folder, ignore_errors=True)
+            _discard([t] if t is not None else [])
         self._ack(button_uuid, uuid, max(size, 0), max(size, 0))  # the browser's progress ends; the note says why
         self._tell(client_id, self.buttons[button_uuid].on_refused, why)
 
@@ -191,24 +189,25 @@ class _Spool:
 
     def drop_client(self, client_id) -> None:
         """A tab closed: its transfers in flight go, and what they stored."""
-        with self.lock:
+        with self.lock:  # removed under the lock: an app stopping meanwhile (`close`) returns after this is gone
             gone = [u for u, t in self.active.items() if t.client_id == client_id]
-            done = [self.active.pop(u) for u in gone]
+            _discard([self.active.pop(u) for u in gone])
             for u in [u for u, c in self.refused.items() if c == client_id]:
                 self.refused.pop(u)
-        for t in done:
-            os.close(t.fd)
-            shutil.rmtree(t.folder, ignore_errors=True)
 
     def close(self) -> None:
         """The app stops: every transfer in flight goes."""
         with self.lock:
-            done = list(self.active.values())
+            _discard(list(self.active.values()))
             self.active.clear()
             self.refused.clear()
-        for t in done:
-            os.close(t.fd)
-            shutil.rmtree(t.folder, ignore_errors=True)
+
+
+def _discard(transfers) -> None:
+    """Close and remove the stored part of each transfer (small: a folder with one partial file)."""
+    for t in transfers:
+        os.close(t.fd)
+        shutil.rmtree(t.folder, ignore_errors=True)
 
 
 _spools: dict[int, _Spool] = {}
