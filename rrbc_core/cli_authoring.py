@@ -283,9 +283,10 @@ def _cmd_calibrate(args) -> str:
     if result["saved_model"] is not None:
         lines.append("kinematic error: the saved arm's (only the sensor-to-robot transform was fitted to this file)")
     else:
+        lines += arm_verdict_lines(result)
         lines.append(
-            f"kinematic error: {'yes' if k['claimed'] else 'not claimed'} (χ² {k['chi2']:.1f} on {k['dof']} degrees "
-            f"of freedom, p = {k['p_value']:.2g}; rule: {k['rule']})"
+            f"identified arm errors against their uncertainty: χ² {k['chi2']:.1f} on {k['dof']} degrees of freedom "
+            f"(p = {k['p_value']:.2g})"
         )
     ident = [p for p in result["parameters"] if p["identifiable"] and "kind" not in p]
     lines.append(
@@ -315,6 +316,34 @@ def calibrate_bound_lines(result: dict) -> list[str]:
         lines.append(f"  {row['id']:<12}" + "".join(f" {'-' if b[m] is None else f'{b[m]:.4f}':>9}" for m in METHODS))
     lines.append(f"  noise: {inst['sigma_mm']:.4g} mm per axis, {inst['source']}")
     lines += [f"warning: {w}" for w in result["bounds"]["warnings"]]
+    return lines
+
+
+def arm_verdict_lines(result: dict) -> list[str]:
+    """`rrbc calibrate`'s text lines on whether the file holds a kinematic error or compliance: rrbc diagnose's
+    decision on the same file and model (`analysis.arm_verdict`), with the tests' p-values and sizes."""
+    v = result["kinematic_error"]["verdict"]
+    t = v["tests"]
+
+    def p_of(name: str) -> str:
+        if name in t:
+            return f"p = {t[name]:.2g}"
+        per = [p for k, p in t.items() if k.endswith(f": {name}")]  # per station
+        return f"smallest p = {min(per):.2g} over {len(per)} stations" if per else "not run"
+
+    kin = f"test {p_of('kinematic')}" + (f", beside a smooth field {p_of('kinematic_beside_field')}")
+    if v["kinematic"]:
+        kin += f"; {v['kinematic_rms_mm']:.3g} mm RMS over the points"
+    lines = [f"kinematic error: {'yes' if v['kinematic'] else 'not named'} ({kin}; alpha {v['alpha']:g})"]
+    if any(k == "compliance" or k.endswith(": compliance") for k in t) or v["compliance"]:
+        comp = f"test {p_of('compliance')}"
+        if v["compliance"]:
+            comp += f"; {v['compliance_rms_mm']:.3g} mm RMS over the points"
+            if not result["compliance"]["requested"]:
+                comp += "; add --compliance to model it"
+        lines.append(f"compliance: {'yes' if v['compliance'] else 'not named'} ({comp})")
+    lines.append(f"  rule: {result['kinematic_error']['rule']}")
+    lines += [f"  limit: {lim}" for lim in v["limits"]]
     return lines
 
 

@@ -48,7 +48,7 @@ class Display:
     marker_mm: float = 8.0  # radius of fiducial / target spheres
     region_zoom: float = 1.0  # regions and heat-map samples drawn this many times larger about their target
     heat_value: str = "rrbc"  # rrbc | rigid (scene); correction | std (measurements)
-    slice_value: str = "rrbc"  # the error slice's value: rrbc | rigid | correction | std
+    slice_value: str = "rrbc"  # the error slice's value: rrbc | rigid | bound95 | correction | std
     slice_axis: str = "z"  # the slice plane's normal: x | y | z (robot frame)
     slice_offset: float | None = None  # mm along slice_axis; None: the work's median
 

@@ -33,6 +33,7 @@ import viser
 
 from rrbc_core.analysis.planning_coverage import DEFAULT_REGION_MM
 from rrbc_core.session.results import PlanningState
+from rrbc_core.session.tolerance_plan import MIN_TOLERANCE_MM, tolerance_text
 
 from . import colors
 
@@ -45,6 +46,11 @@ GHOST_MARKERS = 1.4  # ghost sphere radius, in marker radii (a fiducial is 1)
 PROMPT_SUGGEST = (
     "Press **Suggest** for K more fiducials from the scene's candidate locations (those the sensor "
     "cannot see or that lie inside solid geometry are never suggested)."
+)
+
+PROMPT_TOLERANCE = (
+    "Give the largest 95 % bound you can accept on a target's error and press **Fewest fiducials for it**: the "
+    "fewest of the scene's candidate locations that bring every target under it, or what limits them."
 )
 
 
@@ -211,6 +217,27 @@ class PlanningPanel:
             hint="Undo the last change to the cell (accepted suggestions, added or deleted points): the same history as "
             "the File tab's Undo",
         )
+        with gui.add_folder("To a tolerance"):
+            self.tolerance = gui.add_number(
+                "Tolerance (mm)",
+                0.5,
+                min=MIN_TOLERANCE_MM,
+                step=0.01,
+                hint="The largest 95 % bound on a target's error you can accept (rrbc plan --tolerance)",
+            )
+            self.tolerance_button = gui.add_button(
+                "Fewest fiducials for it",
+                icon=viser.Icon.TARGET,
+                hint="Choose the fewest of the scene's candidate locations that bring every target's 95 % bound under "
+                "the tolerance, or say what limits it",
+            )
+            self.tolerance_md = gui.add_markdown(PROMPT_TOLERANCE)
+            self.use_plan_button = gui.add_button(
+                "Use these fiducials",
+                icon=viser.Icon.CHECK,
+                disabled=True,
+                hint="Replace the cell's fiducials by the planned ones (Undo brings them back)",
+            )
         with gui.add_folder("Coverage"):
             self.colour = gui.add_checkbox(
                 "Colour regions by coverage",
@@ -243,6 +270,14 @@ class PlanningPanel:
         def _clear(event: viser.GuiEvent) -> None:
             app.plan.clear_suggestions()
 
+        @self.tolerance_button.on_click
+        def _tolerance(event: viser.GuiEvent) -> None:
+            app.plan.plan_tolerance(self.tolerance.value, client=event.client)
+
+        @self.use_plan_button.on_click
+        def _use(event: viser.GuiEvent) -> None:
+            app.plan.use_tolerance_plan(client=event.client)
+
         @self.undo_button.on_click
         def _undo(event: viser.GuiEvent) -> None:
             app.authoring.undo(client=event.client)
@@ -274,6 +309,10 @@ class PlanningPanel:
         for h in (self.colour, self.accept_button, self.clear_button):
             h.disabled = not scene_mode
             h.visible = scene_mode  # measured data: suggestions are places to measure, not fiducials to add
+        for h in (self.tolerance, self.tolerance_button, self.tolerance_md, self.use_plan_button):
+            h.visible = scene_mode  # a plan to a tolerance needs the scene's error model
+        self.tolerance_button.disabled, self.use_plan_button.disabled = False, True
+        self.tolerance_md.content = PROMPT_TOLERANCE
         self.k.disabled = self.suggest_button.disabled = False
         self.k.visible = self.suggest_button.visible = True
         self.accept_button.disabled = self.clear_button.disabled = True
@@ -349,6 +388,23 @@ class PlanningPanel:
                 )
             )
 
+    def set_tolerance_busy(self, busy: bool, tolerance_mm: float = 0.0) -> None:
+        """A plan to a tolerance is being computed (its button off and a note) or not."""
+        self.tolerance_button.disabled = busy
+        if busy:
+            self.tolerance_md.content = f"Planning: the fewest fiducials for {tolerance_mm:g} mm…"
+
+    def show_tolerance_plan(self, plan, marker_mm: float) -> None:
+        """A plan to a tolerance: its fiducials as ghost spheres, its text (`rrbc plan --tolerance`'s), and Use."""
+        self._add_ghosts(plan.fiducial_ids, plan.fiducial_positions, marker_mm)
+        self.tolerance_md.content = tolerance_markdown(plan)
+        self.use_plan_button.disabled = not len(self.ghosts)
+        self.clear_button.disabled = not len(self.ghosts)
+
+    def show_tolerance_refusal(self, message: str) -> None:
+        """Why the last plan to a tolerance was refused."""
+        self.tolerance_md.content = f"⚠ Cannot plan: {' '.join(str(message).split())}"
+
     def show_refusal(self, message: str) -> None:
         """Why the last Suggest was refused."""
         self.suggestion_md.content = f"⚠ Cannot suggest: {' '.join(str(message).split())}"
@@ -387,9 +443,15 @@ class PlanningPanel:
             except Exception:  # noqa: BLE001 - already gone
                 pass
         self.ghosts, self.ghost_labels = [], []
-        self.accept_button.disabled = self.clear_button.disabled = True
+        self.accept_button.disabled = self.clear_button.disabled = self.use_plan_button.disabled = True
         if prompt:
             self.suggestion_md.content = PROMPT_SUGGEST
+            self.tolerance_md.content = PROMPT_TOLERANCE
+
+
+def tolerance_markdown(plan) -> str:
+    """The tab's text for a plan to a tolerance: `rrbc plan --tolerance`'s own text (one answer), in a code block."""
+    return "```\n" + tolerance_text(plan).rstrip() + "\n```"
 
 
 def measured_info(n_in: int, n_targets: int, full: int, n_regions: int) -> str:

@@ -76,6 +76,10 @@ def serve(
     try:
         guard = AccessGuard(server, new_token() if token is True else (token or None))
         server.scene.set_up_direction("+z")
+        # no shadow maps: the cell's own meshes never cast or receive them, and on a machine drawing with software
+        # WebGL (a classroom laptop without a GPU, Chromium's SwiftShader) each frame otherwise draws the arm again
+        # into every shadow cascade
+        server.scene.configure_default_lights(True, cast_shadow=False)
         server.on_client_disconnect(lambda client: upload_spool.drop_client(client.client_id))  # half-sent uploads
         app: RunningApp | PerClientApp
         if per_client:

@@ -18,6 +18,7 @@ from . import colors
 SLICE_CHOICES = (
     ("RRBC error", "rrbc"),
     ("rigid error", "rigid"),
+    ("95 % bound", "bound95"),
     ("|ê| (correction)", "correction"),
     ("gp std", "std"),
 )

@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from rrbc_core.session.data_set import SessionData
     from rrbc_core.session.results import HeatMap, MonteCarloPlots, PlanningState
     from rrbc_core.session.slices import ErrorSlice
+    from rrbc_core.session.tolerance_plan import TolerancePlan
     from rrbc_core.session.vec_view import VecView
 
 #: Layers shown when a source is loaded: all but labels, the heat map and the error slice.
@@ -82,6 +83,9 @@ class AppState:
         A drag changed the fiducials since `plan` was computed.
     coverage_colours : bool
         Targets' regions (and halos) coloured by their coverage (the Plan tab's box).
+    tolerance_plan : TolerancePlan or None
+        The Plan tab's last plan to a tolerance (`rrbc plan --tolerance`'s result for the cell as it was), shown as
+        ghosts until used, cleared or another source is loaded.
     vec_on, vec_target, vec_view
         VEC compared (the box ticked and the source has an arm); the target whose tool the Arm tab shows; the VecView
         last shown (None: off, no arm, or refused).
@@ -125,6 +129,7 @@ class AppState:
     plan: PlanningState | None = None
     plan_stale: bool = False
     coverage_colours: bool = False
+    tolerance_plan: TolerancePlan | None = None
     vec_on: bool = False
     vec_target: str = ""
     vec_view: VecView | None = None

@@ -63,13 +63,21 @@ def cases_section(cases: list[dict]) -> list[str]:
     lines = [
         f"## The {len(cases)} seeded mixed cases of the tests (`studies.vec_study.mixed_cases`)",
         "",
-        "| seed | cell | best on checks | recommended | kinematic claimed | p (χ²) | VEC / RRBC (cross-validated) |",
-        "| ---: | --- | --- | --- | --- | ---: | ---: |",
+        "Kinematic claimed is rrbc diagnose's decision (analysis.arm_verdict): its F-test p, and the same beside a "
+        "smooth field (run only when the first is significant); the identified errors' χ² p is information only.",
+        "",
+        "| seed | cell | best on checks | recommended | kinematic claimed | p (test) | p (beside a field) | p (χ²) "
+        "| VEC / RRBC (cross-validated) |",
+        "| ---: | --- | --- | --- | --- | ---: | ---: | ---: | ---: |",
     ]
+
+    def p(x) -> str:
+        return "-" if x is None else f"{x:.2g}"
+
     for c in cases:
         lines.append(
             f"| {c['seed']} | {c['kind']} | {c['best']} | {c['recommended']} | {'yes' if c['claimed'] else 'no'} | "
-            f"{c['p_value']:.2g} | {c['cv_ratio']:.2f} |"
+            f"{p(c['test_p'])} | {p(c['field_p'])} | {c['p_value']:.2g} | {c['cv_ratio']:.2f} |"
         )
     lines += [
         "",

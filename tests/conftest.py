@@ -45,8 +45,19 @@ _TESTS = Path(__file__).resolve().parent
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    for item in items:
+    """Group the modules above, and order the run longest work first: the browser tests (one group on one worker,
+    tests/browser/conftest.py, minutes long) start at once, then the grouped modules, then the rest in file order
+    (scripts/test.sh passes --no-loadscope-reorder, so xdist hands out work units in this order; sorted by their
+    test counts instead, the browser group started last and the run took 14 minutes instead of 11)."""
+
+    def rank(item: pytest.Item) -> int:
         path = Path(str(item.fspath)).resolve()
-        rel = path.relative_to(_TESTS).as_posix() if _TESTS in path.parents else None
+        rel = path.relative_to(_TESTS).as_posix() if _TESTS in path.parents else ""
+        if rel.startswith("browser/"):
+            return 0
         if rel in SHARED_FIXTURE_MODULES:
             item.add_marker(pytest.mark.xdist_group(rel))
+            return 1
+        return 2
+
+    items.sort(key=rank)  # stable: file order within each rank

@@ -23,6 +23,8 @@ At most `MAX_POINTS` points enter the model (a seeded subsample beyond): the wor
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,18 +67,45 @@ def _nll(z2: np.ndarray, d: np.ndarray, lam: np.ndarray) -> tuple[float, float]:
     return 3 * m * np.log(s2) + float(np.sum(np.log(den))), s2
 
 
-def fit_field(points: np.ndarray, residuals: np.ndarray) -> FieldModel:
-    """Maximum-likelihood field at points (N, 3) mm for residuals (N, 3) mm (module docstring)."""
-    idx = _subsample(len(points))
-    p, r = np.asarray(points, float)[idx], np.asarray(residuals, float)[idx]
+_EIGS_LOCK = threading.Lock()
+_EIGS: OrderedDict[bytes, tuple] = OrderedDict()  # the points' bytes -> their kernels' eigendecompositions
+_EIGS_KEPT = 2  # point sets kept (at most 18 x 2 MB each at MAX_POINTS)
+
+
+def _kernel_eigs(p: np.ndarray) -> tuple:
+    """The 18 length scales ℓ for points p (M, 3) mm and K's eigendecomposition (D clipped at 0, U) at each.
+    A diagnosis fits the field several times on the same points with other residuals (the accepted terms change,
+    the arm is judged beside it): the decompositions, which depend on the points alone, are made once (the last
+    `_EIGS_KEPT` point sets are kept); the results are the same as computing them again."""
+    key = p.tobytes()
+    with _EIGS_LOCK:
+        if key in _EIGS:
+            _EIGS.move_to_end(key)
+            return _EIGS[key]
     eye = np.eye(len(p), dtype=bool)
     d2 = np.sum((p[:, None] - p[None]) ** 2, axis=-1)
     nn = float(np.sqrt(np.median(np.min(np.where(eye, np.inf, d2), axis=1))))
     ext = float(np.sqrt(d2.max())) or 1.0
-    best = None
+    out = []
     for ell in np.geomspace(max(nn, 1e-6) * 0.5, max(ext, nn) * 3.0, 18):
         d, u = np.linalg.eigh(np.exp(-d2 / (2 * ell**2)))
         d = np.clip(d, 0.0, None)
+        d.flags.writeable = u.flags.writeable = False  # shared by every model fitted on these points
+        out.append((float(ell), d, u))
+    eigs = tuple(out)
+    with _EIGS_LOCK:
+        _EIGS[key] = eigs
+        while len(_EIGS) > _EIGS_KEPT:
+            _EIGS.popitem(last=False)
+    return eigs
+
+
+def fit_field(points: np.ndarray, residuals: np.ndarray) -> FieldModel:
+    """Maximum-likelihood field at points (N, 3) mm for residuals (N, 3) mm (module docstring)."""
+    idx = _subsample(len(points))
+    p, r = np.ascontiguousarray(np.asarray(points, float)[idx]), np.asarray(residuals, float)[idx]
+    best = None
+    for ell, d, u in _kernel_eigs(p):
         z = u.T @ r
         z2 = z**2
         lam = np.ones(3)

@@ -16,7 +16,9 @@ mm):
 Check rows carry the robot's reading of the point (its truth); RMS errors over them give `rmst_mm`. `cv_rmst_mm` does
 the same over the fiducials by cross-validation (at most `CV_FOLDS` folds; fiducial i in fold i mod folds: the other
 fiducials and the registration rows fit), and `recommended` is the simplest method whose cross-validated error is
-within one standard error of the smallest (`one_standard_error_choice`) — chosen without the check rows. A fiducial row that is also a registration row (role `both`) is held out only when at
+within one standard error of the smallest (`one_standard_error_choice`) — chosen without the check rows. Whether
+the file holds a kinematic error or compliance at all (`kinematic_error.claimed`, `compliance.claimed`) is
+`rrbc diagnose`'s decision on the same file and model (`analysis.arm_verdict`). A fiducial row that is also a registration row (role `both`) is held out only when at
 least `MIN_REGISTRATION` registration rows remain (else it stays in every fit and is not scored): a file whose
 registration rows are `both` and listed first works.
 """
@@ -27,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rrbc_core.analysis.arm_verdict import RULE as ARM_RULE
+from rrbc_core.analysis.arm_verdict import arm_verdict
 from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
@@ -41,8 +45,6 @@ from rrbc_core.runtime.threads import thread_limited
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
 CV_FOLDS = 10
 MIN_REGISTRATION = 3
-KINEMATIC_ALPHA = 1e-3
-KINEMATIC_MARGIN = 0.8
 TERM_SE = 2.0  # load terms: the gain must exceed this many standard errors ...
 TERM_GAIN = 0.05  # ... and this fraction of the RMS
 
@@ -386,14 +388,9 @@ def compare(
             )
     recommended = one_standard_error_choice(sq, among) if folds else "rigid"
     cal = fit.cal
-    # a kinematic error is claimed only when the arm's identified errors are significant against their stated
-    # uncertainty AND the arm model beats a model-free correction out of sample: a smooth sensor field leaks into
-    # the DH fit (its χ² alone would call it kinematic), but then RRBC does as well as VEC without an arm model
-    claimed = bool(
-        folds
-        and cal.kinematic_p_value < KINEMATIC_ALPHA
-        and min(cv_values["vec"], cv_values["vec_rrbc"]) < KINEMATIC_MARGIN * cv_values["rrbc"]
-    )
+    # whether the file holds an arm error is rrbc diagnose's decision on the same file and model (arm_verdict):
+    # one rule for both commands; which method corrects best stays the cross-validated recommendation's question
+    verdict = None if fixed is not None else arm_verdict(mset, robot, tool, urdf, tip, base)
     rows_pts = np.concatenate([rows_tgt, rows_chk]).astype(int)
     pbounds, instrument, bound_warnings = method_bounds(
         mset, fit, folds, sq, rows_reg, rows_fid, rows_pts, s, b, q, gi, _idw_by_group
@@ -461,6 +458,7 @@ def compare(
             for tm, c, se, ok in zip(cal.terms, cal.coef, cal.coef_se, cal.coef_identifiable)
         ],
         "compliance": {
+            "claimed": bool(verdict is not None and verdict.compliance),
             "requested": bool(compliance),
             "gravity_m_s2": list(cal.gravity),
             "candidates": [tm.name for tm in candidates],
@@ -486,12 +484,12 @@ def compare(
         "groups": list(names),
         "residual_sigma_mm": cal.sigma_mm,
         "kinematic_error": {
-            "claimed": claimed,
+            "claimed": bool(verdict is not None and verdict.kinematic),
             "chi2": cal.chi2,
             "dof": cal.chi2_dof,
             "p_value": cal.kinematic_p_value,
-            "rule": f"p < {KINEMATIC_ALPHA:g} (χ² of the identified arm errors, independent noise assumed) and "
-            f"VEC's cross-validated RMST below {KINEMATIC_MARGIN:g} × RRBC's",
+            "rule": ARM_RULE,
+            "verdict": None if verdict is None else verdict.to_json(),
         },
         "targets": targets,
         "check_points": check_points,

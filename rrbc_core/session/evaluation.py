@@ -12,7 +12,7 @@ import numpy as np
 
 from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
-from rrbc_core.correction.bounds import Bounds, PointBounds, bound_points, bounds_basis
+from rrbc_core.correction.bounds import Bounds, BoundsBasis, PointBounds, bound_points, bounds_basis
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
@@ -217,6 +217,9 @@ class TargetBounds:
     rrbc: PointBounds
     rigid: PointBounds
     source: Bounds
+    #: the registration's and fiducials' part (`correction.bounds.bound_points` bounds any other points with it:
+    #: the error slice's grid)
+    basis: BoundsBasis | None = None
 
 
 ROLES_COUNTED = ("registration", "fiducial", "target", "check")
@@ -319,7 +322,7 @@ def _target_bounds(
                 budget.setdefault(k, np.full(m, np.nan))[sel] = v
         return PointBounds(bound, cov, budget)
 
-    return TargetBounds(merged(b.targets, b.checks), merged(b.targets_rigid, b.checks_rigid), b)
+    return TargetBounds(merged(b.targets, b.checks), merged(b.targets_rigid, b.checks_rigid), b, basis)
 
 
 def hull_edges(points) -> np.ndarray:

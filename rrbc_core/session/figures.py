@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rrbc_core import interpolation
+from rrbc_core.correction.bounds import bound_points
 from rrbc_core.correction.rrbc import correct_points
 from rrbc_core.errors import Cancelled, InputError
 from rrbc_core.models.measurement import point_seed
@@ -81,7 +82,9 @@ def error_slice(session: ExplorerSession, plane: SlicePlane) -> ErrorSlice:
     """Predicted error over a plane through the work volume (`slices`): every grid point measured noise-free
     (scene mode: expected sensor reading with the scene's bias; cached per plane and bias size, so a drag only
     re-corrects) and corrected with the current fiducials. Unreachable grid points and unknown values are NaN.
-    Values (n, n) mm: rigid and RRBC error against the truth, |ê|, and gp's std of ê."""
+    Values (n, n) mm: rigid and RRBC error against the truth, the 95 % bound a target there would get (RRBC's, or
+    rigid's without interpolation; `correction.bounds`, as `rrbc correct` and the targets' bounds), |ê|, and gp's std
+    of ê."""
     from rrbc_core.models.kinematics import tool_down
 
     ev = session.last
@@ -115,6 +118,13 @@ def error_slice(session: ExplorerSession, plane: SlicePlane) -> ErrorSlice:
         if hm.std_mm is not None:
             values["std"][ok] = hm.std_mm
         inside[ok] = ~np.asarray(hm.extrapolated, bool)
+        if ev.bounds is not None and ev.bounds.basis is not None:  # what `rrbc correct` would bound a target there
+            b = bound_points(
+                ev.bounds.basis,
+                {"targets": (sensor[ok], np.ones(int(ok.sum())), np.asarray(hm.off_plane_mm, float))},
+            ).targets
+            if b is not None:
+                values["bound95"][ok] = b.bound95_mm
     n = plane.n
     return ErrorSlice(
         plane, grid.reshape(n, n, 3), {k: v.reshape(n, n) for k, v in values.items()}, inside.reshape(n, n)
@@ -128,7 +138,9 @@ def _heat_values(session: ExplorerSession, ev: Evaluation, pos, owner, sensor, t
     e_rigid = np.linalg.norm(cp.robot_rigid - truth, axis=1)
     e_rrbc = np.linalg.norm(cp.robot_rrbc - truth, axis=1)
     std = None if cp.correction_std is None else np.linalg.norm(cp.correction_std, axis=1)
-    return HeatMap(pos, owner, e_rigid, e_rrbc, np.linalg.norm(cp.correction, axis=1), std, cp.extrapolated)
+    return HeatMap(
+        pos, owner, e_rigid, e_rrbc, np.linalg.norm(cp.correction, axis=1), std, cp.extrapolated, cp.off_plane_mm
+    )
 
 
 def _fitted(session: ExplorerSession, ev: Evaluation):

@@ -280,3 +280,31 @@ def _coverage_candidates(session: ExplorerSession, targets, ev, seed: int):
             return pts, f"{len(pts)} places on the cell mesh's upward surfaces seen from the sensor"
     g = pc.grid_candidates(targets)
     return g, f"{len(g)} grid points around the targets (no mesh: free space, check that markers fit there)"
+
+
+def use_fiducials(session: ExplorerSession, ids, positions) -> Evaluation:
+    """Replace the cell's fiducials by `ids` at `positions` (K, 3) robot frame, mm (a plan to a tolerance,
+    `tolerance_plan.plan_to_tolerance`), all included, measured from the error model. One step of the edit history
+    (`undo` brings the former fiducials back). InputError (session unchanged) for an empty or mismatched set, or an
+    id already a registration point's or a target's."""
+    require_planning(session)
+    ids = tuple(str(i) for i in ids)
+    pos = np.asarray(positions, float).reshape(-1, 3)
+    if not ids or len(ids) != len(pos) or len(set(ids)) != len(ids):
+        raise InputError("a plan's fiducials need one distinct id per position")
+    taken = (set(session.layout["registration"].ids) | set(session.layout["targets"].ids)) & set(ids)
+    if taken:
+        raise InputError(f"{', '.join(sorted(taken))}: already a registration point's or a target's id")
+    old_settings = session.settings
+
+    def change():
+        session.layout = {**session.layout, "fiducials": Group(ids, pos)}
+        session.settings = session.settings.replace(excluded=session.settings.excluded - set(ids))
+
+    try:
+        ev = edits.edit(session, change)
+    except InputError:
+        session.settings = old_settings
+        raise
+    clear_suggestion(session)
+    return ev

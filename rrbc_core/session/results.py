@@ -16,7 +16,8 @@ if TYPE_CHECKING:
 @dataclass(frozen=True, eq=False)
 class HeatMap:
     """Samples (S,3) robot frame with their target, predicted errors rigid/RRBC (S,) mm (NaN without truth),
-    the correction size (S,) mm, its gp std (S,) or None, and extrapolation flags."""
+    the correction size (S,) mm, its gp std (S,) or None, extrapolation flags and the distance off the fiducials'
+    plane."""
 
     positions: np.ndarray
     target: tuple
@@ -25,6 +26,7 @@ class HeatMap:
     correction_mm: np.ndarray
     std_mm: np.ndarray | None
     extrapolated: np.ndarray
+    off_plane_mm: np.ndarray | None = None  # (S,) from the fiducials' plane or line (0 for a 3-D set)
 
 
 @dataclass(frozen=True, eq=False)

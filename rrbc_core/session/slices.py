@@ -21,7 +21,7 @@ AXES = ("x", "y", "z")
 #: The in-plane axes of a plane normal to each axis, in image order (columns, rows).
 IN_PLANE = {"x": (1, 2), "y": (0, 2), "z": (0, 1)}
 MAX_GRID = 160  # points per side: 25 600 points, a few tenths of a second on the bundled scenes
-VALUES = ("rigid", "rrbc", "correction", "std")
+VALUES = ("rigid", "rrbc", "bound95", "correction", "std")
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ Units mm, robot frame.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,8 +88,12 @@ def _limit(ev, i: int, tol: float) -> str:
     return max(parts, key=lambda k: parts[k])
 
 
-def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40) -> TolerancePlan:
+def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40, start=None) -> TolerancePlan:
     """The fewest candidates bringing every target's 95 % bound under `tolerance_mm` (module docstring).
+
+    `start`: an `ExplorerSession` of the scene as the user has it now (the app: targets and registration points
+    moved, candidates added); its registration points, targets and candidates are used (it is not changed).
+    Without it, the scene as written.
 
     Raises
     ------
@@ -102,6 +107,10 @@ def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40) -> To
     tol = float(tolerance_mm)
     if not np.isfinite(tol) or tol < MIN_TOLERANCE_MM:
         raise InputError(f"--tolerance {tolerance_mm}: give a bound in mm of at least {MIN_TOLERANCE_MM:g}")
+    if start is not None:
+        from rrbc_core.session.planning_view import planning_scene
+
+        scene = planning_scene(start)
     mask, _ = usable_candidates(scene)
     cands = np.asarray(scene.candidates.positions, float).reshape(-1, 3)[mask]
     cand_ids = [pid for pid, ok in zip(scene.candidates.ids, mask) if ok]
@@ -109,7 +118,7 @@ def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40) -> To
         raise InputError(
             f"{scene.path}: {len(cands)} usable candidates; a bound needs at least {MIN_FIDUCIALS} fiducials"
         )
-    session = ExplorerSession.from_scene(scene)
+    session = ExplorerSession.from_scene(scene) if start is None else copy.copy(start)
     targets = session.layout["targets"].positions
     near = np.argsort(np.min(np.linalg.norm(cands[:, None, :] - targets[None], axis=2), axis=1))[:NEAR]
     pool = cands[near]

@@ -143,7 +143,7 @@ def mixed_case(seed: int) -> tuple[str, dict]:
 
 def mixed_cases(seeds=MIXED_SEEDS) -> list[dict]:
     """Per seeded mixed case: its kind, the best method on the checks, the recommendation, the kinematic verdict
-    (claimed, p-value) and the ratio of VEC's best cross-validated RMST to RRBC's."""
+    (claimed; the identified errors' χ² p-value; rrbc diagnose's test p-values, alone and beside a field) and the ratio of VEC's best cross-validated RMST to RRBC's."""
     from rrbc_core.analysis.vec_compare import compare
 
     out = []
@@ -159,6 +159,8 @@ def mixed_cases(seeds=MIXED_SEEDS) -> list[dict]:
                 "recommended": r["recommended"],
                 "claimed": r["kinematic_error"]["claimed"],
                 "p_value": r["kinematic_error"]["p_value"],
+                "test_p": r["kinematic_error"]["verdict"]["tests"].get("kinematic"),
+                "field_p": r["kinematic_error"]["verdict"]["tests"].get("kinematic_beside_field"),
                 "cv_ratio": min(cv["vec"], cv["vec_rrbc"]) / cv["rrbc"],
                 "rmst_vec": r["rmst_mm"]["vec"],
             }

@@ -123,6 +123,11 @@ class AuthoringController:
     def move_sensor(self, position, client=None):
         return self._author(lambda s: edits.move_sensor(s, position), client)
 
+    def apply_edit(self, change, client=None):
+        """A structural edit `change(session) -> Evaluation` made elsewhere (the Plan tab using a plan's fiducials):
+        applied and redrawn as this tab's own edits are; None and a message when refused."""
+        return self._author(change, client)
+
     def _author(self, change, client):
         """Apply a structural edit to the session and redraw the scene (points were added or removed)."""
         with self.ctx.lock:

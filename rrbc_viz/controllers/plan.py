@@ -22,6 +22,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session import planning_view
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.results import PlanningState
+from rrbc_core.session.tolerance_plan import TolerancePlan, plan_to_tolerance
 
 from .. import colors
 from ..drag_queue import drags_waiting
@@ -73,6 +74,7 @@ class PlanController:
         self.cost_s, self._measured = 0.0, False
         self.ctx.state.plan = None
         self.ctx.state.plan_stale = False
+        self.ctx.state.tolerance_plan = None
         self.ctx.planning.build(session.kind == "scene")
 
     def stop(self) -> None:
@@ -268,6 +270,7 @@ class PlanController:
                 self.ctx.message(error, client, title="Cannot plan")
                 return None
             planning_view.adopt_suggestion(session, snapshot)
+            self.ctx.state.tolerance_plan = None  # the ghosts are the suggestion's now
             with self.ctx.server.atomic():
                 panel.show_suggestion(result, planning_view.suggestion_current(session), marker)
         return result
@@ -303,5 +306,90 @@ class PlanController:
     def clear_suggestions(self) -> None:
         with self.ctx.lock:
             planning_view.clear_suggestion(self.ctx.session)
+            self.ctx.state.tolerance_plan = None
             with self.ctx.server.atomic():
                 self.ctx.planning.remove_ghosts(prompt=True)
+
+    # ------------------------------------------------------------------------------------------ a tolerance
+    def plan_tolerance(self, tolerance_mm, client=None) -> TolerancePlan | None:
+        """The fewest of the scene's candidates bringing every target's 95 % bound under `tolerance_mm`, for the
+        cell as it is now (`tolerance_plan.plan_to_tolerance`, the function `rrbc plan --tolerance` calls), shown as
+        ghosts with the command's text. Computed on a snapshot outside the app's lock, like Suggest. None, and a
+        visible message, when refused."""
+        panel = self.ctx.planning
+        with self.ctx.lock:
+            session = self.ctx.session
+            if session.kind != "scene":
+                self.ctx.message(
+                    "planning to a tolerance needs a scene: its error model gives the planned fiducials' data",
+                    client,
+                    title="Cannot plan",
+                )
+                return None
+            if not self._begin_tolerance(tolerance_mm):
+                self.ctx.message("a plan is already being computed", client, title="Planning")
+                return None
+            snapshot = copy.copy(session)
+            marker = float(self.ctx.state.display.marker_mm)
+        result, error = None, None
+        try:
+            result = plan_to_tolerance(None, tolerance_mm, start=snapshot)
+        except InputError as exc:
+            error = str(exc)
+        except Exception as exc:  # noqa: BLE001 - keep serving
+            traceback.print_exc()
+            error = f"internal error: {type(exc).__name__}: {exc}"
+        with self.ctx.lock:
+            self._end_tolerance()
+            if self.ctx.session is not session:  # another source was loaded meanwhile
+                return None
+            if error is not None or result is None:
+                panel.show_tolerance_refusal(str(error))
+                self.ctx.message(str(error), client, title="Cannot plan")
+                return None
+            self.ctx.state.tolerance_plan = result
+            planning_view.clear_suggestion(session)  # the ghosts are the plan's now
+            with self.ctx.server.atomic():
+                panel.show_tolerance_plan(result, marker)
+        return result
+
+    def use_tolerance_plan(self, client=None) -> Evaluation | None:
+        """Replace the cell's fiducials by the last plan's (one step of the edit history), or say why not."""
+        plan = self.ctx.state.tolerance_plan
+        if plan is None:
+            self.ctx.message("no plan to a tolerance to use", client, title="Not done")
+            return None
+
+        def change(session):
+            return planning_view.use_fiducials(session, plan.fiducial_ids, plan.fiducial_positions)
+
+        ev = self.ctx.authoring.apply_edit(change, client)
+        if ev is not None:
+            with self.ctx.lock:
+                self.ctx.state.tolerance_plan = None
+                with self.ctx.server.atomic():
+                    self.ctx.planning.remove_ghosts(prompt=True)
+            self.ctx.message(
+                f"The cell's fiducials are now the plan's {len(plan.fiducial_ids)} (Undo brings the former back).",
+                client,
+                error=False,
+                title="Fiducials replaced",
+            )
+        return ev
+
+    def _begin_tolerance(self, tolerance_mm) -> bool:
+        with self._busy_lock:
+            if self._busy:
+                return False
+            self._busy = True
+        try:
+            shown = float(tolerance_mm)
+        except (TypeError, ValueError):
+            shown = float("nan")
+        self.ctx.planning.set_tolerance_busy(True, shown)
+        return True
+
+    def _end_tolerance(self) -> None:
+        with self._busy_lock:
+            self._busy = False
+        self.ctx.planning.set_tolerance_busy(False)

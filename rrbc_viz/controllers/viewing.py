@@ -35,7 +35,8 @@ if TYPE_CHECKING:
 SLICE_NOTE = (
     "The plane is sampled on a grid; each point is measured without noise and corrected with the current "
     "fiducials. White line: the fiducials' hull; clear: points the arm cannot reach. Rigid and RRBC share one "
-    "scale."
+    "scale. The 95 % bound is what rrbc correct would bound a target there by; clear where it gives none (farther "
+    "from the fiducials than their cross-validation tested)."
 )
 
 
@@ -209,7 +210,12 @@ class ViewController:
         value = self.ctx.state.display.slice_value
         values = shown.values[value]
         if not np.any(np.isfinite(values)):
-            note = "Nothing to show for this value here (no truth, or not gp)."
+            note = (
+                "No bound anywhere on this plane: too few fiducials to cross-validate, or the plane lies farther from "
+                "them than their cross-validation tested."
+                if value == "bound95"
+                else "Nothing to show for this value here (no truth, or not gp)."
+            )
             self.ctx.controls.view.show_slice_legend(note)
         else:
             lo, hi = self.ctx.slice_node.show(shown, value)

@@ -14,6 +14,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from rrbc_core.analysis.diagnosis import diagnose
 from rrbc_core.analysis.vec_compare import compare
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.models.urdf import load_urdf
@@ -55,7 +56,11 @@ def results():
             load_urdf(robot), seed, n_fid=40, n_chk=30, noise_mm=0.05, kin_size=kin, field_mm=field, compliance=plant
         )
         out.append((robot, seed, plant, field, compare(mset, urdf=robot, compliance=True)))
+        MSETS[(robot, seed)] = mset
     return out
+
+
+MSETS: dict = {}  # the results' files, by (robot, seed)
 
 
 @pytest.mark.slow
@@ -91,6 +96,20 @@ def test_the_recommendation_is_the_best_on_held_out_checks(results):
         best = min(r["rmst_mm"].values())
         hits += r["rmst_mm"][r["recommended"]] <= 1.1 * best
     assert hits >= 0.9 * len(results), [(r["recommended"], r["rmst_mm"]) for *_, r in results]
+
+
+@pytest.mark.slow
+def test_calibrate_claims_compliance_where_it_is_planted_and_diagnose_says_the_same(results):
+    """One decision (analysis.arm_verdict): calibrate's `compliance.claimed` and `kinematic_error.claimed` are
+    `rrbc diagnose`'s names on the same file and model; a planted compliance (no sensor field beside it) is named,
+    none is named where none was planted."""
+    for robot, seed, plant, field, r in results:
+        if not field:
+            assert r["compliance"]["claimed"] == bool(plant), (robot, seed, r["kinematic_error"]["verdict"])
+    for robot, seed, plant, field, r in results[::3]:  # the two commands, side by side, on every third file
+        names = {e.name for e in diagnose(MSETS[(robot, seed)], urdf=robot).effects}
+        assert r["compliance"]["claimed"] == ("compliance" in names), (robot, seed, names)
+        assert r["kinematic_error"]["claimed"] == ("kinematic" in names), (robot, seed, names)
 
 
 def _run(*args):

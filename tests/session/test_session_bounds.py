@@ -69,3 +69,29 @@ def test_dragging_a_fiducial_in_a_scene_changes_the_targets_bounds():
     pos = session.layout["fiducials"].positions[0] + np.array([60.0, -40.0, 0.0])
     after = session.move("fiducials", fid, pos).bounds.rrbc
     assert not np.allclose(np.nan_to_num(after.bound95_mm), np.nan_to_num(ev.bounds.rrbc.bound95_mm))
+
+
+def test_the_error_slice_shows_at_a_target_the_bound_the_target_has():
+    """The slice's `bound95` at a grid point placed on a target is that target's own 95 % bound (the same basis,
+    `correction.bounds.bound_points`; the slice's reading is noise-free, the target's is not: a few µm apart), and the
+    slice has no bound where the fiducials' cross-validation did not reach."""
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_core.io.scene_toml import load_scene
+    from rrbc_core.session.figures import error_slice
+    from rrbc_core.session.slices import SlicePlane
+
+    session = ExplorerSession.from_scene(load_scene(default_scene_path()))
+    ev = session.evaluate()
+    assert ev.bounds is not None
+    for k, (pid, p) in enumerate(zip(ev.targets.ids, ev.targets.positions)):
+        want = ev.bounds.rrbc.bound95_mm[k]
+        assert np.isfinite(want), pid
+        # a 3 x 3 grid whose centre is the target
+        plane = SlicePlane("z", float(p[2]), (p[0] - 10.0, p[1] - 10.0), (p[0] + 10.0, p[1] + 10.0), n=3)
+        assert error_slice(session, plane).values["bound95"][1, 1] == pytest.approx(want, rel=1e-2), pid
+    # over the arm's reach (finite errors), bounds near the fiducials and none far beyond what they tested
+    z = float(np.mean(ev.targets.positions[:, 2]))
+    sl = error_slice(session, SlicePlane("z", z, (-1500.0, -1500.0), (1500.0, 1500.0), n=24))
+    reach = np.isfinite(sl.values["rrbc"])
+    bound = np.isfinite(sl.values["bound95"])
+    assert np.any(bound & reach) and np.any(~bound & reach) and not np.any(bound & ~reach)

@@ -261,3 +261,49 @@ def test_a_layout_the_planner_refuses_gives_a_message_not_a_crash(app):
     settled(app)
     assert "Predicted RMST: rigid" in panel.info.content and app.state.plan is not None
     assert len(shown_coverage(app)) == 8
+
+
+def test_the_plan_tab_plans_to_a_tolerance_as_rrbc_plan_does_and_its_fiducials_can_be_used(app):
+    """One answer: the tab's plan to a tolerance is `rrbc plan --tolerance`'s (the same function on the scene as the
+    app has it: unedited, the scene as written), its text is the command's; Use puts its fiducials in the cell, whose
+    targets' bounds are then the plan's (all under the tolerance), and Undo brings the former fiducials back."""
+    import json
+    import subprocess
+
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_core.session.tolerance_plan import tolerance_text
+    from tests.paths import RRBC
+
+    panel = app.planning
+    before = tuple(app.session.layout["fiducials"].ids)
+    panel.tolerance.value = 0.5
+    _press(panel.tolerance_button)
+    plan = app.state.tolerance_plan
+    assert plan is not None and plan.met, panel.tolerance_md.content
+    cli = subprocess.run(
+        [*RRBC, "plan", str(default_scene_path()), "--tolerance", "0.5", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert cli.returncode == 0, cli.stderr
+    assert json.loads(cli.stdout) == json.loads(json.dumps(plan.to_json()))
+    assert tolerance_text(plan).splitlines()[0] in panel.tolerance_md.content
+    assert len(panel.ghosts) == len(plan.fiducial_ids) and not panel.use_plan_button.disabled
+    _press(panel.use_plan_button)
+    assert app.state.tolerance_plan is None and not panel.ghosts and panel.use_plan_button.disabled
+    assert tuple(app.session.layout["fiducials"].ids) == plan.fiducial_ids
+    ev = app.session.last
+    assert ev.bounds is not None
+    np.testing.assert_allclose(ev.bounds.rrbc.bound95_mm, plan.bound95_mm, rtol=1e-9)
+    assert np.all(ev.bounds.rrbc.bound95_mm < 0.5)
+    _press(panel.undo_button)
+    assert tuple(app.session.layout["fiducials"].ids) == before
+
+
+def test_a_tolerance_that_cannot_be_is_said_in_the_tab_and_measured_data_cannot_plan_to_one(app, measured):
+    panel = app.planning
+    assert app.plan.plan_tolerance(0.0) is None
+    assert "Cannot plan" in panel.tolerance_md.content and app.state.tolerance_plan is None
+    assert measured.plan.plan_tolerance(0.5) is None
+    assert not measured.planning.tolerance_button.visible
