@@ -309,8 +309,9 @@ class PlanningPanel:
         for h in (self.colour, self.accept_button, self.clear_button):
             h.disabled = not scene_mode
             h.visible = scene_mode  # measured data: suggestions are places to measure, not fiducials to add
-        for h in (self.tolerance, self.tolerance_button, self.tolerance_md, self.use_plan_button):
-            h.visible = scene_mode  # a plan to a tolerance needs the scene's error model
+        tolerance_widgets: tuple = (self.tolerance, self.tolerance_button, self.tolerance_md, self.use_plan_button)
+        for w in tolerance_widgets:
+            w.visible = scene_mode  # a plan to a tolerance needs the scene's error model
         self.tolerance_button.disabled, self.use_plan_button.disabled = False, True
         self.tolerance_md.content = PROMPT_TOLERANCE
         self.k.disabled = self.suggest_button.disabled = False

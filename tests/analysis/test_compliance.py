@@ -106,7 +106,7 @@ def test_calibrate_claims_compliance_where_it_is_planted_and_diagnose_says_the_s
     for robot, seed, plant, field, r in results:
         if not field:
             assert r["compliance"]["claimed"] == bool(plant), (robot, seed, r["kinematic_error"]["verdict"])
-    for robot, seed, plant, field, r in results[::3]:  # the two commands, side by side, on every third file
+    for robot, seed, _, _, r in results[::3]:  # the two commands, side by side, on every third file
         names = {e.name for e in diagnose(MSETS[(robot, seed)], urdf=robot).effects}
         assert r["compliance"]["claimed"] == ("compliance" in names), (robot, seed, names)
         assert r["kinematic_error"]["claimed"] == ("kinematic" in names), (robot, seed, names)
