@@ -10,8 +10,6 @@ cd "$root"
 "$root/.venv/bin/ruff" format --check rrbc_core rrbc_viz tests scripts benchmarks examples scenes
 "$root/.venv/bin/mypy"
 # Both cores (pytest-xdist, -n 2): the browser tests run on one worker (one Chromium drawing at a time, docs in
-# tests/browser/conftest.py), the rest are spread over both, longest first in the order tests/conftest.py gives them
-# (--no-loadscope-reorder keeps it); the 25 slowest are printed. Arguments given after
+# tests/browser/conftest.py), the rest are spread over both; the 25 slowest are printed. Arguments given after
 # override these (e.g. `-n 0` for one process, `-m "not browser and not slow"` for the fast tier).
-exec "$root/.venv/bin/python" -m pytest -q -p no:cacheprovider -n 2 --dist loadgroup --no-loadscope-reorder \
-  --durations=25 "$@"
+exec "$root/.venv/bin/python" -m pytest -q -p no:cacheprovider -n 2 --dist loadgroup --durations=25 "$@"

@@ -11,9 +11,7 @@ import atexit
 import os
 import shutil
 import tempfile
-from pathlib import Path
 
-import pytest
 from hypothesis import settings
 
 from rrbc_core.runtime.threads import apply_process_policy
@@ -29,35 +27,3 @@ atexit.register(shutil.rmtree, tempfile.tempdir, ignore_errors=True)
 settings.register_profile("deterministic", derandomize=True, database=None, deadline=None, print_blob=True)
 settings.register_profile("explore", deadline=None, max_examples=500)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
-
-
-# Modules whose module-scoped fixtures are costly (simulated studies, a dask cluster, a report): under pytest-xdist
-# (scripts/test.sh: --dist loadgroup) each runs on one worker, so the fixture is built once, not once per worker.
-# Measured in a full run: test_reproduction's lazily simulated moments alone cost about 30 s on each worker.
-SHARED_FIXTURE_MODULES = (
-    "studies/test_reproduction.py",
-    "analysis/test_compliance.py",
-    "runtime/test_tasks.py",
-    "cli/test_cli_reproduce.py",
-    "correction/test_metrics.py",
-)
-_TESTS = Path(__file__).resolve().parent
-
-
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Group the modules above, and order the run longest work first: the browser tests (one group on one worker,
-    tests/browser/conftest.py, minutes long) start at once, then the grouped modules, then the rest in file order
-    (scripts/test.sh passes --no-loadscope-reorder, so xdist hands out work units in this order; sorted by their
-    test counts instead, the browser group started last and the run took 14 minutes instead of 11)."""
-
-    def rank(item: pytest.Item) -> int:
-        path = Path(str(item.fspath)).resolve()
-        rel = path.relative_to(_TESTS).as_posix() if _TESTS in path.parents else ""
-        if rel.startswith("browser/"):
-            return 0
-        if rel in SHARED_FIXTURE_MODULES:
-            item.add_marker(pytest.mark.xdist_group(rel))
-            return 1
-        return 2
-
-    items.sort(key=rank)  # stable: file order within each rank

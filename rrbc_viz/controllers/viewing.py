@@ -206,8 +206,10 @@ class ViewController:
         """Recompute and redraw the error slice if its layer is on (caller holds the lock)."""
         if not self.ctx.state.layers.get("slice"):
             return
-        shown = self.ctx.state.error_slice = figures.error_slice(self.ctx.session, self.slice_plane())
         value = self.ctx.state.display.slice_value
+        shown = self.ctx.state.error_slice = figures.error_slice(
+            self.ctx.session, self.slice_plane(), bound=value == "bound95"
+        )
         values = shown.values[value]
         if not np.any(np.isfinite(values)):
             note = (

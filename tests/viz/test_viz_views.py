@@ -129,6 +129,12 @@ def test_the_error_slice_follows_drags_and_its_controls(app):
     assert app.state.error_slice.plane.offset_mm == 50.0
     c.view.slice_value.value = "rigid error"
     assert app.state.display.slice_value == "rigid" and "rigid error" in c.view.slice_legend.content
+    assert np.all(np.isnan(app.state.error_slice.values["bound95"]))  # not computed while not shown
+    c.view.slice_value.value = "95 % bound"  # the bound a target there would get: the core's, on the same plane
+    assert app.state.display.slice_value == "bound95" and "95 % bound" in c.view.slice_legend.content
+    shown = app.state.error_slice.values["bound95"]
+    assert np.any(np.isfinite(shown))
+    np.testing.assert_allclose(shown, figures.error_slice(app.session, app.state.error_slice.plane).values["bound95"])
     with pytest.raises(InputError):
         app.evaluate.set_display(slice_axis="w")
 
