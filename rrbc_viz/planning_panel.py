@@ -360,8 +360,9 @@ class PlanningPanel:
         """The planner's progress (its last label)."""
         self.suggestion_md.content = f"Planning: choosing {k} of the scene's candidate locations… {extra}".rstrip()
 
-    def _add_ghosts(self, ids, positions, marker_mm: float) -> None:
-        """Ghost spheres +1 … +K (labelled with their ids) at `positions` (K, 3), robot frame, mm."""
+    def _add_ghosts(self, ids, positions, marker_mm: float, added: bool = True) -> None:
+        """Ghost spheres +1 … +K (labelled with their ids; without `added`, the ids alone: a set that replaces the
+        fiducials) at `positions` (K, 3), robot frame, mm."""
         self.remove_ghosts()
         r = marker_mm
         for i, (cid, p) in enumerate(zip(ids, np.asarray(positions, float).reshape(-1, 3))):
@@ -381,7 +382,7 @@ class PlanningPanel:
             self.ghost_labels.append(
                 self._server.scene.add_label(
                     f"{name}/label",
-                    f"+{i + 1} {cid}",
+                    f"+{i + 1} {cid}" if added else str(cid),
                     position=(0.0, 0.0, 2.0 * r),
                     font_size_mode="screen",
                     font_screen_scale=0.75,
@@ -397,7 +398,7 @@ class PlanningPanel:
 
     def show_tolerance_plan(self, plan, marker_mm: float) -> None:
         """A plan to a tolerance: its fiducials as ghost spheres, its text (`rrbc plan --tolerance`'s), and Use."""
-        self._add_ghosts(plan.fiducial_ids, plan.fiducial_positions, marker_mm)
+        self._add_ghosts(plan.fiducial_ids, plan.fiducial_positions, marker_mm, added=False)
         self.tolerance_md.content = tolerance_markdown(plan)
         self.use_plan_button.disabled = not len(self.ghosts)
         self.clear_button.disabled = not len(self.ghosts)
@@ -451,8 +452,27 @@ class PlanningPanel:
 
 
 def tolerance_markdown(plan) -> str:
-    """The tab's text for a plan to a tolerance: `rrbc plan --tolerance`'s own text (one answer), in a code block."""
-    return "```\n" + tolerance_text(plan).rstrip() + "\n```"
+    """The tab's text for a plan to a tolerance: what `rrbc plan --tolerance` prints (`tolerance_text`: its lead line
+    word for word, one answer), as wrapped text and tables that fit the panel."""
+    lines = tolerance_text(plan).splitlines()
+    j = plan.to_json()
+    fids = "\n".join(f"| {f['id']} | {', '.join(f'{v:.0f}' for v in f['position'])} |" for f in j["fiducials"])
+
+    def target_row(t: dict) -> str:
+        bound = "-" if t["bound95_mm"] is None else f"{t['bound95_mm']:.3f}"
+        return f"| {t['id']} | {bound} | {'under' if t['under'] else (t['limit'] or '')} |"
+
+    tgts = "\n".join(target_row(t) for t in j["targets"])
+    why = (
+        ""
+        if plan.met
+        else "\n\n*instrument*: the readings' own noise; *registration*: the transform's uncertainty; *interpolation*: "
+        "the correction between the fiducials; *reach*: no fiducial near enough for a bound."
+    )
+    return (
+        f"**{lines[0]}**{why}\n\n| fiducial | x, y, z (mm) |\n|---|---|\n{fids}\n\n"
+        f"| target | 95 % bound (mm) | |\n|---|---|---|\n{tgts}\n\n**Use these fiducials** replaces the cell's."
+    )
 
 
 def measured_info(n_in: int, n_targets: int, full: int, n_regions: int) -> str:
