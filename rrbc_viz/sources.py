@@ -181,12 +181,17 @@ def load_station(loaded: Loaded, station: str) -> Loaded:
     return Loaded(fresh, loaded.mesh, f"{base}, station {fresh.station!r} ({k} of {len(fresh.stations)})")
 
 
-def safe_file_name(name: str, suffix: str) -> str:
-    """A file name for an upload kept on the server: the user's base name (letters, digits, '-', '_', '.'), else
-    'cell', with `suffix` (lower case)."""
+def safe_file_name(name: str, suffix: str | None = None, fallback: str = "cell") -> str:
+    """A file name for an upload kept on the server, whatever a tab declared (a path, "..", a NUL byte, thousands
+    of characters): the user's base name (letters, digits, '-', '_', '.'; at most 80), else `fallback`, with
+    `suffix` (lower case; None: the name's own, letters and digits only, at most 10)."""
     import re
 
-    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(str(name)).stem).strip("._")[:80] or "cell"
+    base = Path(str(name).replace("\\", "/"))
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", base.stem).strip("._")[:80] or fallback
+    if suffix is None:
+        suffix = re.sub(r"[^a-z0-9]+", "", base.suffix.lower())[:10]
+        suffix = "." + suffix if suffix else ""
     return stem + suffix
 
 

@@ -29,6 +29,8 @@ from typing import Any
 
 from viser import _messages
 
+from .sources import safe_file_name
+
 #: Transfers stored at once, per tab and in all.
 MAX_ACTIVE_PER_CLIENT = 2
 MAX_ACTIVE = 8
@@ -81,7 +83,7 @@ class _Spool:
         if button is None:
             self._viser_start(client_id, message)
             return
-        name = Path(str(message.filename)).name or "upload"
+        name = safe_file_name(str(message.filename), fallback="upload")  # a tab may declare any name
         size, parts = int(message.size_bytes), int(message.part_count)
         why = None
         if size > button.max_bytes:
@@ -96,10 +98,15 @@ class _Spool:
                 else:
                     folder = Path(tempfile.mkdtemp(prefix="rrbc-upload-"))
                     path = folder / name
-                    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-                    self.active[message.transfer_uuid] = _Transfer(
-                        client_id, message.source_component_uuid, name, size, parts, folder, path, fd
-                    )
+                    try:
+                        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+                    except OSError as exc:  # a full disk, a name the file system refuses: said, nothing left
+                        shutil.rmtree(folder, ignore_errors=True)
+                        why = f"{name}: cannot be stored here ({exc.strerror or exc}); upload it again"
+                    else:
+                        self.active[message.transfer_uuid] = _Transfer(
+                            client_id, message.source_component_uuid, name, size, parts, folder, path, fd
+                        )
         if why is not None:
             self._refuse(client_id, message.transfer_uuid, message.source_component_uuid, size, why)
 

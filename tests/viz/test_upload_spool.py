@@ -184,3 +184,34 @@ def test_a_measurement_file_uploaded_in_parts_opens(tmp_path):
     finally:
         pool.close()
         app.stop()
+
+
+@pytest.mark.parametrize(
+    "declared, stored",
+    [
+        ("..", "upload"),
+        ("be\x00nch.stl", "be_nch.stl"),
+        ("x" * 5000 + ".stl", "x" * 80 + ".stl"),
+        ("../../b.stl", "b.stl"),
+    ],
+    ids=["dot-dot", "nul-byte", "5000-chars", "a-path"],
+)
+def test_a_hostile_upload_name_is_stored_under_a_safe_one_and_leaves_nothing_behind(declared, stored, capfd):
+    """Issue 42: a tab may declare any file name. The spool keeps the file under a safe name (`sources.
+    safe_file_name`: base name, no control characters, at most 80 characters), the tab hears about it in words,
+    no traceback reaches the log, and no folder stays behind."""
+    app = serve(port=0)
+    pool = ClientPool(app.url, 1)
+    try:
+        before = set(_spooled())
+        data, _ = _bench_stl(9)
+        parts = _parts(data)
+        pool.upload(0, app.controls.authoring.mesh._impl.uuid, declared, parts, len(data), len(parts))
+        # said under the safe name: the mesh taken, or (no extension left) refused in words
+        assert _wait(lambda: (app.last_message or "").startswith(f"{stored}: ")), app.last_message
+        assert _wait(lambda: set(_spooled()) <= before)
+    finally:
+        pool.close()
+        app.stop()
+    err = capfd.readouterr().err
+    assert "Traceback" not in err, err[-2000:]
