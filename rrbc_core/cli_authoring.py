@@ -237,7 +237,7 @@ def _convert_stationing(args) -> str:
 
 def _cmd_calibrate(args) -> str:
     from rrbc_core.analysis.saved_model import load_model
-    from rrbc_core.analysis.vec_compare import METHODS, compare
+    from rrbc_core.analysis.vec_compare import compare
     from rrbc_core.io.measurements import read_measurements
 
     if (args.backlash or args.gravity is not None) and not args.compliance:
@@ -261,6 +261,12 @@ def _cmd_calibrate(args) -> str:
     )
     if args.json:
         return json.dumps(result) + "\n"
+    return calibrate_text(result)
+
+
+def calibrate_text(result: dict) -> str:
+    """The text of `rrbc calibrate` for its JSON object `result` (`analysis.vec_compare.compare`)."""
+    from rrbc_core.analysis.vec_compare import METHODS
 
     def mm(v):
         return "-" if v is None else f"{v:.4f}"
@@ -296,6 +302,7 @@ def _cmd_calibrate(args) -> str:
     )
     lines += compliance_lines(result)
     lines += calibrate_bound_lines(result)
+    lines += [f"warning: {w}" for w in result["warnings"]]
     return "\n".join(lines) + "\n"
 
 

@@ -32,6 +32,7 @@ import numpy as np
 from rrbc_core.analysis.arm_verdict import RULE as ARM_RULE
 from rrbc_core.analysis.arm_verdict import arm_verdict
 from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
+from rrbc_core.analysis.configuration_check import configuration_check
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
 from rrbc_core.errors import InputError
@@ -392,6 +393,7 @@ def compare(
     # one rule for both commands; which method corrects best stays the cross-validated recommendation's question
     verdict = None if fixed is not None else arm_verdict(mset, robot, tool, urdf, tip, base)
     rows_pts = np.concatenate([rows_tgt, rows_chk]).astype(int)
+    config = configuration_check(s, q, np.array([i.kind != "prismatic" for i in chain.inputs]), rows_fid, rows_pts)
     pbounds, instrument, bound_warnings = method_bounds(
         mset, fit, folds, sq, rows_reg, rows_fid, rows_pts, s, b, q, gi, _idw_by_group
     )
@@ -494,4 +496,15 @@ def compare(
         "targets": targets,
         "check_points": check_points,
         "bounds": {"level": 0.95, "instrument": instrument, "warnings": bound_warnings},
+        "configuration": None
+        if config is None
+        else {
+            "flagged": config.flagged,
+            "p_value": config.p_value,
+            "beyond": int(config.beyond.sum()),
+            "points": len(config.distance_rad),
+            "largest_change_deg": float(np.degrees(config.distance_rad.max())),
+            "fiducials_largest_change_deg": float(np.degrees(config.fiducial_rad.max())),
+        },
+        "warnings": [w for w in ([config.warning()] if config is not None else []) if w],
     }

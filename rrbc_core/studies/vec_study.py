@@ -36,8 +36,11 @@ def joint_measurements(
     n_chk: int = 30,
     n_tgt: int = 3,
     source: str = "<simulated>",
+    point_shift_rad=None,
 ) -> MeasurementSet:
-    """A simulated measurement set with joint angles q1..q6 (degrees) in its extra columns (module docstring)."""
+    """A simulated measurement set with joint angles q1..q6 (degrees) in its extra columns (module docstring).
+    `point_shift_rad` (6,): added to the checks' and targets' joint values (reached in other configurations than
+    the fiducials)."""
     from rrbc_core.models.errorterms import SmoothField
 
     rng = np.random.default_rng(seed)
@@ -47,6 +50,8 @@ def joint_measurements(
     t = np.array([1100.0, -450.0, 1250.0])
     n = n_reg + n_fid + n_chk + n_tgt
     q = UR5_TOOL_DOWN_SEED + rng.uniform(-0.7, 0.7, (n, 6))
+    if point_shift_rad is not None:
+        q[n_reg + n_fid :] += np.asarray(point_shift_rad, float)
     p, _ = forward(true, q)
     b_nom, _ = forward(nominal, q)
     s = (p - t) @ rot
