@@ -89,7 +89,7 @@ def _hull_line(ev: Evaluation, i: int, region_fraction: float | None) -> str:
     return f"- ⚠ {words}: extrapolated" if not ev.coverage.inside[i] else f"- {words}"
 
 
-BAR_CELLS = 14  # a budget bar's full width, in characters
+BAR_CELLS = 10  # a budget bar's full width, in characters
 
 
 def budget_lines(ev: Evaluation, i: int) -> list[str]:
@@ -106,11 +106,17 @@ def budget_lines(ev: Evaluation, i: int) -> list[str]:
         return [f"- 95 % bound: none{rigid_words.replace(';', ' (')}{')' if rigid_words else ''} — {why}"]
     parts = {k: float(v[i]) for k, v in b.rrbc.budget_mm.items()}
     top = max(max(parts.values()), 1e-12)
-    width = max(len(k) for k in parts)
-    lines = [f"- 95 % bound **{bound:.3f} mm** (RRBC{rigid_words}); its budget, RMS mm:"]
+    # a table: each source's name, bar and figure in one row however narrow the panel (as lines, a name wrapped
+    # onto the line of the bar before it)
+    lines = [
+        f"- 95 % bound **{bound:.3f} mm** (RRBC{rigid_words}); its budget:",
+        "",
+        "| source | | RMS mm |",
+        "|---|---|---|",
+    ]
     for k, v in parts.items():
         n = int(round(BAR_CELLS * v / top))
-        lines.append(f"  `{k:<{width}} {'█' * n}{'░' * (BAR_CELLS - n)} {v:.3f}`")
+        lines.append(f"| {k} | `{'█' * n}{'░' * (BAR_CELLS - n)}` | {v:.3f} |")
     return lines
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from rrbc_core.correction.bounds import bound_ellipsoids
+from rrbc_viz.selection_card import BAR_CELLS
 
 
 def _card(app) -> str:
@@ -44,13 +45,13 @@ def test_the_card_shows_the_bound_and_its_budget_and_a_drag_changes_both(app):
     b = ev.bounds.rrbc
     assert f"95 % bound **{b.bound95_mm[0]:.3f} mm**" in card
     for name, values in b.budget_mm.items():
-        m = re.search(rf"`{name}\s+([█░]+) ([0-9.]+)`", card)
+        m = re.search(rf"\| {name} \| `([█░]+)` \| ([0-9.]+) \|", card)
         assert m is not None, card
         assert float(m.group(2)) == pytest.approx(values[0], abs=5e-4)
-        assert len(m.group(1)) == 14
+        assert len(m.group(1)) == BAR_CELLS
     # the largest source fills its bar
     top = max(b.budget_mm, key=lambda k: b.budget_mm[k][0])
-    assert re.search(rf"`{top}\s+█{{14}} ", card)
+    assert re.search(rf"\| {top} \| `█{{{BAR_CELLS}}}` \|", card)
     node = app.nodes.handle(f"/bounds/{pid}")
     before_scale = np.array(node.scale, float)
     fid = app.session.layout["fiducials"].ids[0]
