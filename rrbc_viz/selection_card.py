@@ -108,8 +108,9 @@ def budget_lines(ev: Evaluation, i: int) -> list[str]:
     top = max(max(parts.values()), 1e-12)
     # a table: each source's name, bar and figure in one row however narrow the panel (as lines, a name wrapped
     # onto the line of the bar before it)
+    inst = b.source.instrument.source or b.source.instrument.name
     lines = [
-        f"- 95 % bound **{bound:.3f} mm** (RRBC{rigid_words}); its budget:",
+        f"- 95 % bound **{bound:.3f} mm** (RRBC{rigid_words}); its budget (instrument: {inst}):",
         "",
         "| source | | RMS mm |",
         "|---|---|---|",
