@@ -11,7 +11,9 @@ import atexit
 import os
 import shutil
 import tempfile
+from pathlib import Path
 
+import pytest
 from hypothesis import settings
 
 from rrbc_core.runtime.threads import apply_process_policy
@@ -27,3 +29,25 @@ atexit.register(shutil.rmtree, tempfile.tempdir, ignore_errors=True)
 settings.register_profile("deterministic", derandomize=True, database=None, deadline=None, print_blob=True)
 settings.register_profile("explore", deadline=None, max_examples=500)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
+
+
+# Modules whose module-scoped fixtures are costly run on one pytest-xdist worker each (scripts/test.sh: --dist
+# loadgroup), so the fixture is built once, not once per worker: the reproduction study's simulated moments (about
+# 30 s), calibrate's compliance cases, the reproduce report, the dask cluster. xdist hands out work units largest
+# first (by test count), and the browser tests are one unit of 21 on one worker: at most one group may be larger
+# (test_reproduction, 45 tests), or the browser unit starts after two others and the run grows by minutes (measured:
+# grouping test_metrics too, 61 tests, took 14 min 12 s against 11 min 55 s).
+SHARED_FIXTURE_MODULES = (
+    "studies/test_reproduction.py",
+    "analysis/test_compliance.py",
+    "cli/test_cli_reproduce.py",
+    "runtime/test_tasks.py",
+)
+_TESTS = Path(__file__).resolve().parent
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    for item in items:
+        path = Path(str(item.fspath)).resolve()
+        if _TESTS in path.parents and (rel := path.relative_to(_TESTS).as_posix()) in SHARED_FIXTURE_MODULES:
+            item.add_marker(pytest.mark.xdist_group(rel))
