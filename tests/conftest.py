@@ -46,6 +46,7 @@ SHARED_FIXTURE_MODULES = (
 _TESTS = Path(__file__).resolve().parent
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups (its worker plugin registers after us)
 def pytest_collection_modifyitems(config, items) -> None:
     for item in items:
         path = Path(str(item.fspath)).resolve()
