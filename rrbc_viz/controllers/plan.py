@@ -52,6 +52,18 @@ def _compute(session: ExplorerSession) -> PlanningState | Exception:
         return exc
 
 
+def _outside_the_lock(run):
+    """(run(), None), or (None, why) when it raised: a planner run on a snapshot keeps the app serving whatever it
+    meets (a bad request in words, anything else as an internal error, its traceback in the log)."""
+    try:
+        return run(), None
+    except InputError as exc:
+        return None, str(exc)
+    except Exception as exc:  # noqa: BLE001 - keep serving
+        traceback.print_exc()
+        return None, f"internal error: {type(exc).__name__}: {exc}"
+
+
 class PlanController:
     """`actions.PlanActions` (module docstring). Its own bookkeeping (when planning last ran and what it cost, the
     background worker, whether a Suggest runs) is private; what the tab shows is in the app's state."""
@@ -201,19 +213,28 @@ class PlanController:
         )
 
     # ------------------------------------------------------------------------------------------ suggesting
-    def _begin(self, k: int) -> bool:
-        """Mark a Suggest as running (False if one already is)."""
+    def _claim(self) -> bool:
+        """Mark a planner run (Suggest, or a plan to a tolerance) as running; False if one already is."""
         with self._busy_lock:
             if self._busy:
                 return False
             self._busy = True
+        return True
+
+    def _release(self) -> None:
+        with self._busy_lock:
+            self._busy = False
+
+    def _begin(self, k: int) -> bool:
+        """Mark a Suggest as running (False if a planner run already is)."""
+        if not self._claim():
+            return False
         self._progress_k = k
         self.ctx.planning.set_busy(True, k)
         return True
 
     def _end(self) -> None:
-        with self._busy_lock:
-            self._busy = False
+        self._release()
         self.ctx.planning.set_busy(False)
 
     def _progress(self, *args) -> None:
@@ -253,14 +274,9 @@ class PlanController:
                 self.ctx.message("a suggestion is already being computed", client, title="Planning")
                 return None
             snapshot = copy.copy(session)  # settings and layout are immutable values
-        result, error = None, None
-        try:
-            result = planning_view.suggest_fiducials(snapshot, k, seed=seed, progress=self._progress)
-        except InputError as exc:
-            error = str(exc)
-        except Exception as exc:  # noqa: BLE001 - keep serving
-            traceback.print_exc()
-            error = f"internal error: {type(exc).__name__}: {exc}"
+        result, error = _outside_the_lock(
+            lambda: planning_view.suggest_fiducials(snapshot, k, seed=seed, progress=self._progress)
+        )
         with self.ctx.lock:
             self._end()
             if self.ctx.session is not session:  # another source was loaded meanwhile
@@ -331,14 +347,7 @@ class PlanController:
                 return None
             snapshot = copy.copy(session)
             marker = float(self.ctx.state.display.marker_mm)
-        result, error = None, None
-        try:
-            result = plan_to_tolerance(None, tolerance_mm, start=snapshot)
-        except InputError as exc:
-            error = str(exc)
-        except Exception as exc:  # noqa: BLE001 - keep serving
-            traceback.print_exc()
-            error = f"internal error: {type(exc).__name__}: {exc}"
+        result, error = _outside_the_lock(lambda: plan_to_tolerance(None, tolerance_mm, start=snapshot))
         with self.ctx.lock:
             self._end_tolerance()
             if self.ctx.session is not session:  # another source was loaded meanwhile
@@ -378,10 +387,8 @@ class PlanController:
         return ev
 
     def _begin_tolerance(self, tolerance_mm) -> bool:
-        with self._busy_lock:
-            if self._busy:
-                return False
-            self._busy = True
+        if not self._claim():
+            return False
         try:
             shown = float(tolerance_mm)
         except (TypeError, ValueError):
@@ -390,6 +397,5 @@ class PlanController:
         return True
 
     def _end_tolerance(self) -> None:
-        with self._busy_lock:
-            self._busy = False
+        self._release()
         self.ctx.planning.set_tolerance_busy(False)
