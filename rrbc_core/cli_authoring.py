@@ -283,7 +283,7 @@ def calibrate_text(result: dict) -> str:
     for m in METHODS:
         lines.append(f"{m:<11} {mm(result['rmst_mm'][m]):>16}   {mm(result['cv_rmst_mm'][m]):>12}")
     lines.append(f"recommended (chosen without the checks): {result['recommended']}")
-    if result["extrapolated_share"] > 0.5:
+    if result["extrapolated_share"] > 0:
         lines.append(f"recommendation: {result['recommendation_basis']}")
     k = result["kinematic_error"]
     if result["saved_model"] is not None:

@@ -33,6 +33,7 @@ from rrbc_core.analysis.arm_verdict import RULE as ARM_RULE
 from rrbc_core.analysis.arm_verdict import arm_verdict
 from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
 from rrbc_core.analysis.configuration_check import configuration_check
+from rrbc_core.analysis.extrapolation_cv import beyond_points, extrapolation_folds, mixture_choice
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
 from rrbc_core.errors import InputError
@@ -130,14 +131,7 @@ def one_standard_error_choice(squared: dict, among: tuple[str, ...] = METHODS) -
     simplest method (`METHODS` order: rigid, rrbc, vec, vec_rrbc) whose mean squared error exceeds the smallest by no
     more than one standard error of their paired difference — the one-standard-error rule of cross-validation, so a
     difference the held-out points cannot resolve does not decide. `among`: the methods to choose from."""
-    among = tuple(m for m in METHODS if m in among)
-    best = min(among, key=lambda m: float(np.mean(squared[m])))
-    for m in among:
-        d = squared[m] - squared[best]
-        se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
-        if float(np.mean(d)) <= se:
-            return m
-    return best
+    return mixture_choice([(1.0, squared)], among)
 
 
 def cv_folds(rows_reg: np.ndarray, rows_fid: np.ndarray, gi=None) -> list[np.ndarray]:
@@ -180,17 +174,19 @@ def _rms(a, b) -> float:
 
 
 def _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, terms=(), gravity=None, fixed=None) -> dict:
-    """Per method, the held-out fiducials' squared errors (H,) mm² over `folds` (`cv_folds`)."""
+    """Per method, the held-out fiducials' squared errors (H,) mm² over `folds`: index arrays into rows_fid, each
+    left out and scored (`cv_folds`), or (left out, scored) pairs (`extrapolation_cv.extrapolation_folds`)."""
     g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])
     errs: dict[str, list] = {m: [] for m in METHODS}
-    for held in folds:
+    for fold in folds:
+        held, scored = fold if isinstance(fold, tuple) else (fold, fold)
         keep = np.setdiff1d(np.arange(len(rows_fid)), held)
         f = fit_methods(
             np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, chain, gi, terms, gravity, fixed
         )
-        pred = predict_methods(f, s[rows_fid[held]], q[rows_fid[held]], g_of(rows_fid[held]))
+        pred = predict_methods(f, s[rows_fid[scored]], q[rows_fid[scored]], g_of(rows_fid[scored]))
         for m in METHODS:
-            errs[m].append(np.sum((pred[m] - b[rows_fid[held]]) ** 2, axis=1))
+            errs[m].append(np.sum((pred[m] - b[rows_fid[scored]]) ** 2, axis=1))
     return {m: np.concatenate(errs[m]) if errs[m] else np.zeros(0) for m in METHODS}
 
 
@@ -227,29 +223,69 @@ def select_terms(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, grav
     return entered, current, table
 
 
-def _beyond_share(s, rows_fid, rows_pred, gi) -> float:
-    """The share of the rows to predict (checks and targets) beyond what cross-validation over their station's
-    fiducials tests: outside the fiducials' hull (`interpolation.hull.covered`, sensor frame) and farther from the
-    nearest fiducial than any fiducial is from its nearest neighbour (a held-out fiducial is predicted from no farther
-    than that). 0 without such rows; a station with fewer than 2 fiducials counts all of its rows."""
-    from scipy.spatial import cKDTree
-
-    from rrbc_core.interpolation.hull import covered
-
-    if not len(rows_pred):
-        return 0.0
-    g = np.zeros(len(s), int) if gi is None else np.asarray(gi, int)
-    beyond = 0
-    for k in np.unique(g[rows_pred]):
-        pred, fid = rows_pred[g[rows_pred] == k], rows_fid[g[rows_fid] == k]
-        if len(fid) < 2:
-            beyond += len(pred)
-            continue
-        tree = cKDTree(s[fid])
-        reach = float(np.max(tree.query(s[fid], k=2)[0][:, 1]))
-        far = tree.query(s[pred])[0] > reach
-        beyond += int(np.sum(far & ~covered(s[fid], s[pred])))
-    return beyond / len(rows_pred)
+def _recommend(sq, folds, rows_reg, rows_fid, rows_pred, s, b, q, chain, gi, terms, gravity, fixed, config_beyond):
+    """The recommended method and its basis in words (docs/calibration.md, "Recommended method"): the
+    one-standard-error rule over ordinary cross-validation for the checks and targets it speaks for, and over
+    buffered leave-out folds (`extrapolation_cv`) for those beyond the fiducials, weighted by their shares; where
+    most checks and targets lie where no fold can test (off the fiducials' plane, or too far to leave anything out),
+    no correction learnt from the fiducials is recommended. Returns (method, basis, `Beyond`, the buffered folds'
+    squared errors per method, {} where none was run)."""
+    beyond = beyond_points(s, rows_fid, rows_pred, gi)
+    if not folds:
+        return "rigid", "too few fiducials to cross-validate: rigid", beyond, {}
+    if beyond.share == 0.0:
+        return (
+            one_standard_error_choice(sq),
+            "the one-standard-error rule over the cross-validated fiducials",
+            beyond,
+            {},
+        )
+    far = extrapolation_folds(s, rows_reg, rows_fid, beyond, gi, min_poses=0 if fixed is not None else 8)
+    sq_far = _cv_squared(far, rows_reg, rows_fid, s, b, q, chain, gi, terms, gravity, fixed) if far else {}
+    n_far = len(far)
+    inside = 1.0 - beyond.share
+    tested = beyond.share - beyond.untestable_share if n_far else 0.0
+    untested = 1.0 - inside - tested
+    words = (
+        f"{beyond.share:.0%} of the checks and targets lie outside the fiducials' hull and farther from them than the "
+        f"fiducials lie from each other ({untested:.0%} where no held-out fiducial can test: off the fiducials' plane "
+        "or line, or too far to leave fiducials out)"
+    )
+    if untested <= 0.5:
+        parts = [(inside / (inside + tested), sq)] + ([(tested / (inside + tested), sq_far)] if tested else [])
+        return (
+            mixture_choice(parts),
+            f"{words}: the one-standard-error rule weighing, by their shares, the cross-validated fiducials and "
+            f"{n_far} folds that leave out every fiducial as near to one fiducial as those points are to theirs "
+            "and predict it from the rest",
+            beyond,
+            sq_far,
+        )
+    # corrections interpolated from the fiducials (rrbc, and vec_rrbc's residuals) are not tested there; the arm's
+    # model is a function of the joints, not of position: it is tested where the points' configurations are like
+    # the fiducials' (`configuration_check`), or where the arm was identified elsewhere (a saved model)
+    if fixed is not None or not config_beyond:
+        parts = [(inside / (inside + tested), sq)] + ([(tested / (inside + tested), sq_far)] if tested else [])
+        why = (
+            "the saved arm's vec"
+            if fixed is not None
+            else "vec (the points are reached in configurations like the fiducials')"
+        )
+        return (
+            mixture_choice(parts, ("rigid", "vec")),
+            f"{words}: chosen between rigid and {why} by the one-standard-error rule over the cross-validated "
+            "fiducials",
+            beyond,
+            sq_far,
+        )
+    return (
+        "rigid",
+        f"{words}, and reached in other joint configurations than the fiducials: nothing tests corrections "
+        "interpolated from the fiducials or an arm identified from them alone there: rigid; measure fiducials "
+        "around the checks, or identify the arm once on data that covers its configurations and reuse it (--model)",
+        beyond,
+        sq_far,
+    )
 
 
 def drop_unphysical_terms(fit: MethodsFit, terms: tuple, refit) -> tuple[MethodsFit, tuple, list[dict]]:
@@ -363,37 +399,28 @@ def compare(
         rmst = {m: _rms(pred[m], b[rows_chk]) for m in METHODS}
     cv_values = {m: float(np.sqrt(np.mean(sq[m]))) for m in METHODS} if folds else {}
     cv: dict[str, float | None] = {m: cv_values.get(m) for m in METHODS}
-    extrapolated = _beyond_share(s, rows_fid, np.concatenate([rows_chk, rows_tgt]), gi)
-    among: tuple[str, ...]
-    if extrapolated <= 0.5:
-        among, basis = METHODS, "the one-standard-error rule over the cross-validated fiducials"
-    else:
-        beyond = (
-            f"{extrapolated:.0%} of the checks and targets lie outside the fiducials' hull and farther from them than "
-            "the fiducials lie from each other, where cross-validation over the fiducials says nothing about "
-            "corrections interpolated from them"
-        )
-        if fixed is not None:  # the arm was identified elsewhere, over the configurations its saved file covers
-            among, basis = (
-                ("rigid", "vec"),
-                f"{beyond}: chosen between rigid and the saved arm's vec by the one-standard-error rule over the "
-                "cross-validated fiducials",
-            )
-        else:  # an arm identified from these fiducials alone extrapolates as far as they do
-            among, basis = (
-                ("rigid",),
-                (
-                    f"{beyond}, nor about an arm identified from them alone: rigid; measure fiducials around the "
-                    "checks, or identify the arm once on data that covers its configurations and reuse it (--model)"
-                ),
-            )
-    recommended = one_standard_error_choice(sq, among) if folds else "rigid"
+    rows_pts = np.concatenate([rows_tgt, rows_chk]).astype(int)
+    config = configuration_check(s, q, np.array([i.kind != "prismatic" for i in chain.inputs]), rows_fid, rows_pts)
+    recommended, basis, beyond, sq_far = _recommend(
+        sq,
+        folds,
+        rows_reg,
+        rows_fid,
+        np.concatenate([rows_chk, rows_tgt]).astype(int),
+        s,
+        b,
+        q,
+        chain,
+        gi,
+        terms,
+        gravity,
+        fixed,
+        config is not None and config.flagged,
+    )
     cal = fit.cal
     # whether the file holds an arm error is rrbc diagnose's decision on the same file and model (arm_verdict):
     # one rule for both commands; which method corrects best stays the cross-validated recommendation's question
     verdict = None if fixed is not None else arm_verdict(mset, robot, tool, urdf, tip, base)
-    rows_pts = np.concatenate([rows_tgt, rows_chk]).astype(int)
-    config = configuration_check(s, q, np.array([i.kind != "prismatic" for i in chain.inputs]), rows_fid, rows_pts)
     pbounds, instrument, bound_warnings = method_bounds(
         mset, fit, folds, sq, rows_reg, rows_fid, rows_pts, s, b, q, gi, _idw_by_group
     )
@@ -432,7 +459,9 @@ def compare(
         "cv_rmst_mm": cv,
         "recommended": recommended,
         "recommendation_basis": basis,
-        "extrapolated_share": extrapolated,
+        "extrapolated_share": beyond.share,
+        "extrapolation_cv_rmst_mm": {m: float(np.sqrt(np.mean(sq_far[m]))) if sq_far else None for m in METHODS},
+        "extrapolation_folds": len(sq_far["rigid"]) if sq_far else 0,
         "identifiable": {
             "rank": cal.rank,
             "parameters": [n for n, ok in zip(cal.names, cal.identifiable) if ok],

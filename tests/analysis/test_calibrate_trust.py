@@ -1,10 +1,10 @@
 """What `rrbc calibrate` claims on data like the real stationing files (docs/real_data.md): a load term identified
-below zero is taken out (no arm stiffens under its load), and a recommendation is not made from cross-validation over
-fiducials that lie far from the checks."""
+below zero is taken out (no arm stiffens under its load), and a recommendation for checks beyond the fiducials is made
+from folds that test extrapolation as extrapolation (docs/recommendation_study.md)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -12,6 +12,8 @@ import pytest
 from rrbc_core.analysis.saved_model import load_model
 from rrbc_core.analysis.vec_compare import compare, drop_unphysical_terms
 from rrbc_core.models.urdf import load_urdf
+from rrbc_core.studies.recommendation_study import board_fiducials, far_checks
+from rrbc_core.studies.vec_study import joint_measurements
 from tests.support.urdf_arms import chain_measurements
 
 
@@ -68,48 +70,66 @@ def test_a_planted_stiffening_is_not_entered_as_a_compliance():
     assert all(v >= 0 for v in entered.values()), entered
 
 
-def _far_checks(mset, n_fid: int):
-    """The same rows with new roles: the fiducials the n_fid rows nearest one corner of the data (sensor frame), the
-    checks the farthest third; registration rows kept."""
-    s = np.asarray(mset.sensor)
-    roles = np.array(mset.roles, dtype=object)
-    free = np.flatnonzero(np.isin(roles, ("fiducial", "check")))
-    corner = s[free].min(axis=0)
-    order = free[np.argsort(np.linalg.norm(s[free] - corner, axis=1))]
-    roles[free] = "target"  # not used
-    roles[order[:n_fid]] = "fiducial"
-    roles[order[-len(order) // 3 :]] = "check"
-    keep = np.flatnonzero(roles != "target")
-    pick = lambda a: np.asarray(a)[keep]
-    return replace(
-        mset,
-        ids=tuple(pick(mset.ids)),
-        roles=tuple(pick(roles)),
-        sensor=pick(mset.sensor),
-        robot=pick(mset.robot),
-        time=pick(mset.time),
-        lines=tuple(0 for _ in keep),
-        extra={k: tuple(pick(v)) for k, v in mset.extra.items()},
-    )
+def _within(res, factor: float = 1.1) -> bool:
+    rm = res["rmst_mm"]
+    return rm[res["recommended"]] <= factor * min(rm.values())
 
 
-@pytest.mark.parametrize("seed", [41, 42])
-def test_checks_far_beyond_the_fiducials_get_no_correction_recommended(tmp_path, seed):
-    chain = load_urdf("lift_arm")
-    full = chain_measurements(chain, seed, n_fid=60, n_chk=60, n_tgt=0, noise_mm=0.05, kin_size=1.0, arm_seed=3)
-    inside = compare(full, urdf="lift_arm")
-    assert inside["extrapolated_share"] <= 0.5
-    assert inside["recommendation_basis"].startswith("the one-standard-error rule")
-    far = _far_checks(full, 20)
-    res = compare(far, urdf="lift_arm")
-    assert res["extrapolated_share"] > 0.5
-    assert res["recommended"] == "rigid"
-    assert "outside the fiducials' hull" in res["recommendation_basis"]
-    # an arm identified on data covering its configurations and reused: vec may be chosen there
+@pytest.mark.parametrize("robot", ["lift_arm", "ur5"])
+def test_checks_far_beyond_hundreds_of_poses_get_the_arm_that_extrapolates(tmp_path, robot):
+    """Hundreds of poses, the checks the farthest third of them, the fiducials the 300 nearest one corner, an arm
+    whose errors are kinematic (the shape of the hidden real arms' files): the identified arm carries to the checks
+    and the buffered leave-out folds see it (issue 38: the former distance rule recommended rigid, 10-18x worse than
+    VEC there). Chosen without the checks, the recommendation is within 10 % of the best at them."""
+    if robot == "ur5":
+        full, kw = joint_measurements(1, n_fid=400, n_chk=200, n_tgt=0), {"robot": "ur5", "tool": 100.0}
+    else:
+        chain = load_urdf("lift_arm")
+        full = chain_measurements(chain, 1, n_fid=400, n_chk=200, n_tgt=0, noise_mm=0.05, kin_size=1.0, arm_seed=3)
+        kw = {"urdf": "lift_arm"}
+    far = far_checks(full, 300)
+    res = compare(far, **kw)
+    assert res["extrapolated_share"] > 0.5 and res["extrapolation_folds"] >= 10
+    assert "folds that leave out every fiducial" in res["recommendation_basis"]
+    assert _within(res), (res["recommended"], res["rmst_mm"], res["extrapolation_cv_rmst_mm"])
+    assert res["rmst_mm"]["vec"] < res["rmst_mm"]["rigid"] / 3, res["rmst_mm"]
+    if robot == "ur5":
+        return
+    # an arm identified on data covering its configurations and reused: only the transforms are fitted
     model = tmp_path / "arm.json"
-    compare(full, urdf="lift_arm", save_model=str(model))
-    reused = compare(far, urdf="lift_arm", model=load_model(str(model)))
+    compare(full, **kw, save_model=str(model))
+    reused = compare(far_checks(full, 20), **kw, model=load_model(str(model)))
     assert reused["extrapolated_share"] > 0.5
-    # the arm's errors are several times the noise: the saved arm wins over rigid, at the fiducials and the checks
-    assert reused["recommended"] == "vec", reused["cv_rmst_mm"]
-    assert reused["rmst_mm"]["vec"] < reused["rmst_mm"]["rigid"] / 3, reused["rmst_mm"]
+    assert reused["recommended"] in ("vec", "vec_rrbc"), (reused["cv_rmst_mm"], reused["extrapolation_cv_rmst_mm"])
+    assert _within(reused), reused["rmst_mm"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [3, 4])
+def test_the_recommendation_beyond_the_fiducials_follows_what_the_error_is(seed):
+    """Hundreds of poses, the checks the farthest third: with a smooth sensor field alone nothing learnt from the
+    fiducials carries there and rigid (or what is within 10 % of the best) is recommended; with kinematic errors
+    alone VEC is; both within 10 % of the best at the checks, chosen without them."""
+    chain = load_urdf("lift_arm")
+    for kin, field in ((0.0, 1.0), (1.0, 0.0)):
+        full = chain_measurements(
+            chain, seed, n_fid=150, n_chk=80, n_tgt=0, noise_mm=0.05, kin_size=kin, field_mm=field
+        )
+        res = compare(far_checks(full, 100), urdf="lift_arm")
+        assert res["extrapolated_share"] > 0.5 and res["extrapolation_folds"] >= 2
+        assert _within(res), (kin, field, res["recommended"], res["rmst_mm"], res["extrapolation_cv_rmst_mm"])
+
+
+def test_checks_off_the_plane_of_coplanar_fiducials_get_no_interpolated_correction():
+    """A board of coplanar fiducials and checks far off its plane (the stationing data's shape): no held-out
+    fiducial can test a direction the fiducials do not span, so no correction interpolated from them (rrbc,
+    vec_rrbc) is recommended there; the arm's model, a function of the joints, may be (chosen against rigid)."""
+    chain = load_urdf("lift_arm")
+    full = chain_measurements(chain, 7, n_fid=4000, n_chk=0, n_tgt=0, noise_mm=0.05, kin_size=1.0, field_mm=0.5)
+    board = board_fiducials(full)
+    n_fid = sum(r == "fiducial" for r in board.roles)
+    assert 15 <= n_fid <= 120, n_fid
+    res = compare(board, urdf="lift_arm")
+    assert res["extrapolated_share"] > 0.5 and res["extrapolation_folds"] == 0
+    assert res["recommended"] in ("rigid", "vec")
+    assert "off the fiducials' plane" in res["recommendation_basis"]
