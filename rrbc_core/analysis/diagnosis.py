@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from rrbc_core.analysis.diagnosis_arm import MIN_POINTS as ARM_MIN_POINTS
-from rrbc_core.analysis.diagnosis_arm import ArmModel, arm_columns
+from rrbc_core.analysis.diagnosis_arm import ArmModel, arm_columns, arm_untested_hint
 from rrbc_core.analysis.diagnosis_field import fit_field, krige_outliers, noise_beside_field
 from rrbc_core.analysis.diagnosis_stats import (
     noise_cov,
@@ -318,6 +318,10 @@ def diagnose(
                 "what the arm's columns cannot follow: its linear part is reported as affine/scale and the rest, "
                 "absorbed by the arm's columns, may go unnamed"
             )
+
+    hint = arm_untested_hint(mset, arm is not None, effects)
+    if hint is not None:
+        limits.append(hint)
 
     # bias, and RRBC on the file as given: rrbc correct's own figure on its check rows, else leave-one-out
     bias = float(np.sqrt(max(0.0, float(np.mean(np.sum(resid**2, axis=1))) - noise_pp)))

@@ -18,6 +18,7 @@ depends on the configuration (the same place reached two ways disagreeing) has n
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -141,3 +142,45 @@ def judge_compliance(y, x_acc, kfull, load_cols, a_each: float, tests: dict, bes
         p_cf = beside_field(x0, cols)
         tests["compliance_beside_field"] = p_cf
     return p_c, p_cf, cols, c_map, q_c, nu_c, f_c, rss_a, rss_c
+
+
+#: a column name that looks like a joint value: q1, j_2, joint3, axis_4, a5, theta6, or any name with "joint"
+JOINT_LIKE = re.compile(r"^(q|j|a|axis|joint|theta)[ _-]?\d+$|joint", re.IGNORECASE)
+#: the largest scale error (ppm) we take a laser tracker, total station or CMM to have: their distance errors are a
+#: few ppm of the range (docs/uncertainty.md, "Instruments"; docs/cli.md, `rrbc diagnose`)
+INSTRUMENT_SCALE_PPM = 10.0
+
+
+def joint_like_columns(mset: MeasurementSet) -> list[str]:
+    """The file's extra columns whose names look like joint values (`JOINT_LIKE`)."""
+    return [c for c in mset.extra if JOINT_LIKE.search(str(c).strip())]
+
+
+def arm_untested_hint(mset: MeasurementSet, arm_tested: bool, effects: dict) -> str | None:
+    """A limit for a file with joint columns whose arm was not tested (no model given, or the default UR5 does not
+    describe it): the sensor effects named may be the arm's, and how to give its model; with a named `scale`
+    beyond `INSTRUMENT_SCALE_PPM`, that it is more than a measuring instrument's. None when nothing applies."""
+    if arm_tested:
+        return None
+    cols = joint_like_columns(mset)
+    if not cols:
+        return None
+    sensor = [n for n in ("scale", "affine", "smooth_field") if n in effects]
+    text = (
+        f"the file has joint columns ({', '.join(cols[:8])}{', ...' if len(cols) > 8 else ''}) but no arm model was "
+        "tested: an arm's kinematic or load errors show in the sensor frame as a scale, an affine term or a smooth "
+        "field"
+    )
+    if sensor:
+        text += f", so what is named here ({', '.join(sensor)}) may be the arm's"
+    if "scale" in effects:
+        ppm = float(effects["scale"].parameters.get("ppm", 0.0))
+        if abs(ppm) > INSTRUMENT_SCALE_PPM:
+            text += (
+                f"; a scale of {ppm:+.0f} ppm is more than a laser tracker, total station or CMM has (a few ppm), so "
+                "unless the sensor is a camera the arm is the likelier cause"
+            )
+    return (
+        text + "; give the arm's model (--robot ur5|ur10, or --urdf ROBOT.urdf --tip LINK) and its tool (--tool) "
+        "to test it, and rrbc calibrate to correct it"
+    )
