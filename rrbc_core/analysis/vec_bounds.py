@@ -1,7 +1,7 @@
 """Per-point 95 % bounds for `rrbc calibrate`'s four methods (rigid, RRBC, VEC, VEC+RRBC) at its targets and checks:
 the same budget as `rrbc correct`'s (`correction.bounds`, docs/uncertainty.md) with the arm model's part.
 
-- *instrument*: one row's noise per axis, from repeats within a station (`correction.bounds.estimate_noise`), else
+- *instrument*: one row's noise per axis, from repeats within a station (`correction.bound_inputs.estimate_noise`), else
   the smaller of two upper bounds: the stations' fiducials' nearest-neighbour differences (averaged) and the arm
   calibration's residual per axis;
 - *registration* (rigid, RRBC): each station's least-squares transform's uncertainty at the point, for RRBC less
@@ -21,9 +21,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rrbc_core.correction.bound_inputs import estimate_noise
 from rrbc_core.correction.bounds import (
     assemble_bounds,
-    estimate_noise,
     no_bounds,
     point_registration_cov,
     profile_from_squares,

@@ -214,7 +214,7 @@ def correct_measurements(
         The registration strategy and interpolation (default: least squares + IDW, k = 4, p = 2).
     instrument : Instrument, optional
         The sensor's and robot's reading noise for the per-point bounds (`CorrectionResult.bounds`; default:
-        estimated from the data, `correction.bounds.estimate_noise`).
+        estimated from the data, `correction.bound_inputs.estimate_noise`).
 
     Returns
     -------

@@ -31,14 +31,18 @@ import math
 import os
 import re
 from array import array
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from os import PathLike
 
 import numpy as np
 
 from rrbc_core.errors import InputError, excerpt
-from rrbc_core.geometry.points import COINCIDENT_MM, COLLINEAR_RATIO, check_registration_points, spread_ratios
+from rrbc_core.geometry.points import check_registration_points
+from rrbc_core.io.measurement_messages import MAX_LISTED
+from rrbc_core.io.measurement_messages import error as _error
+from rrbc_core.io.measurement_messages import listed as _listed
+from rrbc_core.io.measurement_messages import registration_error as _registration_error
 
 __all__ = [
     "ROLES",
@@ -73,35 +77,6 @@ _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)  # 
 COORDINATE_LIMIT_MM = 1e9  # |coordinate| at most this (a km-scale cell is 1e6 mm): larger is a unit or format slip
 FILE_LIMIT_BYTES = 512 * 2**20  # a measurement file is read only up to this size (about 5 million rows)
 TIME_LIMIT_S = 1e12  # |time| at most this (30 000 years of seconds; Unix times are ~1.7e9)
-_MAX_LISTED = 8
-
-
-# --------------------------------------------------------------------------------------------------- messages
-
-
-def _message(source: str, line: int | None, fieldname: str | None, text: str) -> str:
-    parts = [str(source)]
-    if line:
-        parts.append(f"line {line}")
-    if fieldname:
-        parts.append(f"field {fieldname}")
-    parts.append(text)
-    msg = ": ".join(parts)
-    # One line, always: anything user-supplied is shown with repr(), but be safe about the rest.
-    return msg.replace("\r", "\\r").replace("\n", "\\n")
-
-
-def _error(source: str, line: int | None, fieldname: str | None, text: str) -> InputError:
-    return InputError(_message(source, line, fieldname, text))
-
-
-def _listed(names: Sequence[str]) -> str:
-    shown = ", ".join(repr(n) for n in names[:_MAX_LISTED])
-    if len(names) > _MAX_LISTED:
-        shown += f", ... ({len(names)} in all)"
-    return shown
-
-
 # ------------------------------------------------------------------------------------------------ data types
 
 
@@ -453,7 +428,7 @@ def _check_header(header: list[str], line: int, source: str) -> int:
                 hint = f" (found {excerpt(near[0])!r}: column names are case-sensitive)"
             elif name in ROBOT_COLUMNS:
                 hint = " (needed for roles registration, fiducial, both, check)"
-            shown = excerpt(", ".join(h[:20] for h in header[:_MAX_LISTED]), 80)
+            shown = excerpt(", ".join(h[:20] for h in header[:MAX_LISTED]), 80)
             raise _error(source, line, name, f"required column missing{hint}; the header is: {shown}")
     return len(header)
 
@@ -592,37 +567,3 @@ def _validate_groups(mset: MeasurementSet, header_line: int) -> None:
         station = select_rows(mset, rows, f"{mset.source}, group {name!r}")  # as io.groups.group_label names it
         station = replace(station, extra={k: v for k, v in station.extra.items() if k != GROUP_COLUMN})
         _validate(station, header_line)
-
-
-def _registration_error(source, frame, reg: PointGroup, pts, last_line, exc) -> InputError:
-    fieldname = f"{frame}_x/y/z"
-    d = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)
-    i, j = np.triu_indices(len(pts), k=1)
-    close = d[i, j] < COINCIDENT_MM
-    if np.any(close):
-        a, b = int(i[close][0]), int(j[close][0])
-        la, lb = reg.first_line[a], reg.first_line[b]
-        where_a = f" (line {la})" if la else ""
-        where_b = f" (line {lb})" if lb else ""
-        return _error(
-            source,
-            lb or last_line,
-            fieldname,
-            f"registration points {reg.ids[b]!r}{where_b} and {reg.ids[a]!r}{where_a} coincide in the {frame} frame "
-            f"(closer than {COINCIDENT_MM} mm); use distinct, well-spread registration points",
-        )
-    r2, _ = spread_ratios(pts)
-    if r2 < COLLINEAR_RATIO:
-        return _error(
-            source,
-            last_line,
-            fieldname,
-            f"registration points {_listed(reg.ids)} are collinear or nearly so in the {frame} frame "
-            f"(spread ratio sigma2/sigma1 = {r2:.2g} < {COLLINEAR_RATIO}): the rotation about their line is "
-            "undetermined; add a registration point off that line",
-        )
-    text = str(exc).replace("\n", " ")
-    return _error(source, last_line, fieldname, text)
-
-
-# --------------------------------------------------------------------------------------------------- writing

@@ -14,7 +14,8 @@ from os import PathLike
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.io.measurements import ROBOT_COLUMNS, SENSOR_COLUMNS, MeasurementSet, _error, validate
+from rrbc_core.io.measurement_messages import error as _error
+from rrbc_core.io.measurements import ROBOT_COLUMNS, SENSOR_COLUMNS, MeasurementSet, validate
 
 
 def _cell(value: float) -> str:

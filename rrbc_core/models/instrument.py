@@ -14,7 +14,7 @@ The robot's reading of a point (where its controller says the tool is; where it 
 per-axis σ, `robot_mm` (its repeatability). The presets' figures are makers' published specifications read as in
 docs/uncertainty.md (a maximum permissible error taken as two standard deviations); every figure can be given
 instead (`with_overrides`), and without an instrument the noise is estimated from the data
-(`correction.bounds.estimate_noise`). Units mm, µrad, ppm.
+(`correction.bound_inputs.estimate_noise`). Units mm, µrad, ppm.
 """
 
 from __future__ import annotations
