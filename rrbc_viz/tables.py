@@ -53,14 +53,17 @@ def summary(ev: Evaluation, kind: str) -> str:
 def headline(ev: Evaluation, kind: str) -> str:
     """The readout at the top of the panel, above the tabs: rigid → RRBC, the RMS error over what is scored (the scene's
     targets against their truth, a measurement file's check rows), from the same summary as `summary`; "" when
-    nothing is scored. HTML (large type)."""
+    nothing is scored. RRBC's figure is green only for a gain the scored points show, red for a loss they show and
+    grey otherwise (`correction.check_statistics.gain_test`, the decision of rrbc diagnose's recommendation). HTML
+    (large type)."""
     sm = ev.summary
     rig, rr = sm.get("rmst_rigid_mm"), sm.get("rmst_rrbc_mm")
     if rig is None or rr is None or not np.isfinite(rig) or not np.isfinite(rr):
         return ""
     what = "targets" if kind == "scene" else "check rows"
     change = f"{100.0 * (rr / rig - 1.0):+.0f} %" if rig > 0 else ""
-    colour = "#1a7f37" if rr < rig else "#b42318"
+    # green for a gain the scored points show, red for a loss they show, grey when they cannot tell (gain_test)
+    colour = {"gain": "#1a7f37", "loss": "#b42318"}.get(sm.get("gain") or "", "#555555")
     return (
         '<div style="padding:0 0.75rem"><div style="font-size:1.25em;line-height:1.3;margin:2px 0 0 0">'
         f'rigid <b>{_mm(rig)}</b> → RRBC <b style="color:{colour}">{_mm(rr)}</b> mm '

@@ -42,7 +42,7 @@ from rrbc_core.analysis.diagnosis_stats import (
 )
 from rrbc_core.analysis.diagnosis_systematic import Effect, fmt_p, row_systematic, systematic, systematic_at
 from rrbc_core.analysis.diagnosis_verdict import rrbc_verdict
-from rrbc_core.correction.check_statistics import CheckStatistics
+from rrbc_core.correction.check_statistics import CheckStatistics, GainTest
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.registration.strategies import least_squares
@@ -79,6 +79,7 @@ class Diagnosis:
     checks_rms_mm: tuple[float, float] | None = None  # rrbc correct's check RMST (rigid, RRBC), None without checks
     check_statistics: CheckStatistics | None = None  # rrbc correct's before/after statistics of the checks
     checks_extrapolation: str | None = None  # the checks outside the fiducials' hull / off their plane, in words
+    gain: GainTest | None = None  # whether the basis's points show RRBC's change (rrbc_recommended needs a gain)
 
     @property
     def assumes(self) -> str:
@@ -132,6 +133,7 @@ class Diagnosis:
                 ),
                 "assumes": self.assumes,
                 "checks_extrapolation": self.checks_extrapolation,
+                "gain": None if self.gain is None else self.gain.to_json(),
             },
             "n_points": int(self.n_points),
             "alpha": float(self.alpha),
@@ -346,4 +348,5 @@ def diagnose(
         checks_rms_mm=(verdict.rms_rigid_mm, verdict.rms_rrbc_mm) if verdict.basis == "checks" else None,
         check_statistics=verdict.statistics,
         checks_extrapolation=verdict.checks_extrapolation,
+        gain=verdict.gain,
     )

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rrbc_core.analysis.diagnosis import Diagnosis, diagnose
+from rrbc_core.correction.check_statistics import GainTest, gain_from_differences, gain_test
 from rrbc_core.correction.stations import StationsResult, correct_stations
 from rrbc_core.errors import InputError
 from rrbc_core.io.groups import has_groups, split_groups
@@ -41,7 +42,7 @@ class StationsDiagnosis:
 
     def rrbc(self) -> dict:
         """The pooled verdict: ``basis`` ("checks" or "leave-one-out"), ``rms_rigid_mm``, ``rms_rrbc_mm``,
-        ``expected_rmst_change``, ``recommended``."""
+        ``expected_rmst_change``, ``recommended`` (a lower RMS the pooled points show: `gain_test`) and ``gain`` (the test)."""
         s = self.pooled.summary() if self.pooled is not None else None
         if s is not None and s["rmst_rigid_mm"] is not None:
             basis, rigid, rrbc = "checks", float(s["rmst_rigid_mm"]), float(s["rmst_rrbc_mm"])
@@ -51,12 +52,19 @@ class StationsDiagnosis:
             rrbc = float(np.sqrt(np.sum(n * np.array([d.loo_rms_rrbc_mm for d in self.diagnoses]) ** 2) / n.sum()))
             basis = "leave-one-out"
         change = rrbc / rigid - 1.0 if rigid > 0 else 0.0
+        stats = self.pooled.statistics() if basis == "checks" and self.pooled is not None else None
+        if stats is not None:
+            gain = gain_test(stats.error_rigid_mm, stats.error_rrbc_mm)
+        else:  # each station's own leave-one-out differences, pooled
+            diffs = [d.gain.differences for d in self.diagnoses if d.gain is not None]
+            gain = gain_from_differences(np.concatenate(diffs) if diffs else np.zeros(0), change)
         return {
             "basis": basis,
             "rms_rigid_mm": rigid,
             "rms_rrbc_mm": rrbc,
             "expected_rmst_change": change,
-            "recommended": bool(rrbc < rigid),
+            "recommended": bool(rrbc < rigid and gain.verdict == "gain"),
+            "gain": gain.to_json(),
         }
 
     def to_json(self) -> dict:
@@ -101,6 +109,9 @@ class StationsDiagnosis:
             f"RRBC {verdict}: RMST change {100 * v['expected_rmst_change']:+.1f} % {basis} "
             f"(rigid {v['rms_rigid_mm']:.4g} mm, RRBC {v['rms_rrbc_mm']:.4g} mm)"
         )
+        g = v["gain"]
+        test = GainTest(v["expected_rmst_change"], g["p_gain"], g["p_loss"], g["n"], g["alpha"])
+        out.append(f"  {test.words()}" + (": not enough to recommend it" if test.verdict != "gain" else ""))
         return out
 
 

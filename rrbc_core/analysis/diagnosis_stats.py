@@ -388,6 +388,13 @@ def loo(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
     others (sensor frame), with the registration of the others; the RMS is taken over the points `evaluate` (N,)
     bool (default all: a point left out of the RMS still takes part in the others' fits). Returns the two RMS
     values (mm)."""
+    e_rigid, e_rrbc = loo_errors(sensor, robot, weights, k, power, evaluate)
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))
+    return rms(e_rigid), rms(e_rrbc)
+
+
+def loo_errors(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
+    """`loo`'s 3-D errors (mm) at the points `evaluate` (default all): (rigid (E,), RRBC (E,))."""
     n = len(sensor)
     ev = np.ones(n, bool) if evaluate is None else np.asarray(evaluate, bool)
     kk = min(k, n - 1)
@@ -407,8 +414,7 @@ def loo(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=None):
         w = np.where(on.any(axis=1, keepdims=True), on.astype(float), 1.0 / dj**power)
     c = np.einsum("nk,nkc->nc", w, corr) / w.sum(axis=1, keepdims=True)
     e_rrbc = e_rigid - c
-    rms = lambda e: float(np.sqrt(np.mean(np.sum(e[ev] ** 2, axis=1))))
-    return rms(e_rigid), rms(e_rrbc)
+    return np.linalg.norm(e_rigid[ev], axis=1), np.linalg.norm(e_rrbc[ev], axis=1)
 
 
 def noise_cov(

@@ -50,6 +50,8 @@ def diagnosis_lines(dg: Diagnosis) -> list[str]:
         )
     else:
         lines.append(f"RRBC {verdict}: expected RMST change {_pct(dg.expected_rmst_change)} (leave-one-out)")
+    if dg.gain is not None:
+        lines.append(f"  {dg.gain.words()}" + (": not enough to recommend it" if dg.gain.verdict != "gain" else ""))
     if dg.expected_change_without_outliers is not None:
         lines.append(f"  with the outliers removed from the file: {_pct(dg.expected_change_without_outliers)}")
     lines.append(f"  {'measured' if dg.checks_rms_mm is not None else 'predicts'}: {dg.assumes}")

@@ -12,6 +12,10 @@ Two bases, chosen by what the file holds:
   noise is added to both errors and dilutes the difference).
 
 With outliers found, the same figure is also computed with the outliers' rows removed from the file.
+
+RRBC is recommended only for a gain the points show (`correction.check_statistics.gain_test` at its level,
+the one decision the app's headline colour also uses): a change of a few % over checks that cannot tell it from
+nothing is "not recommended", with the test's words.
 """
 
 from __future__ import annotations
@@ -20,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rrbc_core.analysis.diagnosis_stats import loo
-from rrbc_core.correction.check_statistics import CheckStatistics
+from rrbc_core.analysis.diagnosis_stats import loo_errors
+from rrbc_core.correction.check_statistics import GAIN_ALPHA, CheckStatistics, GainTest, gain_test
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.correction.warnings import Corrected, extrapolation
 from rrbc_core.errors import InputError
@@ -44,6 +48,8 @@ class Verdict:
     #: how many checks lie outside the fiducials' hull and how far off their plane (`correction.warnings.extrapolation`),
     #: None when all are inside or there are no scored checks
     checks_extrapolation: str | None = None
+    #: whether the basis's points show the change (`gain_test`); None: not tested (no points)
+    gain: GainTest | None = None
 
     @property
     def change(self) -> float:
@@ -51,7 +57,8 @@ class Verdict:
 
     @property
     def recommended(self) -> bool:
-        return bool(self.rms_rrbc_mm < self.rms_rigid_mm)
+        """RRBC lowers the RMS and the points show it (`gain_test`)."""
+        return bool(self.rms_rrbc_mm < self.rms_rigid_mm and self.gain is not None and self.gain.verdict == "gain")
 
 
 def _check_rms(mset: MeasurementSet) -> tuple[float, float, CheckStatistics, str | None] | None:
@@ -87,6 +94,7 @@ def rrbc_verdict(
     count: np.ndarray,
     outlier_ids: tuple[str, ...] = (),
     ids: tuple[str, ...] = (),
+    alpha: float = GAIN_ALPHA,
 ) -> Verdict:
     """RRBC's verdict on the file as given: on its check rows when it has any, else by leave-one-out.
 
@@ -103,6 +111,8 @@ def rrbc_verdict(
         ``without_outliers``.
     ids : tuple of str
         The paired points' ids (length N).
+    alpha : float
+        The level at which the gain must be shown (`gain_test`).
 
     Returns
     -------
@@ -110,16 +120,21 @@ def rrbc_verdict(
     """
     drop = set(outlier_ids)
     good = np.array([pid not in drop for pid in ids], bool)
-    loo_rigid, loo_rrbc = (float(v) for v in loo(sensor, robot, count, evaluate=good))
+    e_rigid, e_rrbc = loo_errors(sensor, robot, count, evaluate=good)
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))
+    loo_rigid, loo_rrbc = rms(e_rigid), rms(e_rrbc)
     checks = _check_rms(mset)
     if checks is not None:
         without = None
         if drop:
             w = _check_rms(_without_ids(mset, drop))
             without = (w[1] / w[0] - 1.0 if w[0] > 0 else 0.0) if w is not None else None
-        return Verdict("checks", checks[0], checks[1], without, loo_rigid, loo_rrbc, checks[2], checks[3])
+        stats = checks[2]
+        gain = gain_test(stats.error_rigid_mm, stats.error_rrbc_mm, alpha)
+        return Verdict("checks", checks[0], checks[1], without, loo_rigid, loo_rrbc, stats, checks[3], gain)
     without = None
     if drop:
-        r2, f2 = loo(sensor[good], robot[good], count[good])
+        r2, f2 = (rms(e) for e in loo_errors(sensor[good], robot[good], count[good]))
         without = f2 / r2 - 1.0 if r2 > 0 else 0.0
-    return Verdict("leave-one-out", loo_rigid, loo_rrbc, without, loo_rigid, loo_rrbc)
+    gain = gain_test(e_rigid, e_rrbc, alpha)
+    return Verdict("leave-one-out", loo_rigid, loo_rrbc, without, loo_rigid, loo_rrbc, gain=gain)

@@ -7,7 +7,12 @@ every place shows the same numbers. For C check points with robot-frame truth t_
 - the 3-D error |e_c|: mean, RMS, 95th percentile and maximum, rigid and RRBC, with RRBC's change in % of rigid;
 - the horizontal error |(e_x, e_y)| and the vertical error |e_z| in the robot frame (z is the robot base's up
   axis): their 95th percentiles — the figure stationing benchmarks publish;
-- the checks where RRBC is worse than rigid (|e_rrbc| > |e_rigid|), by id.
+- the checks where RRBC is worse than rigid (|e_rrbc| > |e_rigid|), by id;
+- whether the points show RRBC's change at all (`gain_test`): a one-sided paired t-test of the squared errors
+  d_c = |e_rigid,c|² − |e_rrbc,c|² (the RMS is their mean's square root), at `GAIN_ALPHA`. A gain is "shown" only
+  when the mean of d is above zero at that level, a loss likewise; else "unclear". `rrbc diagnose`'s recommendation
+  (its `--alpha` is the level of the effects it names, not of this) and the app's headline colour are this one
+  decision.
 
 Percentiles are numpy's default (linear interpolation between order statistics), stated so that anyone can
 reproduce them.
@@ -16,13 +21,24 @@ reproduce them.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from rrbc_core.errors import InputError
 
-__all__ = ["STATISTICS", "CheckStatistics", "check_statistics"]
+__all__ = [
+    "GAIN_ALPHA",
+    "STATISTICS",
+    "CheckStatistics",
+    "GainTest",
+    "check_statistics",
+    "gain_from_differences",
+    "gain_test",
+]
+
+#: the level at which RRBC's change of the mean squared error counts as shown (`gain_test`)
+GAIN_ALPHA = 0.05
 
 #: The statistics reported, in order: name -> (label, what it is of).
 STATISTICS = {
@@ -140,3 +156,72 @@ def check_statistics(ids: Sequence[str], robot_rigid, robot_rrbc, truth) -> Chec
     d_rigid, d_rrbc = np.linalg.norm(e_rigid, axis=1), np.linalg.norm(e_rrbc, axis=1)
     worse = tuple(str(pid) for pid, x, y in zip(ids, d_rigid, d_rrbc) if y > x)
     return CheckStatistics(tuple(str(i) for i in ids), _stats(e_rigid), _stats(e_rrbc), d_rigid, d_rrbc, worse)
+
+
+@dataclass(frozen=True)
+class GainTest:
+    """Whether the points show RRBC's change (module docstring): `change` = RMS RRBC / RMS rigid − 1, the one-sided
+    p-values of a gain and of a loss, the number of points and the level; `verdict` "gain", "loss" or "unclear"."""
+
+    change: float
+    p_gain: float
+    p_loss: float
+    n: int
+    alpha: float
+    #: (n,) the tested differences rigid² − rrbc², mm² (pooling tests: `gain_from_differences`)
+    differences: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False, repr=False)
+
+    @property
+    def verdict(self) -> str:
+        if self.p_gain < self.alpha:
+            return "gain"
+        if self.p_loss < self.alpha:
+            return "loss"
+        return "unclear"
+
+    def words(self) -> str:
+        """The decision in words, e.g. "a gain these 40 points show (paired test of the squared errors, p 3e-05)"."""
+        test = "paired test of the squared errors"
+        if self.verdict == "unclear":
+            p = min(self.p_gain, self.p_loss)
+            return f"these {self.n} points do not show the change at the {self.alpha:g} level ({test}, p {p:.2g})"
+        p = self.p_gain if self.verdict == "gain" else self.p_loss
+        return f"a {self.verdict} these {self.n} points show ({test}, p {p:.2g})"
+
+    def to_json(self) -> dict:
+        return {
+            "verdict": self.verdict,
+            "p_gain": self.p_gain,
+            "p_loss": self.p_loss,
+            "n": self.n,
+            "alpha": self.alpha,
+        }
+
+
+def gain_test(error_rigid_mm, error_rrbc_mm, alpha: float = GAIN_ALPHA) -> GainTest:
+    """`GainTest` of the 3-D errors (C,) mm of the same points, rigid and RRBC (non-finite pairs left out): a
+    one-sided paired t-test of d = rigid² − rrbc² each way. Fewer than 3 points, or no spread in d: p = 1 both ways
+    unless every d has one sign and they are not all zero (then that side's p is 0)."""
+    a, b = np.asarray(error_rigid_mm, float), np.asarray(error_rrbc_mm, float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    a, b = a[ok], b[ok]
+    rms = lambda e: float(np.sqrt(np.mean(e**2))) if len(e) else 0.0
+    change = rms(b) / rms(a) - 1.0 if rms(a) > 0 else 0.0
+    return gain_from_differences(a**2 - b**2, change, alpha)
+
+
+def gain_from_differences(d, change: float, alpha: float = GAIN_ALPHA) -> GainTest:
+    """`GainTest` of the squared-error differences d (n,) = rigid² − rrbc², mm² (`gain_test`; pooled over stations
+    by concatenating theirs), RRBC's RMS `change` given."""
+    from scipy.stats import ttest_1samp
+
+    d = np.asarray(d, float)
+    n = int(len(d))
+    if n < 3:
+        return GainTest(change, 1.0, 1.0, n, float(alpha), d)
+    if float(np.std(d)) <= 1e-15 * max(float(np.max(np.abs(d))), 1e-300):
+        mean = float(np.mean(d))
+        return GainTest(change, 0.0 if mean > 0 else 1.0, 0.0 if mean < 0 else 1.0, n, float(alpha), d)
+    p_gain = float(ttest_1samp(d, 0.0, alternative="greater").pvalue)
+    p_loss = float(ttest_1samp(d, 0.0, alternative="less").pvalue)
+    return GainTest(change, p_gain, p_loss, n, float(alpha), d)

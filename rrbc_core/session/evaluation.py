@@ -13,6 +13,7 @@ import numpy as np
 from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
 from rrbc_core.correction.bounds import Bounds, BoundsBasis, PointBounds, bound_points, bounds_basis
+from rrbc_core.correction.check_statistics import gain_test
 from rrbc_core.correction.rrbc import correct_points, fiducial_corrections
 from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
@@ -463,6 +464,8 @@ def evaluate(
         "rmst_rrbc_mm": metrics.rmst(targets.error_rrbc[known]) if np.any(known) else None,
         "max_rigid_mm": float(targets.error_rigid[known].max()) if np.any(known) else None,
         "max_rrbc_mm": float(targets.error_rrbc[known].max()) if np.any(known) else None,
+        # whether the scored points show RRBC's change (the decision rrbc diagnose's recommendation makes)
+        "gain": gain_test(targets.error_rigid[known], targets.error_rrbc[known]).verdict if np.any(known) else None,
         "extrapolated": [pid for pid, e in zip(tg.ids, targets.extrapolated) if e],
         "fiducials_used": int(np.count_nonzero(included)),
     }

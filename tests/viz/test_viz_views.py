@@ -6,6 +6,7 @@ import re
 import numpy as np
 import pytest
 
+from rrbc_core.correction.check_statistics import gain_test
 from rrbc_core.errors import InputError
 from rrbc_core.session import figures
 from rrbc_viz import colors, selection_card, teaching
@@ -252,6 +253,12 @@ def test_the_headline_is_the_summarys_rigid_to_rrbc(app, measured):
         assert f"RMS error over {sm['scored']} {what}" in head and a.controls.headline.visible
         rig, rr = (float(x) for x in re.findall(r"<b[^>]*>([0-9.]+)</b>", head))
         assert f"{rig:.3f} mm rigid → {rr:.3f} mm RRBC" in a.controls.explore.summary.content
+        # its colour is the core's decision on the same points (gain_test: rrbc diagnose's recommendation)
+        t = a.session.last.targets
+        known = np.isfinite(t.error_rigid)
+        verdict = gain_test(t.error_rigid[known], t.error_rrbc[known]).verdict
+        colour = {"gain": "#1a7f37", "loss": "#b42318"}.get(verdict, "#555555")
+        assert sm["gain"] == verdict and f'color:{colour}">{rr:.3f}' in head, (verdict, head)
 
 
 def test_the_bullseye_keeps_its_scale_during_a_drag_and_refits_after(app):
