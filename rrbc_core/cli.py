@@ -49,6 +49,13 @@ def build_parser() -> argparse.ArgumentParser:
     add_method_options(c)
     add_instrument_options(c)
     c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.add_argument(
+        "--out",
+        default=None,
+        metavar="CORRECTED.csv",
+        help="also write the corrected targets and checks (id, role, robot_x/y/z the robot is sent to, bound95_mm, "
+        "extrapolated; docs/cli.md) to this CSV",
+    )
     c.set_defaults(run=_cmd_correct)
 
     g = sub.add_parser(
@@ -184,13 +191,23 @@ def _cmd_correct(args) -> str:
     from rrbc_core.io.measurements import read_measurements
     from rrbc_core.methods import MethodOptions, method_flags
 
+    if args.out is not None:
+        from rrbc_core.io.measurements_write import output_path
+
+        output_path(args.out)  # a bad --out is said before the run
     mset = read_measurements(args.measurements)
     flags = {flag: getattr(args, option_dest(flag)) for flag in method_flags() if flag != "seed"}
     opts = MethodOptions.named(args.registration, args.interpolation, seed=args.seed, **flags)
     result = correct_stations(mset, opts, instrument_of(args))
+    written = ""
+    if args.out is not None:
+        from rrbc_core.io.corrected_write import write_corrected
+
+        n = write_corrected(args.out, result.to_json())
+        written = f"wrote {n} corrected targets and checks to {args.out}\n"
     if args.json:
         return json.dumps(result.to_json(), allow_nan=False) + "\n"
-    return stations_text(result) if isinstance(result, StationsResult) else correct_text(result)
+    return (stations_text(result) if isinstance(result, StationsResult) else correct_text(result)) + written
 
 
 def _cmd_diagnose(args) -> str:

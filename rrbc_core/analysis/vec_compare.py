@@ -37,6 +37,7 @@ from rrbc_core.analysis.extrapolation_cv import beyond_points, extrapolation_fol
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
 from rrbc_core.errors import InputError
+from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.io.groups import GROUP_COLUMN, group_names, has_groups
 from rrbc_core.io.joints import joint_values
 from rrbc_core.io.measurements import MeasurementSet
@@ -221,6 +222,11 @@ def select_terms(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, grav
         if not _better(current["vec"], sq_rest["vec"]):
             entered, current = rest, sq_rest
     return entered, current, table
+
+
+def _forms(rotation, translation) -> dict:
+    """The transform's matrix, xyz and rpy forms (`geometry.transforms.RigidTransform.export_forms`)."""
+    return RigidTransform(rotation, translation).export_forms()
 
 
 def _recommend(sq, folds, rows_reg, rows_fid, rows_pred, s, b, q, chain, gi, terms, gravity, fixed, config_beyond):
@@ -505,10 +511,10 @@ def compare(
         "saved_to": save_model,
         "units": "per parameter (unit): angles rad, lengths mm, compliances rad/Nm",
         "sensor_to_robot": (
-            {"rotation": cal.rotation.tolist(), "translation": cal.translation.tolist()}
+            {**RigidTransform(cal.rotation, cal.translation).as_dict(), **_forms(cal.rotation, cal.translation)}
             if cal.rotations is None or cal.translations is None
             else [
-                {"group": g, "rotation": r.tolist(), "translation": t.tolist()}
+                {"group": g, "rotation": r.tolist(), "translation": t.tolist(), **_forms(r, t)}
                 for g, r, t in zip(names, cal.rotations, cal.translations)
             ]
         ),

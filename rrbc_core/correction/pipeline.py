@@ -18,6 +18,7 @@ from rrbc_core.correction.check_statistics import CheckStatistics, check_statist
 from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
+from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.interpolation.auto import AutoChoice
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
@@ -134,6 +135,8 @@ class CorrectionResult:
         reg = self.registration
         bounds = self.bounds if with_bounds else None
         reg_json = {"method": reg.method, **reg.mapping.as_dict(), "fre_rms_mm": reg.fre_rms_mm}
+        if isinstance(reg.mapping, RigidTransform):  # a piecewise mapping has no one matrix
+            reg_json.update(reg.mapping.export_forms())
         reg_json.update(self.options.registration_json())  # the strategy's options (a seeded one's seed)
         return {
             "registration": reg_json,

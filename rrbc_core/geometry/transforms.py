@@ -159,6 +159,27 @@ class RigidTransform:
     def as_dict(self) -> dict:
         return {"rotation": self.rotation.tolist(), "translation": self.translation.tolist()}
 
+    def rpy(self) -> np.ndarray:
+        """(3,) roll, pitch, yaw (rad) of the rotation in the URDF / ROS convention: fixed axes x, then y, then z,
+        R = Rz(yaw) Ry(pitch) Rx(roll); pitch in [−π/2, π/2]; at pitch ±π/2 (gimbal lock) roll is 0."""
+        r = self.rotation
+        pitch = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
+        if abs(r[2, 0]) < 1.0 - 1e-12:
+            roll, yaw = float(np.arctan2(r[2, 1], r[2, 2])), float(np.arctan2(r[1, 0], r[0, 0]))
+        else:  # gimbal lock: only yaw - roll (pitch +π/2) or yaw + roll (−π/2) is determined
+            roll, yaw = 0.0, float(np.arctan2(-r[0, 1], r[1, 1]))
+        return np.array([roll, pitch, yaw])
+
+    def export_forms(self) -> dict:
+        """The forms robot controllers and ROS take: ``matrix_4x4`` (row-major, mm), ``xyz_mm``, ``xyz_m`` (a
+        URDF origin's units) and ``rpy_rad`` (`rpy`)."""
+        return {
+            "matrix_4x4": self.as_matrix().tolist(),
+            "xyz_mm": self.translation.tolist(),
+            "xyz_m": (self.translation / 1000.0).tolist(),
+            "rpy_rad": self.rpy().tolist(),
+        }
+
 
 def mean_transform(transforms, origin=None, weights=None) -> RigidTransform:
     """Average rigid transforms: chordal mean of rotations; translation averaged so that the averaged
