@@ -30,7 +30,7 @@ from rrbc_core.cli_options import (
     scheduler_option,
     where,
 )
-from rrbc_core.cli_text import correct_text, plan_text, simulate_text, stations_text
+from rrbc_core.cli_text import correct_text, plan_text, report_text, simulate_text, stations_text
 from rrbc_core.errors import InputError, one_line, printable
 
 __all__ = ["build_parser", "main"]
@@ -57,6 +57,22 @@ def build_parser() -> argparse.ArgumentParser:
         "extrapolated; docs/cli.md) to this CSV",
     )
     c.set_defaults(run=_cmd_correct)
+
+    rp = sub.add_parser(
+        "report",
+        help="an acceptance report: every method, every point, a verdict against a tolerance (HTML or JSON)",
+        description="The integrator's acceptance report of a measured cell: what was measured, the registration, "
+        "the methods side by side with the recommended one, before/after figures, every point with its error and "
+        "95 %% bound, what rrbc diagnose names, and a verdict against --tolerance (docs/cli.md).",
+    )
+    rp.add_argument("measurements", help="measurement CSV (docs/formats/measurement-file.md)")
+    rp.add_argument("--tolerance", type=positive_float, default=None, metavar="MM", help="the tolerance, mm")
+    rp.add_argument("--out", default=None, metavar="REPORT.html", help="write the self-contained HTML report here")
+    rp.add_argument("--interpolation", default="idw", choices=list(interpolation.METHODS))
+    add_instrument_options(rp)
+    add_robot_model_options(rp, "adds rrbc calibrate's VEC methods (a file with joint columns)")
+    rp.add_argument("--json", action="store_true", help="print one JSON object")
+    rp.set_defaults(run=_cmd_report)
 
     g = sub.add_parser(
         "diagnose",
@@ -208,6 +224,39 @@ def _cmd_correct(args) -> str:
     if args.json:
         return json.dumps(result.to_json(), allow_nan=False) + "\n"
     return (stations_text(result) if isinstance(result, StationsResult) else correct_text(result)) + written
+
+
+def _cmd_report(args) -> str:
+    from rrbc_core.analysis.acceptance import acceptance
+    from rrbc_core.io.joints import file_tool
+    from rrbc_core.io.measurements import read_measurements
+    from rrbc_core.methods import MethodOptions
+
+    if args.out is not None:
+        from rrbc_core.io.measurements_write import output_path
+
+        output_path(args.out)  # a bad --out is said before the run
+    model = robot_model_args(args)
+    mset = read_measurements(args.measurements)
+    tool = args.tool if args.tool is not None else file_tool(mset)
+    acc = acceptance(
+        mset,
+        tolerance_mm=args.tolerance,
+        options=MethodOptions.named("least-squares", args.interpolation),
+        instrument=instrument_of(args),
+        tool=tool,
+        **model,
+    )
+    written = ""
+    if args.out is not None:
+        from rrbc_core.analysis.acceptance_html import report_html
+        from rrbc_core.io.measurements_write import atomic_write_text
+
+        atomic_write_text(args.out, report_html(acc))
+        written = f"wrote the report to {args.out}\n"
+    if args.json:
+        return json.dumps(acc, allow_nan=False) + "\n"
+    return report_text(acc) + written
 
 
 def _cmd_diagnose(args) -> str:

@@ -217,3 +217,30 @@ def plan_text(res) -> str:
             + (f"; and {len(res.rejected) - 5} more" if len(res.rejected) > 5 else "")
         )
     return "\n".join(lines) + "\n"
+
+
+def report_text(acc: dict) -> str:
+    """The text of `rrbc report` for its object (`analysis.acceptance.acceptance`): the verdict, its criterion and
+    reason, the failing points, the methods' RMS at the checks and the recommended one."""
+    from rrbc_core.analysis.acceptance import METHOD_NAMES
+
+    tol = acc["tolerance_mm"]
+    lines = [
+        f"verdict: {acc['verdict']} ({acc['reason']})",
+        f"criterion: {acc['criterion']}" + (f": {tol:g} mm" if tol is not None else ""),
+    ]
+    for f in acc["failing"]:
+        where = f" (station {f['group']})" if f["group"] is not None else ""
+        what = "95 % bound" if f["what"] == "bound95" else "error"
+        lines.append(f"  beyond: {f['role']} {f['id']}{where}: {what} {f['mm']:.3f} mm")
+    for name, fig in acc["methods"].items():
+        rms = fig.get("calibrate_rmst_mm", fig.get("rmst_mm"))
+        shown = "-" if rms is None else f"{rms:.4f} mm"
+        lines.append(
+            f"{METHOD_NAMES[name]:<11} RMS at the checks {shown}"
+            + ("  (recommended)" if name == acc["recommended"] else "")
+        )
+    lines.append(f"recommended: {METHOD_NAMES[acc['recommended']]}: {acc['recommendation_basis']}")
+    m = acc["measured"]
+    lines.append(f"{m['targets']} targets, {m['checks']} checks, {m['fiducials']} fiducials")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,232 @@
+"""`rrbc report`'s HTML: one self-contained page from the acceptance object (`analysis.acceptance`).
+
+No external request: the figures are matplotlib PNGs inlined as data URIs, the style is inline CSS, and there is no
+script. It prints to PDF from a browser (figures and tables avoid page breaks inside them). Every string from the
+file (ids, station names, the source's name) is HTML-escaped.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+from html import escape
+
+import numpy as np
+
+from rrbc_core.analysis.acceptance import METHOD_NAMES
+
+COLOURS = {"rigid": "#8c8c8c", "rrbc": "#0077bb", "vec": "#cc6600", "vec_rrbc": "#7a3b99"}
+VERDICT_COLOURS = {"PASS": "#1a7f37", "FAIL": "#b42318", "UNDECIDED": "#6b6b6b"}
+STYLE = """
+body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;max-width:62rem;margin:1.5rem auto;padding:0 1rem;
+color:#222;line-height:1.45}
+h1{font-size:1.6rem;margin-bottom:.2rem}h2{font-size:1.2rem;margin-top:1.8rem;border-bottom:1px solid #ddd}
+table{border-collapse:collapse;margin:.5rem 0;font-size:.9rem}td,th{border:1px solid #ddd;padding:.25rem .5rem;
+text-align:right}th{background:#f4f4f4}td.l,th.l{text-align:left}tr.fail td{background:#fde8e6}
+.verdict{font-size:1.5rem;font-weight:700;padding:.6rem 1rem;border-radius:.4rem;color:#fff;display:inline-block}
+.muted{color:#666;font-size:.9rem}img{max-width:100%}figure{margin:.8rem 0;break-inside:avoid}
+table,figure{break-inside:avoid}@media print{body{margin:0;max-width:none}h2{break-after:avoid}}
+"""
+
+
+def _mm(v) -> str:
+    return "—" if v is None or not np.isfinite(v) else f"{v:.3f}"
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def figures(acc: dict) -> list[tuple[str, str]]:
+    """(caption, PNG data URI) of the report's figures: the checks' errors before and after (histograms), and the
+    errors and targets' bounds against the distance to the nearest fiducial. [] without checks or targets."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rec = acc["recommended"]
+    shown = ["rigid"] + ([rec] if rec != "rigid" else ["rrbc"])
+    checks = [p for p in acc["points"] if p["role"] == "check" and p["error_mm"]]
+    targets = [p for p in acc["points"] if p["role"] == "target"]
+    out = []
+    if checks:
+        fig, ax = plt.subplots(figsize=(7.0, 3.2))
+        errs = {m: np.array([p["error_mm"].get(m, np.nan) for p in checks], float) for m in shown}
+        top = max(float(np.nanmax(e)) for e in errs.values() if np.isfinite(e).any())
+        bins = np.linspace(0.0, top * 1.05 if top > 0 else 1.0, 21).tolist()
+        for m in shown:
+            e = errs[m][np.isfinite(errs[m])]
+            ax.hist(e, bins=bins, alpha=0.55, color=COLOURS[m], label=f"{METHOD_NAMES[m]} (RMS {_mm(_rms(e))} mm)")
+        if acc["tolerance_mm"] is not None:
+            ax.axvline(acc["tolerance_mm"], color="#b42318", ls="--", label=f"tolerance {acc['tolerance_mm']:g} mm")
+        ax.set_xlabel("3-D error at the checks (mm)")
+        ax.set_ylabel("checks")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+        out.append((f"The {len(checks)} checks' errors, before ({METHOD_NAMES['rigid']}) and after", _png(fig)))
+        plt.close(fig)
+    if checks or targets:
+        fig, ax = plt.subplots(figsize=(7.0, 3.2))
+        for m in shown:
+            d = [p["nearest_fiducial_mm"] for p in checks]
+            e = [p["error_mm"].get(m) for p in checks]
+            ax.scatter(d, e, s=14, color=COLOURS[m], label=f"check error, {METHOD_NAMES[m]}")
+        tb = [(p["nearest_fiducial_mm"], (p["bound95_mm"] or {}).get(rec)) for p in targets]
+        tb = [(d, b) for d, b in tb if d is not None and b is not None]
+        if tb:
+            td, tbd = np.array([d for d, _ in tb], float), np.array([b for _, b in tb], float)
+            ax.scatter(td, tbd, s=30, marker="^", color="#222", label=f"target 95 % bound, {METHOD_NAMES[rec]}")
+        if acc["tolerance_mm"] is not None:
+            ax.axhline(acc["tolerance_mm"], color="#b42318", ls="--", label="tolerance")
+        ax.set_xlabel("distance to the nearest fiducial (mm, sensor frame)")
+        ax.set_ylabel("mm")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+        out.append(("Error and bound against the distance to the nearest fiducial", _png(fig)))
+        plt.close(fig)
+    return out
+
+
+def _rms(e) -> float | None:
+    e = np.asarray(e, float)
+    e = e[np.isfinite(e)]
+    return float(np.sqrt(np.mean(e**2))) if len(e) else None
+
+
+def _table(head: list[str] | None, rows: list[list[str]], left: int = 1, classes: list[str] | None = None) -> str:
+    """An HTML table (no header row when `head` is None); the first `left` columns left-aligned."""
+    th = "".join(f'<th class="{"l" if i < left else ""}">{h}</th>' for i, h in enumerate(head or []))
+    body = []
+    for k, r in enumerate(rows):
+        cls = f' class="{classes[k]}"' if classes and classes[k] else ""
+        body.append(
+            f"<tr{cls}>" + "".join(f'<td class="{"l" if i < left else ""}">{c}</td>' for i, c in enumerate(r)) + "</tr>"
+        )
+    return f"<table>{f'<tr>{th}</tr>' if head else ''}{''.join(body)}</table>"
+
+
+def report_html(acc: dict, title: str = "RRBC acceptance report") -> str:
+    """The whole page (module docstring)."""
+    rec = acc["recommended"]
+    v = acc["verdict"]
+    m = acc["measured"]
+    parts = [
+        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{escape(title)}</title>"
+        f"<style>{STYLE}</style></head><body>",
+        f"<h1>{escape(title)}</h1><p class='muted'>{escape(str(m['source']))}</p>",
+        f"<p><span class='verdict' style='background:{VERDICT_COLOURS[v]}'>{v}</span></p>",
+        f"<p><b>Criterion:</b> {escape(acc['criterion'])}"
+        + (f" ({acc['tolerance_mm']:g} mm)" if acc["tolerance_mm"] is not None else "")
+        + f". <b>{escape(acc['reason'])}</b>.</p>",
+    ]
+    if acc["failing"]:
+        rows = [
+            [
+                escape(f["id"]),
+                f["role"],
+                escape(str(f["group"] or "")),
+                "95 % bound" if f["what"] == "bound95" else "error",
+                _mm(f["mm"]),
+            ]
+            for f in acc["failing"]
+        ]
+        parts.append(
+            "<h2>Points beyond the tolerance</h2>" + _table(["point", "role", "station", "what", "mm"], rows, 4)
+        )
+    parts.append("<h2>What was measured</h2>")
+    inst = m["instrument"] or {}
+    rows = [
+        ["rows", str(m["rows"])],
+        ["stations", escape(", ".join(map(str, m["stations"]))) if m["stations"] else "one"],
+        ["fiducials", str(m["fiducials"])],
+        ["targets", str(m["targets"])],
+        ["checks", str(m["checks"])],
+        ["instrument", escape(f"{inst.get('name', '')}: {inst.get('source', '')}")],
+        ["arm model", escape(str(m["arm"])) if m["arm"] else "none given"],
+    ]
+    parts.append(_table(None, rows, 2))
+    parts.append("<h2>Registration (robot = R · sensor + t)</h2>")
+    rows = []
+    for r in acc["registration"]:
+        xyz = r.get("xyz_mm")
+        rpy = r.get("rpy_rad")
+        rows.append(
+            [
+                escape(str(r.get("group") or "—")),
+                escape(r["method"]),
+                _mm(r.get("fre_rms_mm")),
+                ", ".join(f"{x:.3f}" for x in xyz) if xyz else "—",
+                ", ".join(f"{x:.6f}" for x in rpy) if rpy else "—",
+            ]
+        )
+    parts.append(_table(["station", "method", "FRE RMS (mm)", "xyz (mm)", "rpy (rad)"], rows, 2))
+    parts.append("<h2>Methods side by side</h2>")
+    with_cv = any(fig.get("cv_rmst_mm") is not None for fig in acc["methods"].values())
+    rows = []
+    for name, fig in acc["methods"].items():
+        rms = fig.get("calibrate_rmst_mm", fig.get("rmst_mm"))
+        row = [METHOD_NAMES[name] + (" (recommended)" if name == rec else ""), _mm(rms)]
+        rows.append(row + ([_mm(fig.get("cv_rmst_mm"))] if with_cv else []))
+    head = ["method", "RMS at the checks (mm)"] + (["cross-validated over the fiducials (mm)"] if with_cv else [])
+    parts.append(_table(head, rows, 1))
+    parts.append(f"<p><b>Recommended: {METHOD_NAMES[rec]}.</b> {escape(acc['recommendation_basis'])}</p>")
+    for caption, uri in figures(acc):
+        parts.append(
+            f"<figure><img alt='{escape(caption)}' src='{uri}'><figcaption class='muted'>{escape(caption)}"
+            "</figcaption></figure>"
+        )
+    parts.append("<h2>Every point</h2>")
+    failing = {(f["id"], f["group"]) for f in acc["failing"]}
+    rows, classes = [], []
+    for p in acc["points"]:
+        err = p["error_mm"] or {}
+        b = (p["bound95_mm"] or {}).get(rec)
+        rows.append(
+            [
+                escape(p["id"]),
+                p["role"],
+                escape(str(p["group"] or "")),
+                _mm(err.get("rigid")),
+                _mm(err.get(rec)),
+                _mm(p["correction_mm"]),
+                _mm(b),
+                _mm(p["nearest_fiducial_mm"]),
+                "yes" if p["extrapolated"] else "",
+            ]
+        )
+        classes.append("fail" if (p["id"], p["group"]) in failing else "")
+    head = [
+        "point",
+        "role",
+        "station",
+        "error rigid",
+        f"error {METHOD_NAMES[rec]}",
+        "|RRBC correction|",
+        f"95 % bound ({METHOD_NAMES[rec]})",
+        "nearest fiducial",
+        "extrapolated",
+    ]
+    parts.append("<p class='muted'>mm; errors only where the file holds the truth (checks).</p>")
+    parts.append(_table(head, rows, 3, classes))
+    d = acc["diagnosis"]
+    parts.append("<h2>What rrbc diagnose names</h2>")
+    if d["effects"]:
+        parts.append(
+            "<ul>"
+            + "".join(f"<li><b>{escape(k)}</b>: {escape(str(e))}</li>" for k, e in d["effects"].items())
+            + "</ul>"
+        )
+    else:
+        parts.append("<p>Nothing beyond a rigid transform plus isotropic noise.</p>")
+    if d["limits"]:
+        parts.append("<p class='muted'>Limits: " + escape("; ".join(d["limits"])) + "</p>")
+    if acc["warnings"]:
+        parts.append("<h2>Warnings</h2><ul>" + "".join(f"<li>{escape(w)}</li>" for w in acc["warnings"]) + "</ul>")
+    parts.append(
+        "<p class='muted'>Made by rrbc report (docs/cli.md); every figure is the one rrbc correct, "
+        "rrbc diagnose and rrbc calibrate print for this file.</p></body></html>"
+    )
+    return "\n".join(parts)

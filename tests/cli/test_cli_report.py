@@ -1,0 +1,129 @@
+"""`rrbc report` (issue 40, item 1): the JSON contract, the verdict flipping at the right tolerance, its figures
+equal to `rrbc correct`'s and `rrbc calibrate`'s, stations and joints, and a self-contained HTML page that lists
+every check (the page opened in Chromium: tests/browser/test_report_browser.py)."""
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rrbc_core.analysis.acceptance import verdict_of
+from rrbc_core.io.measurements_write import write_measurements
+from rrbc_core.simulation.station_data import station_measurements
+from rrbc_core.studies.vec_study import joint_measurements
+from tests.paths import ROOT
+
+RRBC = str(Path(sys.executable).with_name("rrbc"))
+EXAMPLE = ROOT / "rrbc_core" / "data" / "example_measurements.csv"
+
+
+def run(*args, timeout=300):
+    return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+
+
+def _report(*args) -> dict:
+    r = run("report", *args, "--json")
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+def _worst(acc: dict) -> tuple[float, str]:
+    """The largest figure the verdict holds against the tolerance, and its point's id."""
+    m = acc["recommended"]
+    figs = [
+        ((p["error_mm"] or {}).get(m) if p["role"] == "check" else (p["bound95_mm"] or {}).get(m), p["id"])
+        for p in acc["points"]
+    ]
+    return max((v, i) for v, i in figs if v is not None)
+
+
+def test_the_verdict_flips_at_the_worst_point_and_its_figures_are_rrbc_corrects():
+    acc = _report(EXAMPLE)
+    assert {"verdict", "tolerance_mm", "criterion", "failing", "methods", "points"} <= set(acc)
+    assert acc["verdict"] == "UNDECIDED" and acc["tolerance_mm"] is None  # no tolerance: no verdict
+    worst, wid = _worst(acc)
+    passed = _report(EXAMPLE, "--tolerance", worst * 1.001)
+    assert passed["verdict"] == "PASS" and passed["failing"] == []
+    failed = _report(EXAMPLE, "--tolerance", worst * 0.999)
+    assert failed["verdict"] == "FAIL" and [f["id"] for f in failed["failing"]] == [wid]
+    # one answer: the points' figures are rrbc correct's own
+    cj = json.loads(run("correct", EXAMPLE, "--json").stdout)
+    by_id = {p["id"]: p for p in acc["points"]}
+    assert len(by_id) == len(cj["targets"]) + len(cj["checks"])
+    for t in cj["targets"]:
+        assert by_id[t["id"]]["bound95_mm"]["rrbc"] == t["bound95_mm"]
+        assert by_id[t["id"]]["robot"]["rrbc"] == t["robot_rrbc"]
+    for c in cj["checks"]:
+        assert by_id[c["id"]]["error_mm"] == {"rigid": c["error_rigid_mm"], "rrbc": c["error_rrbc_mm"]}
+    assert acc["methods"]["rrbc"]["rmst_mm"] == cj["summary"]["rmst_rrbc_mm"]
+    text = run("report", EXAMPLE, "--tolerance", worst * 0.999).stdout
+    assert text.startswith("verdict: FAIL") and "beyond: " in text and wid in text
+
+
+def test_the_html_is_self_contained_and_lists_every_point(tmp_path):
+    out = tmp_path / "report.html"
+    r = run("report", EXAMPLE, "--tolerance", "0.3", "--out", out)
+    assert r.returncode == 0 and f"wrote the report to {out}" in r.stdout, r.stderr
+    html = out.read_text()
+    assert not re.search(r"""(src|href)\s*=\s*['"](https?:)?//""", html)  # nothing fetched from anywhere
+    assert html.count("src='data:image/png;base64,") == 2  # the histogram and the error-against-distance plot
+    acc = _report(EXAMPLE, "--tolerance", "0.3")
+    for p in acc["points"]:
+        assert f'<td class="l">{p["id"]}</td>' in html
+    assert f">{acc['verdict']}</span>" in html
+
+
+def test_stations_and_joints(tmp_path):
+    data = tmp_path / "stations.csv"
+    write_measurements(data, station_measurements(5, stations=3))
+    acc = _report(data, "--tolerance", "1.0")
+    assert len(acc["measured"]["stations"]) == 3 and len(acc["registration"]) == 3
+    assert all(p["group"] is not None for p in acc["points"])
+    assert all(f["group"] is not None for f in acc["failing"])
+    arm = tmp_path / "arm.csv"
+    write_measurements(arm, joint_measurements(2, n_fid=40, n_chk=30))
+    acc = _report(arm, "--robot", "ur5", "--tool", "100", "--tolerance", "0.5")
+    cal = json.loads(run("calibrate", arm, "--robot", "ur5", "--tool", "100", "--json").stdout)
+    assert set(acc["methods"]) == {"rigid", "rrbc", "vec", "vec_rrbc"}
+    assert acc["recommended"] == cal["recommended"]
+    checks = {c["id"]: c for c in cal["check_points"]}
+    for p in acc["points"]:
+        if p["role"] == "check":
+            assert p["error_mm"] == checks[p["id"]]["error_mm"]
+            assert p["bound95_mm"] == checks[p["id"]]["bound95_mm"]
+
+
+def test_bad_input_is_one_line_and_writes_nothing(tmp_path):
+    for args in (
+        ("--tolerance", "-1"),
+        ("--tolerance", "nan"),
+        ("--out", tmp_path / "missing" / "r.html"),
+        ("--robot", "ur5", "--urdf", "ur5"),
+    ):
+        r = run("report", EXAMPLE, *args)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, (args, r.stderr)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "points, expect",
+    [
+        ([], "UNDECIDED"),
+        ([{"id": "T", "role": "target", "group": None, "bound95_mm": {"rrbc": None}}], "UNDECIDED"),
+        ([{"id": "T", "role": "target", "group": None, "bound95_mm": {"rrbc": 0.2}}], "PASS"),
+        (
+            [
+                {"id": "T", "role": "target", "group": None, "bound95_mm": {"rrbc": None}},
+                {"id": "C", "role": "check", "group": None, "error_mm": {"rrbc": 0.7}, "bound95_mm": {}},
+            ],
+            "FAIL",
+        ),
+    ],
+)
+def test_verdict_cases(points, expect):
+    v, failing, reason = verdict_of(points, "rrbc", 0.5)
+    assert v == expect and reason
+    assert [f["id"] for f in failing] == (["C"] if expect == "FAIL" else [])
