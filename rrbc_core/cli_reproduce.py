@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 from rrbc_core.cli_options import int_at_least, progress_bar, scheduler_option, where
 from rrbc_core.errors import InputError
@@ -47,15 +46,12 @@ def add_parsers(sub) -> None:
 
 
 def _check_report_dir(out) -> None:
+    """A bad --out is said before the study runs; a folder that does not exist yet is created when written."""
     if out is None:
         return
-    if not str(out).strip():
-        raise InputError("--out: an empty path; give a folder for the report")
-    p = Path(out)
-    if p.exists() and not p.is_dir():
-        raise InputError(f"--out {p}: exists and is not a directory")
-    if not p.resolve().parent.exists():
-        raise InputError(f"--out {p}: parent directory {p.resolve().parent} does not exist")
+    from rrbc_core.io.measurements_write import output_dir
+
+    output_dir(out)
 
 
 def _cmd_reproduce_crpi(args) -> str:

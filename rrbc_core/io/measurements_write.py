@@ -10,6 +10,7 @@ import os
 import secrets
 from collections.abc import Sequence
 from os import PathLike
+from pathlib import Path
 
 import numpy as np
 
@@ -92,6 +93,34 @@ def output_path(path: str | PathLike) -> str:
     if not os.access(directory, os.W_OK):
         raise _error(dest, None, None, f"cannot write the file: the folder {directory} is not writable")
     return dest
+
+
+def output_dir(path: str | PathLike, flag: str = "--out") -> Path:
+    """Where a folder of outputs goes (`flag` names it in messages): refused (InputError, one line) when empty, when
+    it exists and is not a folder, or when its nearest existing ancestor is not a folder one can write in; it need
+    not exist yet (`make_output_dir` creates it, with any missing parents). Call it before long work."""
+    text = os.fsdecode(os.fspath(path))
+    if not text.strip():
+        raise InputError(f"{flag}: an empty path; give a folder")
+    p = Path(text)
+    if p.exists() and not p.is_dir():
+        raise InputError(f"{flag} {p}: exists and is not a folder")
+    ancestor = p.resolve()
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir() or not os.access(ancestor, os.W_OK | os.X_OK):
+        raise InputError(f"{flag} {p}: cannot create or write it ({ancestor} is not a folder one can write in)")
+    return p
+
+
+def make_output_dir(path: str | PathLike, flag: str = "--out") -> Path:
+    """`output_dir`, created if it does not exist yet (with its missing parents)."""
+    p = output_dir(path, flag)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{flag} {p}: cannot create the folder: {exc.strerror or exc}") from None
+    return p
 
 
 def atomic_write_text(path: str | PathLike, text: str) -> None:

@@ -78,12 +78,11 @@ def to_markups(mset: MeasurementSet) -> tuple[dict, dict]:
 
 
 def write_markups(mset: MeasurementSet, out_dir, stem: str) -> tuple[Path, Path]:
-    """Write `<stem>_sensor.mrk.json` and `<stem>_robot.mrk.json` into `out_dir`, each atomically."""
-    from rrbc_core.io.measurements_write import atomic_write_text
+    """Write `<stem>_sensor.mrk.json` and `<stem>_robot.mrk.json` into `out_dir` (created if needed), each
+    atomically."""
+    from rrbc_core.io.measurements_write import atomic_write_text, make_output_dir
 
-    d = Path(out_dir)
-    if not d.is_dir():
-        raise InputError(f"--out {d}: not a directory (create it first)")
+    d = make_output_dir(out_dir)  # created when it does not exist yet
     sensor, robot = to_markups(mset)
     paths = (d / f"{stem}_sensor.mrk.json", d / f"{stem}_robot.mrk.json")
     for p, doc in zip(paths, (sensor, robot)):

@@ -542,6 +542,7 @@ def write_folder(out_dir, writers: dict) -> Path:
     beside `out_dir`; only when every file is written are they moved into `out_dir` (created if needed). Returns
     `out_dir`/report.md."""
     out = Path(out_dir)
+    out.resolve().parent.mkdir(parents=True, exist_ok=True)  # a folder that does not exist yet, with its parents
     tmp = Path(tempfile.mkdtemp(prefix=".rrbc-report-", dir=out.resolve().parent))
     try:
         for name, write in writers.items():

@@ -109,14 +109,18 @@ def test_out_that_is_a_file_is_refused_and_left_alone(tmp_path):
     f = tmp_path / "report"
     f.write_text("keep me")
     res = run("reproduce", "vanwyk2018", "--out", f, *QUICK)
-    assert res.returncode == 2 and "not a directory" in res.stderr
+    assert res.returncode == 2 and "is not a folder" in res.stderr
     assert f.read_text() == "keep me"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]  # no temporary leftovers
 
 
-def test_out_in_a_missing_parent_is_refused(tmp_path):
+def test_out_in_a_missing_parent_is_created_and_under_a_file_refused(tmp_path):
     res = run("reproduce", "vanwyk2018", "--out", tmp_path / "no" / "such", *QUICK)
-    assert res.returncode == 2 and "does not exist" in res.stderr
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "no" / "such" / "report.md").is_file()
+    (tmp_path / "file").write_text("x")
+    res = run("reproduce", "vanwyk2018", "--out", tmp_path / "file" / "below", *QUICK)
+    assert res.returncode == 2 and "cannot create or write it" in res.stderr
 
 
 def test_peg_prediction_recovers_a_known_capture_radius():

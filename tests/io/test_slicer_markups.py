@@ -83,3 +83,27 @@ def test_ras_is_read_as_slicer_converts_it_and_bad_files_are_refused(tmp_path):
         timeout=60,
     )
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "x.csv").exists()
+
+
+def test_an_out_folder_that_does_not_exist_yet_is_created(tmp_path):
+    """Issue 40: every `--out DIR` creates the folder (with its missing parents); under a file it is refused."""
+    out = tmp_path / "new" / "markups"
+    r = subprocess.run(
+        [*RRBC, "convert", str(EXAMPLE_CSV), "--to", "slicer", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == [
+        f"{EXAMPLE_CSV.name[:-4]}_robot.mrk.json",
+        f"{EXAMPLE_CSV.name[:-4]}_sensor.mrk.json",
+    ]
+    (tmp_path / "file").write_text("x")
+    r = subprocess.run(
+        [*RRBC, "convert", str(EXAMPLE_CSV), "--to", "slicer", "--out", str(tmp_path / "file" / "below")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
