@@ -119,6 +119,13 @@ def add_parsers(sub) -> None:
     )
     k.add_argument("--save-model", default=None, metavar="M.json", help="write the identified arm to this file")
     k.add_argument(
+        "--export-urdf",
+        default=None,
+        metavar="CALIBRATED.urdf",
+        help="with --urdf: write the identified arm as a URDF (joint origins and offsets updated, the tool as a link "
+        "rrbc_tool, load terms in a comment; docs/calibration.md)",
+    )
+    k.add_argument(
         "--model",
         default=None,
         metavar="M.json",
@@ -257,6 +264,7 @@ def _cmd_calibrate(args) -> str:
         gravity=args.gravity,
         model=model,
         save_model=args.save_model,
+        export_urdf=args.export_urdf,
         **robot_model_args(args),
     )
     if args.json:

@@ -224,6 +224,26 @@ def select_terms(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, grav
     return entered, current, table
 
 
+def _export_urdf(path: str, urdf, cal: Calibration, source: str, poses: int) -> None:
+    """Write the identified arm `cal` as a URDF (`models.urdf_export`) to `path`, atomically."""
+    from rrbc_core.io.measurements_write import atomic_write_text
+    from rrbc_core.models.urdf import resolve_urdf
+    from rrbc_core.models.urdf_export import calibrated_urdf
+
+    notes = [
+        f"Calibrated by rrbc calibrate from {source} ({poses} poses; {cal.rank} parameter combinations identified,",
+        f"residual noise {cal.sigma_mm:.4g} mm per axis): joint origins and offsets of {resolve_urdf(urdf).name}",
+        "updated; link rrbc_tool is the measured tool point. The sensor-to-robot transform is not part of the arm.",
+    ]
+    if cal.terms:
+        notes.append("Load terms (no URDF element; apply them as rrbc's models.loads does):")
+        notes += [
+            f"  {t.name} = {c:.6g} {t.unit} (standard error {se:.2g})"
+            for t, c, se in zip(cal.terms, cal.coef, cal.coef_se)
+        ]
+    atomic_write_text(path, calibrated_urdf(resolve_urdf(urdf), cal.chain, cal.delta, notes))
+
+
 def _forms(rotation, translation) -> dict:
     """The transform's matrix, xyz and rpy forms (`geometry.transforms.RigidTransform.export_forms`)."""
     return RigidTransform(rotation, translation).export_forms()
@@ -331,13 +351,15 @@ def compare(
     gravity=None,
     model=None,
     save_model: str | None = None,
+    export_urdf: str | None = None,
 ) -> dict:
     """The JSON object of `rrbc calibrate` (docs/cli.md) for a measurement file with joint values. The model:
     `robot` (ur5, ur10; default ur5) or `urdf` with `tip` and `base` (`robot_model.robot_chain`); `tool`: a length along the DH
     flange's z axis or a point (3,) in the tip link's frame, mm. `compliance` (and `backlash`): load terms under
     `gravity` (m/s², base frame) enter where cross-validation says they help (`select_terms`). `model`: a saved arm
     (`saved_model.SavedModel`) kept fixed; only the sensor-to-robot transforms are fitted. `save_model`: a path to
-    write the identified arm to (`saved_model.save_model`)."""
+    write the identified arm to (`saved_model.save_model`). `export_urdf`: a path to write the identified arm to as a
+    URDF (`models.urdf_export`; a URDF model only)."""
     if save_model is not None:
         from pathlib import Path
 
@@ -345,6 +367,15 @@ def compare(
             raise InputError("--save-model with --model: the arm is the saved one already; nothing new to save")
         if Path(save_model).is_dir() or not Path(save_model).parent.is_dir():
             raise InputError(f"--save-model {save_model}: must be a file in an existing directory")
+    if export_urdf is not None:
+        from rrbc_core.io.measurements_write import output_path
+
+        if urdf is None and (model is None or model.urdf is None):
+            raise InputError(
+                "--export-urdf writes a URDF's joints: give the arm as a URDF (--urdf ROBOT.urdf, or --urdf ur5 for "
+                "the packaged UR5), not a DH table (--robot)"
+            )
+        output_path(export_urdf)
     fixed = None
     if model is not None:
         chain, fixed = model.chain_for(urdf=urdf, tip=tip, base=base, robot=robot if urdf is None else None)
@@ -448,6 +479,8 @@ def compare(
         from rrbc_core.analysis.saved_model import save_model as write_model
 
         write_model(save_model, from_calibration(cal, robot, urdf, mset.source, len(known)))
+    if export_urdf is not None:
+        _export_urdf(export_urdf, urdf if urdf is not None else model.urdf, cal, mset.source, len(known))
     return {
         "robot": chain.name,
         "model": {
@@ -509,6 +542,7 @@ def compare(
         },
         "saved_model": None if model is None else model.describe(),
         "saved_to": save_model,
+        "exported_urdf": export_urdf,
         "units": "per parameter (unit): angles rad, lengths mm, compliances rad/Nm",
         "sensor_to_robot": (
             {**RigidTransform(cal.rotation, cal.translation).as_dict(), **_forms(cal.rotation, cal.translation)}

@@ -276,6 +276,28 @@ class Chain:
             d_inputs[:, :, j.driver] += j.multiplier * joint_cols[:, :, k]
         return p, d_params, d_inputs
 
+    def joint_error(self, k: int, delta) -> np.ndarray:
+        """(4, 4) mm: moving joint k's identified error as `kinematics` applies it after the joint's folded origin,
+        E_k(δ) · M_k(δ_offset) (module docstring; the offset as a motion about or along the joint's own axis, which
+        commutes with the joint's motion). `delta` (P,) in `param_names` order."""
+        d = np.asarray(delta, float).reshape(self.n_params)
+        dirs = self._directions()
+        rv, pos = np.zeros(3), np.zeros(3)
+        for idx in range(6 * k + 1, 6 * k + 6):
+            if dirs[idx][1] == "rot":
+                rv = rv + d[idx] * dirs[idx][3]
+            else:
+                pos = pos + d[idx] * dirs[idx][3]
+        e = np.eye(4)
+        e[:3, :3], e[:3, 3] = _rotvec(rv), pos
+        j = self.joints[k]
+        m = np.eye(4)
+        if j.prismatic:
+            m[:3, 3] = j.axis * d[6 * k]
+        else:
+            m[:3, :3] = rotation(j.axis, np.array(d[6 * k]))
+        return e @ m
+
     def forward(self, q, delta=None) -> np.ndarray:
         """Tool points (N, 3), base frame, mm, for inputs q (N, I) rad or mm (`kinematics` without Jacobians)."""
         return self.kinematics(q, delta, jacobians=False)[0]
