@@ -14,9 +14,13 @@ EXAMPLE = ROOT / "rrbc_core" / "data" / "example_measurements.csv"
 
 def test_the_report_opens_offline_with_its_figures_drawn_and_every_check_listed(browser_context, tmp_path):
     out = tmp_path / "report.html"
-    r = subprocess.run([RRBC, "report", str(EXAMPLE), "--tolerance", "0.3", "--out", str(out)], capture_output=True)
+    r = subprocess.run(
+        [RRBC, "report", str(EXAMPLE), "--tolerance", "0.3", "--out", str(out), "--json"],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
-    acc = json.loads(subprocess.run([RRBC, "report", str(EXAMPLE), "--json"], capture_output=True, text=True).stdout)
+    acc = json.loads(r.stdout)
     page = browser_context.new_page()
     requests: list[str] = []
     page.on("request", lambda req: requests.append(req.url))

@@ -11,6 +11,9 @@ from pathlib import Path
 import pytest
 
 from rrbc_core.analysis.acceptance import verdict_of
+from rrbc_core.analysis.vec_compare import compare
+from rrbc_core.correction.stations import correct_stations
+from rrbc_core.io.measurements import read_measurements
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.simulation.station_data import station_measurements
 from rrbc_core.studies.vec_study import joint_measurements
@@ -40,37 +43,35 @@ def _worst(acc: dict) -> tuple[float, str]:
     return max((v, i) for v, i in figs if v is not None)
 
 
-def test_the_verdict_flips_at_the_worst_point_and_its_figures_are_rrbc_corrects():
-    acc = _report(EXAMPLE)
+def test_the_verdict_flips_at_the_worst_point_and_its_figures_are_rrbc_corrects(tmp_path):
+    out = tmp_path / "report.html"
+    r = run("report", EXAMPLE, "--json", "--out", out)
+    assert r.returncode == 0, r.stderr
+    acc = json.loads(r.stdout)
     assert {"verdict", "tolerance_mm", "criterion", "failing", "methods", "points"} <= set(acc)
     assert acc["verdict"] == "UNDECIDED" and acc["tolerance_mm"] is None  # no tolerance: no verdict
     worst, wid = _worst(acc)
-    passed = _report(EXAMPLE, "--tolerance", worst * 1.001)
-    assert passed["verdict"] == "PASS" and passed["failing"] == []
-    failed = _report(EXAMPLE, "--tolerance", worst * 0.999)
-    assert failed["verdict"] == "FAIL" and [f["id"] for f in failed["failing"]] == [wid]
+    v, failing, _ = verdict_of(acc["points"], acc["recommended"], worst * 1.001)
+    assert v == "PASS" and failing == []
+    v, failing, _ = verdict_of(acc["points"], acc["recommended"], worst * 0.999)
+    assert v == "FAIL" and [f["id"] for f in failing] == [wid]
+    # through the command, with the tolerance given: the same verdict, in words
+    text = run("report", EXAMPLE, "--tolerance", worst * 0.999).stdout
+    assert text.startswith("verdict: FAIL") and "beyond: " in text and wid in text
     # one answer: the points' figures are rrbc correct's own
-    cj = json.loads(run("correct", EXAMPLE, "--json").stdout)
+    cj = correct_stations(read_measurements(EXAMPLE)).to_json()
     by_id = {p["id"]: p for p in acc["points"]}
     assert len(by_id) == len(cj["targets"]) + len(cj["checks"])
-    for t in cj["targets"]:
-        assert by_id[t["id"]]["bound95_mm"]["rrbc"] == t["bound95_mm"]
-        assert by_id[t["id"]]["robot"]["rrbc"] == t["robot_rrbc"]
+    for tg in cj["targets"]:
+        assert by_id[tg["id"]]["bound95_mm"]["rrbc"] == tg["bound95_mm"]
+        assert by_id[tg["id"]]["robot"]["rrbc"] == tg["robot_rrbc"]
     for c in cj["checks"]:
         assert by_id[c["id"]]["error_mm"] == {"rigid": c["error_rigid_mm"], "rrbc": c["error_rrbc_mm"]}
     assert acc["methods"]["rrbc"]["rmst_mm"] == cj["summary"]["rmst_rrbc_mm"]
-    text = run("report", EXAMPLE, "--tolerance", worst * 0.999).stdout
-    assert text.startswith("verdict: FAIL") and "beyond: " in text and wid in text
-
-
-def test_the_html_is_self_contained_and_lists_every_point(tmp_path):
-    out = tmp_path / "report.html"
-    r = run("report", EXAMPLE, "--tolerance", "0.3", "--out", out)
-    assert r.returncode == 0 and f"wrote the report to {out}" in r.stdout, r.stderr
+    # the page: self-contained, both figures, every point listed, the verdict shown
     html = out.read_text()
     assert not re.search(r"""(src|href)\s*=\s*['"](https?:)?//""", html)  # nothing fetched from anywhere
     assert html.count("src='data:image/png;base64,") == 2  # the histogram and the error-against-distance plot
-    acc = _report(EXAMPLE, "--tolerance", "0.3")
     for p in acc["points"]:
         assert f'<td class="l">{p["id"]}</td>' in html
     assert f">{acc['verdict']}</span>" in html
@@ -86,7 +87,7 @@ def test_stations_and_joints(tmp_path):
     arm = tmp_path / "arm.csv"
     write_measurements(arm, joint_measurements(2, n_fid=40, n_chk=30))
     acc = _report(arm, "--robot", "ur5", "--tool", "100", "--tolerance", "0.5")
-    cal = json.loads(run("calibrate", arm, "--robot", "ur5", "--tool", "100", "--json").stdout)
+    cal = compare(read_measurements(arm), robot="ur5", tool=100.0)  # rrbc calibrate's function
     assert set(acc["methods"]) == {"rigid", "rrbc", "vec", "vec_rrbc"}
     assert acc["recommended"] == cal["recommended"]
     checks = {c["id"]: c for c in cal["check_points"]}
