@@ -345,6 +345,12 @@ def _solve(dh: DHParameters, pos: np.ndarray, rot: np.ndarray, seeds: np.ndarray
     q = np.full((n, 6), np.nan)
     perr = np.full(n, np.inf)
     oerr = np.full(n, np.inf)
+    # beyond any reach of the chain: unreachable without iterating (a point 1e9 mm away costs no solver time)
+    near = np.flatnonzero(np.linalg.norm(pos, axis=1) <= reach_bound(dh) + POSITION_TOL_MM)
+    if len(near) < n:
+        if len(near):
+            q[near], perr[near], oerr[near] = _solve(dh, pos[near], rot[near], seeds[near])
+        return q, perr, oerr
     ideal = _ur_ideal(dh)
     if ideal is not None:
         ps, rs = forward(ideal, seeds)
@@ -369,6 +375,13 @@ def _solve(dh: DHParameters, pos: np.ndarray, rot: np.ndarray, seeds: np.ndarray
         q[idx], perr[idx], oerr[idx] = qr[better], pr[better], orr[better]
     q = seeds + _wrap(q - seeds)
     return q, perr, oerr
+
+
+def reach_bound(dh: DHParameters) -> float:
+    """An upper bound (mm) on the tool point's distance from the base origin at any joint values: each DH link
+    moves the frame by (a cos θ, a sin θ, d), of length sqrt(a² + d²), and the tool adds |tool_mm| (the triangle
+    inequality); a point farther than this is unreachable."""
+    return float(np.sum(np.hypot(dh.a, dh.d)) + abs(dh.tool_mm))
 
 
 def _unreachable(perr, oerr) -> np.ndarray:

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.io.measurements import COORDINATE_LIMIT_MM
 from rrbc_core.models.errorterms import Kinematic
 from rrbc_core.models.measurement import MeasurementModel
 from rrbc_core.runtime.threads import thread_limited
@@ -327,6 +328,8 @@ class ExplorerSession:
         p = np.asarray(position, float).reshape(3)
         if not np.all(np.isfinite(p)):
             raise InputError("a position must be 3 finite numbers (mm)")
+        if np.abs(p).max() > COORDINATE_LIMIT_MM:  # the measurement reader's own limit: a unit or format slip
+            raise InputError(f"a position must lie within {COORDINATE_LIMIT_MM:g} mm of the origin")
         g = self.layout[kind]
         i = g.index(pid)
         old_layout, old_readings = self.layout, dict(self._readings)

@@ -279,3 +279,27 @@ def test_reachable_says_which_points_inverse_path_would_refuse():
         with pytest.raises(InputError, match="not reachable"):
             inverse_path(dh, pts[i : i + 1], tool_down(), UR5_TOOL_DOWN_SEED)
     assert not reachable(dh, [[5000.0, 0.0, 0.0]], tool_down(), UR5_TOOL_DOWN_SEED)[0]
+
+
+def test_the_reach_bound_holds_and_points_beyond_it_cost_no_solver_work(monkeypatch):
+    """Issue 42: one tab dragging a target to (1e9, 1e9, 1e9) mm froze the others while the solver iterated. A point
+    beyond `reach_bound` (the triangle inequality over the DH links) is refused without any solver call."""
+    from rrbc_core.models import kinematics
+    from rrbc_core.models.kinematics import reach_bound
+
+    rng = np.random.default_rng(4)
+    arm = UR5.with_tool(120.0)
+    p, _ = forward(arm, rng.uniform(-np.pi, np.pi, (5000, 6)))
+    bound = reach_bound(arm)
+    assert np.linalg.norm(p, axis=1).max() <= bound
+    assert np.linalg.norm(p, axis=1).max() > 0.8 * bound  # a bound, not a loose guess
+
+    def no_solver(*args, **kwargs):
+        raise AssertionError("the solver ran for a point beyond any reach")
+
+    monkeypatch.setattr(kinematics, "_lm", no_solver)
+    monkeypatch.setattr(kinematics, "_continuation", no_solver)
+    far = np.array([[1e9, 1e9, 1e9], [bound + 10.0, 0.0, 0.0], [0.0, 0.0, -3 * bound]])
+    assert not reachable(arm, far, np.eye(3), UR5_TOOL_DOWN_SEED).any()
+    with pytest.raises(InputError, match="not reachable"):
+        inverse(arm, far[0], np.eye(3), UR5_TOOL_DOWN_SEED)

@@ -126,6 +126,11 @@ def test_measurement_mode_moves_targets_and_refuses_to_move_measured_fiducials()
     np.testing.assert_allclose(ev2.targets.robot_rigid[0], ev.targets.positions[0] + [60.0, 40.0, 0.0], atol=1e-9)
     with pytest.raises(InputError, match="cannot be moved"):
         ses.move("fiducials", ev.fiducial_ids[0], ev.fiducial_positions[0] + 1.0)
+    # a hostile position (issue 42): beyond the measurement reader's coordinate limit, refused, the session as it was
+    for bad in ([1e12, 0.0, 0.0], [np.nan, 0.0, 0.0], [np.inf, 1.0, 1.0]):
+        with pytest.raises(InputError):
+            ses.move("targets", t0, bad)
+    np.testing.assert_array_equal(ses.layout["targets"].positions[0], ev2.targets.positions[0])
     with pytest.raises(InputError):
         ses.update(noise_scale=2.0)
     hm = figures.heat_map(ses, samples_per_target=20)
