@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-from rrbc_core.errors import InputError
 from rrbc_core.studies import reference_data
 from rrbc_core.studies.reproduction import METHODS, STATISTICS
 from rrbc_core.studies.vanwyk2018 import Reproduction, best_extension, fitted_errors, nearest_direction
@@ -508,12 +507,9 @@ def _z_table(z: np.ndarray) -> str:
 
 def write_report(rep: Reproduction, outdir, command: str) -> Path:
     """Write report.md, summary.json and the figures into `outdir` (created if needed); all or nothing."""
-    out = Path(outdir)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a directory")
-    parent = out.resolve().parent
-    if not parent.exists():
-        raise InputError(f"--out {out}: parent directory {parent} does not exist")
+    from rrbc_core.io.measurements_write import output_dir
+
+    out = output_dir(outdir)  # a folder that does not exist yet is made by write_folder, with its parents
     return write_folder(
         out,
         {
