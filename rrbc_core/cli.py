@@ -28,6 +28,7 @@ from rrbc_core.cli_options import (
     progress_bar,
     robot_model_args,
     scheduler_option,
+    tool_type,
     where,
 )
 from rrbc_core.cli_text import correct_text, plan_text, report_text, simulate_text, stations_text
@@ -167,6 +168,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     v.add_argument("--tip", default=None, help="with --urdf: the measured link (default: end of the longest chain)")
     v.add_argument("--base", default=None, help="with --urdf: the base link (default: the root link)")
+    v.add_argument(
+        "--tool",
+        type=tool_type,
+        default=None,
+        help="with --urdf: the measured point X,Y,Z (or Z along the flange axis) in the tip link's frame, mm "
+        "(default: the file's tool columns, else the tip link's origin)",
+    )
     v.add_argument(
         "--data",
         action="append",
@@ -367,6 +375,7 @@ def _cmd_view(args) -> str:
         urdf=args.urdf,
         tip=args.tip,
         base=args.base,
+        tool=args.tool,
         simple_arm=args.simple_arm,
     )
     try:

@@ -44,6 +44,7 @@ def serve(
     urdf=None,
     tip: str | None = None,
     base: str | None = None,
+    tool=None,
     simple_arm: bool = False,
 ):
     """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
@@ -65,9 +66,9 @@ def serve(
     if urdf is not None:  # measured data's robot, posed at each point's joint values (session.arm.attach_arm)
         from rrbc_core.session.arm import attach_arm
 
-        attach_arm(loaded.session, urdf, tip, base)
-    elif tip is not None or base is not None:
-        raise InputError("--tip and --base choose links of a URDF: give --urdf")
+        attach_arm(loaded.session, urdf, tip, base, tool)
+    elif tip is not None or base is not None or tool is not None:
+        raise InputError("--tip, --base and --tool describe the robot of a URDF: give --urdf")
     _check_host(host)
     library = sources.Library.of(data_dirs, source)
     out = io.StringIO() if quiet else None

@@ -104,7 +104,24 @@ def arm_pose(scene, position, bias_scale: float = 1.0, tool_rotation=None) -> Ar
 _ROLES = {"registration": ("registration", "both"), "fiducials": ("fiducial", "both"), "targets": ("target", "check")}
 
 
-def attach_arm(session, urdf, tip: str | None = None, base: str | None = None) -> None:
+def _tool_hint(chain, q: np.ndarray, robot: np.ndarray, limit_mm: float) -> str:
+    """Words for a model that misses the robot columns: when a tool point in the tip link's frame, fitted by least
+    squares (robot ≈ p_tip(q) + R_tip(q) t), brings it within `limit_mm` RMS, that tool (give --tool); else "" (the
+    URDF, its tip or its base is not this robot's)."""
+    zero = chain.with_tool(np.zeros(3))
+    p0 = zero.forward(q)
+    cols = np.stack([zero.with_tool(np.eye(3)[k]).forward(q) - p0 for k in range(3)], axis=2)  # (N, 3, 3) = R_tip
+    tool, *_ = np.linalg.lstsq(cols.reshape(-1, 3), (robot - p0).reshape(-1), rcond=None)
+    rms = float(np.sqrt(np.mean(np.sum((p0 + np.einsum("nij,j->ni", cols, tool) - robot) ** 2, axis=1))))
+    if rms > limit_mm or not np.all(np.isfinite(tool)):
+        return ""
+    shown = ",".join(f"{v:.1f}" for v in tool)
+    return (
+        f"; with a tool point at ({shown}) mm in the tip link's frame it fits ({rms:.2f} mm RMS): give --tool {shown}"
+    )
+
+
+def attach_arm(session, urdf, tip: str | None = None, base: str | None = None, tool=None) -> None:
     """Give a session on measured data its robot (`rrbc view data.csv --urdf`): the URDF's description and each
     point's joint values from the file's joint columns (`io.joints.joint_values`), after holding the model against
     the robot columns as `rrbc calibrate` does (the nominal forward kinematics of the registration and fiducial rows
@@ -112,15 +129,21 @@ def attach_arm(session, urdf, tip: str | None = None, base: str | None = None) -
     not this robot's).
 
     Sets ``session.arm`` (ArmDescription), ``session.arm_joints`` {(kind, id): (I,) rad or mm} and
-    ``session.arm_spec`` (urdf, tip, base: kept when another station opens). Raises InputError naming what is
-    missing or wrong."""
+    ``session.arm_spec`` (urdf, tip, base, tool: kept when another station opens). `tool` (3,) mm in the tip link's
+    frame (default: the file's tool columns, `io.joints.file_tool`, else the tip link's origin). Raises InputError
+    naming what is missing or wrong (a tool that would make the model fit is named)."""
     from rrbc_core.analysis.robot_model import MODEL_CHECK_MM
-    from rrbc_core.io.joints import joint_values
+    from rrbc_core.io.joints import file_tool, joint_values
 
     mset = session.mset
     if session.kind != "measurements" or mset is None:
         raise InputError("--urdf poses the robot of a measurement file; a scene names its own (robot.urdf)")
-    desc = urdf_arm_description(urdf, tip=tip, base=base)
+    if tool is None:
+        tool = file_tool(mset)
+    if tool is not None:  # a length Z is a point along the tip link's z axis (as `rrbc calibrate --tool Z`)
+        t = np.asarray(tool, float)
+        tool = np.array([0.0, 0.0, float(t)]) if t.ndim == 0 else t.reshape(3)
+    desc = urdf_arm_description(urdf, tip=tip, base=base, tool_mm=tool)
     q = joint_values(mset, desc.chain)
     if q is None:
         raise InputError(
@@ -133,16 +156,18 @@ def attach_arm(session, urdf, tip: str | None = None, base: str | None = None) -
         d = np.linalg.norm(desc.chain.forward(q[known]) - mset.robot[known], axis=1)
         rms = float(np.sqrt(np.mean(d**2)))
         if rms > MODEL_CHECK_MM:
+            hint = _tool_hint(desc.chain, q[known], mset.robot[known], MODEL_CHECK_MM)
             raise InputError(
-                f"{mset.source}: {desc.chain.name} ({desc.chain.base} → {desc.chain.tip}) places the registration and "
-                f"fiducial rows {rms:.1f} mm RMS from their robot columns (at most {MODEL_CHECK_MM:g}): not this "
-                "robot, or another --tip or --base"
+                f"{mset.source}: {desc.chain.name} ({desc.chain.base} → {desc.chain.tip}, tool "
+                f"({', '.join(f'{v:g}' for v in desc.chain.tool)}) mm) places the registration and fiducial rows "
+                f"{rms:.1f} mm RMS from their robot columns (at most {MODEL_CHECK_MM:g})"
+                + (hint or ": not this robot, or another --tip, --base or --tool")
             )
     joints: dict[tuple[str, str], np.ndarray] = {}
     for kind, which in _ROLES.items():
         for i in np.flatnonzero(np.isin(roles, which)):
             joints.setdefault((kind, mset.ids[i]), q[i])
-    session.arm, session.arm_joints, session.arm_spec = desc, joints, (urdf, tip, base)
+    session.arm, session.arm_joints, session.arm_spec = desc, joints, (urdf, tip, base, tool)
 
 
 def measured_arm_pose(session, kind: str, pid: str) -> ArmPose:

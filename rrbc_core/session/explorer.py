@@ -105,7 +105,7 @@ class ExplorerSession:
         self.saved_fingerprint: str | None = None  # edits.fingerprint of what was last opened or saved
         self.arm = None  # measured data: the robot's URDF description (session.arm.attach_arm), else None
         self.arm_joints: dict = {}  # ... each point's joint values, (kind, id) -> (I,) rad or mm
-        self.arm_spec: tuple | None = None  # ... (urdf, tip, base), kept when another station opens
+        self.arm_spec: tuple | None = None  # ... (urdf, tip, base, tool), kept when another station opens
 
     # ------------------------------------------------------------------------------------------------ sources
     @classmethod

@@ -1,6 +1,8 @@
 """The arm the app draws (rrbc_core.session.arm): posed by the nominal controller to reach a place; the real arm's
 tool lands where the scene's kinematic error puts it, which agrees with the measurement model's truth."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -99,3 +101,27 @@ def test_rrbc_view_refuses_a_urdf_that_cannot_pose_the_files_robot(tmp_path):
         r = subprocess.run([*RRBC, "view", *args, "--port", "0"], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert r.stdout == ""
+
+
+def test_a_probe_is_given_with_tool_and_a_missing_one_is_named(tmp_path):
+    """Issue 39: `rrbc view data.csv --urdf ... --tool X,Y,Z` (a 109 mm probe); without it the refusal says which
+    tool would make the model fit, instead of blaming --tip."""
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.models.urdf import load_urdf
+    from rrbc_core.session.arm import attach_arm
+    from rrbc_core.simulation.arm_data import chain_measurements
+
+    probe = load_urdf("ur5", tip="tool0", tool_mm=[0.0, 0.0, 109.0])
+    mset = chain_measurements(probe, 5, n_fid=12, n_chk=6, n_tgt=2, noise_mm=0.05)
+    mset = replace(mset, extra={k: v for k, v in mset.extra.items() if not k.startswith("tool_")})
+    write_measurements(tmp_path / "d.csv", mset)
+
+    def fresh():
+        return ExplorerSession.from_measurements(read_measurements(tmp_path / "d.csv"))
+
+    with pytest.raises(InputError, match=r"give --tool -?0\.0,-?0\.0,109\.0"):
+        attach_arm(fresh(), "ur5", tip="tool0")
+    for tool in ((0.0, 0.0, 109.0), 109.0):
+        s = fresh()
+        attach_arm(s, "ur5", tip="tool0", tool=tool)
+        assert s.arm_spec == ("ur5", "tool0", None, s.arm_spec[3]) and np.allclose(s.arm_spec[3], [0, 0, 109])
