@@ -75,6 +75,7 @@ class ArmNodes:
         self.pose = None
         self.compact = False  # short label text (presentation mode)
         self.magnification = 1.0  # of the last pose shown
+        self.chain_links = False  # a URDF without geometry: drawn as links between its joints (`_show_chain`)
 
     def _build_urdf(self) -> bool:
         """The description's meshes under /arm/urdf, its root at the description's base pose; False if they cannot
@@ -84,6 +85,18 @@ class ArmNodes:
         from viser.extras import ViserUrdf
 
         d = self.description
+        visual, collision = d.has_geometry()
+        if not visual and not collision:
+            print(
+                f"rrbc view: {Path(d.urdf).name} has neither visual nor collision geometry: the arm is drawn as "
+                "links between its joints",
+                file=sys.stderr,
+            )
+            self.chain_links = True
+            return False
+        if not visual:
+            print(f"rrbc view: {Path(d.urdf).name} has no visual geometry: the arm is drawn from its collision "
+                  "geometry", file=sys.stderr)  # fmt: skip
         try:
             self.scene.add_frame(
                 "/arm/urdf",
@@ -91,7 +104,17 @@ class ArmNodes:
                 wxyz=np.asarray(vtf.SO3.from_matrix(d.rotation).wxyz, float),
                 position=np.asarray(d.translation, float),
             )
-            self.urdf = ViserUrdf(self.stage, Path(d.urdf), scale=1000.0, root_node_name="/arm/urdf")
+            self.urdf = ViserUrdf(
+                self.stage,
+                Path(d.urdf),
+                scale=1000.0,
+                root_node_name="/arm/urdf",
+                load_meshes=visual,
+                load_collision_meshes=not visual,
+                collision_mesh_color_override=None
+                if visual
+                else (LINK_RGB[0] / 255, LINK_RGB[1] / 255, LINK_RGB[2] / 255),
+            )
         except Exception as exc:  # noqa: BLE001 - a description whose meshes do not load: generated links instead
             print(f"rrbc view: {Path(d.urdf).name}: its meshes could not be drawn ({exc}); generated links instead",
                   file=sys.stderr)  # fmt: skip
@@ -108,15 +131,19 @@ class ArmNodes:
             self.stylus = sc.add_cylinder("/arm/stylus", radius=4.0, height=1.0, color=TOOL_RGB, cast_shadow=False)
             self._build_marks()
             return
+        n_links = 6
+        if self.chain_links and self.description is not None:  # one link per gap between its joints' origins
+            n_links = len(self.description.chain.joints) + 1
+            radius_mm = min(radius_mm, 20.0)
         self.links = [
             sc.add_cylinder(f"/arm/link{i}", radius=radius_mm, height=1.0, color=LINK_RGB, cast_shadow=False)
-            for i in range(6)
+            for i in range(n_links)
         ]
         self.joints = [
             sc.add_cylinder(
                 f"/arm/joint{i}", radius=1.15 * radius_mm, height=2.4 * radius_mm, color=JOINT_RGB, cast_shadow=False
             )
-            for i in range(6)
+            for i in range(n_links if not self.chain_links else n_links - 1)
         ]
         self.stylus = sc.add_cylinder("/arm/stylus", radius=4.0, height=1.0, color=TOOL_RGB, cast_shadow=False)
         self._build_marks()
@@ -135,6 +162,8 @@ class ArmNodes:
         self.pose = pose
         if self.urdf is not None:
             self._show_urdf(pose)
+        elif self.chain_links:
+            self._show_chain(pose)
         else:
             self._show_links(pose)
         self._show_marks(pose, magnification)
@@ -154,6 +183,23 @@ class ArmNodes:
         self.urdf.update_cfg(np.array([values.get(n, 0.0) for n in self.urdf_names], float))
         tip = d.tip_frame(pose.joints)
         self._set_stylus(tip[:3, 3], d.tool_point(pose.joints))
+
+    def _show_chain(self, pose) -> None:
+        """A URDF arm without geometry: a link between each pair of successive joint origins (root, joints, tip), a
+        joint cylinder along each moving joint's axis, the stylus to the tool point."""
+        d = self.description
+        pts = d.joint_points(pose.joints)
+        for i, link in enumerate(self.links):
+            a, b = pts[i], pts[i + 1]
+            length = float(np.linalg.norm(b - a))
+            link.visible = length > 1e-6
+            if link.visible:
+                link.position, link.wxyz, link.height = 0.5 * (a + b), _z_to(b - a), length
+        g_rot = d.chain.frames(np.asarray(pose.joints, float)[None])[0][0]  # (K, 3, 3) before each motion
+        for k, joint in enumerate(self.joints):
+            joint.position = pts[k + 1]
+            joint.wxyz = _z_to(d.rotation @ g_rot[k] @ d.chain.joints[k].axis)
+        self._set_stylus(pts[-1], d.tool_point(pose.joints))
 
     def _show_links(self, pose) -> None:
         f = pose.frames

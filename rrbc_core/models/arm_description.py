@@ -70,6 +70,28 @@ class ArmDescription:
         p = self.chain.forward(np.asarray(q, float)[None])[0]
         return self.rotation @ p + self.translation
 
+    def joint_points(self, q) -> np.ndarray:
+        """(K + 2, 3) robot frame, mm, at inputs q (I,): the root link's origin, each moving joint's origin (before
+        its motion) and the tip link's origin: what an arm is drawn from as links and joints when its URDF has no
+        geometry of its own."""
+        g_pos = self.chain.frames(np.asarray(q, float)[None])[1][0]  # (K, 3) root frame
+        root = np.vstack([np.zeros(3), g_pos])
+        return np.vstack([root @ self.rotation.T + self.translation, self.tip_frame(q)[:3, 3]])
+
+    def has_geometry(self) -> tuple[bool, bool]:
+        """(visual, collision): whether any link of the URDF has visual, or collision, geometry."""
+        import yourdfpy
+
+        robot = yourdfpy.URDF.load(
+            str(self.urdf),
+            build_scene_graph=False,
+            build_collision_scene_graph=False,
+            load_meshes=False,
+            load_collision_meshes=False,
+        )
+        links = robot.robot.links
+        return any(link.visuals for link in links), any(link.collisions for link in links)
+
 
 @lru_cache(maxsize=8)
 def dh_arm_description(model: str, tool_mm: float = 0.0) -> ArmDescription:
