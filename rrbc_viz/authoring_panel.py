@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import viser
 
-from rrbc_core.authoring.cell_geometry import MESH_MAX_BYTES, refuse_from_header
+from rrbc_core.io.mesh_file import MESH_MAX_BYTES, refuse_from_header
 
 from . import upload_spool
 from .syncing import clamped

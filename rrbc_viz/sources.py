@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet, parse_measurements, read_measurements
 from rrbc_core.io.measurements_write import write_measurements
+from rrbc_core.io.mesh_file import check_mesh_file
 from rrbc_core.io.scene import default_scene_path
 from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.session.explorer import ExplorerSession
@@ -104,8 +105,7 @@ def load_mesh(path) -> trimesh.Trimesh:
     import trimesh
 
     p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{path}: mesh file not found")
+    check_mesh_file(p)  # missing, too large, or declaring too many triangles: refused before it is parsed
     try:
         mesh = trimesh.load(str(p), force="mesh")
     except Exception as exc:  # noqa: BLE001 - trimesh raises many types for unreadable files

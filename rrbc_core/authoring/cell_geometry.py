@@ -12,11 +12,13 @@ from pathlib import Path
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.io.mesh_file import (
+    MESH_MAX_FACES,
+    check_mesh_file,
+)
 from rrbc_core.models.kinematics import ROBOT_DH, UR5_TOOL_DOWN_SEED, reachable, tool_down
 from rrbc_core.models.visibility import inside_solids, visible_points
 
-MESH_MAX_BYTES = 200 << 20
-MESH_MAX_FACES = 2_000_000
 METRES_BELOW_MM = 20.0  # a mesh whose whole extent is below this looks like metres
 ON_SURFACE_LIFT_MM = 1.0  # a point on a surface is tested for "inside a solid" this far above it
 
@@ -27,12 +29,7 @@ def load_cell_mesh(path):
     from rrbc_core.io.scene import _load_mesh_file
 
     p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: mesh file not found")
-    size = p.stat().st_size
-    why = _too_large(str(p), size, declared_triangles(p) if size <= MESH_MAX_BYTES else None)
-    if why is not None:  # refused from its size and header, before it is parsed
-        raise InputError(why)
+    check_mesh_file(p)  # refused from its size and header, before it is parsed
     try:
         mesh = _load_mesh_file(p)
     except Exception as exc:  # noqa: BLE001 - trimesh raises many types for unreadable files
@@ -53,72 +50,6 @@ def load_cell_mesh(path):
             "(scale by 1000)"
         )
     return mesh
-
-
-def declared_triangles(path) -> int | None:
-    """The number of triangles a mesh file says it holds, read without parsing the mesh (bounded memory): a binary
-    STL's count field, an ASCII STL's facets, a PLY header's face element, an OBJ's face lines (at least one
-    triangle each); None for other formats or a file that says nothing readable."""
-    p = Path(path)
-    suffix = p.suffix.lower()
-    size = p.stat().st_size
-    with open(p, "rb") as f:
-        head = f.read(512)
-        n = header_triangles(suffix, head, size)
-        if n is not None:
-            return n
-        if suffix == ".stl" and head.lstrip()[:5].lower() == b"solid":
-            return _count(f, b"facet normal")
-        if suffix == ".obj":
-            return _count(f, b"\nf ")
-    return None
-
-
-def header_triangles(suffix: str, head: bytes, size: int) -> int | None:
-    """The triangle count a mesh file's first bytes `head` declare (a file of `size` bytes, name ending in
-    `suffix`): a binary STL's count field (when it agrees with the size), a PLY header's face element; None when
-    the head alone does not say (other formats, ASCII STL, OBJ)."""
-    suffix = suffix.lower()
-    if suffix == ".stl" and len(head) >= 84:
-        n = int.from_bytes(head[80:84], "little")
-        if 84 + 50 * n == size:  # binary: the count field agrees with the file's length
-            return n
-    if suffix == ".ply" and head.startswith(b"ply"):
-        for line in head[:4096].split(b"\n"):
-            parts = line.split()
-            if len(parts) == 3 and parts[0] == b"element" and parts[1] == b"face" and parts[2].isdigit():
-                return int(parts[2])
-            if line.strip() == b"end_header":
-                break
-    return None
-
-
-def refuse_from_header(name: str, head: bytes, size: int) -> str | None:
-    """Why an upload of a mesh file must be refused from its size and first bytes alone (too large, or declaring
-    more than `MESH_MAX_FACES` triangles), or None."""
-    return _too_large(name, size, header_triangles(Path(name).suffix, head, size) if size <= MESH_MAX_BYTES else None)
-
-
-def _too_large(name: str, size: int, declared: int | None) -> str | None:
-    """The one refusal of a mesh file over `MESH_MAX_BYTES` or declaring over `MESH_MAX_FACES` triangles."""
-    if size > MESH_MAX_BYTES:
-        return f"{name}: mesh file larger than {MESH_MAX_BYTES >> 20} MiB; decimate it first"
-    if declared is not None and declared > MESH_MAX_FACES:
-        return f"{name}: {declared} triangles; at most {MESH_MAX_FACES} (decimate it first)"
-    return None
-
-
-def _count(f, token: bytes, chunk: int = 1 << 22) -> int:
-    """Occurrences of `token` in an open binary file, read in chunks (memory: one chunk)."""
-    f.seek(0)
-    n, tail = 0, b""
-    while True:
-        block = f.read(chunk)
-        if not block:
-            return n
-        data = tail + block  # a token across the boundary starts in the tail, shorter than the token
-        n += data.count(token)
-        tail = data[-(len(token) - 1) :] if len(token) > 1 else b""
 
 
 def inside(mesh, points) -> np.ndarray:

@@ -342,6 +342,9 @@ def _load_mesh_file(path: Path):
     Raises ValueError/OSError-derived exceptions from trimesh; the loader wraps them."""
     import trimesh
 
+    from rrbc_core.io.mesh_file import check_mesh_file
+
+    check_mesh_file(path)  # too large, or declaring too many triangles: refused before it is parsed
     loaded: Any = trimesh.load(str(path), force="scene")  # a trimesh.Scene (force="scene")
     parts, meshes = [], []
     start = 0

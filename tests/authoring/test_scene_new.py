@@ -207,24 +207,73 @@ def test_a_mesh_file_too_large_is_refused_from_its_header(tmp_path):
 
     from rrbc_core.authoring import cell_geometry as cg
     from rrbc_core.errors import InputError
+    from rrbc_core.io import mesh_file as cg_limits
 
     box = trimesh.creation.box(extents=(100, 100, 100))
-    for fmt in ("stl", "obj", "ply"):
+    for fmt in ("stl", "obj", "ply", "3mf", "glb"):
         p = tmp_path / f"box.{fmt}"
         box.export(p)
-        assert cg.declared_triangles(p) == 12, fmt
+        assert cg_limits.declared_triangles(p) == 12, fmt
     ascii_stl = tmp_path / "ascii.stl"
     ascii_stl.write_text(trimesh.exchange.stl.export_stl_ascii(box))
-    assert cg.declared_triangles(ascii_stl) == 12
+    assert cg_limits.declared_triangles(ascii_stl) == 12
     big = tmp_path / "big.stl"  # a binary STL whose count says 3 million (its length agrees): never parsed
     n = 3_000_000
     with open(big, "wb") as f:
         f.write(b"\0" * 80 + struct.pack("<I", n))
         f.seek(84 + 50 * n - 1)
         f.write(b"\0")
-    assert cg.declared_triangles(big) == n
+    assert cg_limits.declared_triangles(big) == n
     with pytest.raises(InputError, match="3000000 triangles; at most"):
         cg.load_cell_mesh(big)
+
+
+def test_a_compressed_mesh_is_refused_before_it_is_unpacked(tmp_path):
+    """Issue 42: a 3MF is a zip archive: one that would unpack beyond the size limit (a 'zip bomb' of zeros) is
+    refused from what the archive declares, and one holding more triangles than the limit from a streamed count
+    (bounded memory), before any mesh reader parses it; so is a GLB whose JSON declares too many triangles. The
+    File tab's --mesh path (sources.load_mesh) and a scene's mesh take the same check."""
+    import json
+    import zipfile
+
+    from rrbc_core.authoring.cell_geometry import load_cell_mesh
+    from rrbc_core.errors import InputError
+    from rrbc_core.io.mesh_file import MESH_MAX_BYTES, MESH_MAX_FACES, check_mesh_file
+    from rrbc_viz.sources import load_mesh
+
+    bomb = tmp_path / "bomb.3mf"
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as z:
+        with z.open("3D/3dmodel.model", "w", force_zip64=True) as f:
+            block = b"\0" * (1 << 20)
+            for _ in range((MESH_MAX_BYTES >> 20) + 8):
+                f.write(block)
+    assert bomb.stat().st_size < 2 << 20  # a small file on disk
+    for load in (check_mesh_file, load_cell_mesh, load_mesh):
+        with pytest.raises(InputError, match="unpacks to"):
+            load(bomb)
+    many = tmp_path / "many.3mf"
+    with zipfile.ZipFile(many, "w", zipfile.ZIP_DEFLATED) as z:
+        with z.open("3D/3dmodel.model", "w") as f:
+            f.write(b'<model><resources><object id="1"><mesh><triangles>')
+            line = b'<triangle v1="0" v2="1" v3="2"/>' * 1000
+            for _ in range(MESH_MAX_FACES // 1000 + 1):
+                f.write(line)
+            f.write(b"</triangles></mesh></object></resources></model>")
+    with pytest.raises(InputError, match="triangles; at most"):
+        check_mesh_file(many)
+    glb = tmp_path / "many.glb"
+    doc = {
+        "asset": {"version": "2.0"},
+        "accessors": [{"count": 3 * (MESH_MAX_FACES + 1), "componentType": 5125, "type": "SCALAR"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 0}]}],
+        "nodes": [{"mesh": 0}],
+    }
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    glb.write_bytes(b"glTF" + (2).to_bytes(4, "little") + (20 + len(js)).to_bytes(4, "little")
+                    + len(js).to_bytes(4, "little") + b"JSON" + js)  # fmt: skip
+    with pytest.raises(InputError, match=f"{MESH_MAX_FACES + 1} triangles; at most"):
+        check_mesh_file(glb)
 
 
 @pytest.mark.parametrize("seed", [3, 4])

@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from rrbc_core.authoring.cell_geometry import MESH_MAX_BYTES, MESH_MAX_FACES
+from rrbc_core.io.mesh_file import MESH_MAX_BYTES, MESH_MAX_FACES
 from rrbc_viz.serve import serve
 from tests.support.viser_clients import ClientPool
 
