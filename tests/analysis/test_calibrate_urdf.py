@@ -15,7 +15,7 @@ import pytest
 
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.models.urdf import load_urdf
-from tests.paths import RRBC
+from tests.support.cli_run import rrbc
 from tests.support.urdf_arms import LIFT_ARM, chain_measurements
 
 NOISE = 0.02  # per axis, sensor and robot (chain_measurements' default)
@@ -39,7 +39,7 @@ def _chain(arm: str):
 
 
 def _run(*args, timeout=300):
-    return subprocess.run([*RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    return rrbc(*args, timeout=timeout)  # in this process (tests/support/cli_run.py)
 
 
 def _file(tmp_path, arm, seed, **kw):
@@ -176,7 +176,6 @@ def test_stations_get_a_transform_each_and_share_the_arms_errors(tmp_path):
     stations' offset, hundreds of mm); per station with shared errors the residual is the noise and VEC beats rigid
     at the checks."""
     import json
-    import subprocess
     import sys
     from pathlib import Path
 

@@ -9,7 +9,6 @@ a full calibration there."""
 from __future__ import annotations
 
 import json
-import subprocess
 
 import numpy as np
 import pytest
@@ -18,7 +17,7 @@ from rrbc_core.analysis.diagnosis import diagnose
 from rrbc_core.analysis.vec_compare import compare
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.models.urdf import load_urdf
-from tests.paths import RRBC
+from tests.support.cli_run import rrbc
 from tests.support.urdf_arms import chain_measurements
 
 Z_MAX = 3.5  # |estimate − planted| / its standard error: P(|z| > 3.5) = 5e-4 per term under the stated uncertainty
@@ -112,8 +111,8 @@ def test_calibrate_claims_compliance_where_it_is_planted_and_diagnose_says_the_s
         assert r["kinematic_error"]["claimed"] == ("kinematic" in names), (robot, seed, names)
 
 
-def _run(*args):
-    return subprocess.run([*RRBC, *map(str, args)], capture_output=True, text=True, timeout=300)
+def _run(*args, timeout=300):
+    return rrbc(*args, timeout=timeout)  # in this process (tests/support/cli_run.py)
 
 
 @pytest.fixture(scope="module")

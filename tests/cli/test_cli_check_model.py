@@ -2,9 +2,6 @@
 
 import json
 import shutil
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
@@ -14,13 +11,13 @@ from rrbc_core.models.errorterms import Drift, SmoothField
 from rrbc_core.simulation.datasets import measured_data
 from rrbc_core.simulation.montecarlo import work_cell_from_scene
 from tests.paths import ROOT
+from tests.support.cli_run import rrbc
 
-RRBC = str(Path(sys.executable).with_name("rrbc"))
 FIGURES = ("rmst_rigid_mm", "rmst_rrbc_mm", "fre_mm")
 
 
 def run(*args, timeout=300):
-    return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    return rrbc(*args, timeout=timeout)  # in this process (tests/support/cli_run.py)
 
 
 @pytest.fixture(scope="module")

@@ -4,9 +4,6 @@ controllers and ROS take (4x4, xyz, rpy), in `correct` and `calibrate`."""
 
 import csv
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,13 +13,13 @@ from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.simulation.station_data import station_measurements
 from tests.paths import ROOT
+from tests.support.cli_run import rrbc
 
-RRBC = str(Path(sys.executable).with_name("rrbc"))
 EXAMPLE = ROOT / "rrbc_core" / "data" / "example_measurements.csv"
 
 
 def run(*args, timeout=300):
-    return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    return rrbc(*args, timeout=timeout)  # in this process (tests/support/cli_run.py)
 
 
 def _read(path):

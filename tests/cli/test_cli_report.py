@@ -4,9 +4,6 @@ every check (the page opened in Chromium: tests/browser/test_report_browser.py).
 
 import json
 import re
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
@@ -18,13 +15,13 @@ from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.simulation.station_data import station_measurements
 from rrbc_core.studies.vec_study import joint_measurements
 from tests.paths import ROOT
+from tests.support.cli_run import rrbc
 
-RRBC = str(Path(sys.executable).with_name("rrbc"))
 EXAMPLE = ROOT / "rrbc_core" / "data" / "example_measurements.csv"
 
 
 def run(*args, timeout=300):
-    return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    return rrbc(*args, timeout=timeout)  # in this process (tests/support/cli_run.py)
 
 
 def _report(*args) -> dict:

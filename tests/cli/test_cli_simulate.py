@@ -1,20 +1,17 @@
 """`rrbc simulate` end to end through the console script (docs/cli.md)."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
 from tests.paths import ROOT
+from tests.support.cli_run import rrbc
 
-RRBC = str(Path(sys.executable).with_name("rrbc"))
 SCENES = ["demo_workcell", "breadboard_vanwyk2018", "peg_in_hole_cell"]
 
 
 def run(*args, timeout=300):
-    return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+    return rrbc(*args, timeout=timeout)  # in this process (tests/support/cli_run.py)
 
 
 @pytest.mark.parametrize("scene", [SCENES[0], *(pytest.param(s, marks=pytest.mark.slow) for s in SCENES[1:])])
