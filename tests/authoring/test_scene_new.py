@@ -5,18 +5,17 @@ outside solids; bad input is refused in one line with nothing written."""
 from __future__ import annotations
 
 import json
-import subprocess
 
 import numpy as np
 import pytest
 
 from rrbc_core.io.scene_toml import load_scene
-from tests.paths import RRBC
 from tests.support.cells import random_cell
+from tests.support.cli_run import rrbc
 
 
-def _run(*args, cwd=None):
-    return subprocess.run([*RRBC, *map(str, args)], capture_output=True, text=True, timeout=300, cwd=cwd)
+def _run(*args):
+    return rrbc(*args)  # in this process (tests/support/cli_run.py)
 
 
 def _on_surface_and_outside(mesh, info, points):
