@@ -62,6 +62,17 @@ def candidates(n: int) -> list:
     return out
 
 
+def left_out(n: int) -> tuple[tuple[str, str], ...]:
+    """(method, why) of the candidates not tried for N fiducials (`candidates`): `auto` says so rather than narrowing
+    its choice without a word."""
+    out = []
+    if n > TPS_MAX:
+        out.append(("tps", f"more than {TPS_MAX} fiducials (a dense solve per fold)"))
+    if n > GP_MAX:
+        out.append(("gp", f"more than {GP_MAX} fiducials (a likelihood fit, cubic in their number, per fold)"))
+    return tuple(out)
+
+
 def method_json(method) -> dict:
     """A method object as JSON: ``method`` and its options by flag (as `MethodOptions.interpolation_json`)."""
     out: dict[str, Any] = {"method": method.name}
@@ -96,15 +107,19 @@ class AutoChoice:
     method: Any
     table: tuple[CVRow, ...]
     folds: int
+    #: (method, why) of candidates not tried (`left_out`)
+    not_tried: tuple[tuple[str, str], ...] = ()
 
     def to_json(self) -> dict:
         """The ``interpolation`` JSON of a run with `--interpolation auto`: the chosen method and its options,
-        ``selected_by`` "cross-validation over the fiducials", ``folds`` and ``cv`` (the table)."""
+        ``selected_by`` "cross-validation over the fiducials", ``folds``, ``cv`` (the table) and ``not_tried``
+        ([{method, why}])."""
         return {
             **method_json(self.method),
             "selected_by": "cross-validation over the fiducials",
             "folds": self.folds,
             "cv": [row.to_json() for row in self.table],
+            "not_tried": [{"method": m, "why": why} for m, why in self.not_tried],
         }
 
     def describe(self) -> str:
@@ -115,7 +130,8 @@ class AutoChoice:
         head = f"auto chose {self.method.name}" + (f" ({opts})" if opts else "")
         if best is None or rigid is None:
             return head + " (too few fiducials to cross-validate)"
-        return f"{head}: CV RMS {best:.4f} mm over {self.folds} folds of the fiducials (rigid {rigid:.4f} mm)"
+        skipped = "".join(f"; {m} not tried: {why}" for m, why in self.not_tried)
+        return f"{head}: CV RMS {best:.4f} mm over {self.folds} folds of the fiducials (rigid {rigid:.4f} mm){skipped}"
 
 
 def folds_of(n: int) -> np.ndarray:
@@ -176,7 +192,7 @@ def choose(points, values) -> AutoChoice:
             best, best_rms = r, rms
     if not clearly_better(best, rigid):
         best = rigid
-    return AutoChoice(best.method, table, int(fold.max()) + 1)
+    return AutoChoice(best.method, table, int(fold.max()) + 1, left_out(len(p)))
 
 
 class _FittedAuto:

@@ -5,7 +5,7 @@ import pytest
 
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.interpolation import Auto, make_interpolator
-from rrbc_core.interpolation.auto import FOLDS, GP_MAX, candidates, choose, folds_of
+from rrbc_core.interpolation.auto import FOLDS, GP_MAX, TPS_MAX, candidates, choose, folds_of, left_out
 from rrbc_core.methods import MethodOptions
 from rrbc_core.simulation.station_data import station_measurements
 
@@ -133,3 +133,16 @@ def test_the_app_shows_the_choice_rrbc_correct_makes():
     cli = correct_measurements(mset, MethodOptions.named("least-squares", "auto")).choice
     assert ev.choice.method == cli.method and ev.choice.to_json() == cli.to_json()
     assert cli.describe() in tables.summary(ev, session.kind)
+
+
+def test_candidates_left_out_for_size_are_said_not_dropped_silently():
+    """Issue 41: above GP_MAX fiducials gp is not tried (above TPS_MAX tps): the choice's JSON and its line say so."""
+
+    assert left_out(GP_MAX) == () and [m for m, _ in left_out(GP_MAX + 1)] == ["gp"]
+    assert [m for m, _ in left_out(TPS_MAX + 1)] == ["tps", "gp"]
+    rng = np.random.default_rng(2)
+    p = rng.uniform(0, 500, (GP_MAX + 10, 3))
+    c = choose(p, 0.01 * np.sin(p / 100.0))
+    assert [r["method"] for r in c.to_json()["not_tried"]] == ["gp"]
+    assert "gp not tried: more than 150 fiducials" in c.describe()
+    assert not any(row.method.name == "gp" for row in c.table)
