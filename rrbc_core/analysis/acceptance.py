@@ -54,6 +54,7 @@ def _correct_points(cj: dict) -> list[dict]:
                         "bound95_mm": {"rigid": p.get("bound95_rigid_mm"), "rrbc": p.get("bound95_mm")},
                         "correction_mm": float(np.linalg.norm(p["correction_mm"])),
                         "extrapolated": bool(p["extrapolated"]),
+                        "rrbc_worse": bool(p.get("rrbc_worse", False)),
                         "nearest_fiducial_mm": near,
                     }
                 )
@@ -154,10 +155,15 @@ def acceptance(
         basis = f"rrbc calibrate's recommendation: {calibration['recommendation_basis']}"
     else:
         recommended = "rrbc" if rrbc_ok else "rigid"
+        shown = (
+            ""
+            if gain is None
+            else f" (paired test of the squared errors over {gain['n']} points, p {gain['p_gain']:.2g})"
+        )
         basis = (
-            "rrbc diagnose: RRBC lowers the RMS and the points show it"
+            f"RRBC lowers the RMS error and the points show it{shown}"
             if rrbc_ok
-            else "rrbc diagnose: the points do not show a gain from RRBC, so rigid"
+            else f"the points do not show a gain from RRBC{shown}, so rigid"
         )
     verdict, failing, reason = verdict_of(points, recommended, tolerance_mm)
     regs = [{"group": p.get("group"), **p["registration"]} for p in _parts(cj)]

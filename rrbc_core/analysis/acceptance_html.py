@@ -29,6 +29,29 @@ table,figure{break-inside:avoid}@media print{body{margin:0;max-width:none}h2{bre
 """
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("rrbc")
+    except PackageNotFoundError:  # pragma: no cover - run from a source tree without installing
+        return "(source tree)"
+
+
+def _instrument_words(inst: dict) -> str:
+    """The instrument's reading noise in words: its figures and where they came from."""
+    if inst.get("kind") == "polar":
+        figs = (
+            f"distance {inst.get('distance_mm', 0):g} mm + {inst.get('distance_ppm', 0):g} ppm, "
+            f"angle {inst.get('angle_urad', 0):g} µrad"
+        )
+    else:
+        figs = f"σ {_mm(inst.get('sigma_mm'))} mm per axis"
+    name = inst.get("name", "")
+    prefix = "" if name in ("estimated", "given") else f"{name}: "
+    return f"{prefix}{figs} ({inst.get('source', '')})"
+
+
 def _mm(v) -> str:
     return "—" if v is None or not np.isfinite(v) else f"{v:.3f}"
 
@@ -144,7 +167,7 @@ def report_html(acc: dict, title: str = "RRBC acceptance report") -> str:
         ["fiducials", str(m["fiducials"])],
         ["targets", str(m["targets"])],
         ["checks", str(m["checks"])],
-        ["instrument", escape(f"{inst.get('name', '')}: {inst.get('source', '')}")],
+        ["instrument noise", escape(_instrument_words(inst))],
         ["arm model", escape(str(m["arm"])) if m["arm"] else "none given"],
     ]
     parts.append(_table(None, rows, 2))
@@ -162,7 +185,14 @@ def report_html(acc: dict, title: str = "RRBC acceptance report") -> str:
                 ", ".join(f"{x:.6f}" for x in rpy) if rpy else "—",
             ]
         )
-    parts.append(_table(["station", "method", "FRE RMS (mm)", "xyz (mm)", "rpy (rad)"], rows, 2))
+    head = [
+        "station",
+        "method",
+        "fit residual at the registration points, RMS (mm)",
+        "translation xyz (mm)",
+        "rotation roll, pitch, yaw (rad, URDF convention)",
+    ]
+    parts.append(_table(head, rows, 2))
     parts.append("<h2>Methods side by side</h2>")
     with_cv = any(fig.get("cv_rmst_mm") is not None for fig in acc["methods"].values())
     rows = []
@@ -180,39 +210,42 @@ def report_html(acc: dict, title: str = "RRBC acceptance report") -> str:
         )
     parts.append("<h2>Every point</h2>")
     failing = {(f["id"], f["group"]) for f in acc["failing"]}
+    stations = any(p["group"] is not None for p in acc["points"])
     rows, classes = [], []
     for p in acc["points"]:
         err = p["error_mm"] or {}
         b = (p["bound95_mm"] or {}).get(rec)
-        rows.append(
-            [
-                escape(p["id"]),
-                p["role"],
-                escape(str(p["group"] or "")),
-                _mm(err.get("rigid")),
-                _mm(err.get(rec)),
-                _mm(p["correction_mm"]),
-                _mm(b),
-                _mm(p["nearest_fiducial_mm"]),
-                "yes" if p["extrapolated"] else "",
-            ]
-        )
+        row = [escape(p["id"]), p["role"]] + ([escape(str(p["group"]))] if stations else [])
+        row += [
+            _mm(err.get("rigid")),
+            _mm(err.get(rec)),
+            _mm(p["correction_mm"]),
+            _mm(b),
+            _mm(p["nearest_fiducial_mm"]),
+            "yes" if p["extrapolated"] else "no",
+        ]
+        if rec != "rigid":
+            row.append("worse" if err and err.get(rec, 0.0) > err.get("rigid", np.inf) else "")
+        rows.append(row)
         classes.append("fail" if (p["id"], p["group"]) in failing else "")
-    head = [
-        "point",
-        "role",
-        "station",
+    head = ["point", "role"] + (["station"] if stations else [])
+    head += [
         "error rigid",
         f"error {METHOD_NAMES[rec]}",
-        "|RRBC correction|",
+        "size of the RRBC correction",
         f"95 % bound ({METHOD_NAMES[rec]})",
         "nearest fiducial",
-        "extrapolated",
+        "outside the fiducials' hull",
     ]
-    parts.append("<p class='muted'>mm; errors only where the file holds the truth (checks).</p>")
-    parts.append(_table(head, rows, 3, classes))
+    head += [f"{METHOD_NAMES[rec]} worse than rigid"] if rec != "rigid" else []
+    parts.append(
+        "<p class='muted'>mm. Errors only where the file holds the truth (checks); a check passes or fails by its "
+        "error, a target by its 95 % bound (the distance within which its corrected position lies with 95 % "
+        "probability).</p>"
+    )
+    parts.append(_table(head, rows, 3 if stations else 2, classes))
     d = acc["diagnosis"]
-    parts.append("<h2>What rrbc diagnose names</h2>")
+    parts.append("<h2>What the data hold beyond a rigid transform and noise (rrbc diagnose)</h2>")
     if d["effects"]:
         parts.append(
             "<ul>"
@@ -226,7 +259,7 @@ def report_html(acc: dict, title: str = "RRBC acceptance report") -> str:
     if acc["warnings"]:
         parts.append("<h2>Warnings</h2><ul>" + "".join(f"<li>{escape(w)}</li>" for w in acc["warnings"]) + "</ul>")
     parts.append(
-        "<p class='muted'>Made by rrbc report (docs/cli.md); every figure is the one rrbc correct, "
+        f"<p class='muted'>Made by rrbc {escape(_version())} (rrbc report); every figure is the one rrbc correct, "
         "rrbc diagnose and rrbc calibrate print for this file.</p></body></html>"
     )
     return "\n".join(parts)

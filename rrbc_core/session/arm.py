@@ -115,7 +115,10 @@ def _tool_hint(chain, q: np.ndarray, robot: np.ndarray, limit_mm: float) -> str:
     rms = float(np.sqrt(np.mean(np.sum((p0 + np.einsum("nij,j->ni", cols, tool) - robot) ** 2, axis=1))))
     if rms > limit_mm or not np.all(np.isfinite(tool)):
         return ""
+    tool = np.where(np.abs(tool) < 0.05, 0.0, tool)  # no "-0.0"
     shown = ",".join(f"{v:.1f}" for v in tool)
+    if not np.any(tool):
+        return f"; with no tool (the tip link's origin) it fits ({rms:.2f} mm RMS): leave out --tool"
     return (
         f"; with a tool point at ({shown}) mm in the tip link's frame it fits ({rms:.2f} mm RMS): give --tool {shown}"
     )
@@ -160,7 +163,7 @@ def attach_arm(session, urdf, tip: str | None = None, base: str | None = None, t
             raise InputError(
                 f"{mset.source}: {desc.chain.name} ({desc.chain.base} → {desc.chain.tip}, tool "
                 f"({', '.join(f'{v:g}' for v in desc.chain.tool)}) mm) places the registration and fiducial rows "
-                f"{rms:.1f} mm RMS from their robot columns (at most {MODEL_CHECK_MM:g})"
+                f"{rms:.1f} mm RMS from their robot columns (at most {MODEL_CHECK_MM:g} mm)"
                 + (hint or ": not this robot, or another --tip, --base or --tool")
             )
     joints: dict[tuple[str, str], np.ndarray] = {}
