@@ -224,13 +224,14 @@ def _cmd_correct(args) -> str:
     opts = MethodOptions.named(args.registration, args.interpolation, seed=args.seed, **flags)
     result = correct_stations(mset, opts, instrument_of(args))
     written = ""
+    j = result.to_json() if args.out is not None or args.json else {}  # built once for the file and stdout
     if args.out is not None:
         from rrbc_core.io.corrected_write import write_corrected
 
-        n = write_corrected(args.out, result.to_json())
+        n = write_corrected(args.out, j)
         written = f"wrote {n} corrected targets and checks to {args.out}\n"
     if args.json:
-        return json.dumps(result.to_json(), allow_nan=False) + "\n"
+        return json.dumps(j, allow_nan=False) + "\n"
     return (stations_text(result) if isinstance(result, StationsResult) else correct_text(result)) + written
 
 

@@ -188,9 +188,7 @@ def acceptance(
             "fiducials": sum(len(p["fiducials"]) for p in _parts(cj)),
             "targets": len(points) - n_checks,
             "checks": n_checks,
-            "instrument": (
-                cj["bounds"]["instrument"] if "bounds" in cj else [p["bounds"]["instrument"] for p in _parts(cj)][0]
-            ),
+            "instrument": _parts(cj)[0]["bounds"]["instrument"],  # the first station's (each estimates its own)
             "arm": None if calibration is None else calibration["robot"],
         },
         "registration": regs,

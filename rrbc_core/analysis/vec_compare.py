@@ -33,7 +33,7 @@ from rrbc_core.analysis.arm_verdict import RULE as ARM_RULE
 from rrbc_core.analysis.arm_verdict import arm_verdict
 from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
 from rrbc_core.analysis.configuration_check import configuration_check
-from rrbc_core.analysis.extrapolation_cv import beyond_points, extrapolation_folds, mixture_choice
+from rrbc_core.analysis.extrapolation_cv import METHOD_ORDER, beyond_points, extrapolation_folds, mixture_choice
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
 from rrbc_core.errors import InputError
@@ -45,7 +45,7 @@ from rrbc_core.models.chain import Chain
 from rrbc_core.models.loads import candidate_terms, gravity_loads
 from rrbc_core.runtime.threads import thread_limited
 
-METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
+METHODS = METHOD_ORDER  # rigid, rrbc, vec, vec_rrbc: simplest first (`extrapolation_cv.METHOD_ORDER`)
 CV_FOLDS = 10
 MIN_REGISTRATION = 3
 TERM_SE = 2.0  # load terms: the gain must exceed this many standard errors ...
