@@ -43,12 +43,9 @@ def robot_chain(
         name = robot or "ur5"
         if name not in ROBOT_DH:
             raise InputError(f"--robot must be one of {', '.join(ROBOT_DH)}, got {name!r} (or give --urdf)")
-        if name == "ur5":  # with its links' masses (`arm_masses`): compliance can be tested and identified
-            from rrbc_core.models.arm_masses import dh_chain_with_masses
+        from rrbc_core.models.arm_masses import dh_chain_with_masses
 
-            chain = dh_chain_with_masses(ROBOT_DH[name])
-        else:
-            chain = Chain.from_dh(ROBOT_DH[name], name)
+        chain = dh_chain_with_masses(ROBOT_DH[name])  # with its links' masses: compliance can be tested and identified
     if tool is None:
         return chain
     t = np.asarray(tool, float)

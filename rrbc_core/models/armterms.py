@@ -2,7 +2,7 @@
 one robot model of calibration and diagnosis (`models.chain.Chain`: each joint's offset and its origin's position and
 orientation errors, in `Chain.param_names`) and its load terms (`models.loads`: a joint's compliance under the
 gravity torque, a column's bending), for the scene's arm: a URDF (`robot.urdf`, `robot.tip`: its link masses carry
-the loads) or a DH arm (`robot.model` ur5/ur10; the UR5 with its masses).
+the loads) or a DH arm (`robot.model` ur5/ur10; with their links' masses, `arm_masses`).
 
 The true arm is the nominal chain with `parameters` and `loads`; the robot reports the nominal chain's forward
 kinematics of the joints it reads. For a physical point p (robot frame, mm):
@@ -35,19 +35,16 @@ GRAVITY = (0.0, 0.0, -9.80665)
 
 def arm_chain(urdf: str = "", tip: str = "", robot: str = "", tool_mm=(0.0, 0.0, 0.0)):
     """The nominal chain of a URDF (a file, or a packaged/bundled name; `tip` the measured link) or a DH arm
-    ("ur5" with its links' masses, "ur10"), with the tool point (3,) mm in the tip link's frame."""
+    ("ur5", "ur10", with their links' masses), with the tool point (3,) mm in the tip link's frame."""
     from rrbc_core.models.arm_masses import dh_chain_with_masses
-    from rrbc_core.models.chain import Chain
     from rrbc_core.models.kinematics import ROBOT_DH
     from rrbc_core.models.urdf import load_urdf
 
     tool = np.asarray(tool_mm, float).reshape(3)
     if urdf:
         return load_urdf(urdf, tip=tip or None, tool_mm=tool)
-    if robot == "ur5":
-        return dh_chain_with_masses(ROBOT_DH["ur5"]).with_tool(tool)
     if robot in ROBOT_DH:
-        return Chain.from_dh(ROBOT_DH[robot], robot).with_tool(tool)
+        return dh_chain_with_masses(ROBOT_DH[robot]).with_tool(tool)
     raise InputError("an arm_errors term needs the scene's arm: robot.model ur5/ur10, or robot.urdf")
 
 

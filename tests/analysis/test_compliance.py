@@ -9,6 +9,7 @@ a full calibration there."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ from rrbc_core.analysis.vec_compare import compare
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.models.urdf import load_urdf
 from tests.support.cli_run import rrbc
-from tests.support.urdf_arms import chain_measurements
+from tests.support.urdf_arms import LIFT_ARM, chain_measurements
 
 Z_MAX = 3.5  # |estimate − planted| / its standard error: P(|z| > 3.5) = 5e-4 per term under the stated uncertainty
 PLANTED = {
@@ -188,8 +189,10 @@ def test_bad_models_are_refused_in_one_line(tmp_path):
     write_measurements(data, chain_measurements(chain, 3, n_fid=20, n_chk=5, compliance=_plant("lift_arm", 3)))
     model = tmp_path / "m.json"
     assert _run("calibrate", data, "--urdf", "lift_arm", "--compliance", "--save-model", model).returncode == 0
+    massless = tmp_path / "massless.urdf"  # the lift arm without its links' <inertial>
+    massless.write_text(re.sub(r"<inertial>.*?</inertial>", "", LIFT_ARM.read_text(), flags=re.S))
     cases = [
-        (["--robot", "ur10", "--compliance"], "no link masses"),  # the UR5 carries its masses (issue 36)
+        (["--urdf", massless, "--compliance"], "no link masses"),  # the packaged UR5 and UR10 carry theirs (issue 36)
         (["--model", model, "--urdf", "panda"], "not this model's|another|is the chain"),
         (["--model", model, "--compliance"], "drop --compliance"),
         (["--urdf", "lift_arm", "--backlash"], "go with --compliance"),
@@ -201,7 +204,7 @@ def test_bad_models_are_refused_in_one_line(tmp_path):
         r = _run("calibrate", data, *args)
         assert r.returncode == 2, (args, r.stdout, r.stderr)
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
-        assert __import__("re").search(message, r.stderr), (args, r.stderr)
+        assert re.search(message, r.stderr), (args, r.stderr)
     assert not (tmp_path / "no").exists()
     edited = json.loads(model.read_text())
     edited["joints"][0] = "elbow"

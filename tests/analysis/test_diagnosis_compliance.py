@@ -76,3 +76,28 @@ def test_compliance_not_named_on_a_rigid_or_geometric_arm(robot, kin):
         assert "compliance" not in names, (seed, names)
         assert names == ([] if kin == 0.0 else ["kinematic"]), (seed, names)
         assert "compliance" in d.tests  # the test ran
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ["ur5", "ur10"])
+def test_the_packaged_dh_arms_carry_their_masses(robot):
+    """Issue 36: `--robot ur5|ur10` (the DH tables, not the URDFs) carry their links' masses, so `rrbc diagnose`
+    tests compliance on them and `rrbc calibrate --compliance` recovers planted joint compliances within Z_MAX
+    standard errors; on the same arm without compliance nothing is named but `kinematic`."""
+    from rrbc_core.analysis.robot_model import robot_chain
+    from rrbc_core.analysis.vec_compare import compare
+
+    z_max = 3.5  # P(|z| > 3.5) = 5e-4 per term under the stated uncertainty
+    chain = robot_chain(robot)
+    rng = np.random.default_rng({"ur5": 71, "ur10": 72}[robot])
+    plant = {"joint2.compliance": rng.uniform(1e-5, 6e-5), "joint3.compliance": rng.uniform(1e-5, 6e-5)}
+    mset = chain_measurements(chain, 7, n_fid=40, n_chk=30, noise_mm=0.05, compliance=plant)
+    d = diagnose(mset, robot=robot, seed=0)
+    assert "compliance" in d.tests and "compliance" in [e.name for e in d.effects], d.effects
+    got = {
+        p["name"]: p for p in compare(mset, robot=robot, compliance=True)["parameters"] if p.get("kind") == "compliance"
+    }
+    for name, value in plant.items():
+        assert abs(got[name]["error"] - value) <= z_max * got[name]["std_error"], (name, value, got[name])
+    clean = diagnose(chain_measurements(chain, 8, n_fid=40, n_chk=30, noise_mm=0.05), robot=robot, seed=0)
+    assert "compliance" in clean.tests and [e.name for e in clean.effects] == ["kinematic"], clean.effects
