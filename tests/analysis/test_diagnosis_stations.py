@@ -1,9 +1,6 @@
 """`rrbc diagnose` on files with stations and on checks far off the fiducials' plane (issue 28, items 1 and 4)."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
@@ -14,8 +11,7 @@ from rrbc_core.correction.stations import correct_stations
 from rrbc_core.io.groups import split_groups
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.simulation.station_data import station_measurements
-
-RRBC = str(Path(sys.executable).with_name("rrbc"))
+from tests.support.cli_run import rrbc
 
 
 def test_each_station_is_diagnosed_on_its_own_at_the_split_alpha():
@@ -49,11 +45,11 @@ def test_the_field_planted_at_every_station_is_found_at_most_and_named_only_as_a
 def test_the_command_line_reports_each_station(tmp_path):
     path = tmp_path / "st.csv"
     write_measurements(path, station_measurements(24, stations=2, eval_fiducials=0.5))
-    out = subprocess.run([RRBC, "diagnose", str(path), "--json"], capture_output=True, text=True, timeout=300)
+    out = rrbc("diagnose", path, "--json")
     assert out.returncode == 0, out.stderr
     data = json.loads(out.stdout)
     assert [g["group"] for g in data["groups"]] == ["station1", "station2"] and data["alpha_per_group"] == 0.005
-    text = subprocess.run([RRBC, "diagnose", str(path)], capture_output=True, text=True, timeout=300).stdout
+    text = rrbc("diagnose", path).stdout
     assert "=== group 'station1' ===" in text and "=== all 2 groups" in text
 
 

@@ -2,9 +2,6 @@
 bring every target's 95 % bound under T, or says what limits it; the scene's Monte Carlo confirms the bounds."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,8 +11,7 @@ from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.session.evaluation import Group
 from rrbc_core.session.explorer import ExplorerSession
 from rrbc_core.session.tolerance_plan import plan_to_tolerance
-
-RRBC = str(Path(sys.executable).with_name("rrbc"))
+from tests.support.cli_run import rrbc
 
 
 @pytest.fixture(scope="module")
@@ -67,13 +63,11 @@ def test_the_scenes_monte_carlo_confirms_the_planned_bounds(scene):
 
 @pytest.mark.parametrize("flags", [("--tolerance", "0"), ("--tolerance", "nan"), ("--tolerance", "x")])
 def test_a_tolerance_that_cannot_be_is_refused_in_one_line(flags):
-    out = subprocess.run([RRBC, "plan", default_scene_path(), *flags], capture_output=True, text=True, timeout=120)
+    out = rrbc("plan", default_scene_path(), *flags)
     assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1
 
 
 def test_the_command_prints_the_plan_as_json():
-    out = subprocess.run(
-        [RRBC, "plan", default_scene_path(), "--tolerance", "0.5", "--json"], capture_output=True, text=True
-    )
+    out = rrbc("plan", default_scene_path(), "--tolerance", "0.5", "--json")
     j = json.loads(out.stdout)
     assert j["met"] and j["count"] == len(j["fiducials"]) and all(t["under"] for t in j["targets"])

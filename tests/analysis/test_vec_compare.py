@@ -5,7 +5,6 @@ field, the recommendation (made without the checks) matches the best method on t
 from __future__ import annotations
 
 import json
-import subprocess
 
 import numpy as np
 import pytest
@@ -13,7 +12,7 @@ import pytest
 from rrbc_core.analysis.vec_compare import compare
 from rrbc_core.io.measurements import read_measurements
 from rrbc_core.studies import vec_study
-from tests.paths import RRBC
+from tests.support.cli_run import rrbc
 from tests.support.joint_data import joint_file
 
 NOISE = 0.02  # per axis, on the sensor and on the robot readings (joint_data's default)
@@ -21,10 +20,7 @@ FLOOR = float(np.sqrt(3 * (2 * NOISE**2)))  # RMS 3-D error of one check reading
 
 
 def _calibrate(path, *extra):
-    r = subprocess.run(
-        [*RRBC, "calibrate", str(path), "--tool", "0,0,100", *extra], capture_output=True, text=True, timeout=300
-    )
-    return r
+    return rrbc("calibrate", path, "--tool", "0,0,100", *extra)
 
 
 @pytest.mark.parametrize("seed", [1, 2])

@@ -1,4 +1,6 @@
-"""`rrbc correct` end to end, through the installed console script, against docs/cli.md."""
+"""`rrbc correct` end to end against docs/cli.md: the installed console script itself (a fresh interpreter, its entry
+point) in `test_the_console_script_corrects_and_refuses`, every other case through `rrbc_core.cli.main` in this
+process (`tests.support.cli_run`: the same exit code, stdout and stderr without a second of imports per call)."""
 
 import json
 import subprocess
@@ -10,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from tests.paths import EXAMPLE_CSV
+from tests.support.cli_run import rrbc
 from tests.support.synth import BiasField, measure, random_transform
 
 RRBC = str(Path(sys.executable).with_name("rrbc"))
@@ -17,8 +20,12 @@ EXAMPLE = EXAMPLE_CSV
 HEADER = "id,role,sensor_x,sensor_y,sensor_z,robot_x,robot_y,robot_z,time"
 
 
-def run(*args):
+def run_script(*args):
+    """The installed console script in a new process."""
     return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=120)
+
+
+run = rrbc
 
 
 def _fmt(v):
@@ -157,9 +164,16 @@ def test_readable_table_without_json():
         json.loads(res.stdout)
 
 
-def test_bundled_example_rrbc_helps():
-    out = json.loads(run("correct", EXAMPLE, "--json").stdout)
+def test_the_console_script_corrects_and_refuses():
+    """The installed `rrbc` in a new process: the bundled example is corrected (RRBC helps on it, and the script
+    prints what `main` prints in this process); no arguments is one line on stderr and exit 2."""
+    res = run_script("correct", EXAMPLE, "--json")
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
     assert out["summary"]["rmst_rrbc_mm"] < out["summary"]["rmst_rigid_mm"]
+    assert res.stdout == run("correct", EXAMPLE, "--json").stdout
+    bad = run_script()
+    assert bad.returncode == 2 and bad.stdout == "" and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
 
 
 def _good_rows():

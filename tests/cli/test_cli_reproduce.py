@@ -1,22 +1,18 @@
 """`rrbc reproduce vanwyk2018` end to end through the console script (docs/cli.md), and the report."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rrbc_core.studies import reference_data, vanwyk2018
 from rrbc_core.studies.reproduction import METHODS
+from tests.support.cli_run import rrbc
 
-RRBC = str(Path(sys.executable).with_name("rrbc"))
 QUICK = ["--replicates", "8", "--layouts", "A", "--no-confusion"]
 
 
-def run(*args, timeout=600):
-    return subprocess.run([RRBC, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+run = rrbc  # the command in this process (`tests.support.cli_run`); the console script: tests/cli/test_cli.py
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,7 @@ import pytest
 from rrbc_core.errors import InputError
 from rrbc_core.runtime.tasks import run_tasks, spawn_seeds
 from tests.paths import ROOT, RRBC
+from tests.support.cli_run import rrbc
 
 DASK = str(Path(sys.executable).with_name("dask"))
 
@@ -112,32 +113,35 @@ def test_monte_carlo_gives_the_same_numbers_on_a_cluster(cluster):
 
 
 @pytest.mark.slow
-def test_rrbc_simulate_prints_the_same_bytes_with_and_without_a_scheduler(cluster):
+def test_rrbc_simulate_prints_the_same_bytes_with_and_without_a_scheduler(cluster, monkeypatch):
+    """The command run here (`rrbc_core.cli.main` in this process, as the console script runs it), on the cluster
+    by --scheduler and by RRBC_SCHEDULER: the same output."""
     address, _ = cluster
-    args = [*RRBC, "simulate", str(ROOT / "scenes" / "demo_workcell.toml"), "--trials", "20", "--json"]
-    env = {k: v for k, v in os.environ.items() if k != "RRBC_SCHEDULER"}
-    local = subprocess.run(args, capture_output=True, timeout=300, env=env)
-    remote = subprocess.run([*args, "--scheduler", address], capture_output=True, timeout=300, env=env)
+    args = ["simulate", ROOT / "scenes" / "demo_workcell.toml", "--trials", "20", "--json"]
+    monkeypatch.delenv("RRBC_SCHEDULER", raising=False)
+    local = rrbc(*args)
+    remote = rrbc(*args, "--scheduler", address)
     assert local.returncode == 0 and remote.returncode == 0, remote.stderr
     assert local.stdout == remote.stdout
-    by_env = subprocess.run(args, capture_output=True, timeout=300, env=dict(env, RRBC_SCHEDULER=address))
-    assert by_env.stdout == local.stdout
+    monkeypatch.setenv("RRBC_SCHEDULER", address)
+    assert rrbc(*args).stdout == local.stdout
 
 
 @pytest.mark.slow
-def test_rrbc_reproduce_prints_the_same_bytes_with_and_without_a_scheduler(cluster):
+def test_rrbc_reproduce_prints_the_same_bytes_with_and_without_a_scheduler(cluster, monkeypatch):
     """Both studies, small sizes, every stage (the simulations and assessments; the crpi candidates and joint fits;
-    the confusion tables in the next test) on two separate workers against one process."""
+    the confusion tables in the next test) on two separate workers against one process (the command run in this
+    process, `rrbc_core.cli.main`)."""
     address, _ = cluster
-    env = {k: v for k, v in os.environ.items() if k != "RRBC_SCHEDULER"}
+    monkeypatch.delenv("RRBC_SCHEDULER", raising=False)
     for args in (
-        [*RRBC, "reproduce", "vanwyk2018", "--replicates", "5", "--layouts", "A", "--no-confusion", "--json"],
-        [*RRBC, "reproduce", "crpi", "--replicates", "10", "--joint-replicates", "20", "--json"],
+        ["reproduce", "vanwyk2018", "--replicates", "5", "--layouts", "A", "--no-confusion", "--json"],
+        ["reproduce", "crpi", "--replicates", "10", "--joint-replicates", "20", "--json"],
     ):
-        here = subprocess.run([*args, "--scheduler", "in-process"], capture_output=True, timeout=600, env=env)
-        there = subprocess.run([*args, "--scheduler", address], capture_output=True, timeout=600, env=env)
+        here = rrbc(*args, "--scheduler", "in-process")
+        there = rrbc(*args, "--scheduler", address)
         assert here.returncode == 0 and there.returncode == 0, there.stderr
-        assert here.stdout == there.stdout and b'"replicates"' in here.stdout
+        assert here.stdout == there.stdout and '"replicates"' in here.stdout
 
 
 @pytest.mark.slow
@@ -225,7 +229,13 @@ def test_a_scheduler_lost_mid_run_is_one_line_and_exit_2():
         env = {k: v for k, v in os.environ.items() if k != "RRBC_SCHEDULER"}
         args = [*RRBC, "simulate", str(ROOT / "scenes" / "demo_workcell.toml"), "--trials", "40000", "--json"]
         run = subprocess.Popen([*args, "--scheduler", address], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
-        time.sleep(8)
+        from distributed import Client
+
+        with Client(address, timeout=10) as watch:  # wait until the run's tasks are on the scheduler
+            deadline = time.time() + 120
+            while not watch.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks)):
+                assert run.poll() is None and time.time() < deadline, "the run never sent its tasks"
+                time.sleep(0.1)
         assert run.poll() is None, "the run ended before the scheduler was killed"
         os.killpg(procs[0].pid, signal.SIGKILL)
         out, err = run.communicate(timeout=120)
