@@ -42,12 +42,14 @@ def estimate_noise(
     """
     if data is not None:
         rows = np.flatnonzero(np.isfinite(data.robot).all(axis=1))
-        ids = np.asarray(data.ids, dtype=object)[rows]
-        diff = data.sensor[rows] @ np.asarray(rotation).T - data.robot[rows]
-        uniq, inv, counts = np.unique(ids, return_inverse=True, return_counts=True)
+        ids = [data.ids[i] for i in rows]
+        index: dict = {}
+        inv = np.fromiter((index.setdefault(i, len(index)) for i in ids), int, len(ids))  # each row's id, numbered
+        counts = np.bincount(inv, minlength=len(index)) if len(ids) else np.zeros(0, int)
         dof = int(np.sum(counts - 1))
         if dof >= 3:
-            mean = np.zeros((len(uniq), 3))
+            diff = data.sensor[rows] @ np.asarray(rotation).T - data.robot[rows]
+            mean = np.zeros((len(index), 3))
             np.add.at(mean, inv, diff)
             mean /= counts[:, None]
             ss = float(np.sum((diff - mean[inv]) ** 2))
@@ -56,8 +58,7 @@ def estimate_noise(
     if n < 3:
         return None
     dist, j = cKDTree(fid_sensor).query(fid_sensor, k=2)
-    pairs = {tuple(sorted((i, int(j[i, 1])))) for i in range(n)}
-    ii, jj = np.array(sorted(pairs)).T
+    ii, jj = np.unique(np.sort(np.c_[np.arange(n), j[:, 1]], axis=1), axis=0).T  # each nearest pair once
     d2 = np.sum((fid_sensor[ii] - fid_sensor[jj]) ** 2, axis=1)
     y = np.sum((fid_corr[ii] - fid_corr[jj]) ** 2, axis=1)
     close = d2 <= np.percentile(d2, 25)  # the closest quarter of the pairs bounds the noise above

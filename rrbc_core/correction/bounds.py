@@ -207,10 +207,18 @@ def fold_distances(fid_sensor: np.ndarray) -> np.ndarray:
     (`interpolation.auto.folds_of`): how far the cross-validation predicts it from."""
     n = len(fid_sensor)
     fold = folds_of(n)
-    dist = np.empty(n)
-    for f in range(int(fold.max()) + 1):
-        test = fold == f
-        dist[test] = cKDTree(fid_sensor[~test]).query(fid_sensor[test])[0]
+    dist = np.full(n, np.inf)
+    if n < 2 or fold.max() == 0:
+        return dist
+    # one tree: each point's nearest neighbours, the first in another fold (folds are dealt at random, so one is
+    # almost always among the nearest 6); per fold, with the rest's own tree, for the few that have none there
+    d, j = cKDTree(fid_sensor).query(fid_sensor, k=min(n, 6))
+    other = fold[j] != fold[:, None]
+    found = other.any(axis=1)
+    dist[found] = d[found, np.argmax(other[found], axis=1)]
+    for f in np.unique(fold[~found]):
+        test = (fold == f) & ~found
+        dist[test] = cKDTree(fid_sensor[fold != f]).query(fid_sensor[test])[0]
     return dist
 
 
@@ -301,7 +309,7 @@ def cv_profile(
     n = len(fid_sensor)
     fold = folds_of(n)
     err = np.empty_like(fid_corr)
-    dist = np.empty(n)
+    dist = fold_distances(fid_sensor)
     inside = np.empty(n, bool)
     for f in range(int(fold.max()) + 1):
         test = fold == f
@@ -310,7 +318,6 @@ def cv_profile(
         except InputError:
             return None
         err[test] = pred.values - fid_corr[test]
-        dist[test] = cKDTree(fid_sensor[~test]).query(fid_sensor[test])[0]
         inside[test] = ~np.asarray(pred.extrapolated, bool)  # the one hull test (`interpolation.hull`)
     if not np.all(np.isfinite(err)):
         return None
@@ -446,7 +453,8 @@ class BoundsBasis:
     fid_sensor: np.ndarray
     interpolating: bool
     profile: CVProfile | None
-    fitted: tuple | None  # the interpolator fitted to the fiducials' positions and to ones (F, w)
+    fitted: tuple | None  # the interpolator fitted to the fiducials' positions and to ones (F, w; w None: weights
+    # that sum to one, w = 0)
     tested_mm: float | None
     slope: float
     v_rigid: float
@@ -509,8 +517,13 @@ def bounds_basis(
             if profile is None:
                 warnings.append("no RRBC bound: the correction could not be cross-validated over the fiducials")
             else:
-                try:
-                    fw = (method.fit(fid_sensor, fid_sensor), method.fit(fid_sensor, np.ones_like(fid_sensor)))
+                try:  # the weight is 0 for a method whose weights sum to one: no second fit
+                    ones = (
+                        None
+                        if getattr(method, "reproduces_constants", False)
+                        else method.fit(fid_sensor, np.ones_like(fid_sensor))
+                    )
+                    fw = (method.fit(fid_sensor, fid_sensor), ones)
                 except InputError:
                     fw = None
     return BoundsBasis(
@@ -579,8 +592,8 @@ def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndar
             out[name] = no_bounds(len(p))
             continue
         if fw is not None:
-            lever = p - fw[0].predict(p).values
-            weight = 1.0 - fw[1].predict(p).values.mean(axis=1)
+            lever = p - fw[0].values_at(p)
+            weight = np.zeros(len(p)) if fw[1] is None else 1.0 - fw[1].values_at(p).mean(axis=1)
         else:  # the transform's error at the point, not cancelled (wider)
             lever, weight = p, np.ones(len(p))
         reg = point_registration_cov(rot, lever, weight, theta)

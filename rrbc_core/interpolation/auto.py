@@ -211,6 +211,9 @@ class _FittedAuto:
     def predict(self, query) -> Prediction:
         return self.fitted.predict(query)
 
+    def values_at(self, query) -> np.ndarray:
+        return self.fitted.values_at(query)
+
 
 @dataclass(frozen=True)
 class Auto:

@@ -49,6 +49,8 @@ class FittedInterpolator(Protocol):
 
     def predict(self, query) -> Prediction: ...
 
+    def values_at(self, query) -> np.ndarray: ...
+
 
 # ---------------------------------------------------------------------------------------------------------------
 # Input checks
@@ -157,6 +159,12 @@ class Fitted:
         else:
             off = self.hull.frame.off_axis(q)
         return Prediction(values=values, std=std, extrapolated=np.asarray(extra, bool), off_plane_mm=off)
+
+    def values_at(self, query) -> np.ndarray:
+        """The predicted values only (M, 3), without the hull flags `predict` adds (for callers that do not need
+        them: the bounds' transform lever)."""
+        q = as_query(query)
+        return self._predict(q, self.hull.frame.to_local(q))[0]
 
     def _predict(self, q, local_q):  # pragma: no cover - abstract
         raise NotImplementedError

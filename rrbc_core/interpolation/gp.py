@@ -234,6 +234,8 @@ class GP:
     """
 
     name: ClassVar[str] = "gp"
+    #: fitted to ones, it predicts ones everywhere (weights that sum to one; tests/interpolation/test_interpolation.py)
+    reproduces_constants: ClassVar[bool] = True
     kernel: str = option(
         "matern52",
         label="GP kernel",

@@ -40,6 +40,7 @@ class NoCorrection:
     """Baseline: predicts zero corrections everywhere (std None); the hull flags are still reported."""
 
     name: ClassVar[str] = "none"
+    reproduces_constants: ClassVar[bool] = False
 
     def fit(self, points, values) -> FittedInterpolator:
         p, v = check_data(points, values)
@@ -103,6 +104,8 @@ class IDW:
     """Inverse distance weighting over the k nearest fiducials (3-D distance, sensor frame), weights 1/d^power."""
 
     name: ClassVar[str] = "idw"
+    #: fitted to ones, it predicts ones everywhere (weights that sum to one; tests/interpolation/test_interpolation.py)
+    reproduces_constants: ClassVar[bool] = True
     k: int = option(
         4,
         flag="neighbors",

@@ -146,6 +146,8 @@ class Linear:
     """
 
     name: ClassVar[str] = "linear"
+    #: fitted to ones, it predicts ones everywhere (weights that sum to one; tests/interpolation/test_interpolation.py)
+    reproduces_constants: ClassVar[bool] = True
 
     def fit(self, points, values) -> FittedInterpolator:
         p, v = check_data(points, values)

@@ -111,6 +111,8 @@ class TPS:
     """
 
     name: ClassVar[str] = "tps"
+    #: fitted to ones, it predicts ones everywhere (weights that sum to one; tests/interpolation/test_interpolation.py)
+    reproduces_constants: ClassVar[bool] = True
     smoothing: float = option(
         0.0,
         label="TPS smoothing",

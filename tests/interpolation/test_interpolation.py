@@ -753,3 +753,35 @@ def test_linear_extension_outside_a_noisy_grid_avoids_sliver_simplices(seed):
     pred = Linear().fit(pts, corr).predict(query)
     assert pred.extrapolated.all()
     assert np.abs(pred.values).max() <= 1.1 * np.abs(corr).max()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_methods_that_claim_to_reproduce_constants_do_and_values_at_is_predicts_values(seed):
+    """`reproduces_constants` (the bounds skip fitting ones on it, `correction.bounds`): fitted to ones, the method
+    predicts ones inside and far outside the hull, on 3-D and coplanar fiducials with near-coincident pairs, with its
+    non-default options too; `values_at` gives `predict`'s values."""
+    rng = np.random.default_rng(400 + seed)
+    cloud = rng.uniform(0, 500, (int(rng.integers(8, 80)), 3))
+    xy = rng.uniform(0, 500, (int(rng.integers(8, 40)), 2))
+    flat = np.c_[xy, np.zeros(len(xy))]
+    near = np.r_[cloud, cloud[:2] + 1e-4]
+    q = np.r_[rng.uniform(-800, 1300, (300, 3)), cloud[:5]]
+    variants = {
+        "idw": [{}, {"k": 9, "power": 1.2}],
+        "tps": [{}, {"smoothing": 5.0}],
+        "gp": [{}, {"noise_mm": 0.05}],
+        "linear": [{}],
+    }
+    for name, cls in METHODS.items():
+        if name == "auto":
+            continue
+        if not cls.reproduces_constants:
+            assert np.allclose(make_interpolator(name).fit(cloud, np.ones_like(cloud)).predict(q).values, 0.0)
+            continue
+        for options in variants[name]:
+            method = make_interpolator(name, **options)
+            for pts in (cloud, flat, near):
+                fitted = method.fit(pts, np.ones_like(pts))
+                pred = fitted.predict(q).values
+                assert np.allclose(pred, 1.0, atol=1e-9), (name, options, np.abs(pred - 1).max())
+                assert np.array_equal(fitted.values_at(q), pred)
