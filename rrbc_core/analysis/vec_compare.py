@@ -32,10 +32,10 @@ import numpy as np
 from rrbc_core.analysis.arm_verdict import RULE as ARM_RULE
 from rrbc_core.analysis.arm_verdict import arm_verdict
 from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
-from rrbc_core.analysis.configuration_check import configuration_check
 from rrbc_core.analysis.extrapolation_cv import METHOD_ORDER, beyond_points, extrapolation_folds, mixture_choice
 from rrbc_core.analysis.robot_model import require_model, robot_chain
 from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
+from rrbc_core.correction.configuration_check import configuration_check
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.io.groups import GROUP_COLUMN, group_names, has_groups

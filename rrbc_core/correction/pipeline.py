@@ -15,6 +15,7 @@ from rrbc_core import interpolation, registration
 from rrbc_core.correction import metrics
 from rrbc_core.correction.bounds import Bounds, correction_bounds
 from rrbc_core.correction.check_statistics import CheckStatistics, check_statistics
+from rrbc_core.correction.configuration_check import file_configuration_check
 from rrbc_core.correction.rrbc import CorrectedPoints, correct_points, fiducial_corrections
 from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
@@ -125,8 +126,13 @@ class CorrectionResult:
             )
             if cp is not None
         ]
-        return correction_warnings(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points) + (
-            tuple(self.bounds.warnings) if with_bounds else ()
+        method = self.choice.method if self.choice is not None else self.options.interpolator()
+        config = file_configuration_check(self.data) if method.name != "none" else None
+        said = config.warning("rrbc calibrate with the arm's model (VEC) follows it") if config is not None else None
+        return (
+            correction_warnings(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points)
+            + ((said,) if said else ())
+            + (tuple(self.bounds.warnings) if with_bounds else ())
         )
 
     def to_json(self, with_bounds: bool = True) -> dict:

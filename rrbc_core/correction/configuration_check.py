@@ -1,5 +1,5 @@
 """Are the checks and targets reached in the arm configurations their nearest fiducials were measured in?
-(`rrbc calibrate`'s warning, issue 38.)
+(`rrbc calibrate`'s warning, and `rrbc correct`'s on a file with the DH arms' joint columns q1..q6, issue 38.)
 
 RRBC interpolates the fiducials' corrections by position. An arm's error depends on its joint configuration (the
 same place reached with the tool turned, or the wrist flipped, is another error), so where a point is reached in
@@ -37,8 +37,8 @@ class ConfigurationCheck:
     beyond: np.ndarray
     flagged: bool
 
-    def warning(self) -> str | None:
-        """The warning's words when `flagged`, else None."""
+    def warning(self, advice: str = "VEC follows the configuration") -> str | None:
+        """The warning's words when `flagged`, else None; `advice` ends it."""
         if not self.flagged:
             return None
         n, m = int(self.beyond.sum()), len(self.distance_rad)
@@ -47,8 +47,7 @@ class ConfigurationCheck:
             f"fiducials (up to {np.degrees(self.distance_rad.max()):.0f}° in one joint) than any fiducial is from its "
             f"neighbours' ({np.degrees(self.fiducial_rad.max()):.0f}°; one-sided Mann-Whitney p = {self.p_value:.2g}):"
             " RRBC interpolates by position only, so where the arm's error depends on its configuration its "
-            "correction there comes from other configurations and can be worse than rigid; VEC follows the "
-            "configuration"
+            f"correction there comes from other configurations and can be worse than rigid; {advice}"
         )
 
 
@@ -81,3 +80,25 @@ def configuration_check(
     own = np.array([_joint_change(qr[[f]], qr[rows_fid[nb[1:]]]).min() for f, nb in zip(rows_fid, near_f)])
     p = float(mannwhitneyu(dist, own, alternative="greater").pvalue)
     return ConfigurationCheck(dist, own, p, dist > own.max(), bool(p < ALPHA))
+
+
+def file_configuration_check(mset) -> ConfigurationCheck | None:
+    """`configuration_check` on a measurement file's own rows (fiducial and both against check and target) when it
+    has the DH arms' joint columns q1..q6 (degrees, six revolute joints: docs/formats/measurement-file.md); None
+    without them, or when they cannot be read as such (then `rrbc calibrate`, given the arm, reads and checks them).
+    What `rrbc correct` warns with: it has no arm model, and a URDF's joint names and kinds are not known to it."""
+    from rrbc_core.errors import InputError
+    from rrbc_core.io.joints import joint_values
+    from rrbc_core.models.chain import Chain
+    from rrbc_core.models.kinematics import UR5
+
+    if mset is None or not all(f"q{i}" in mset.extra for i in range(1, 7)):
+        return None
+    try:
+        q = joint_values(mset, Chain.from_dh(UR5, "dh"))
+    except InputError:
+        return None
+    if q is None:
+        return None
+    pts = np.concatenate([mset.rows("check"), mset.rows("target")]).astype(int)
+    return configuration_check(mset.sensor, q, np.ones(q.shape[1], bool), np.asarray(mset.rows("fiducial")), pts)
