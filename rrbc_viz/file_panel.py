@@ -49,6 +49,21 @@ class FilePanel:
         )
         self.download_csv = gui.add_button("Download data (CSV)", icon=viser.Icon.DOWNLOAD)
         self.download_json = gui.add_button("Download results (JSON)", icon=viser.Icon.DOWNLOAD)
+        self.download_corrected = gui.add_button(
+            "Download corrected targets (CSV)",
+            icon=viser.Icon.DOWNLOAD,
+            hint="What `rrbc correct DATA.csv --out corrected.csv` writes for the data above: each target's and "
+            "check's corrected robot position, its 95 % bound and whether it is extrapolated",
+        )
+        self.report_tolerance = gui.add_number(
+            "Report tolerance (mm)", 0.0, min=0.0, step=0.01, hint="The acceptance report's tolerance; 0: none"
+        )
+        self.download_report = gui.add_button(
+            "Download report (HTML)",
+            icon=viser.Icon.DOWNLOAD,
+            hint="What `rrbc report DATA.csv --out report.html` writes for the data above (least squares, this "
+            "interpolation with its default options): every method, every point, a verdict against the tolerance",
+        )
 
         @self.load.on_click
         def _(event: viser.GuiEvent) -> None:
@@ -73,6 +88,12 @@ class FilePanel:
 
         self.download_csv.on_click(lambda event: app.files.download("csv", client=event.client))
         self.download_json.on_click(lambda event: app.files.download("json", client=event.client))
+        self.download_corrected.on_click(lambda event: app.files.download("corrected", client=event.client))
+
+        @self.download_report.on_click
+        def _(event: viser.GuiEvent) -> None:
+            tol = self.report_tolerance.value  # this panel's own widget, passed with the action
+            app.files.download("report", client=event.client, tolerance_mm=tol if tol and tol > 0 else None)
 
     def confirm(self, title: str, text: str, yes: str, on_yes: Callable[[], object]) -> None:
         """Ask before an action that discards something (a modal: `yes` runs `on_yes`, "Keep editing" closes)."""

@@ -1,5 +1,6 @@
 """The session's views besides its evaluation: the heat map over the targets' regions, the Monte Carlo plots, and
-the exports (a measurement file, the JSON of `rrbc correct`)."""
+the exports (a measurement file, the JSON of `rrbc correct`, its corrected targets and checks, the acceptance report
+of `rrbc report`)."""
 
 from __future__ import annotations
 
@@ -262,3 +263,32 @@ def export_json(session: ExplorerSession) -> dict:
     out["settings"] = s.to_json()
     out["source"] = {"kind": session.kind, "name": session.name}
     return out
+
+
+@thread_limited
+def export_corrected(session: ExplorerSession) -> str:
+    """The corrected targets and checks as `rrbc correct FILE --out corrected.csv` writes them (`io.corrected_write`),
+    for FILE = `export_measurements(session)` with the session's method (registration, interpolation, options)."""
+    from rrbc_core.correction.stations import correct_stations
+    from rrbc_core.io.corrected_write import corrected_csv
+
+    return corrected_csv(correct_stations(export_measurements(session), session.settings.method).to_json())
+
+
+def report_options(session: ExplorerSession):
+    """The `MethodOptions` `rrbc report FILE --interpolation NAME` uses for the session's interpolation NAME: least
+    squares and the method's default options (the command has no other flags)."""
+    from rrbc_core.methods import MethodOptions
+
+    return MethodOptions.named("least-squares", session.settings.interpolation)
+
+
+@thread_limited
+def export_report(mset, options, tolerance_mm: float | None = None) -> dict:
+    """`rrbc report FILE --interpolation NAME [--tolerance T] --json` (`analysis.acceptance`) for a measurement set
+    taken from the session (`export_measurements`) and `report_options(session)`; the file's tool as the command
+    reads it. Taken as values so the app computes it outside its lock."""
+    from rrbc_core.analysis.acceptance import acceptance
+    from rrbc_core.io.joints import file_tool
+
+    return acceptance(mset, tolerance_mm=tolerance_mm, options=options, tool=file_tool(mset))

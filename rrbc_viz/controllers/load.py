@@ -109,11 +109,23 @@ class FileController:
         """An upload refused before it was parsed (`upload_spool`: too large, or its header says too much)."""
         self.ctx.message(why, client, title="Upload refused")
 
-    def export(self, what: str) -> tuple[str, bytes]:
-        """(file name, content) of "csv" (figures.export_measurements(session) as a measurement file) or "json"
-        (figures.export_json(session))."""
+    def export(self, what: str, tolerance_mm: float | None = None) -> tuple[str, bytes]:
+        """(file name, content) of "csv" (figures.export_measurements(session) as a measurement file), "json"
+        (figures.export_json(session)), "corrected" (figures.export_corrected: `rrbc correct --out`'s CSV) or "report"
+        (the HTML of `rrbc report` on the "csv" file, `tolerance_mm` its --tolerance; computed outside the lock)."""
+        if what == "report":
+            from rrbc_core.analysis.acceptance_html import report_html
+
+            with self.ctx.lock:
+                slug = sources.slug(self.ctx.session.name)
+                mset = figures.export_measurements(self.ctx.session)
+                options = figures.report_options(self.ctx.session)
+            acc = figures.export_report(mset, options, tolerance_mm)
+            return f"rrbc-{slug}-report.html", report_html(acc).encode("utf-8")
         with self.ctx.lock:
             slug = sources.slug(self.ctx.session.name)
+            if what == "corrected":
+                return f"rrbc-{slug}-corrected.csv", figures.export_corrected(self.ctx.session).encode("utf-8")
             if what == "csv":
                 s = self.ctx.session.settings
                 text = sources.measurements_csv(
@@ -129,12 +141,12 @@ class FileController:
                 return f"rrbc-{slug}-results.json", (
                     json.dumps(figures.export_json(self.ctx.session), indent=2) + "\n"
                 ).encode("utf-8")
-        raise InputError(f"unknown export '{what}': csv or json")
+        raise InputError(f"unknown export '{what}': csv, json, corrected or report")
 
-    def download(self, what: str, client=None) -> tuple[str, bytes] | None:
-        """Send an export to `client` (every tab if None) as a file download."""
+    def download(self, what: str, client=None, tolerance_mm: float | None = None) -> tuple[str, bytes] | None:
+        """Send an export to `client` (every tab if None) as a file download (`export`)."""
         try:
-            name, content = self.export(what)
+            name, content = self.export(what, tolerance_mm)
         except (InputError, ValueError) as exc:
             self.ctx.message(str(exc), client, title="Export failed")
             return None

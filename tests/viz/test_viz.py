@@ -410,6 +410,33 @@ def test_exports_come_from_the_session(app):
     app.controls.file.download_json.value = True
 
 
+def test_the_file_tabs_corrected_targets_and_report_are_the_commands_on_its_csv(measured, tmp_path):
+    """Issue 40, items 2 and 3: the File tab's corrected targets are `rrbc correct CSV --out` and its report is `rrbc
+    report CSV --interpolation NAME [--tolerance T] --out` on the CSV the same tab downloads (one answer, the
+    same bytes), with the app's interpolation changed from the default."""
+    from html import escape as html_escape
+
+    from tests.support.cli_run import rrbc
+
+    app = measured
+    app.controls.explore.interpolation.value = "tps"  # as a user sets it
+    name, data = app.files.export("csv")
+    path = tmp_path / name
+    path.write_bytes(data)
+    name, corrected = app.files.export("corrected")
+    assert name.endswith("-corrected.csv")
+    assert rrbc("correct", path, "--interpolation", "tps", "--out", tmp_path / "c.csv").returncode == 0
+    assert corrected == (tmp_path / "c.csv").read_bytes()
+    name, html = app.files.export("report", tolerance_mm=0.2)
+    assert name.endswith("-report.html")
+    r = rrbc("report", path, "--interpolation", "tps", "--tolerance", "0.2", "--out", tmp_path / "r.html")
+    assert r.returncode == 0, r.stderr
+    source = html_escape(figures.export_measurements(app.session).source).encode()  # the file the app opened
+    assert html.replace(source, html_escape(str(path)).encode()) == (tmp_path / "r.html").read_bytes()
+    assert b"0.2 mm" in html or b"0.2&nbsp;mm" in html
+    app.controls.file.download_corrected.value = True  # no tab connected: nothing to send, nothing breaks
+
+
 # ------------------------------------------------------------------------------------------------- bad files
 def test_bad_files_leave_the_server_and_session(app, tmp_path):
     session = app.session
