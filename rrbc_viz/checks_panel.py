@@ -1,5 +1,5 @@
-"""The Explore tab's "Checks: rigid vs RRBC" folder: the before/after statistics of the data set's check rows and
-their histogram, rigid against RRBC.
+"""The Explore tab's "Checks: rigid vs RRBC" folder: the before/after statistics of the data set's check rows,
+their histogram, rigid against RRBC, and the per-point list (the largest errors first).
 
 Every number comes from `rrbc_core.session.data_set.check_statistics` — `rrbc correct` with the session's method on
 the data the CSV download writes — so the folder shows what `rrbc correct DATA.csv` prints (its
@@ -14,6 +14,8 @@ from rrbc_core.correction.check_statistics import CheckStatistics
 
 #: Histogram bins of the check errors.
 BINS = 20
+#: checks listed one by one (the largest RRBC errors); the rest are counted
+LISTED = 15
 
 
 def _series(label: str, colour: str) -> dict:
@@ -32,6 +34,18 @@ def render(stats: CheckStatistics, method: str) -> str:
     return head + "\n\n```\n" + "\n".join(stats.lines()[1:]) + "\n```"
 
 
+def point_list(stats: CheckStatistics, limit: int = LISTED) -> str:
+    """The per-point list (`CheckStatistics.per_point`): each check's rigid and RRBC error, the largest RRBC error
+    first, those RRBC made worse marked."""
+    rows = stats.per_point(limit)
+    lines = ["| check | rigid mm | RRBC mm | |", "|---|---:|---:|---|"]
+    for pid, rigid, rrbc in rows:
+        lines.append(f"| {pid} | {rigid:.3f} | {rrbc:.3f} | {'worse' if rrbc > rigid else ''} |")
+    more = stats.n - len(rows)
+    tail = f"\n\n… and {more} more (all in *Download corrected targets* and the report)." if more > 0 else ""
+    return "**Per check**, the largest RRBC errors first:\n\n" + "\n".join(lines) + tail
+
+
 class ChecksPanel:
     """The folder's widgets (built inside the Explore tab); `show` gives it values, it owns its handles."""
 
@@ -47,6 +61,7 @@ class ChecksPanel:
                 axes=({"label": "error (mm)"}, {"label": "fraction of checks"}),
                 aspect=1.4,
             )
+            self.points = gui.add_markdown("")
         self.folder.visible = False
         self.stats: CheckStatistics | None = None  # what is shown (None: hidden)
 
@@ -58,3 +73,4 @@ class ChecksPanel:
             return
         self.text.content = render(stats, method)
         self.histogram.data = stats.histogram(BINS)
+        self.points.content = point_list(stats)

@@ -95,6 +95,13 @@ class CheckStatistics:
             "rrbc_worse": list(self.worse),
         }
 
+    def per_point(self, limit: int | None = None) -> list[tuple[str, float, float]]:
+        """(id, rigid error, RRBC error) mm per check, the largest RRBC error first (ties: the larger rigid error,
+        then the file's order); the first `limit` (all when None)."""
+        order = np.lexsort((np.arange(self.n), -self.error_rigid_mm, -self.error_rrbc_mm))
+        rows = [(str(self.ids[i]), float(self.error_rigid_mm[i]), float(self.error_rrbc_mm[i])) for i in order]
+        return rows if limit is None else rows[: max(int(limit), 0)]
+
     def histogram(self, bins: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(bin centres (B,), fraction of checks per bin rigid (B,), RRBC (B,)) of the 3-D errors over one set of
         bins from 0 to the largest error, mm."""
