@@ -15,6 +15,7 @@ FIDUCIAL_EXCLUDED: Rgb = (150, 150, 150)
 TARGET: Rgb = (20, 40, 110)
 TARGET_EXTRAPOLATED: Rgb = (235, 30, 200)
 CHECK: Rgb = (0, 100, 50)  # a measurement file's check rows (targets scored against their robot values)
+CHECK_EXTRAPOLATED: Rgb = (120, 120, 0)  # a check outside the fiducials' hull: a check still, not a target
 REGION: Rgb = (80, 170, 255)
 HULL: Rgb = (240, 190, 40)
 CORRECTION_FIDUCIAL: Rgb = (255, 110, 0)
@@ -42,6 +43,7 @@ DATA_COLORS: dict[str, Rgb] = {
     "target": TARGET,
     "check (measured data)": CHECK,
     "target outside the hull (extrapolated)": TARGET_EXTRAPOLATED,
+    "check outside the hull (extrapolated)": CHECK_EXTRAPOLATED,
     "region of variability": REGION,
     "95 % bound of a target (true size)": BOUND,
     "fiducials' hull": HULL,

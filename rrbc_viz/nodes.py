@@ -409,10 +409,10 @@ class SceneNodes:
             self._assign(
                 self._spheres[("targets", pid)],
                 "color",
-                colors.TARGET_EXTRAPOLATED
+                (colors.CHECK_EXTRAPOLATED if t.extrapolated[i] else colors.CHECK)
+                if pid in ev.check_ids  # a check stays a check's colour, outside the hull too
+                else colors.TARGET_EXTRAPOLATED
                 if t.extrapolated[i]
-                else colors.CHECK
-                if pid in ev.check_ids
                 else colors.TARGET,
             )
             if ("targets", pid) not in self._dragging:

@@ -89,10 +89,13 @@ def stations_line(session) -> str:
 
 
 def target_table(ev: Evaluation) -> str:
-    """Per target: error rigid, error RRBC (mm, — without truth), |correction|, gp std, extrapolation flag."""
+    """Per target (and check: the column says which the rows are): error rigid, error RRBC (mm, — without truth),
+    |correction|, gp std, extrapolation flag."""
     t = ev.targets
     has_std = t.correction_std is not None
-    head = "| target | rigid | RRBC | \\|ê\\| | " + ("std | " if has_std else "") + "hull |"
+    n_chk = sum(pid in ev.check_ids for pid in t.ids)
+    name = "target" if n_chk == 0 else "check" if n_chk == len(t.ids) else "target / check"
+    head = f"| {name} | rigid | RRBC | \\|ê\\| | " + ("std | " if has_std else "") + "hull |"
     sep = "|---|---:|---:|---:|" + ("---:|" if has_std else "") + ":---:|"  # centred: never runs into the number
     rows = [head, sep]
     corr = np.linalg.norm(t.correction.reshape(-1, 3), axis=1)

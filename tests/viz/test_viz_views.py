@@ -342,11 +342,13 @@ def test_a_researcher_sees_checks_as_checks_and_only_the_layers_that_apply(measu
     checks = sorted(ev.check_ids)
     assert checks and measured.state.selected == ("targets", [p for p in ev.targets.ids if p in ev.check_ids][0])
     assert measured.controls.selection.info.content.startswith(f"**Check {measured.state.selected[1]}**")
-    assert tuple(measured.nodes.handle(f"/targets/{checks[0]}/gizmo/sphere").color) in (
-        colors.CHECK,
-        colors.TARGET_EXTRAPOLATED,
-    )
+    for pid in checks:  # every check in a check's colour (olive outside the hull), never a target's
+        k = ev.targets.ids.index(pid)
+        want = colors.CHECK_EXTRAPOLATED if ev.targets.extrapolated[k] else colors.CHECK
+        assert tuple(measured.nodes.handle(f"/targets/{pid}/gizmo/sphere").color) == want, pid
     others = [p for p in ev.targets.ids if p not in ev.check_ids]
+    head = measured.controls.explore.table.content.splitlines()[0]  # the side table says what its rows are
+    assert head.startswith("| target / check |" if others else "| check |"), head
     if others:
         assert tuple(measured.nodes.handle(f"/targets/{others[0]}/gizmo/sphere").color) in (
             colors.TARGET,
