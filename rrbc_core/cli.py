@@ -190,6 +190,14 @@ def build_parser() -> argparse.ArgumentParser:
         "still refused)",
     )
     v.add_argument(
+        "--allow-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a host name the browser may use to reach the app besides localhost, IP addresses and --host "
+        "(repeatable; other names are refused against DNS rebinding)",
+    )
+    v.add_argument(
         "--per-client",
         action="store_true",
         help="one independent session per browser tab (a class: each student their own) instead of one "
@@ -372,6 +380,7 @@ def _cmd_view(args) -> str:
         per_client=args.per_client,
         present=args.present,
         token=not args.no_token,
+        allow_hosts=args.allow_host,
         data_dirs=args.data,
         urdf=args.urdf,
         tip=args.tip,

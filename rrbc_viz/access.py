@@ -9,6 +9,11 @@ read what it shows. Two checks on every websocket handshake, before any message 
   websocket at the path ``/rrbc-<token>`` (viser's client takes the websocket address from the ``websocket`` URL
   parameter). A connection without it is refused. `--no-token` turns this off for trusted setups (the Origin
   check stays).
+- **Host allow-list** (as Jupyter keeps one, against DNS rebinding: a page from evil.example whose name is made to
+  resolve to 127.0.0.1 sends ``Host: evil.example:PORT`` and its own matching Origin). The handshake's Host name must
+  be a localhost name, an IP address literal (rebinding needs a name) or a name given with ``rrbc view
+  --allow-host NAME``; checked with and without the token.
+- A handshake with more than one Host or Origin header is refused (never read as either value).
 
 A refused connection is closed with code 1008 (policy violation) before viser sends it anything; its client id is
 remembered so the app's per-client callbacks skip it. viser 1.1.1 has no public hook for the handshake: the check
@@ -31,9 +36,41 @@ def new_token() -> str:
     return secrets.token_urlsafe(24)
 
 
-def allowed(origin: str | None, host: str | None, path: str, token: str | None) -> tuple[bool, str]:
+#: Host names always allowed (besides IP address literals and `--allow-host` names)
+LOCAL_NAMES = frozenset({"localhost", "localhost.localdomain", "ip6-localhost", "ip6-loopback"})
+
+
+def host_name(host: str) -> str:
+    """The name part of a Host header value (no port; an IPv6 literal without its brackets), lower case."""
+    h = host.strip().lower()
+    if h.startswith("["):
+        return h[1 : h.find("]")] if "]" in h else h[1:]
+    return h.rsplit(":", 1)[0] if h.count(":") == 1 else h
+
+
+def host_allowed(host: str, extra: frozenset[str] = frozenset()) -> bool:
+    """Whether a Host header names this machine in a way no other site can (module docstring): a localhost name, an
+    IP address literal, or one of `extra` (lower case)."""
+    import ipaddress
+
+    name = host_name(host)
+    if name in LOCAL_NAMES or name in extra:
+        return True
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
+def allowed(
+    origin: str | None, host: str | None, path: str, token: str | None, hosts: frozenset[str] = frozenset()
+) -> tuple[bool, str]:
     """Whether a websocket handshake may proceed: (ok, reason when not). `origin`, `host`: the Origin and Host
-    headers (None when absent); `path`: the request path; `token`: the run's token (None: no token required)."""
+    headers (None when absent); `path`: the request path; `token`: the run's token (None: no token required);
+    `hosts`: names allowed besides localhost names and IP literals (`--allow-host`)."""
+    if host is not None and not host_allowed(host, hosts):
+        return False, "this server answers only to localhost, IP addresses and --allow-host names (Host refused)"
     if origin is not None:
         o = urlsplit(origin)
         if o.scheme not in ("http", "https") or not host or o.netloc.lower() != host.strip().lower():
@@ -60,8 +97,9 @@ def page_url(base_url: str, token: str | None) -> str:
 class AccessGuard:
     """Checks every websocket handshake of a viser server (module docstring). `refused`: the client ids closed."""
 
-    def __init__(self, server: viser.ViserServer, token: str | None):
+    def __init__(self, server: viser.ViserServer, token: str | None, hosts=()):
         self.token = token
+        self.hosts = frozenset(str(h).strip().lower() for h in hosts)
         self.refused: set[int] = set()
         self.refusals = 0
         self._infra = server._websock_server  # viser 1.1.1: its websocket server (no public handshake hook)
@@ -77,7 +115,12 @@ class AccessGuard:
         req = ws.request
         if req is None:
             return
-        ok, why = allowed(req.headers.get("Origin"), req.headers.get("Host"), req.path, self.token)
+        values = {name: req.headers.get_all(name) for name in ("Origin", "Host")}
+        if any(len(v) > 1 for v in values.values()):
+            ok, why = False, "a handshake with more than one Host or Origin header is refused"
+        else:
+            origin, host = (v[0] if v else None for v in values.values())
+            ok, why = allowed(origin, host, req.path, self.token, self.hosts)
         if not ok:
             self.refused.add(int(conn.client_id))
             self.refusals += 1

@@ -40,6 +40,7 @@ def serve(
     per_client: bool = False,
     present: bool = False,
     token: str | bool | None = True,
+    allow_hosts=(),
     data_dirs=(),
     urdf=None,
     tip: str | None = None,
@@ -53,7 +54,8 @@ def serve(
     line. `urdf` (with `tip`, `base`): the robot of a measurement file, drawn from its URDF at each point's joint
     values (`session.arm.attach_arm`). `per_client`: one independent session per browser tab (per_client.PerClientApp) instead of one shared
     by all; `present`: start in presentation mode (large text, collapsible panel; View → Presentation mode);
-    `simple_arm`: draw a scene's arm as links and joints instead of its URDF meshes (much lighter where the browser
+    `allow_hosts`: Host names the page may use besides localhost names, IP literals and `host` itself
+    (`access.AccessGuard`); `simple_arm`: draw a scene's arm as links and joints instead of its URDF meshes (much lighter where the browser
     renders in software: a drag redraws the whole cell). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
     server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
     apply_process_policy()
@@ -75,7 +77,7 @@ def serve(
     with contextlib.redirect_stdout(out) if quiet else contextlib.nullcontext():
         server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)
     try:
-        guard = AccessGuard(server, new_token() if token is True else (token or None))
+        guard = AccessGuard(server, new_token() if token is True else (token or None), (*allow_hosts, host))
         server.scene.set_up_direction("+z")
         # no shadow maps: the cell's own meshes never cast or receive them, and on a machine drawing with software
         # WebGL (a classroom laptop without a GPU, Chromium's SwiftShader) each frame otherwise draws the arm again

@@ -84,10 +84,72 @@ def test_no_token_mode_still_refuses_foreign_pages():
         (None, "127.0.0.1:8080", "/rrbc-abd", "abc", False),
         (None, "127.0.0.1:8080", "/rrbc-abc", "abc", True),
         ("http://127.0.0.1:8080", "127.0.0.1:8080", "/", None, True),
+        # DNS rebinding: a page from a name made to resolve here, its Origin matching its Host (issue 42, item 3)
+        ("http://evil.example:8080", "evil.example:8080", "/rrbc-abc", "abc", False),
+        ("http://evil.example:8080", "evil.example:8080", "/", None, False),
+        (None, "evil.example:8080", "/", None, False),
+        ("http://[::1]:8080", "[::1]:8080", "/", None, True),  # IP literals cannot be rebound
+        ("http://192.168.1.20:8080", "192.168.1.20:8080", "/", None, True),
+        ("http://LOCALHOST:8080", "LOCALHOST:8080", "/", None, True),
     ],
 )
 def test_the_rule(origin, host, path, token, ok):
     assert allowed(origin, host, path, token)[0] is ok
+
+
+def test_an_allowed_name_is_accepted_and_only_it():
+    assert allowed("http://lab-pc:8080", "lab-pc:8080", "/", None, frozenset({"lab-pc"}))[0]
+    assert not allowed("http://lab-pc2:8080", "lab-pc2:8080", "/", None, frozenset({"lab-pc"}))[0]
+
+
+def _raw_handshake(port: int, path: str, headers: list[tuple[str, str]]) -> bytes:
+    """A websocket handshake written by hand (a client library would not send a header twice): the reply's start."""
+    import socket
+
+    base = [
+        ("Upgrade", "websocket"),
+        ("Connection", "Upgrade"),
+        ("Sec-WebSocket-Key", "dGhlIHNhbXBsZSBub25jZQ=="),
+        ("Sec-WebSocket-Version", "13"),
+        ("Sec-WebSocket-Protocol", PROTOCOL),
+    ]
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall((f"GET {path} HTTP/1.1\r\n" + "".join(f"{k}: {v}\r\n" for k, v in headers + base) + "\r\n").encode())
+        data = b""
+        while b"\r\n\r\n" not in data:
+            chunk = s.recv(4096)
+            if not chunk:
+                break
+            data += chunk
+        try:  # what follows the upgrade: the close frame of a refused connection (or the app's first message)
+            s.settimeout(5)
+            data += s.recv(4096)
+        except OSError:
+            pass
+        return data
+
+
+@pytest.mark.parametrize("twice", ["Host", "Origin"])
+def test_a_handshake_with_a_header_twice_is_refused_without_a_traceback(tokened, twice, caplog):
+    """Issue 42, item 2: two Host (or Origin) headers, one of them this server's: refused (400, or closed with 1008
+    before anything is sent), never read as either value, and nothing is logged with a traceback."""
+    import logging
+    import struct
+
+    caplog.set_level(logging.INFO)
+    own_host, own_origin = f"127.0.0.1:{tokened.port}", f"http://127.0.0.1:{tokened.port}"
+    headers = [("Host", own_host), ("Origin", own_origin)]
+    headers.append(("Host", "evil.example") if twice == "Host" else ("Origin", "http://evil.example"))
+    reply = _raw_handshake(tokened.port, TOKEN_PATH_PREFIX + tokened.guard.token, headers)
+    status = reply.split(b"\r\n", 1)[0]
+    if b" 101 " in status:  # upgraded, then closed by the guard with 1008 as its first frame
+        frame = reply.split(b"\r\n\r\n", 1)[1]
+        assert frame[:1] == b"\x88" and struct.unpack(">H", frame[2:4])[0] == 1008, reply
+    else:
+        assert b" 400 " in status, reply
+    assert not any(r.exc_info for r in caplog.records), [r.getMessage() for r in caplog.records if r.exc_info]
+    ok = _try(tokened.port, TOKEN_PATH_PREFIX + tokened.guard.token, own_origin)  # the app still answers its page
+    assert ok == ("message", None)
 
 
 def test_page_url_carries_the_websocket_address_with_the_token():
