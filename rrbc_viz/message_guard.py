@@ -10,11 +10,20 @@ with how many were dropped and the first reason), and a client that sends more t
 `WINDOW_S` is disconnected (close code 1008). The check replaces viser's message consumer
 (`viser.infra._infra._message_consumer`, pinned version; the tests drive a real server with raw websocket clients,
 so a change there fails loudly), installed once per process by `install`.
+
+Well-formed messages can still carry hostile values: a GUI update naming a property the widget does not have, or a
+value of another type ("abc" for a slider), a NaN or infinity, a number outside the widget's range, a dropdown
+choice it does not offer. viser 1.1.1 casts such values with an assertion or `float("abc")` (a traceback per
+message) or passes them on to the app's callbacks. `check_gui_update` checks each against the widget's own state
+first (`GuiApi._handle_gui_updates` is wrapped by `install`); a refused update is dropped and counted like a
+malformed message. Clients are counted by their address, not per connection, so a reconnecting client's drops are
+logged once per `LOG_INTERVAL_S` too.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 import threading
 import time
@@ -42,7 +51,7 @@ class _Client:
     last_log: float = -1e18
 
 
-_clients: dict[int, _Client] = {}
+_clients: dict[object, _Client] = {}
 stats = {"dropped": 0, "disconnected": 0, "logged": 0}
 
 
@@ -85,11 +94,58 @@ def check(raw, message_class) -> tuple[object | None, str]:
         return None, f"{mapping['type'][:40]}: {' '.join(str(exc).split())[:120]}"
 
 
-def note_bad(client_key: int, why: str, log: Callable[[str], object] | None = None) -> bool:
+#: The longest text a GUI update may carry (a text field; file names come by other messages).
+MAX_TEXT = 10_000
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(float(x))
+
+
+def check_gui_update(state, updates: dict) -> str:
+    """Why the GUI `updates` {property: value} a client sent for a widget whose state (viser's props) is `state`
+    must be refused ("" when they may go on): only `value` may be sent; its type is the widget's (numbers finite,
+    within `min`/`max` where the widget has them; a dropdown's value one of its options; text at most MAX_TEXT
+    characters)."""
+    props = getattr(state, "props", state)  # viser keeps min, max and options in the widget's props
+    for name, value in updates.items():
+        if name != "value" or not hasattr(state, "value"):
+            return f"GUI update of a property a client may not set ({str(name)[:40]!r})"
+        current = state.value
+        if isinstance(current, bool) or getattr(state, "is_button", False):
+            if not isinstance(value, bool):
+                return "GUI update: not a true/false value"
+        elif isinstance(current, (int, float)):
+            if not _finite(value):
+                return f"GUI update: not a finite number ({str(value)[:40]!r})"
+            lo, hi = getattr(props, "min", None), getattr(props, "max", None)
+            tol = abs(float(getattr(props, "step", None) or 0.0)) + 1e-9 * (abs(lo or 0.0) + abs(hi or 0.0) + 1.0)
+            if (lo is not None and value < lo - tol) or (hi is not None and value > hi + tol):  # a step's rounding
+                return f"GUI update: {value!r} outside the widget's range"
+        elif isinstance(current, tuple):
+            if not isinstance(value, (list, tuple)) or len(value) != len(current):
+                return "GUI update: not a list of the widget's length"
+            if current and not isinstance(current[0], str) and not all(_finite(v) for v in value):
+                return "GUI update: not finite numbers"
+            if current and isinstance(current[0], str) and not all(isinstance(v, str) for v in value):
+                return "GUI update: not texts"
+        elif isinstance(current, str):
+            if not isinstance(value, str) or len(value) > MAX_TEXT:
+                return "GUI update: not a text of at most 10,000 characters"
+            options = getattr(props, "options", None)
+            if options is not None and value not in options:
+                return f"GUI update: {value[:40]!r} is not one of the widget's options"
+    return ""
+
+
+def note_bad(client_key: object, why: str, log: Callable[[str], object] | None = None) -> bool:
     """Count a malformed message of a client; log at most once per LOG_INTERVAL_S. True when the client has sent
     too many (disconnect it)."""
     now = time.monotonic()
     with _lock:
+        if len(_clients) > 1000:  # forget clients quiet for longer than both intervals (a bounded table)
+            for k in [k for k, v in _clients.items() if now - max(v.times[-1:] or [v.last_log]) > 2 * WINDOW_S]:
+                del _clients[k]
         c = _clients.setdefault(client_key, _Client())
         c.times = [t for t in c.times if now - t < WINDOW_S] + [now]
         c.unlogged += 1
@@ -108,14 +164,22 @@ def note_bad(client_key: int, why: str, log: Callable[[str], object] | None = No
     return too_many
 
 
-def forget(client_key: int) -> None:
+def forget(client_key: object) -> None:
     with _lock:
         _clients.pop(client_key, None)
 
 
+def _client_key(websocket) -> object:
+    """A client's address (its drops counted across reconnections), the connection itself when it has none."""
+    try:
+        return str(websocket.remote_address[0])
+    except Exception:  # noqa: BLE001 - any transport without an address
+        return id(websocket)
+
+
 async def _guarded_consumer(websocket, handle_message, message_class) -> None:
     """viser's message consumer with the check (module docstring)."""
-    key = id(websocket)
+    key = _client_key(websocket)
     try:
         while True:
             raw = await websocket.recv()
@@ -127,7 +191,8 @@ async def _guarded_consumer(websocket, handle_message, message_class) -> None:
                 continue
             handle_message(message)
     finally:
-        forget(key)
+        if key == id(websocket):  # an address's count outlives its connections (it is one line per minute)
+            forget(key)
 
 
 def install() -> None:
@@ -136,7 +201,20 @@ def install() -> None:
     with _lock:
         if _installed:
             return
+        from viser import _gui_api
         from viser.infra import _infra
 
         _infra._message_consumer = _guarded_consumer
+        handle_updates = _gui_api.GuiApi._handle_gui_updates
+
+        async def _checked_updates(self, client_id, message) -> None:  # registered by each GuiApi made after this
+            handle = self._gui_input_handle_from_uuid.get(message.uuid, None)
+            if handle is not None and not handle._impl.removed:
+                why = check_gui_update(handle._impl, dict(message.updates))
+                if why:
+                    note_bad(f"gui:{client_id}", why)
+                    return
+            await handle_updates(self, client_id, message)
+
+        _gui_api.GuiApi._handle_gui_updates = _checked_updates  # type: ignore[method-assign]
         _installed = True

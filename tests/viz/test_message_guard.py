@@ -69,3 +69,50 @@ def test_the_check_names_what_is_wrong():
         encode("TransformControlsDragStartMessage", name="/targets/H1/gizmo", owner=""), Message
     )
     assert ok is not None and why == ""
+
+
+def test_hostile_gui_values_are_dropped_without_a_traceback_and_good_ones_still_apply(app, pool, capfd):
+    """Issue 42, item 2: well-formed GUI updates with hostile values for real widgets - text for a slider, a
+    property a client may not set, NaN, infinity, out of range, a dropdown choice not offered - change nothing and
+    log no traceback; a valid update from the same client still applies."""
+    explore = app.controls.explore
+    slider, menu = explore.noise, explore.interpolation
+    top = slider._impl.props.max
+    hostile = [
+        (slider, {"value": "abc"}),
+        (slider, {"nope": 1}),
+        (slider, {"value": float("nan")}),
+        (slider, {"value": float("inf")}),
+        (slider, {"value": top * 1e6}),
+        (menu, {"value": "rm -rf"}),
+        (menu, {"value": 5}),
+        (menu, {"value": "x" * 20_000}),
+    ]
+    before = (slider.value, menu.value, message_guard.stats["dropped"])
+    for handle, updates in hostile:
+        pool.send_raw(0, encode("GuiUpdateMessage", uuid=handle._impl.uuid, updates=updates))
+    good = min(top, 2.0)
+    pool.send_raw(0, encode("GuiUpdateMessage", uuid=slider._impl.uuid, updates={"value": good}))
+    deadline = time.monotonic() + 10
+    while slider.value != good and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert slider.value == good and menu.value == before[1]  # only the good update applied, in order
+    assert message_guard.stats["dropped"] - before[2] == len(hostile)
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "AssertionError" not in err, err
+    assert not pool.records[0].closed
+
+
+def test_the_gui_check_names_what_is_wrong():
+    class Slider:
+        value, min, max = 1.0, 0.0, 3.0
+
+    class Menu:
+        value, options = "idw", ("idw", "tps")
+
+    assert message_guard.check_gui_update(Slider, {"value": 2.5}) == ""
+    assert "finite" in message_guard.check_gui_update(Slider, {"value": float("nan")})
+    assert "range" in message_guard.check_gui_update(Slider, {"value": 3.5})
+    assert "property" in message_guard.check_gui_update(Slider, {"visible": False})
+    assert message_guard.check_gui_update(Menu, {"value": "tps"}) == ""
+    assert "options" in message_guard.check_gui_update(Menu, {"value": "gp"})
