@@ -76,6 +76,16 @@ class AuthoringController:
         kind = kind or self.ctx.state.click_mode
         if kind is None:
             return None  # clicks select: nothing to add
+        try:  # what a tab sends is data: a ray of 3 finite numbers each, a direction that is not zero
+            origin, direction = (np.asarray(v, float).reshape(3) for v in (origin, direction))
+            usable = bool(np.all(np.isfinite(origin)) and np.all(np.isfinite(direction)) and np.any(direction))
+        except (TypeError, ValueError):
+            usable = False
+        if not usable:
+            self.ctx.message(
+                "the click's ray is not a ray (not finite numbers): nothing added", client, title="Not added"
+            )
+            return None
         with self.ctx.lock:
             hit = surface_hit(self.ctx.loaded.mesh, origin, direction)
             if hit is None:

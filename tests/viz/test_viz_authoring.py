@@ -245,3 +245,23 @@ def test_a_new_cell_on_a_mesh_the_arm_cannot_reach_is_refused_and_nothing_change
     assert "no upward-facing surface" in app.last_message and "far.stl" in app.last_message
     assert "rrbc-mesh-" not in app.last_message
     assert app.session.last.targets.ids == before
+
+
+def test_a_click_ray_that_is_not_a_ray_adds_nothing_and_says_so(app, capsys):
+    """Issue 42, item 2: a tab's click with NaN, infinite, zero or malformed rays: nothing added, a message, no
+    traceback; a real ray afterwards still adds the point."""
+    app.authoring.set_click_mode("fiducials")
+    before = app.session.layout["fiducials"].ids
+    for origin, direction in (
+        ([float("nan"), 0, 800], [0, 0, -1]),
+        ([520, -60, 800], [0, 0, float("inf")]),
+        ([520, -60, 800], [0, 0, 0]),
+        ([520, -60], [0, 0, -1]),
+        ("abc", [0, 0, -1]),
+    ):
+        assert app.authoring.add_at_ray(origin, direction) is None
+        assert "not a ray" in app.last_message
+    assert app.session.layout["fiducials"].ids == before
+    assert "Traceback" not in capsys.readouterr().err
+    assert app.authoring.add_at_ray([520, -60, 800], [0, 0, -1]) is not None
+    assert len(app.session.layout["fiducials"].ids) == len(before) + 1
