@@ -122,6 +122,9 @@ __all__ = [
     "usable_candidates",
 ]
 
+#: At most this many fiducials suggested at once (`rrbc plan --add`): the search's work grows with K (each added
+#: fiducial is chosen against every usable candidate and then exchanged), so a larger K is asked for in steps
+MAX_ADD = 30
 #: Random K-subsets averaged for the "random" baseline.
 RANDOM_DRAWS = 32
 
@@ -306,6 +309,11 @@ def plan(
     add = int(add)
     if add < 0:
         raise InputError(f"add must be >= 0, got {add}")
+    if add > MAX_ADD:
+        raise InputError(
+            f"--add {add}: at most {MAX_ADD} fiducials are suggested at once (the search grows with K); suggest "
+            f"{MAX_ADD}, add them to the scene and plan again"
+        )
     base = scene.fiducials.positions if fiducials_mm is None else _points(fiducials_mm, "fiducial positions")
     mask, rejected = usable_candidates(scene) if add > 0 else (np.ones(len(scene.candidates), bool), {})
     cand_idx = np.flatnonzero(mask)

@@ -39,6 +39,7 @@ STRATEGY_NAMES = tuple(registration.STRATEGIES)  # the registries' names, in the
 #: every fixed method (`auto` re-chooses per trial by cross-validation: run it through `rrbc correct` on a file)
 INTERPOLATION_NAMES = tuple(name for name in interpolation.METHODS if name != "auto")
 MAX_TRIALS = 100_000  # Monte Carlo trials `simulate` runs at most (issue 16: a stated limit)
+MAX_ICP_TRIALS = 1000  # ICP trials (`simulate --icp`) at most: each registers a point cloud against the mesh
 
 
 @dataclass(frozen=True, eq=False)
@@ -515,6 +516,11 @@ def simulate(
         with distance, and the RMST after RRBC (IDW); per interpolation method the RMST after least squares +
         RRBC; `to_json()` gives the command's JSON.
     """
+    if not 0 <= int(icp) <= MAX_ICP_TRIALS:
+        raise InputError(
+            f"--icp must be 0 to {MAX_ICP_TRIALS:,} trials (each registers a point cloud against the mesh), got "
+            f"{int(icp):,}"
+        )
     if layout:
         scene = scene.with_layout(layout)
     cell = work_cell_from_scene(scene, seed=seed)

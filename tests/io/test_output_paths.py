@@ -128,3 +128,25 @@ def test_simulate_states_its_trials_limit():
 
     with pytest.raises(InputError, match="trials must be 1 to"):
         simulate(load_scene(default_scene_path()), MAX_TRIALS + 1)
+
+
+def test_simulate_icp_and_plan_add_state_their_limits():
+    """Issue 42, item 4: `simulate --icp` and `plan --add` are bounded with a refusal in one line, before any work."""
+    import time
+
+    from rrbc_core.analysis.planning import MAX_ADD
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_core.simulation.montecarlo import MAX_ICP_TRIALS
+    from tests.support.cli_run import rrbc
+
+    scene = default_scene_path()
+    t0 = time.perf_counter()
+    for args, said in (
+        (["simulate", scene, "--trials", "2", "--icp", str(MAX_ICP_TRIALS + 1)], "--icp must be 0 to"),
+        (["simulate", scene, "--trials", "2", "--icp", "1000000000"], "--icp must be 0 to"),
+        (["plan", scene, "--add", str(MAX_ADD + 1)], f"at most {MAX_ADD} fiducials"),
+    ):
+        r = rrbc(*args)
+        assert r.returncode == 2 and r.stdout == "", (args, r.stdout)
+        assert len(r.stderr.strip().splitlines()) == 1 and said in r.stderr, r.stderr
+    assert time.perf_counter() - t0 < 30  # refused before the work, not after it
