@@ -1,4 +1,5 @@
-"""Each target's 95 % bound in the scene (/bounds/<id>: a translucent ellipsoid at true size about the target, the
+"""Each target's 95 % bound in the scene (/bounds/<id>: a translucent ellipsoid about the target, magnified as the
+arrows are or at true size (`picture.BOUND_SCALES`, the semi-axes it is handed), the
 95 % region of its corrected position's error covariance, `rrbc_core.correction.bounds.bound_ellipsoids`; hidden
 where the data back no bound). Robot frame, mm. The class keeps its handles and is handed values (`build`, `show`)."""
 

@@ -36,14 +36,16 @@ def render(stats: CheckStatistics, method: str) -> str:
 
 def point_list(stats: CheckStatistics, limit: int = LISTED) -> str:
     """The per-point list (`CheckStatistics.per_point`): each check's rigid and RRBC error, the largest RRBC error
-    first, those RRBC made worse marked."""
+    first, those RRBC made worse marked; a fixed-width block like the statistics above it (not a second table
+    beside the targets' one)."""
     rows = stats.per_point(limit)
-    lines = ["| check | rigid mm | RRBC mm | |", "|---|---:|---:|---|"]
+    width = max([len("check")] + [len(pid) for pid, _, _ in rows])
+    lines = [f"{'check':<{width}}  rigid mm   RRBC mm"]
     for pid, rigid, rrbc in rows:
-        lines.append(f"| {pid} | {rigid:.3f} | {rrbc:.3f} | {'worse' if rrbc > rigid else ''} |")
+        lines.append(f"{pid:<{width}}  {rigid:8.3f}  {rrbc:8.3f}" + ("  RRBC worse" if rrbc > rigid else ""))
     more = stats.n - len(rows)
     tail = f"\n\n… and {more} more (all in *Download corrected targets* and the report)." if more > 0 else ""
-    return "**Per check**, the largest RRBC errors first:\n\n" + "\n".join(lines) + tail
+    return "**Per check**, the largest RRBC errors first:\n\n```\n" + "\n".join(lines) + "\n```" + tail
 
 
 class ChecksPanel:

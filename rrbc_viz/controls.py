@@ -27,6 +27,7 @@ from .diagnosis_panel import PROMPT
 from .file_panel import FilePanel
 from .model_check_panel import ModelCheckPanel
 from .node_values import LAYERS, Display
+from .picture import BOUND_SCALES
 from .planning_panel import PlanningPanel
 from .selection_panel import Bullseye, SelectionPanel
 from .slice_nodes import SLICE_AXES, SLICE_CHOICES
@@ -48,7 +49,7 @@ LAYER_LABELS = {
     "hull": "Fiducials' hull",
     "targets": "Targets",
     "regions": "Regions of variability",
-    "bounds": "95 % bounds of the targets (true size)",
+    "bounds": "95 % bounds of the targets",
     "landing": "Landing points (rigid vs RRBC)",
     "labels": "Labels",
     "heatmap": "Heat map of predicted error",
@@ -123,6 +124,13 @@ class ExplorePanel:
                 200,
                 hint="Correction arrows and landing offsets are drawn this many times longer than they are",
             )
+            self.bound_scale = gui.add_dropdown(
+                "95 % bounds drawn",
+                tuple(BOUND_SCALES.values()),
+                initial_value=BOUND_SCALES["arrows"],
+                hint="The bounds layer's ellipsoids: magnified as the arrows and landing offsets are (comparable with "
+                "them), or at true size (tenths of a mm: hidden inside the markers unless zoomed in)",
+            )
             self.scale = gui.add_markdown("")
             self.summary = gui.add_markdown("")
             self.table = gui.add_markdown("")
@@ -173,12 +181,18 @@ class ExplorePanel:
         self.magnification.on_update(
             _forward(self.magnification, syncing, lambda **kw: app.evaluate.set_display(**kw), "magnification", float)
         )
+        by_label = {label: value for value, label in BOUND_SCALES.items()}
+        self.bound_scale.on_update(
+            _forward(self.bound_scale, syncing, lambda **kw: app.evaluate.set_display(**kw), "bound_scale",
+                     lambda label: by_label.get(label, label))
+        )  # fmt: skip
         self.new_seed.on_click(lambda event: app.evaluate.new_seed(client=event.client))
 
     def sync(self, settings: Settings | None, kind: str, display: Display | None = None) -> None:
         with self.syncing.quiet():
             if display is not None:
                 self.magnification.value = float(min(max(display.magnification, 1), MAG_MAX))
+                self.bound_scale.value = BOUND_SCALES[display.bound_scale]
                 return
             assert settings is not None
             self.registration.value = settings.registration

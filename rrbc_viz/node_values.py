@@ -45,6 +45,7 @@ class Display:
     """Display-only options (no effect on any number)."""
 
     magnification: float = 200.0  # arrows and landing offsets drawn this many times longer
+    bound_scale: str = "arrows"  # the 95 % bounds drawn ×magnification like the arrows ("arrows") or "true" size
     marker_mm: float = 8.0  # radius of fiducial / target spheres
     region_zoom: float = 1.0  # regions and heat-map samples drawn this many times larger about their target
     heat_value: str = "rrbc"  # rrbc | rigid (scene); correction | std (measurements)

@@ -19,7 +19,7 @@ Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's)
     /targets/<id>/gizmo                transform controls, translation only (drag a target)
     /targets/<id>/gizmo/sphere         the target (magenta when extrapolated), …/label
     /regions/<id>                      translucent box / icosphere with per-axis scale
-    /bounds/<id>                       translucent ellipsoid: the target's 95 % bound at true size (bound_nodes)
+    /bounds/<id>                       translucent ellipsoid: the target's 95 % bound (× the arrows' magnification or true size: Display.bound_scale)
     /landing/anchor, /landing/rigid, /landing/rrbc   the landing bullseye of the selected target (LandingDisplay),
     /landing/lines, /landing/rings, /landing/scale   floating above it: stalk, offsets, scale rings, ring label
     /heatmap/points                    point cloud, float32: the samples, in their region (true size × region zoom)

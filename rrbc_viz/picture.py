@@ -21,6 +21,9 @@ if TYPE_CHECKING:
 
 #: the frames' axes are this share of the point sets' extent long
 AXES_SHARE = 0.12
+#: how the 95 % bounds are drawn (`Display.bound_scale`): (label, value); at true size a bound of tenths of a mm is
+#: hidden inside its target's marker, so by default it is magnified as the arrows and landing offsets are
+BOUND_SCALES = {"arrows": "× arrow magnification", "true": "true size"}
 
 
 @dataclass(frozen=True)
@@ -104,6 +107,8 @@ def scene_picture(session: ExplorerSession, state: AppState, ev: Evaluation) -> 
     reg_wxyz, reg_position = registered_frame_pose(true_pose, mapping, frame_mag)
     if ev.bounds is not None:
         bound_rot, bound_axes = ev.bounds.rrbc.ellipsoids()
+        if display.bound_scale == "arrows":  # drawn as the error arrows are: comparable with the landing offsets
+            bound_axes = bound_axes * display.magnification
     else:
         bound_rot, bound_axes = np.zeros((len(t.ids), 3, 3)), np.full((len(t.ids), 3), np.nan)
     return ScenePicture(

@@ -174,8 +174,9 @@ class EvaluateController:
 
     def set_display(self, client=None, **changes: Any) -> None:
         """Display-only options (Display fields): magnification, marker_mm, region_zoom, heat_value, slice_value,
-        slice_axis, slice_offset."""
+        slice_axis, slice_offset, bound_scale."""
         from ..controls import HEAT_CHOICES
+        from ..picture import BOUND_SCALES
 
         ctx = self.ctx
         with ctx.lock:
@@ -189,6 +190,8 @@ class EvaluateController:
             if new.heat_value not in heat_values:
                 raise InputError(f"heat_value must be one of {', '.join(heat_values)} here, got {new.heat_value!r}")
             ctx.views.check_slice_display(new)
+            if new.bound_scale not in BOUND_SCALES:
+                raise InputError(f"bound_scale must be one of {', '.join(BOUND_SCALES)}, got {new.bound_scale!r}")
             if not (new.magnification > 0 and new.marker_mm > 0 and new.region_zoom > 0):
                 raise InputError("magnification, marker_mm and region_zoom must be > 0")
             ctx.state.display = new

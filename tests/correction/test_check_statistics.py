@@ -101,12 +101,15 @@ def test_correct_diagnose_and_the_app_show_the_same_statistics(capsys):
         assert rigid.sum() == pytest.approx(1.0) and rrbc.sum() == pytest.approx(1.0)
         # the per-point list: the checks with the largest RRBC errors, their errors as `rrbc correct --json` gives them
         by_id = {c["id"]: (c["error_rigid_mm"], c["error_rrbc_mm"]) for c in checks}
-        listed = [ln for ln in panel.points.content.splitlines() if ln.startswith("| ") and "check |" not in ln]
+        block = panel.points.content.split("```")[1].strip().splitlines()
+        assert block[0].split() == ["check", "rigid", "mm", "RRBC", "mm"]
+        listed = block[1:]
         top = sorted(by_id, key=lambda i: -by_id[i][1])[: len(listed)]
-        assert len(listed) == min(len(by_id), 15) and [ln.split("|")[1].strip() for ln in listed] == top
+        assert len(listed) == min(len(by_id), 15) and [ln.split()[0] for ln in listed] == top
         for ln in listed:
-            pid, a, b = (x.strip() for x in ln.split("|")[1:4])
+            pid, a, b = ln.split()[:3]
             assert (float(a), float(b)) == pytest.approx(by_id[pid], abs=5e-4)
-            assert ("worse" in ln) == (pid in cs["rrbc_worse"])
+            assert ("RRBC worse" in ln) == (pid in cs["rrbc_worse"])
+        assert "<table" not in panel.points.content and "| " not in panel.points.content  # one table: the targets'
     finally:
         app.stop()

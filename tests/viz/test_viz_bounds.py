@@ -1,4 +1,5 @@
-"""Per-point bounds in the running app (issue 37, item 3): each target's 95 % bound drawn at true size as a layer,
+"""Per-point bounds in the running app (issue 37, item 3): each target's 95 % bound drawn as a layer (magnified as the
+arrows are, or at true size),
 the selected target's card with its bound and budget bars, both the session's numbers (`rrbc correct`'s), both
 following a drag."""
 
@@ -15,7 +16,13 @@ def _card(app) -> str:
     return app.controls.selection.info.content
 
 
-def test_the_bounds_layer_draws_each_targets_95_percent_ellipsoid_at_true_size(app):
+@pytest.mark.parametrize("scale", ["arrows", "true"])
+def test_the_bounds_layer_draws_each_targets_95_percent_ellipsoid(app, scale):
+    """By default magnified as the arrows and landing offsets are (a bound of tenths of a mm is otherwise hidden in
+    its marker), at true size when asked; the View's dropdown says which."""
+    app.controls.explore.bound_scale.value = {"arrows": "× arrow magnification", "true": "true size"}[scale]
+    assert app.state.display.bound_scale == scale
+    factor = app.state.display.magnification if scale == "arrows" else 1.0
     ev = app.session.last
     assert "bounds" in app.controls.view.layers and not app.state.layers["bounds"]  # off until asked
     app.evaluate.set_layer("bounds", True)
@@ -32,7 +39,7 @@ def test_the_bounds_layer_draws_each_targets_95_percent_ellipsoid_at_true_size(a
             continue
         shown += 1
         assert node.visible
-        np.testing.assert_allclose(node.scale, axes[i], rtol=1e-6)
+        np.testing.assert_allclose(node.scale, factor * axes[i], rtol=1e-6)
         np.testing.assert_allclose(node.position, ev.targets.positions[i])
     assert shown > 0
 
@@ -63,9 +70,10 @@ def test_the_card_shows_the_bound_and_its_budget_and_a_drag_changes_both(app):
     after = app.session.last.bounds.rrbc
     assert _card(app) != card and f"{after.bound95_mm[0]:.3f} mm" in _card(app)
     _, axes = after.ellipsoids()
-    if np.all(np.isfinite(axes[0])):
-        np.testing.assert_allclose(app.nodes.handle(f"/bounds/{pid}").scale, axes[0], rtol=1e-6)
-        assert not np.allclose(before_scale, axes[0])
+    if np.all(np.isfinite(axes[0])):  # drawn as the arrows are (the default)
+        drawn = app.state.display.magnification * axes[0]
+        np.testing.assert_allclose(app.nodes.handle(f"/bounds/{pid}").scale, drawn, rtol=1e-6)
+        assert not np.allclose(before_scale, drawn)
 
 
 def test_a_target_without_a_bound_says_why_on_its_card(measured):
