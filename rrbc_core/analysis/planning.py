@@ -309,11 +309,6 @@ def plan(
     add = int(add)
     if add < 0:
         raise InputError(f"add must be >= 0, got {add}")
-    if add > MAX_ADD:
-        raise InputError(
-            f"--add {add}: at most {MAX_ADD} fiducials are suggested at once (the search grows with K); suggest "
-            f"{MAX_ADD}, add them to the scene and plan again"
-        )
     base = scene.fiducials.positions if fiducials_mm is None else _points(fiducials_mm, "fiducial positions")
     mask, rejected = usable_candidates(scene) if add > 0 else (np.ones(len(scene.candidates), bool), {})
     cand_idx = np.flatnonzero(mask)
@@ -339,6 +334,11 @@ def plan(
             raise InputError(
                 f"{scene.path}: --add {add}: only {len(cand_idx)} usable candidates are not already fiducials"
             )
+    if add > MAX_ADD:
+        raise InputError(
+            f"--add {add}: at most {MAX_ADD} fiducials are suggested at once (the search grows with K); suggest "
+            f"{MAX_ADD}, add them to the scene and plan again"
+        )
     cand_pos = scene.candidates.positions[cand_idx]
     cov0 = coverage(base, scene.targets, seed=seed)
     pred0 = predict_rmst(scene, base, seed=seed, samples_per_target=samples_per_target)
