@@ -124,7 +124,10 @@ def acceptance(
     cj = result.to_json()
     points = _correct_points(cj)
     arm = robot is not None or urdf is not None
-    dg = diagnose_stations(mset, robot=robot, urdf=urdf, tip=tip, base=base, tool_mm=tool)
+    from rrbc_core.analysis.arm_verdict import ALPHA
+
+    # rrbc diagnose's call, as `arm_verdict` makes it (level, seed): with an arm, calibrate's verdict reuses it
+    dg = diagnose_stations(mset, alpha=ALPHA, seed=0, robot=robot, urdf=urdf, tip=tip, base=base, tool_mm=tool)
     if isinstance(dg, StationsDiagnosis):
         d_rrbc = dg.rrbc()
         effects = {name: f"in {len(where)} of {len(dg.groups)} stations" for name, where in dg.effects().items()}
@@ -143,9 +146,10 @@ def acceptance(
     }
     calibration = None
     if arm:
+        from rrbc_core.analysis.arm_verdict import verdict_of as arm_verdict_of
         from rrbc_core.analysis.vec_compare import compare
 
-        calibration = compare(mset, robot=robot, urdf=urdf, tip=tip, base=base, tool=tool)
+        calibration = compare(mset, robot=robot, urdf=urdf, tip=tip, base=base, tool=tool, verdict=arm_verdict_of(dg))
         _with_calibration(points, calibration)
         for m in METHOD_NAMES:
             methods.setdefault(m, {})

@@ -352,6 +352,7 @@ def compare(
     model=None,
     save_model: str | None = None,
     export_urdf: str | None = None,
+    verdict=None,
 ) -> dict:
     """The JSON object of `rrbc calibrate` (docs/cli.md) for a measurement file with joint values. The model:
     `robot` (ur5, ur10; default ur5) or `urdf` with `tip` and `base` (`robot_model.robot_chain`); `tool`: a length along the DH
@@ -359,7 +360,8 @@ def compare(
     `gravity` (m/s², base frame) enter where cross-validation says they help (`select_terms`). `model`: a saved arm
     (`saved_model.SavedModel`) kept fixed; only the sensor-to-robot transforms are fitted. `save_model`: a path to
     write the identified arm to (`saved_model.save_model`). `export_urdf`: a path to write the identified arm to as a
-    URDF (`models.urdf_export`; a URDF model only)."""
+    URDF (`models.urdf_export`; a URDF model only). `verdict`: `arm_verdict`'s for this file and model when the
+    caller has already run `rrbc diagnose`'s function on them (`rrbc report`), so it is not run twice."""
     if save_model is not None:
         from pathlib import Path
 
@@ -457,7 +459,10 @@ def compare(
     cal = fit.cal
     # whether the file holds an arm error is rrbc diagnose's decision on the same file and model (arm_verdict):
     # one rule for both commands; which method corrects best stays the cross-validated recommendation's question
-    verdict = None if fixed is not None else arm_verdict(mset, robot, tool, urdf, tip, base)
+    if fixed is not None:
+        verdict = None
+    elif verdict is None:
+        verdict = arm_verdict(mset, robot, tool, urdf, tip, base)
     pbounds, instrument, bound_warnings = method_bounds(
         mset, fit, folds, sq, rows_reg, rows_fid, rows_pts, s, b, q, gi, _idw_by_group
     )

@@ -94,6 +94,25 @@ def test_stations_and_joints(tmp_path):
             assert p["bound95_mm"] == checks[p["id"]]["bound95_mm"]
 
 
+def test_a_report_with_an_arm_runs_diagnose_once_and_calibrate_judges_the_arm_the_same(tmp_path, monkeypatch):
+    """The report's diagnosis is the call calibrate's arm verdict makes (same model, level and seed): reused, not
+    run twice, and the verdict is the one `compare` reaches on its own."""
+    from rrbc_core.analysis import acceptance, diagnosis_stations
+
+    arm = tmp_path / "arm.csv"
+    write_measurements(arm, joint_measurements(3, dh_size=1.0, n_fid=40, n_chk=30))
+    mset = read_measurements(arm)
+    alone = compare(mset, robot="ur5", tool=100.0)["kinematic_error"]["verdict"]
+    calls, real = [], diagnosis_stations.diagnose_stations
+    monkeypatch.setattr(diagnosis_stations, "diagnose_stations", lambda *a, **k: calls.append(1) or real(*a, **k))
+    seen = {}
+    original = acceptance._with_calibration
+    monkeypatch.setattr(acceptance, "_with_calibration", lambda pts, cal: seen.update(cal) or original(pts, cal))
+    acceptance.acceptance(mset, robot="ur5", tool=100.0)
+    assert len(calls) == 1
+    assert seen["kinematic_error"]["verdict"] == alone
+
+
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path):
     for args in (
         ("--tolerance", "-1"),
