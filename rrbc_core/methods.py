@@ -10,6 +10,7 @@ spelling and means the same thing everywhere.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,10 +24,11 @@ __all__ = ["SEEDED", "MethodOptions", "method_flags"]
 SEEDED = tuple(name for name, cls in registration.STRATEGIES.items() if cls.seeded)
 
 
+@functools.cache
 def method_flags() -> dict[str, list[tuple[str, str, OptionSpec]]]:
     """Every option of every method by its flag: flag -> [(side, method name, spec), …], side "registration" or
     "interpolation". The command line makes one `--flag` per entry; an option of the chosen method is routed to it by
-    its flag (`MethodOptions.named`)."""
+    its flag (`MethodOptions.named`). Built once (the registries are fixed): read it, do not change it."""
     out: dict[str, list] = {}
     for side, registry in (("registration", registration.STRATEGIES), ("interpolation", interpolation.METHODS)):
         for name, cls in registry.items():

@@ -277,7 +277,8 @@ def tail_factor(sq: np.ndarray, model: np.ndarray, shape: np.ndarray) -> float:
 def own_cov(inst: Instrument, rotation: np.ndarray, p_sensor: np.ndarray, count) -> np.ndarray:
     """(M, 3, 3): the covariance of a point's own readings in the robot frame, mm² (module docstring)."""
     r = np.asarray(rotation, float)
-    c = np.einsum("ij,njk,lk->nil", r, inst.sensor_cov(p_sensor), r) + inst.robot_cov(p_sensor)
+    sensor, robot = inst.sensor_and_robot_cov(p_sensor)
+    c = np.einsum("ij,njk,lk->nil", r, sensor, r) + robot
     return c / np.asarray(count, float).reshape(-1, 1, 1)
 
 

@@ -89,6 +89,12 @@ class Instrument:
         uu = u[:, :, None] * u[:, None, :]
         return sd[:, None, None] ** 2 * uu + st2[:, None, None] * (np.eye(3) - uu)
 
+    def sensor_and_robot_cov(self, p_sensor) -> tuple[np.ndarray, np.ndarray]:
+        """(`sensor_cov`, `robot_cov`) at the points p_sensor (N, 3): a model's own noise evaluated once for both."""
+        if self.covariances is not None:
+            return self.covariances(np.asarray(p_sensor, float).reshape(-1, 3))
+        return self.sensor_cov(p_sensor), self.robot_cov(p_sensor)
+
     def robot_var(self) -> float:
         """The robot's per-axis variance, mm² (0 when not known)."""
         return float(self.robot_mm or 0.0) ** 2

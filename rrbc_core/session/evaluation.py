@@ -6,6 +6,7 @@ measurement model (scene) or the file (measured data) give them."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -100,10 +101,10 @@ class Settings:
                 opts[k.replace("_", "-") if k.replace("_", "-") in method_flags() else k] = v
         return Settings(**base, options=tuple(opts.items()))
 
-    @property
+    @cached_property
     def method(self) -> MethodOptions:
         """The registration and interpolation in force, with the options the user set for them (and the session's
-        seed for a seeded strategy)."""
+        seed for a seeded strategy). Made once per Settings (frozen: its fields never change)."""
         flags = method_flags()
         chosen = {self.registration, self.interpolation}
         given = {k: v for k, v in self.options if any(name in chosen for _, name, _ in flags[k])}

@@ -44,3 +44,19 @@ def test_degenerate_inputs_decide_without_a_test():
     assert gain_test([1.0, np.nan, 1.0, 1.0], [1.0, 0.2, 1.0, 1.0]).verdict == "unclear"  # NaN pair left out
     pooled = gain_from_differences(np.concatenate([np.full(5, 1.0), np.full(5, 1.2)]), -0.3)
     assert pooled.verdict == "gain" and pooled.n == 10
+
+
+def test_the_t_tails_are_scipys_one_sample_t_test():
+    """`gain_from_differences` computes the one-sided paired t-test itself (it runs on every drag update): the same
+    p-values as scipy.stats.ttest_1samp each way, over seeded samples of many sizes and signs."""
+    import numpy as np
+    from scipy.stats import ttest_1samp
+
+    from rrbc_core.correction.check_statistics import gain_from_differences
+
+    rng = np.random.default_rng(17)
+    for _ in range(200):
+        d = rng.normal(rng.normal(0, 1), rng.uniform(0.05, 3), int(rng.integers(3, 400)))
+        g = gain_from_differences(d, 0.0)
+        assert np.isclose(g.p_gain, ttest_1samp(d, 0.0, alternative="greater").pvalue, rtol=1e-9, atol=1e-300)
+        assert np.isclose(g.p_loss, ttest_1samp(d, 0.0, alternative="less").pvalue, rtol=1e-9, atol=1e-300)
