@@ -186,6 +186,8 @@ def plan_text(res) -> str:
         "  hull: the target's own position inside the fiducials' hull (what RRBC's extrapolation flag tests); "
         "coverage: the fraction of its region of variability inside"
     )
+    for tid, why in res.uncovered.items():
+        lines.append(f"  not covered{' after the suggestions' if res.suggested_ids else ''}: {tid}: {why['reason']}")
     lines += [
         "",
         f"predicted RMST over the regions ({p0.method}), mm:",

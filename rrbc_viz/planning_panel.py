@@ -166,6 +166,8 @@ def render_suggestion(result, current: bool = True) -> str:
             if getattr(result, "note", "")
             else "⚠ The planner found no usable candidate to add (see the rejected candidates below)."
         )
+        uncovered = getattr(result, "uncovered", {}) or {}
+        why += "".join(f"\n\n- **{tid}**: {u['reason']}." for tid, u in uncovered.items())
         return why + (f"\n\nRejected candidates: {_rejected_text(result.rejected)}." if result.rejected else "")
     b, a = result.predicted, result.predicted_after
     rows = "\n".join(
@@ -183,6 +185,11 @@ def render_suggestion(result, current: bool = True) -> str:
         f"{b.rrbc_mm:.3f} → **{a.rrbc_mm:.3f} ± {a.rrbc_std_mm:.4f} mm** (RRBC {change:+.0f} %).",
         "Coverage after: " + ("every target 100 %." if not short else ", ".join(short) + "."),
     ]
+    uncovered = getattr(result, "uncovered", {}) or {}
+    if (
+        uncovered
+    ):  # why a region stays partly outside and where a fiducial would be needed (`planning.uncovered_reasons`)
+        lines.append("\n".join(f"- **{tid}**: {why['reason']}." for tid, why in uncovered.items()))
     if getattr(result, "requested", k) > k:  # fewer than asked: only these are predicted to help
         lines.insert(len(lines) - 2, f"⚠ {result.note}.")
     base = _baseline_text(result.baselines)

@@ -75,7 +75,7 @@ that does is suggested, or nothing, and `PlanResult.note` says so.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -100,7 +100,7 @@ from rrbc_core.analysis.planning_search import (
     usable_candidates,
 )
 from rrbc_core.errors import InputError
-from rrbc_core.interpolation.hull import OFF_PLANE_TOL_MM, assess_coverage, coverage
+from rrbc_core.interpolation.hull import OFF_PLANE_TOL_MM, assess_coverage, coverage, covered
 from rrbc_core.runtime.threads import thread_limited
 
 if TYPE_CHECKING:
@@ -160,6 +160,10 @@ class PlanResult:
     inside: np.ndarray | None = None  # (T,) bool: each target inside the fiducials' hull (`hull.assess_coverage`)
     inside_after: np.ndarray | None = None  # the same with the suggestions
     off_plane_mm: np.ndarray | None = None  # (T,) distance from the fiducials' plane (0: they span a volume)
+    #: target id -> why its region is not wholly inside the hull after the suggestions and where a fiducial would
+    #: be needed ({"reason", "candidates_could", "needed_mm"}: `uncovered_reasons`); fully covered targets are not
+    #: listed
+    uncovered: dict = field(default_factory=dict)
 
     def overall_coverage(self, after: bool = False) -> float:
         """Volume-weighted fraction of all regions inside the hull (before, or after the suggestions)."""
@@ -183,6 +187,7 @@ class PlanResult:
             "inside_hull_per_target": _per_target(self.target_ids, self.inside),
             "inside_hull_per_target_after": _per_target(self.target_ids, self.inside_after),
             "off_plane_mm_per_target": _per_target(self.target_ids, self.off_plane_mm, float),
+            "uncovered_after": dict(self.uncovered),
             "predicted": self.predicted.to_json(),
             "predicted_after": self.predicted_after.to_json(),
             "suggested_ids": list(self.suggested_ids),
@@ -194,6 +199,53 @@ class PlanResult:
             "evaluations": self.evaluations,
             "seconds": self.seconds,
         }
+
+
+def uncovered_reasons(fiducials, candidates, targets, target_ids, seed: int = 0) -> dict[str, dict]:
+    """Per target whose region of variability is not wholly inside the hull of `fiducials` (N, 3): {"reason": in
+    words, "candidates_could": bool, "needed_mm": [x, y, z] or None, where a fiducial would be needed}. Either the usable `candidates` (C, 3) could cover it (the hull of all of
+    them with the fiducials covers more: ask for more or other fiducials), or no candidate lies beyond it (even all
+    of them leave part of it outside): then the part left outside that lies farthest from the fiducials' centroid is
+    named, a place a new candidate (a fiducial beyond it) would have to be. Robot frame, mm."""
+    f = np.asarray(fiducials, float).reshape(-1, 3)
+    c = np.asarray(candidates, float).reshape(-1, 3)
+    if not len(targets):
+        return {}
+    now = coverage(f, targets, seed=seed) if len(f) >= 4 else np.zeros(len(targets))
+    everything = np.concatenate([f, c])
+    best = coverage(everything, targets, seed=seed) if len(everything) >= 4 else np.zeros(len(targets))
+    out = {}
+    rng = np.random.default_rng([seed, 11])
+    centre = everything.mean(axis=0) if len(everything) else np.zeros(3)
+    for k, tid in enumerate(target_ids):
+        if now[k] >= 1.0:
+            continue
+        if best[k] > now[k]:
+            why = (
+                f"{100 * (1 - now[k]):.0f} % of its region lies outside the fiducials' hull; the usable candidates "
+                f"could bring it to {100 * best[k]:.0f} % (all of them together): ask for more or other fiducials "
+                "(--add)"
+            )
+            out[tid] = {"reason": why, "candidates_could": True, "needed_mm": None}
+            continue
+        samples = getattr(targets[k], "region", targets[k]).sample(rng, 512)
+        outside = samples[~covered(everything, samples)] if len(everything) >= 4 else samples
+        far = outside[np.argmax(np.linalg.norm(outside - centre, axis=1))] if len(outside) else samples.mean(axis=0)
+        where = ", ".join(f"{v + 0.0:.0f}" for v in far)
+        off = float(assess_coverage(everything, far[None]).off_plane_mm[0]) if len(everything) >= 3 else 0.0
+        need = (
+            f"its uncovered part lies up to {off:.0f} mm off the plane the fiducials and candidates lie in: a "
+            f"fiducial off that plane, beyond ({where}) mm, would be needed"
+            if off > OFF_PLANE_TOL_MM
+            else f"a fiducial beyond its farthest uncovered point ({where}) mm, away from the others, would be needed"
+        )
+        why = (
+            f"{100 * (1 - now[k]):.0f} % of its region lies outside the fiducials' hull and no usable candidate lies "
+            f"beyond it (all of them together leave {100 * (1 - best[k]):.0f} % outside); {need}: add a candidate "
+            "there"
+        )
+        out[tid] = {"reason": why, "candidates_could": False, "needed_mm": [float(v) for v in far]}
+    return out
 
 
 def _per_target(ids, values, kind=bool) -> dict | None:
@@ -362,6 +414,13 @@ def plan(
             inside=in0,
             inside_after=in0,
             off_plane_mm=off0,
+            uncovered=(
+                uncovered_reasons(
+                    base, scene.candidates.positions[usable_candidates(scene)[0]], scene.targets, scene.target_ids, seed
+                )
+                if np.any(cov0 < 1.0)
+                else {}
+            ),
         )
     pool = _pool(scene, base, cand_pos, samples_per_target, seed)
     rng = np.random.default_rng([seed, 7])
@@ -429,4 +488,5 @@ def plan(
         in0,
         _centres(after, scene)[0],
         off0,
+        uncovered_reasons(after, cand_pos, scene.targets, scene.target_ids, seed),
     )

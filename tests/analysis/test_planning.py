@@ -356,3 +356,32 @@ def test_cli_bad_scene_exits_2(capsys, tmp_path):
     )
     rc, out, err = _run(capsys, "plan", bad, "--json")
     assert rc == 2 and out == "" and len(err.strip().splitlines()) == 1 and "units" in err
+
+
+def test_a_plan_says_which_regions_stay_uncovered_why_and_where_a_fiducial_would_be_needed():
+    """Issue 39, item 1: the breadboard's regions stand above its coplanar fiducials and no candidate lies above
+    them: every region not wholly covered is named with "no usable candidate lies beyond it" and a place, which lies
+    outside the hull of all fiducials and candidates (where one would have to be); regions the candidates could
+    cover say so instead; the JSON and the text say the same."""
+    from rrbc_core.interpolation.hull import covered
+
+    scene = load_scene(ROOT / "scenes" / "breadboard_vanwyk2018.toml")
+    res = planning.plan(scene, add=0)
+    partial = [t for t, c in zip(scene.target_ids, res.coverage) if c < 1.0]
+    assert partial and sorted(res.uncovered) == sorted(partial)
+    usable = scene.candidates.positions[planning.usable_candidates(scene)[0]]
+    everything = np.concatenate([scene.fiducials.positions, usable])
+    for tid, why in res.uncovered.items():
+        assert "no usable candidate lies beyond it" in why["reason"] and not why["candidates_could"], why
+        where = np.array(why["needed_mm"])
+        assert not covered(everything, where[None])[0], (tid, where)  # a place the candidates cannot reach
+        assert f"{where[0] + 0.0:.0f}, {where[1] + 0.0:.0f}, {where[2] + 0.0:.0f}" in why["reason"]
+    assert res.to_json()["uncovered_after"] == res.uncovered
+    # the demo cell without most of its fiducials: its candidates could cover what the rest leave out
+    demo = load_scene(ROOT / "scenes" / "demo_workcell.toml")
+    few = demo.fiducials.positions[:4]
+    thin = planning.plan(demo, add=0, fiducials_mm=few)
+    assert thin.uncovered and all(
+        w["candidates_could"] and "could bring it to" in w["reason"] for w in thin.uncovered.values()
+    )
+    assert set(thin.uncovered) == {t for t, c in zip(demo.target_ids, thin.coverage) if c < 1.0}
