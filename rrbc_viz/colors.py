@@ -45,7 +45,7 @@ DATA_COLORS: dict[str, Rgb] = {
     "target outside the hull (extrapolated)": TARGET_EXTRAPOLATED,
     "check outside the hull (extrapolated)": CHECK_EXTRAPOLATED,
     "region of variability": REGION,
-    "95 % bound of a target (× the arrows' magnification, or true size)": BOUND,
+    "95 % bound of a target (× arrows, or true size)": BOUND,
     "fiducials' hull": HULL,
     "correction at a fiducial": CORRECTION_FIDUCIAL,
     "correction at a target": CORRECTION_TARGET,

@@ -132,7 +132,7 @@ def info_card(ev: Evaluation, selected: tuple[str, str] | None, region_fraction:
         lines = [
             f"**{_word(ev, kind, pid).capitalize()} {pid}** at {_v(t.positions[i])} mm (robot frame)",
             f"- sensor reading x = {_v(t.sensor[i])} mm (sensor frame)",
-            f"- correction ê = {_v(t.correction[i])} mm, |ê| = {float(np.linalg.norm(t.correction[i])):.3f} mm"
+            f"- correction ê = {_v(t.correction[i])} mm (sensor frame), |ê| = {float(np.linalg.norm(t.correction[i])):.3f} mm"
             + (f" ± {float(np.linalg.norm(t.correction_std[i])):.3f} (1σ)" if t.correction_std is not None else ""),
             f"- error rigid **{_mm(t.error_rigid[i])}** → RRBC **{_mm(t.error_rrbc[i])}**",
             _hull_line(ev, i, region_fraction),

@@ -77,7 +77,11 @@ def _with_calibration(points: list[dict], cal: dict) -> None:
 def verdict_of(points: list[dict], method: str, tolerance_mm: float | None) -> tuple[str, list[dict], str]:
     """(verdict, failing points, reason) for `method` against `tolerance_mm` (module docstring)."""
     if tolerance_mm is None:
-        return "UNDECIDED", [], "no tolerance given (--tolerance MM)"
+        return (
+            "UNDECIDED",
+            [],
+            "no tolerance given (rrbc report --tolerance MM; in the app, the File tab's Report tolerance)",
+        )
     if not points:
         return "UNDECIDED", [], "the file has neither targets nor checks"
     failing, unbounded = [], []
