@@ -73,6 +73,8 @@ DragCallback = Callable[..., object]
 ClickCallback = Callable[..., object]
 
 GIZMO_LIMITS = ((-1e7, 1e7),) * 3
+#: the targets whose correction the last fiducial drag changed most are drawn this much larger
+CHANGED_SCALE = 1.6
 
 
 class SceneNodes:
@@ -405,7 +407,9 @@ class SceneNodes:
                 x if self._selected == ("targets", pid) else pid + (" ⚠" if t.extrapolated[i] else "")
                 for i, (pid, x) in enumerate(zip(t.ids, texts))
             ]
+        changed = {pid for pid, _ in picture.changed}  # a fiducial's drag marks the targets it changed most
         for i, pid in enumerate(t.ids):
+            self._assign(self._spheres[("targets", pid)], "scale", CHANGED_SCALE if pid in changed else 1.0)
             self._assign(
                 self._spheres[("targets", pid)],
                 "color",

@@ -71,6 +71,7 @@ class ScenePicture:
     bias_scale: float = 1.0
     tool: tuple[float, float] | None = None
     drag_active: bool = False
+    changed: tuple = ()  # (id, change mm) of the targets the last fiducial drag changed most (`changed_targets`)
     bound_rotations: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)), repr=False)
     bound_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
 
@@ -85,6 +86,18 @@ def scene_extent(ev: Evaluation) -> float:
         ]
     )
     return max(float(np.linalg.norm(pts.max(0) - pts.min(0))) if len(pts) else 1000.0, 1.0)
+
+
+def changed_targets(state: AppState, ev: Evaluation) -> tuple[tuple[str, float], ...]:
+    """(id, |ê change| mm) of the targets whose correction the last fiducial drag changed most, largest first
+    (`rrbc_core.session.results.largest_changes` against `state.drag_baseline`); () without one."""
+    from rrbc_core.session.results import correction_changes, largest_changes
+
+    if state.drag_baseline is None:
+        return ()
+    t = ev.targets
+    ids, before = state.drag_baseline
+    return largest_changes(t.ids, correction_changes(ids, before, t.ids, t.correction_robot))
 
 
 def scene_picture(session: ExplorerSession, state: AppState, ev: Evaluation) -> ScenePicture:
@@ -124,6 +137,7 @@ def scene_picture(session: ExplorerSession, state: AppState, ev: Evaluation) -> 
         bias_scale=float(session.settings.bias_scale) if session.kind == "scene" else 1.0,
         tool=None if tool is None else (float(tool[0]), float(tool[1])),
         drag_active=state.drag_active,
+        changed=changed_targets(state, ev),
         bound_rotations=bound_rot,
         bound_axes=bound_axes,
     )

@@ -56,6 +56,9 @@ class AppState:
     drag_active : bool
         A drag is under way: the bullseye keeps its drawing scale (and the arm follows at most a few times a second)
         until it ends.
+    drag_baseline : (ids, corrections (T, 3) robot frame mm) or None
+        The targets' corrections when the last fiducial drag started: the targets whose correction it changed most
+        are marked (`picture.ScenePicture.changed`); cleared by a target's drag and a new scene.
     target_arrows : bool
         The targets' correction arrows are drawn (a lesson step shows the fiducials' only).
     landing : LandingDisplay or None
@@ -115,6 +118,7 @@ class AppState:
     see_through: bool = False
     extent_mm: float = 1000.0
     drag_active: bool = False
+    drag_baseline: tuple[tuple, np.ndarray] | None = None
     target_arrows: bool = True
     landing: LandingDisplay | None = None
     lesson_index: int | None = None

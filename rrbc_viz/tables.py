@@ -20,6 +20,15 @@ def scale_line(magnification: float) -> str:
     return f"Arrows and landing offsets **×{m}**: 1 mm is drawn as {m} mm."
 
 
+def changes_line(changed) -> str:
+    """The targets whose correction the last fiducial drag changed most ((id, mm), largest first), said under the
+    scale line; "" without."""
+    if not changed:
+        return ""
+    said = ", ".join(f"**{pid}** {mm:.3f} mm" for pid, mm in changed)
+    return f"\n\nThe last fiducial drag changed these targets' corrections most (drawn larger): {said}."
+
+
 def summary(ev: Evaluation, kind: str) -> str:
     sm = ev.summary
     s = ev.settings

@@ -1,6 +1,7 @@
 """What the session hands the app besides an `Evaluation`: the heat map over the targets' regions (`HeatMap`), the
-planning state (`PlanningState`), the Monte Carlo plots (`MonteCarloPlots`), and the error model with the app's
-noise and bias sizes applied (`scaled`)."""
+planning state (`PlanningState`), the Monte Carlo plots (`MonteCarloPlots`), the error model with the app's
+noise and bias sizes applied (`scaled`), and which targets' corrections a fiducial's drag changed most
+(`correction_changes`, `largest_changes`)."""
 
 from __future__ import annotations
 
@@ -114,3 +115,31 @@ def _scaled(model, noise: float, bias: float):
         return t if f == 1.0 else _Scaled(t, f)
 
     return ErrorModel(robot=tuple(sc(t) for t in model.robot), sensor=tuple(sc(t) for t in model.sensor))
+
+
+#: a target's correction changed "most" in a drag when its change is at least this share of the largest change
+CHANGE_SHARE = 0.2
+#: and at least this (mm): below it nothing is said to have changed
+CHANGE_FLOOR_MM = 1e-3
+
+
+def correction_changes(before_ids, before_corrections, ids, corrections) -> np.ndarray:
+    """(T,) |ê_now − ê_before| mm of the targets `ids` (T,) with corrections (T, 3) (robot frame) against the
+    corrections (B, 3) of `before_ids` (a drag's start); NaN for a target that was not there before."""
+    before = {pid: np.asarray(c, float) for pid, c in zip(before_ids, np.asarray(before_corrections, float))}
+    now = np.asarray(corrections, float).reshape(-1, 3)
+    return np.array([float(np.linalg.norm(now[i] - before[p])) if p in before else np.nan for i, p in enumerate(ids)])
+
+
+def largest_changes(ids, changes, k: int = 3) -> tuple[tuple[str, float], ...]:
+    """The up to `k` targets (id, change mm) whose correction changed most, largest first: changes of at least
+    CHANGE_SHARE of the largest and CHANGE_FLOOR_MM (what a fiducial's drag marks in the app)."""
+    c = np.asarray(changes, float)
+    ok = np.isfinite(c)
+    if not np.any(ok):
+        return ()
+    top = float(np.max(c[ok]))
+    if top < CHANGE_FLOOR_MM:
+        return ()
+    order = [i for i in np.argsort(-np.where(ok, c, -np.inf), kind="stable") if ok[i] and c[i] >= CHANGE_SHARE * top]
+    return tuple((str(ids[i]), float(c[i])) for i in order[:k])

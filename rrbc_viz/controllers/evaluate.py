@@ -81,6 +81,8 @@ class EvaluateController:
                 ctx.nodes.drag_ended(kind, pid)
             if phase == "start":
                 self._refused.discard(key)
+                t = session.last.targets  # a fiducial's drag marks the targets whose correction it changes most
+                ctx.state.drag_baseline = (tuple(t.ids), t.correction_robot.copy()) if kind == "fiducials" else None
                 return session.last
             group = session.layout.get(kind)
             before = None

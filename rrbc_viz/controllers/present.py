@@ -15,7 +15,7 @@ from rrbc_core.session.evaluation import Evaluation
 
 from .. import tables, teaching
 from ..colors import legend_markdown
-from ..picture import ScenePicture, scene_extent, scene_picture
+from ..picture import ScenePicture, changed_targets, scene_extent, scene_picture
 
 if TYPE_CHECKING:
     from ..context import AppContext
@@ -37,7 +37,7 @@ class Presenter:
         self.draw_scene(ev)
         ctx.controls.show_headline(tables.headline(ev, session.kind))
         ctx.controls.explore.show_results(
-            tables.scale_line(ctx.state.display.magnification),
+            tables.scale_line(ctx.state.display.magnification) + tables.changes_line(self.picture_changes(ev)),
             tables.summary(ev, session.kind) + tables.stations_line(session),
             tables.target_table(ev),
         )
@@ -65,11 +65,16 @@ class Presenter:
         ctx = self.ctx
         ctx.state.extent_mm = scene_extent(ev)
         ctx.state.error_slice = None
+        ctx.state.drag_baseline = None  # another cell: the last drag's changes say nothing here
         picture = scene_picture(ctx.session, ctx.state, ev)
         ctx.state.landing = picture.landing
         ctx.nodes.build(ctx.session, picture, ctx.loaded.mesh, ctx.state.layers)
         ctx.slice_node.clear()
         ctx.plan.build(ctx.session)
+
+    def picture_changes(self, ev: Evaluation) -> tuple[tuple[str, float], ...]:
+        """The targets whose correction the last fiducial drag changed most (`picture.changed_targets`)."""
+        return changed_targets(self.ctx.state, ev)
 
     def picture(self) -> ScenePicture:
         """What the scene shows now (the session's last evaluation in the current state)."""

@@ -89,3 +89,49 @@ def test_a_target_without_a_bound_says_why_on_its_card(measured):
     assert np.isnan(measured.session.last.bounds.rrbc.bound95_mm[i])
     assert "95 % bound: none" in _card(measured) and "cross-validation tested" in _card(measured)
     assert not measured.nodes.handle(f"/bounds/{pid}").visible
+
+
+def test_a_fiducial_drag_marks_the_targets_whose_correction_it_changed_most(app):
+    """Issue 39, item 2: after a fiducial's drag the targets whose correction changed most (at least a fifth of the
+    largest change, at most three) are drawn larger and named under the scale line with their change; a target's
+    drag clears the mark. The changes are the session's own corrections before and after."""
+    from rrbc_core.session.results import correction_changes, largest_changes
+    from rrbc_viz.nodes import CHANGED_SCALE
+
+    ev0 = app.session.last
+    before = ev0.targets.correction_robot.copy()
+    fid = app.session.layout["fiducials"].ids[0]
+    start = np.array(app.session.layout["fiducials"].positions[0], float)
+    goal = start + np.array([120.0, -80.0, 40.0])
+    app.evaluate.handle_drag("fiducials", fid, start, phase="start")
+    app.evaluate.handle_drag("fiducials", fid, goal)
+    ev = app.evaluate.handle_drag("fiducials", fid, goal, phase="end")
+    changes = correction_changes(ev0.targets.ids, before, ev.targets.ids, ev.targets.correction_robot)
+    marked = largest_changes(ev.targets.ids, changes)
+    assert marked and marked[0][1] == pytest.approx(np.nanmax(changes))
+    for pid in ev.targets.ids:
+        scale = np.atleast_1d(np.asarray(app.nodes.handle(f"/targets/{pid}/gizmo/sphere").scale, float))
+        want = CHANGED_SCALE if pid in dict(marked) else 1.0
+        assert np.allclose(scale, want), (pid, scale)
+    text = app.controls.explore.scale.content
+    assert all(f"**{pid}** {mm:.3f} mm" in text for pid, mm in marked), text
+    t0 = ev.targets.positions[0]
+    app.evaluate.handle_drag("targets", ev.targets.ids[0], t0, phase="start")  # a target's drag clears the mark
+    app.evaluate.handle_drag("targets", ev.targets.ids[0], t0 + np.array([1.0, 0.0, 0.0]), phase="end")
+    assert "changed these targets" not in app.controls.explore.scale.content
+    assert all(
+        np.allclose(np.asarray(app.nodes.handle(f"/targets/{p}/gizmo/sphere").scale, float), 1.0)
+        for p in ev.targets.ids
+    )
+
+
+def test_largest_changes_are_a_fifth_of_the_largest_and_at_most_three():
+    from rrbc_core.session.results import correction_changes, largest_changes
+
+    ids = ("A", "B", "C", "D", "E")
+    now = np.array([[1.0, 0, 0], [0, 0.5, 0], [0, 0, 0.1], [0.3, 0, 0], [0, 0, 0]])
+    changes = correction_changes(("A", "B", "C", "D"), np.zeros((4, 3)), ids, now)
+    assert np.isnan(changes[4]) and changes[0] == pytest.approx(1.0)  # E was not there before
+    assert largest_changes(ids, changes) == (("A", 1.0), ("B", 0.5), ("D", 0.3))
+    assert largest_changes(ids, changes, k=1) == (("A", 1.0),)
+    assert largest_changes(ids, np.full(5, 1e-5)) == ()  # nothing changed enough to say
