@@ -45,13 +45,13 @@ _validators: dict[type, type] = {}
 
 @dataclasses.dataclass
 class _Client:
-    times: list = dataclasses.field(default_factory=list)  # when its malformed messages came (time.monotonic)
     unlogged: int = 0
     first_reason: str = ""
     last_log: float = -1e18
 
 
-_clients: dict[object, _Client] = {}
+_clients: dict[object, _Client] = {}  # per client address: its drops not yet logged and when it was last logged
+_floods: dict[object, list] = {}  # per connection: when its malformed messages came (time.monotonic), last WINDOW_S
 stats = {"dropped": 0, "disconnected": 0, "logged": 0}
 
 
@@ -138,16 +138,19 @@ def check_gui_update(state, updates: dict) -> str:
     return ""
 
 
-def note_bad(client_key: object, why: str, log: Callable[[str], object] | None = None) -> bool:
-    """Count a malformed message of a client; log at most once per LOG_INTERVAL_S. True when the client has sent
-    too many (disconnect it)."""
+def note_bad(client_key: object, why: str, log: Callable[[str], object] | None = None, connection=None) -> bool:
+    """Count a malformed message of a client (`client_key`: its address); log at most once per LOG_INTERVAL_S per
+    address. True when the `connection` (default: the client) has sent too many within WINDOW_S (disconnect it: a
+    tab's flood never closes another tab from the same address)."""
     now = time.monotonic()
+    conn = client_key if connection is None else connection
     with _lock:
-        if len(_clients) > 1000:  # forget clients quiet for longer than both intervals (a bounded table)
-            for k in [k for k, v in _clients.items() if now - max(v.times[-1:] or [v.last_log]) > 2 * WINDOW_S]:
+        if len(_clients) > 1000:  # forget addresses quiet for longer than both intervals (a bounded table)
+            for k in [k for k, v in _clients.items() if now - v.last_log > 2 * max(WINDOW_S, LOG_INTERVAL_S)]:
                 del _clients[k]
         c = _clients.setdefault(client_key, _Client())
-        c.times = [t for t in c.times if now - t < WINDOW_S] + [now]
+        times = [t for t in _floods.get(conn, []) if now - t < WINDOW_S] + [now]
+        _floods[conn] = times
         c.unlogged += 1
         c.first_reason = c.first_reason or why
         stats["dropped"] += 1
@@ -156,7 +159,7 @@ def note_bad(client_key: object, why: str, log: Callable[[str], object] | None =
             line = f"rrbc view: dropped {c.unlogged} malformed message(s) from a client ({c.first_reason})"
             c.last_log, c.unlogged, c.first_reason = now, 0, ""
             stats["logged"] += 1
-        too_many = len(c.times) > MAX_BAD
+        too_many = len(times) > MAX_BAD
         if too_many:
             stats["disconnected"] += 1
     if line is not None:
@@ -164,9 +167,11 @@ def note_bad(client_key: object, why: str, log: Callable[[str], object] | None =
     return too_many
 
 
-def forget(client_key: object) -> None:
+def forget(key: object) -> None:
+    """Forget a connection's (or a client's) counts."""
     with _lock:
-        _clients.pop(client_key, None)
+        _clients.pop(key, None)
+        _floods.pop(key, None)
 
 
 def _client_key(websocket) -> object:
@@ -185,14 +190,14 @@ async def _guarded_consumer(websocket, handle_message, message_class) -> None:
             raw = await websocket.recv()
             message, why = check(raw, message_class)
             if message is None:
-                if note_bad(key, why):
+                if note_bad(key, why, connection=id(websocket)):
                     await websocket.close(1008, "too many malformed messages")
                     return
                 continue
             handle_message(message)
     finally:
-        if key == id(websocket):  # an address's count outlives its connections (it is one line per minute)
-            forget(key)
+        with _lock:  # the connection's flood count goes with it; its address's log line outlives it
+            _floods.pop(id(websocket), None)
 
 
 def install() -> None:
@@ -212,7 +217,7 @@ def install() -> None:
             if handle is not None and not handle._impl.removed:
                 why = check_gui_update(handle._impl, dict(message.updates))
                 if why:
-                    note_bad(f"gui:{client_id}", why)
+                    note_bad("gui", why)  # counted and logged, never a reason to close a tab
                     return
             await handle_updates(self, client_id, message)
 

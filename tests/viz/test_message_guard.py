@@ -49,6 +49,15 @@ def test_malformed_messages_are_dropped_logged_once_and_a_flood_disconnects(app,
         time.sleep(0.1)
     assert pool.records[1].closed and pool.records[1].close_code == 1008
     assert not pool.records[0].closed  # the other tab is still served
+    # another tab from the same address: its own malformed message is dropped, it is not closed for the first tab's
+    # flood, and the address's log line is not repeated within the minute
+    before = message_guard.stats["dropped"]
+    pool.send_raw(0, _garbage(2))
+    deadline = time.monotonic() + 10
+    while message_guard.stats["dropped"] == before and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert message_guard.stats["dropped"] == before + 1 and not pool.records[0].closed
+    assert "malformed message(s) from a client" not in capfd.readouterr().err
 
 
 def test_well_formed_messages_still_drive_the_app(app, pool):
