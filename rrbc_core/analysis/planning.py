@@ -201,17 +201,19 @@ class PlanResult:
         }
 
 
-def uncovered_reasons(fiducials, candidates, targets, target_ids, seed: int = 0) -> dict[str, dict]:
+def uncovered_reasons(fiducials, candidates, targets, target_ids, seed: int = 0, now=None) -> dict[str, dict]:
     """Per target whose region of variability is not wholly inside the hull of `fiducials` (N, 3): {"reason": in
     words, "candidates_could": bool, "needed_mm": [x, y, z] or None, where a fiducial would be needed}. Either the usable `candidates` (C, 3) could cover it (the hull of all of
     them with the fiducials covers more: ask for more or other fiducials), or no candidate lies beyond it (even all
     of them leave part of it outside): then the part left outside that lies farthest from the fiducials' centroid is
-    named, a place a new candidate (a fiducial beyond it) would have to be. Robot frame, mm."""
+    named, a place a new candidate (a fiducial beyond it) would have to be. Robot frame, mm. `now`: the fiducials'
+    coverage (T,) when the caller has it (`coverage(fiducials, targets, seed=seed)`)."""
     f = np.asarray(fiducials, float).reshape(-1, 3)
     c = np.asarray(candidates, float).reshape(-1, 3)
     if not len(targets):
         return {}
-    now = coverage(f, targets, seed=seed) if len(f) >= 4 else np.zeros(len(targets))
+    if now is None:
+        now = coverage(f, targets, seed=seed) if len(f) >= 4 else np.zeros(len(targets))
     everything = np.concatenate([f, c])
     best = coverage(everything, targets, seed=seed) if len(everything) >= 4 else np.zeros(len(targets))
     out = {}
@@ -416,7 +418,12 @@ def plan(
             off_plane_mm=off0,
             uncovered=(
                 uncovered_reasons(
-                    base, scene.candidates.positions[usable_candidates(scene)[0]], scene.targets, scene.target_ids, seed
+                    base,
+                    scene.candidates.positions[usable_candidates(scene)[0]],
+                    scene.targets,
+                    scene.target_ids,
+                    seed,
+                    cov0,
                 )
                 if np.any(cov0 < 1.0)
                 else {}
@@ -488,5 +495,5 @@ def plan(
         in0,
         _centres(after, scene)[0],
         off0,
-        uncovered_reasons(after, cand_pos, scene.targets, scene.target_ids, seed),
+        uncovered_reasons(after, cand_pos, scene.targets, scene.target_ids, seed, cov1),
     )

@@ -51,11 +51,11 @@ class ConfigurationCheck:
         )
 
 
-def _joint_change(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
-    """(A, B) the largest wrapped change of one joint between configurations qa (A, J) and qb (B, J), rad."""
-    d = qa[:, None, :] - qb[None, :, :]
-    d = np.abs((d + np.pi) % (2 * np.pi) - np.pi)
-    return d.max(axis=2)
+def _nearest_change(q: np.ndarray, neighbours: np.ndarray) -> np.ndarray:
+    """(M,) per configuration q (M, J), the smallest over its neighbours' configurations (M, K, J) of the largest
+    wrapped change of one joint, rad."""
+    d = np.abs((q[:, None, :] - neighbours + np.pi) % (2 * np.pi) - np.pi)
+    return d.max(axis=2).min(axis=1)
 
 
 def configuration_check(
@@ -75,9 +75,9 @@ def configuration_check(
     qr = np.asarray(q, float)[:, rev]
     tree = cKDTree(s[rows_fid])
     _, near = tree.query(s[rows_pts], k=NEIGHBOURS)
-    dist = np.array([_joint_change(qr[[i]], qr[rows_fid[nb]]).min() for i, nb in zip(rows_pts, near)])
+    dist = _nearest_change(qr[rows_pts], qr[rows_fid[near]])
     _, near_f = tree.query(s[rows_fid], k=NEIGHBOURS + 1)  # itself first
-    own = np.array([_joint_change(qr[[f]], qr[rows_fid[nb[1:]]]).min() for f, nb in zip(rows_fid, near_f)])
+    own = _nearest_change(qr[rows_fid], qr[rows_fid[near_f[:, 1:]]])
     p = float(mannwhitneyu(dist, own, alternative="greater").pvalue)
     return ConfigurationCheck(dist, own, p, dist > own.max(), bool(p < ALPHA))
 

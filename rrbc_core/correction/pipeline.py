@@ -114,6 +114,14 @@ class CorrectionResult:
         c = self.checks_corrected
         return check_statistics(self.checks.ids, c.robot_rigid, c.robot_rrbc, self.checks.robot)
 
+    @cached_property
+    def configuration_warning(self) -> str | None:
+        """On a file with q1..q6: checks and targets reached in other joint configurations than their nearest
+        fiducials (`configuration_check.file_configuration_check`), in words; None otherwise. Computed once."""
+        method = self.choice.method if self.choice is not None else self.options.interpolator()
+        config = file_configuration_check(self.data) if method.name != "none" else None
+        return config.warning("rrbc calibrate with the arm's model (VEC) follows it") if config is not None else None
+
     def warnings(self, with_bounds: bool = True) -> tuple[str, ...]:
         """One-line warnings on this correction (`correction.warnings.correction_warnings`: wild corrections,
         conflicting nearly coincident fiducials, extrapolated targets and checks), then the bounds' (`bounds`: points
@@ -126,9 +134,7 @@ class CorrectionResult:
             )
             if cp is not None
         ]
-        method = self.choice.method if self.choice is not None else self.options.interpolator()
-        config = file_configuration_check(self.data) if method.name != "none" else None
-        said = config.warning("rrbc calibrate with the arm's model (VEC) follows it") if config is not None else None
+        said = self.configuration_warning
         return (
             correction_warnings(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections, points)
             + ((said,) if said else ())

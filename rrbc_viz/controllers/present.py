@@ -15,7 +15,7 @@ from rrbc_core.session.evaluation import Evaluation
 
 from .. import tables, teaching
 from ..colors import legend_markdown
-from ..picture import ScenePicture, changed_targets, scene_extent, scene_picture
+from ..picture import ScenePicture, scene_extent, scene_picture
 
 if TYPE_CHECKING:
     from ..context import AppContext
@@ -34,10 +34,10 @@ class Presenter:
         ctx = self.ctx
         session = ctx.session
         ctx.vec.show()  # the Arm tab, and VEC's landings for the bullseye
-        self.draw_scene(ev)
+        picture = self.draw_scene(ev)
         ctx.controls.show_headline(tables.headline(ev, session.kind))
         ctx.controls.explore.show_results(
-            tables.scale_line(ctx.state.display.magnification) + tables.changes_line(self.picture_changes(ev)),
+            tables.scale_line(ctx.state.display.magnification) + tables.changes_line(picture.changed),
             tables.summary(ev, session.kind) + tables.stations_line(session),
             tables.target_table(ev),
         )
@@ -52,12 +52,13 @@ class Presenter:
             ctx.views.update_slice()
             self.update_checks()
 
-    def draw_scene(self, ev: Evaluation) -> None:
+    def draw_scene(self, ev: Evaluation) -> ScenePicture:
         """Draw `ev` in the 3-D scene as the state says (`picture.scene_picture`; caller holds the lock, inside
-        atomic()); the bullseye shown is remembered in the state."""
+        atomic()); the bullseye shown is remembered in the state. Returns the picture drawn."""
         picture = scene_picture(self.ctx.session, self.ctx.state, ev)
         self.ctx.state.landing = picture.landing
         self.ctx.nodes.show(picture)
+        return picture
 
     def build_scene(self, ev: Evaluation) -> None:
         """Rebuild the 3-D scene for the session as it is now: a source loaded, the cell edited (caller holds the lock,
@@ -71,10 +72,6 @@ class Presenter:
         ctx.nodes.build(ctx.session, picture, ctx.loaded.mesh, ctx.state.layers)
         ctx.slice_node.clear()
         ctx.plan.build(ctx.session)
-
-    def picture_changes(self, ev: Evaluation) -> tuple[tuple[str, float], ...]:
-        """The targets whose correction the last fiducial drag changed most (`picture.changed_targets`)."""
-        return changed_targets(self.ctx.state, ev)
 
     def picture(self) -> ScenePicture:
         """What the scene shows now (the session's last evaluation in the current state)."""
