@@ -33,6 +33,7 @@ Ids are used in node names with "/" replaced by "_" (`node_key`).
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -64,8 +65,6 @@ from .picture import ScenePicture
 from .region_nodes import RegionNodes
 from .robot_nodes import ArmNodes, ArmPoser, SensorNodes
 from .stage import Stage
-
-#: The scene's layers, each a group node whose visibility the View tab and the lesson steps switch.
 
 #: (kind, id, robot-frame position mm, phase, client=...) -> anything
 DragCallback = Callable[..., object]
@@ -155,10 +154,8 @@ class SceneNodes:
     # ------------------------------------------------------------------------------------------ building
     def clear(self) -> None:
         for h in list(self._groups.values()):
-            try:
+            with contextlib.suppress(Exception):  # already gone
                 h.remove()
-            except Exception:  # noqa: BLE001 - already gone
-                pass
         self._groups.clear()
         self._gizmos.clear()
         self._spheres.clear()
@@ -554,9 +551,8 @@ class SceneNodes:
         mine = None if self._selected is None else f"{gizmo_name(*self._selected)}/label"
         anchor = "bottom-center" if self._label_scale > 1.0 else "bottom-left"
         labels = {n: (self.label_anchor(n), str(self._labels[n].text)) for n in names}
-        self._lesson_hidden = lesson_labels.declutter(
-            labels, mine, pose, image_px, panel_px, 0.75 * self._label_scale, anchor
-        )
+        scale = 0.75 * self._label_scale
+        self._lesson_hidden = lesson_labels.declutter(labels, mine, pose, image_px, panel_px, scale, anchor)
         self._show_labels()
         return self._lesson_hidden
 
@@ -576,8 +572,7 @@ class SceneNodes:
             self._apply_sizes()
 
     def _show_labels(self) -> None:
-        # presentation mode: only the selected point's label and a lesson step's (large labels of every point would
-        # overlap)
+        # presentation mode: only the selected point's label and a lesson step's (large labels would overlap)
         on = bool(self._layers.get("labels")) and self._label_scale <= 1.0
         lesson = tuple(f"/{k}/" for k in self._lesson_labels)
         mine = None if self._selected is None else f"{gizmo_name(*self._selected)}/label"

@@ -21,14 +21,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from rrbc_core.correction.bound_inputs import estimate_noise
+from rrbc_core.correction.bound_inputs import estimate_noise, tested_from
 from rrbc_core.correction.bounds import (
     assemble_bounds,
     no_bounds,
     point_registration_cov,
     profile_from_squares,
     registration_theta_cov,
-    tested_from,
 )
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")

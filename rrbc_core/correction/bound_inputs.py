@@ -1,7 +1,8 @@
 """What the per-point bounds (`correction.bounds`) are computed from besides the cross-validation: a row's noise
 estimated from the data when no instrument is given (`estimate_noise`), the instrument with every figure filled in
 (`complete_instrument`), and the correction field's rate of change for points off coplanar fiducials
-(`field_slope`). docs/uncertainty.md derives them. Units mm; frames as in the measurement file.
+(`field_slope`), and how far the fiducials' cross-validation tests a prediction (`fold_distances`,
+`tested_distance`). docs/uncertainty.md derives them. Units mm; frames as in the measurement file.
 """
 
 from __future__ import annotations
@@ -12,10 +13,13 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.spatial import cKDTree
 
+from rrbc_core.interpolation.auto import folds_of
 from rrbc_core.models.instrument import Instrument
 
 #: fewer fiducials than this: no cross-validation, so no RRBC bound (a warning says so)
 MIN_FIDUCIALS = 6
+#: a point is bounded up to this percentile of the folds' held-out distances (`tested_from`)
+TESTED_PERCENTILE = 90
 
 
 def fit_quadratic(d2: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -127,3 +131,40 @@ def complete_instrument(
     var, why = estimate
     robot = float(np.sqrt(max(var - sensor_var_at_fid, 0.0)))
     return replace(inst, robot_mm=robot, robot_source=f"{why}, less the instrument's noise")
+
+
+def fold_distances(fid_sensor: np.ndarray) -> np.ndarray:
+    """(F,): each fiducial's distance (sensor frame, mm) from the nearest fiducial outside its fold
+    (`interpolation.auto.folds_of`): how far the cross-validation predicts it from."""
+    n = len(fid_sensor)
+    fold = folds_of(n)
+    dist = np.full(n, np.inf)
+    if n < 2 or fold.max() == 0:
+        return dist
+    # one tree: each point's nearest neighbours, the first in another fold (folds are dealt at random, so one is
+    # almost always among the nearest 6); per fold, with the rest's own tree, for the few that have none there
+    d, j = cKDTree(fid_sensor).query(fid_sensor, k=min(n, 6))
+    other = fold[j] != fold[:, None]
+    found = other.any(axis=1)
+    dist[found] = d[found, np.argmax(other[found], axis=1)]
+    for f in np.unique(fold[~found]):
+        test = (fold == f) & ~found
+        dist[test] = cKDTree(fid_sensor[fold != f]).query(fid_sensor[test])[0]
+    return dist
+
+
+def tested_distance(fid_sensor: np.ndarray, distances: np.ndarray | None = None) -> float | None:
+    """The distance (mm) up to which the fiducials' cross-validation tests a prediction: the 90th percentile of
+    `fold_distances` (given as `distances` when already computed); None with fewer than 3 fiducials (nothing
+    tested, no limit applied)."""
+    if len(fid_sensor) < 3:
+        return None
+    return tested_from(fold_distances(fid_sensor) if distances is None else distances)
+
+
+def tested_from(distances: np.ndarray) -> float:
+    """The distance the folds tested (mm): the `TESTED_PERCENTILE`th percentile of the held-out points' distances
+    from the nearest fiducial left in (the finite ones; 0 without any)."""
+    d = np.asarray(distances, float)
+    d = d[np.isfinite(d)]
+    return float(np.percentile(d, TESTED_PERCENTILE)) if len(d) else 0.0

@@ -48,6 +48,8 @@ from rrbc_core.correction.bound_inputs import (
     estimate_noise,
     field_slope,
     fit_quadratic,
+    fold_distances,
+    tested_distance,
 )
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.auto import folds_of
@@ -57,8 +59,6 @@ from rrbc_core.models.instrument import Instrument
 #: the bound's probability
 LEVEL = 0.95
 BUDGET_KEYS = ("instrument", "registration", "interpolation", "arm")
-#: a point is bounded up to this percentile of the folds' held-out distances (`tested_from`)
-TESTED_PERCENTILE = 90
 
 
 def bound95(cov: np.ndarray, level: float = LEVEL) -> np.ndarray:
@@ -200,43 +200,6 @@ class Bounds:
             "instrument": self.instrument.to_json(),
             "interpolation_profile": None if self.profile is None else self.profile.to_json(),
         }
-
-
-def fold_distances(fid_sensor: np.ndarray) -> np.ndarray:
-    """(F,): each fiducial's distance (sensor frame, mm) from the nearest fiducial outside its fold
-    (`interpolation.auto.folds_of`): how far the cross-validation predicts it from."""
-    n = len(fid_sensor)
-    fold = folds_of(n)
-    dist = np.full(n, np.inf)
-    if n < 2 or fold.max() == 0:
-        return dist
-    # one tree: each point's nearest neighbours, the first in another fold (folds are dealt at random, so one is
-    # almost always among the nearest 6); per fold, with the rest's own tree, for the few that have none there
-    d, j = cKDTree(fid_sensor).query(fid_sensor, k=min(n, 6))
-    other = fold[j] != fold[:, None]
-    found = other.any(axis=1)
-    dist[found] = d[found, np.argmax(other[found], axis=1)]
-    for f in np.unique(fold[~found]):
-        test = (fold == f) & ~found
-        dist[test] = cKDTree(fid_sensor[fold != f]).query(fid_sensor[test])[0]
-    return dist
-
-
-def tested_distance(fid_sensor: np.ndarray, distances: np.ndarray | None = None) -> float | None:
-    """The distance (mm) up to which the fiducials' cross-validation tests a prediction: the 90th percentile of
-    `fold_distances` (given as `distances` when already computed); None with fewer than 3 fiducials (nothing
-    tested, no limit applied)."""
-    if len(fid_sensor) < 3:
-        return None
-    return tested_from(fold_distances(fid_sensor) if distances is None else distances)
-
-
-def tested_from(distances: np.ndarray) -> float:
-    """The distance the folds tested (mm): the `TESTED_PERCENTILE`th percentile of the held-out points' distances
-    from the nearest fiducial left in (the finite ones; 0 without any)."""
-    d = np.asarray(distances, float)
-    d = d[np.isfinite(d)]
-    return float(np.percentile(d, TESTED_PERCENTILE)) if len(d) else 0.0
 
 
 def _rigid_error(c_robot, fid_registered, reg_residuals, n_reg: int, fid_noise: float):
