@@ -290,6 +290,13 @@ def calibrate_text(result: dict) -> str:
     ]
     for m in METHODS:
         lines.append(f"{m:<11} {mm(result['rmst_mm'][m]):>16}   {mm(result['cv_rmst_mm'][m]):>12}")
+    for m, sp in result.get("interpolation_space", {}).items():
+        if sp["space"] == "configuration":
+            cv = sp["cv_rmst_mm"]
+            lines.append(
+                f"{m} interpolates over the arm's configuration (joint space): cross-validated {mm(cv['configuration'])}"
+                f" mm against {mm(cv['position'])} over position"
+            )
     lines.append(f"recommended (chosen without the checks): {result['recommended']}")
     if result["extrapolated_share"] > 0:
         lines.append(f"recommendation: {result['recommendation_basis']}")

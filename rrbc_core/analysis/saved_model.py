@@ -226,3 +226,23 @@ def load_model(path) -> SavedModel:
 
 
 __all__ = ["SavedModel", "from_calibration", "load_model", "save_model", "to_json", "urdf_digest"]
+
+
+def export_calibrated_urdf(path: str, urdf, cal: Calibration, source: str, poses: int) -> None:
+    """`rrbc calibrate --export-urdf`: write the identified arm `cal` as a URDF (`models.urdf_export`) to `path`, atomically."""
+    from rrbc_core.io.measurements_write import atomic_write_text
+    from rrbc_core.models.urdf import resolve_urdf
+    from rrbc_core.models.urdf_export import calibrated_urdf
+
+    notes = [
+        f"Calibrated by rrbc calibrate from {source} ({poses} poses; {cal.rank} parameter combinations identified,",
+        f"residual noise {cal.sigma_mm:.4g} mm per axis): joint origins and offsets of {resolve_urdf(urdf).name}",
+        "updated; link rrbc_tool is the measured tool point. The sensor-to-robot transform is not part of the arm.",
+    ]
+    if cal.terms:
+        notes.append("Load terms (no URDF element; apply them as rrbc's models.loads does):")
+        notes += [
+            f"  {t.name} = {c:.6g} {t.unit} (standard error {se:.2g})"
+            for t, c, se in zip(cal.terms, cal.coef, cal.coef_se)
+        ]
+    atomic_write_text(path, calibrated_urdf(resolve_urdf(urdf), cal.chain, cal.delta, notes))

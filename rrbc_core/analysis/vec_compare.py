@@ -8,10 +8,12 @@ rows (with joint values) it identifies the arm's kinematic errors and the sensor
 mm):
 
 - rigid: least-squares registration of the registration rows, b̂ = R s + t;
-- rrbc: RRBC over the fiducials (IDW k = 4, p = 2), as `rrbc correct`;
+- rrbc: RRBC over the fiducials (IDW k = 4, p = 2), as `rrbc correct`; over position, or over the arm's
+  configuration where the cross-validation says so (`configuration_rrbc`; JSON `interpolation_space`);
 - vec: the point p = T_vec(s); the joints q* that put the IDENTIFIED arm's tool there, from the row's joints; the
   command the NOMINAL controller needs to go to q* (`calibration.vec_commands`);
-- vec_rrbc: vec, then RRBC on vec's residuals at the fiducials (e_i = b_i − b̂_vec(s_i), IDW to the row).
+- vec_rrbc: vec, then RRBC on vec's residuals at the fiducials (e_i = b_i − b̂_vec(s_i), IDW to the row; over
+  position or configuration, as rrbc).
 
 Check rows carry the robot's reading of the point (its truth); RMS errors over them give `rmst_mm`. `cv_rmst_mm` does
 the same over the fiducials by cross-validation (at most `CV_FOLDS` folds; fiducial i in fold i mod folds: the other
@@ -25,15 +27,25 @@ registration rows are `both` and listed first works.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from rrbc_core.analysis.arm_verdict import RULE as ARM_RULE
 from rrbc_core.analysis.arm_verdict import arm_verdict
 from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
+from rrbc_core.analysis.configuration_rrbc import (
+    INTERPOLATED,
+    choose_spaces,
+    configuration_idw,
+    configuration_key,
+    joint_levers,
+    resolve_spaces,
+    spaces_json,
+)
 from rrbc_core.analysis.extrapolation_cv import METHOD_ORDER, beyond_points, extrapolation_folds, mixture_choice
 from rrbc_core.analysis.robot_model import require_model, robot_chain
+from rrbc_core.analysis.saved_model import export_calibrated_urdf
 from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
 from rrbc_core.correction.configuration_check import configuration_check
 from rrbc_core.errors import InputError
@@ -76,6 +88,9 @@ class MethodsFit:
     vec_fid: np.ndarray  # VEC's commands for the fiducials' sensor readings
     fid_group: np.ndarray  # (F,) the fiducials' stations
     grouped: bool = False
+    fid_q: np.ndarray | None = None  # (F, I) the fiducials' joint values
+    levers: np.ndarray | None = None  # (I,) joint space's scale (`configuration_rrbc.joint_levers`)
+    spaces: dict | None = None  # rrbc / vec_rrbc -> "position" or "configuration" (None: position)
 
 
 def fit_methods(
@@ -100,22 +115,25 @@ def fit_methods(
     else:
         cal = calibrate(chain, q[rows], s[rows], rot[0], t[0], terms=terms, gravity=gravity)
     vec_fid = vec_commands(cal, s[rows_fid], q[rows_fid], gi[rows_fid] if grouped else None)
-    return MethodsFit(rot, t, cal, s[rows_fid], b[rows_fid], vec_fid, gi[rows_fid], grouped)
+    levers = joint_levers(chain, q[rows_fid])
+    return MethodsFit(rot, t, cal, s[rows_fid], b[rows_fid], vec_fid, gi[rows_fid], grouped, q[rows_fid], levers)
 
 
-def _idw_by_group(src, values, dst, g_src, g_dst) -> np.ndarray:
-    """IDW corrections at dst from the fiducials of the same station only (zero where a station has none)."""
+def _idw_by_group(src, values, dst, g_src, g_dst, interpolate=_idw) -> np.ndarray:
+    """IDW corrections at dst from the fiducials of the same station only (zero where a station has none);
+    `interpolate(src, values, dst)` the interpolation (position-space IDW by default)."""
     out = np.zeros((len(dst), 3))
     for g in np.unique(g_dst):
         into, fro = g_dst == g, g_src == g
         if np.any(fro):
-            out[into] = _idw(src[fro], values[fro], dst[into])
+            out[into] = interpolate(src[fro], values[fro], dst[into])
     return out
 
 
 def predict_methods(f: MethodsFit, s_rows, q_rows, g_rows=None) -> dict:
     """The four commands (D, 3) for rows with sensor readings s_rows, joint values q_rows and (with stations)
-    stations g_rows (D,)."""
+    stations g_rows (D,); rrbc and vec_rrbc interpolated in the space `f.spaces` chose (position by default), and
+    both also under `configuration_rrbc.configuration_key` interpolated over the joints."""
     g_rows = np.zeros(len(s_rows), int) if g_rows is None else np.asarray(g_rows, int)
     rigid = np.einsum("nij,nj->ni", f.rot[g_rows], s_rows) + f.t[g_rows]
     fid_rigid = np.einsum("nij,nj->ni", f.rot[f.fid_group], f.fid_sensor) + f.t[f.fid_group]
@@ -124,7 +142,18 @@ def predict_methods(f: MethodsFit, s_rows, q_rows, g_rows=None) -> dict:
         return {"rigid": rigid, "rrbc": rigid, "vec": vec, "vec_rrbc": vec}
     rrbc = rigid + _idw_by_group(fid_rigid, f.fid_robot - fid_rigid, rigid, f.fid_group, g_rows)
     vec_rrbc = vec + _idw_by_group(f.vec_fid, f.fid_robot - f.vec_fid, vec, f.fid_group, g_rows)
-    return {"rigid": rigid, "rrbc": rrbc, "vec": vec, "vec_rrbc": vec_rrbc}
+    out = {"rigid": rigid, "rrbc": rrbc, "vec": vec, "vec_rrbc": vec_rrbc}
+    if f.fid_q is not None and f.levers is not None:
+        levers = f.levers
+
+        def over_joints(src, values, dst):
+            return configuration_idw(src, values, dst, levers)
+
+        q_rows = np.asarray(q_rows, float)
+        for m, base, fid_base in (("rrbc", rigid, fid_rigid), ("vec_rrbc", vec, f.vec_fid)):
+            corr = _idw_by_group(f.fid_q, f.fid_robot - fid_base, q_rows, f.fid_group, g_rows, over_joints)
+            out[configuration_key(m)] = base + corr
+    return resolve_spaces(out, f.spaces)
 
 
 def one_standard_error_choice(squared: dict, among: tuple[str, ...] = METHODS) -> str:
@@ -178,7 +207,7 @@ def _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, terms=(), gravity
     """Per method, the held-out fiducials' squared errors (H,) mm² over `folds`: index arrays into rows_fid, each
     left out and scored (`cv_folds`), or (left out, scored) pairs (`extrapolation_cv.extrapolation_folds`)."""
     g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])
-    errs: dict[str, list] = {m: [] for m in METHODS}
+    errs: dict[str, list] = {m: [] for m in METHODS + tuple(configuration_key(m) for m in INTERPOLATED)}
     for fold in folds:
         held, scored = fold if isinstance(fold, tuple) else (fold, fold)
         keep = np.setdiff1d(np.arange(len(rows_fid)), held)
@@ -186,9 +215,9 @@ def _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, gi, terms=(), gravity
             np.setdiff1d(rows_reg, rows_fid[held]), rows_fid[keep], s, b, q, chain, gi, terms, gravity, fixed
         )
         pred = predict_methods(f, s[rows_fid[scored]], q[rows_fid[scored]], g_of(rows_fid[scored]))
-        for m in METHODS:
+        for m in pred:
             errs[m].append(np.sum((pred[m] - b[rows_fid[scored]]) ** 2, axis=1))
-    return {m: np.concatenate(errs[m]) if errs[m] else np.zeros(0) for m in METHODS}
+    return {m: np.concatenate(v) if v else np.zeros(0) for m, v in errs.items()}
 
 
 def _better(sq_a: np.ndarray, sq_b: np.ndarray) -> bool:
@@ -224,32 +253,9 @@ def select_terms(folds, rows_reg, rows_fid, s, b, q, chain, gi, candidates, grav
     return entered, current, table
 
 
-def _export_urdf(path: str, urdf, cal: Calibration, source: str, poses: int) -> None:
-    """Write the identified arm `cal` as a URDF (`models.urdf_export`) to `path`, atomically."""
-    from rrbc_core.io.measurements_write import atomic_write_text
-    from rrbc_core.models.urdf import resolve_urdf
-    from rrbc_core.models.urdf_export import calibrated_urdf
-
-    notes = [
-        f"Calibrated by rrbc calibrate from {source} ({poses} poses; {cal.rank} parameter combinations identified,",
-        f"residual noise {cal.sigma_mm:.4g} mm per axis): joint origins and offsets of {resolve_urdf(urdf).name}",
-        "updated; link rrbc_tool is the measured tool point. The sensor-to-robot transform is not part of the arm.",
-    ]
-    if cal.terms:
-        notes.append("Load terms (no URDF element; apply them as rrbc's models.loads does):")
-        notes += [
-            f"  {t.name} = {c:.6g} {t.unit} (standard error {se:.2g})"
-            for t, c, se in zip(cal.terms, cal.coef, cal.coef_se)
-        ]
-    atomic_write_text(path, calibrated_urdf(resolve_urdf(urdf), cal.chain, cal.delta, notes))
-
-
-def _forms(rotation, translation) -> dict:
-    """The transform's matrix, xyz and rpy forms (`geometry.transforms.RigidTransform.export_forms`)."""
-    return RigidTransform(rotation, translation).export_forms()
-
-
-def _recommend(sq, folds, rows_reg, rows_fid, rows_pred, s, b, q, chain, gi, terms, gravity, fixed, config_beyond):
+def _recommend(
+    sq, folds, rows_reg, rows_fid, rows_pred, s, b, q, chain, gi, terms, gravity, fixed, config_beyond, spaces=None
+):
     """The recommended method and its basis in words (docs/calibration.md, "Recommended method"): the
     one-standard-error rule over ordinary cross-validation for the checks and targets it speaks for, and over
     buffered leave-out folds (`extrapolation_cv`) for those beyond the fiducials, weighted by their shares; where
@@ -267,7 +273,11 @@ def _recommend(sq, folds, rows_reg, rows_fid, rows_pred, s, b, q, chain, gi, ter
             {},
         )
     far = extrapolation_folds(s, rows_reg, rows_fid, beyond, gi, min_poses=0 if fixed is not None else 8)
-    sq_far = _cv_squared(far, rows_reg, rows_fid, s, b, q, chain, gi, terms, gravity, fixed) if far else {}
+    sq_far = (
+        resolve_spaces(_cv_squared(far, rows_reg, rows_fid, s, b, q, chain, gi, terms, gravity, fixed), spaces)
+        if far
+        else {}
+    )
     n_far = len(far)
     inside = 1.0 - beyond.share
     tested = beyond.share - beyond.untestable_share if n_far else 0.0
@@ -431,6 +441,11 @@ def compare(
             return fit_methods(rows_reg, rows_fid, s, b, q, chain, gi, rest, gravity, fixed), rest
 
         fit, terms, refused = drop_unphysical_terms(fit, terms, refit)
+    # rrbc and vec_rrbc interpolate over position or over the joints, as the same cross-validation says
+    spaces = choose_spaces(sq) if folds else dict.fromkeys(INTERPOLATED, "position")
+    space_table = spaces_json(sq, spaces)
+    fit = replace(fit, spaces=spaces)
+    sq = resolve_spaces(sq, spaces)
     g_of = (lambda rows: None) if gi is None else (lambda rows: gi[rows])
     rmst = dict.fromkeys(METHODS)
     if len(rows_chk):
@@ -455,6 +470,7 @@ def compare(
         gravity,
         fixed,
         config is not None and config.flagged,
+        spaces,
     )
     cal = fit.cal
     # whether the file holds an arm error is rrbc diagnose's decision on the same file and model (arm_verdict):
@@ -485,7 +501,7 @@ def compare(
 
         write_model(save_model, from_calibration(cal, robot, urdf, mset.source, len(known)))
     if export_urdf is not None:
-        _export_urdf(export_urdf, urdf if urdf is not None else model.urdf, cal, mset.source, len(known))
+        export_calibrated_urdf(export_urdf, urdf if urdf is not None else model.urdf, cal, mset.source, len(known))
     return {
         "robot": chain.name,
         "model": {
@@ -503,6 +519,7 @@ def compare(
         "cv_rmst_mm": cv,
         "recommended": recommended,
         "recommendation_basis": basis,
+        "interpolation_space": space_table,
         "extrapolated_share": beyond.share,
         "extrapolation_cv_rmst_mm": {m: float(np.sqrt(np.mean(sq_far[m]))) if sq_far else None for m in METHODS},
         "extrapolation_folds": len(sq_far["rigid"]) if sq_far else 0,
@@ -550,10 +567,10 @@ def compare(
         "exported_urdf": export_urdf,
         "units": "per parameter (unit): angles rad, lengths mm, compliances rad/Nm",
         "sensor_to_robot": (
-            {**RigidTransform(cal.rotation, cal.translation).as_dict(), **_forms(cal.rotation, cal.translation)}
+            {**(tr := RigidTransform(cal.rotation, cal.translation)).as_dict(), **tr.export_forms()}
             if cal.rotations is None or cal.translations is None
             else [
-                {"group": g, "rotation": r.tolist(), "translation": t.tolist(), **_forms(r, t)}
+                {"group": g, "rotation": r.tolist(), "translation": t.tolist(), **RigidTransform(r, t).export_forms()}
                 for g, r, t in zip(names, cal.rotations, cal.translations)
             ]
         ),
@@ -580,5 +597,5 @@ def compare(
             "largest_change_deg": float(np.degrees(config.distance_rad.max())),
             "fiducials_largest_change_deg": float(np.degrees(config.fiducial_rad.max())),
         },
-        "warnings": [w for w in ([config.warning()] if config is not None else []) if w],
+        "warnings": [w for w in ([config.warning(space=spaces["rrbc"])] if config is not None else []) if w],
     }

@@ -37,17 +37,24 @@ class ConfigurationCheck:
     beyond: np.ndarray
     flagged: bool
 
-    def warning(self, advice: str = "VEC follows the configuration") -> str | None:
-        """The warning's words when `flagged`, else None; `advice` ends it."""
+    def warning(self, advice: str = "VEC follows the configuration", space: str = "position") -> str | None:
+        """The warning's words when `flagged`, else None; `advice` ends it. `space`: what RRBC interpolates over
+        (`rrbc calibrate` may interpolate over the joints, `analysis.configuration_rrbc`)."""
         if not self.flagged:
             return None
         n, m = int(self.beyond.sum()), len(self.distance_rad)
+        how = (
+            "RRBC interpolates by position only, so where the arm's error depends on its configuration its "
+            "correction there comes from other configurations"
+            if space == "position"
+            else "RRBC interpolates over the fiducials' configurations, and none is near theirs, so its correction "
+            "there is carried from other configurations"
+        )
         return (
             f"{n} of {m} checks and targets are reached in joint configurations farther from those of their nearest "
             f"fiducials (up to {np.degrees(self.distance_rad.max()):.0f}° in one joint) than any fiducial is from its "
             f"neighbours' ({np.degrees(self.fiducial_rad.max()):.0f}°; one-sided Mann-Whitney p = {self.p_value:.2g}):"
-            " RRBC interpolates by position only, so where the arm's error depends on its configuration its "
-            f"correction there comes from other configurations and can be worse than rigid; {advice}"
+            f" {how} and can be worse than rigid; {advice}"
         )
 
 

@@ -37,10 +37,12 @@ def joint_measurements(
     n_tgt: int = 3,
     source: str = "<simulated>",
     point_shift_rad=None,
+    family_shift_rad=None,
 ) -> MeasurementSet:
     """A simulated measurement set with joint angles q1..q6 (degrees) in its extra columns (module docstring).
     `point_shift_rad` (6,): added to the checks' and targets' joint values (reached in other configurations than
-    the fiducials)."""
+    the fiducials). `family_shift_rad` (6,): added to every other row's joint values (registration, fiducials,
+    checks and targets alike: two configuration families throughout, e.g. the wrist turned)."""
     from rrbc_core.models.errorterms import SmoothField
 
     rng = np.random.default_rng(seed)
@@ -52,6 +54,8 @@ def joint_measurements(
     q = UR5_TOOL_DOWN_SEED + rng.uniform(-0.7, 0.7, (n, 6))
     if point_shift_rad is not None:
         q[n_reg + n_fid :] += np.asarray(point_shift_rad, float)
+    if family_shift_rad is not None:
+        q[1::2] += np.asarray(family_shift_rad, float)
     p, _ = forward(true, q)
     b_nom, _ = forward(nominal, q)
     s = (p - t) @ rot
