@@ -301,7 +301,9 @@ def _recommend(
     # model is a function of the joints, not of position: it is tested where the points' configurations are like
     # the fiducials' (`configuration_check`), or where the arm was identified elsewhere (a saved model)
     if fixed is not None or not config_beyond:
-        parts = [(inside / (inside + tested), sq)] + ([(tested / (inside + tested), sq_far)] if tested else [])
+        # every point beyond and untestable (inside + tested = 0): the cross-validated fiducials are all there is
+        spoken = inside + tested
+        parts = [(inside / spoken, sq)] + ([(tested / spoken, sq_far)] if tested else []) if spoken else [(1.0, sq)]
         why = (
             "the saved arm's vec"
             if fixed is not None

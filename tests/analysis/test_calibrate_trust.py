@@ -120,7 +120,7 @@ def test_the_recommendation_beyond_the_fiducials_follows_what_the_error_is(seed)
         assert _within(res), (kin, field, res["recommended"], res["rmst_mm"], res["extrapolation_cv_rmst_mm"])
 
 
-def test_checks_off_the_plane_of_coplanar_fiducials_get_no_interpolated_correction():
+def test_checks_off_the_plane_of_coplanar_fiducials_get_no_interpolated_correction(tmp_path):
     """A board of coplanar fiducials and checks far off its plane (the stationing data's shape): no held-out
     fiducial can test a direction the fiducials do not span, so no correction interpolated from them (rrbc,
     vec_rrbc) is recommended there; the arm's model, a function of the joints, may be (chosen against rigid)."""
@@ -133,3 +133,10 @@ def test_checks_off_the_plane_of_coplanar_fiducials_get_no_interpolated_correcti
     assert res["extrapolated_share"] > 0.5 and res["extrapolation_folds"] == 0
     assert res["recommended"] in ("rigid", "vec")
     assert "off the fiducials' plane" in res["recommendation_basis"]
+    # the same board with an arm saved and reused (the stationing study's "calibrate once"): every check beyond and
+    # none testable, so the ordinary cross-validation is all the evidence there is (it divided by zero before)
+    model = tmp_path / "arm.json"
+    compare(board, urdf="lift_arm", save_model=str(model))
+    reused = compare(board_fiducials(full, off_mm=900.0), urdf="lift_arm", model=load_model(str(model)))
+    assert reused["extrapolated_share"] == 1.0 and reused["recommended"] in ("rigid", "vec")
+    assert "the saved arm's vec" in reused["recommendation_basis"]
