@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
+from scipy.stats import f as f_dist
 
 from rrbc_core.correction.bound_inputs import (
     MIN_FIDUCIALS,
@@ -205,10 +206,15 @@ class Bounds:
 def _rigid_error(c_robot, fid_registered, reg_residuals, n_reg: int, fid_noise: float):
     """Rigid's uncorrected error (the correction not made): its 3-D variance beyond a fiducial's own noise, its shape
     (3, 3) and the tail factor (the fiducials' 95th percentile of |c| against a normal error's), from the fiducials'
-    corrections c (F, 3) robot frame, those that are registration points too scaled by n/(n − 2) (their correction is
-    a fit residual, smaller than a point's error by that factor); without fiducials, from the registration residuals.
-    (None, I/3, 1) when neither holds enough."""
-    if len(c_robot):
+    corrections c (F, 3) robot frame: those of the fiducials that are not registration points when there are
+    `MIN_FIDUCIALS` of them, else all, those that are registration points too scaled by n/(n − 2) (their correction
+    is a fit residual, smaller than a point's error by that factor); without fiducials, from the registration
+    residuals. (None, I/3, 1) when neither holds enough."""
+    free = ~np.asarray(fid_registered, bool)
+    if np.count_nonzero(free) >= MIN_FIDUCIALS:  # enough points the registration did not see: theirs alone
+        c = np.asarray(c_robot, float)[free]
+        scale = np.ones(len(c))
+    elif len(c_robot):
         c = np.asarray(c_robot, float)
         scale = np.where(np.asarray(fid_registered, bool), n_reg / max(n_reg - 2, 1), 1.0)
     elif reg_residuals is not None and len(reg_residuals) > 3:
@@ -226,15 +232,25 @@ def _rigid_error(c_robot, fid_registered, reg_residuals, n_reg: int, fid_noise: 
     return v, shape, tail
 
 
-def tail_factor(sq: np.ndarray, model: np.ndarray, shape: np.ndarray) -> float:
+def tail_factor(sq: np.ndarray, model: np.ndarray, shape: np.ndarray, fitted: int = 1) -> float:
     """The tail the samples show, at least 1: the 95th percentile of |r| / sqrt(model), squared errors sq (H,)
     against their modelled 3-D variances model (H,), over a normal error's with the covariance's `shape` (3, 3);
-    1 with fewer than `MIN_FIDUCIALS` usable samples."""
+    times the predictive factor of a variance estimated from these samples (`predictive_factor`, `fitted` the
+    model's parameters fitted to them); 1 with fewer than `MIN_FIDUCIALS` usable samples."""
     ok = model > 0
-    if np.count_nonzero(ok) < MIN_FIDUCIALS:
+    n = int(np.count_nonzero(ok))
+    if n < MIN_FIDUCIALS:
         return 1.0
     z = np.sqrt(sq[ok] / model[ok])
-    return max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
+    empirical = max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
+    return empirical * predictive_factor(3 * n - fitted)
+
+
+def predictive_factor(dof: int, level: float = LEVEL) -> float:
+    """How much wider a `level` bound on a new point's 3-D error must be when its variance is estimated with `dof`
+    degrees of freedom rather than known: sqrt(3 F_level(3, dof) / chi²_level(3)) (the new error's squared length
+    over the estimate is 3 F(3, dof) for a normal error; docs/uncertainty.md). 1 as dof grows."""
+    return float(np.sqrt(3.0 * f_dist.ppf(level, 3, max(int(dof), 1)) / chi2.ppf(level, 3)))
 
 
 def own_cov(inst: Instrument, rotation: np.ndarray, p_sensor: np.ndarray, count) -> np.ndarray:
@@ -267,9 +283,16 @@ def point_registration_cov(
 
 
 def cv_profile(
-    method, fid_sensor: np.ndarray, fid_corr: np.ndarray, rotation: np.ndarray, noise_mm2: float
+    method,
+    fid_sensor: np.ndarray,
+    fid_corr: np.ndarray,
+    rotation: np.ndarray,
+    noise_mm2: float,
+    scored: np.ndarray | None = None,
 ) -> CVProfile | None:
-    """The interpolation's K-fold cross-validation profile (`CVProfile`), None when a fold cannot be fitted."""
+    """The interpolation's K-fold cross-validation profile (`CVProfile`), None when a fold cannot be fitted.
+    `scored` (F,) bool: the held-out fiducials whose errors make the profile (default all; every fiducial is held
+    out and predicts the others either way)."""
     n = len(fid_sensor)
     fold = folds_of(n)
     err = np.empty_like(fid_corr)
@@ -286,7 +309,8 @@ def cv_profile(
     if not np.all(np.isfinite(err)):
         return None
     r = err @ np.asarray(rotation, float).T
-    return profile_from_squares(np.sum(r**2, axis=1), dist, inside, noise_mm2, r, int(fold.max()) + 1)
+    k = np.ones(n, bool) if scored is None else np.asarray(scored, bool)
+    return profile_from_squares(np.sum(r[k] ** 2, axis=1), dist[k], inside[k], noise_mm2, r[k], int(fold.max()) + 1)
 
 
 def profile_from_squares(sq, dist, inside, noise_mm2: float, r=None, folds: int = 0) -> CVProfile:
@@ -310,7 +334,7 @@ def profile_from_squares(sq, dist, inside, noise_mm2: float, r=None, folds: int 
     s = r.T @ r if r is not None else np.eye(3)
     shape = s / np.trace(s) if np.trace(s) > 0 else np.eye(3) / 3
     # the tail the fiducials show: their 95th percentile of |r| / sqrt(A + B d²) against a normal error's
-    tail = tail_factor(sq, a + np.where(inside, b_in, b_out) * dist**2, shape)
+    tail = tail_factor(sq, a + np.where(inside, b_in, b_out) * dist**2, shape, fitted=2)
     t2 = tail**2
     return CVProfile(
         a * t2,
@@ -477,7 +501,12 @@ def bounds_basis(
                 f"(at least {MIN_FIDUCIALS})"
             )
         else:
-            profile = cv_profile(method, fid_sensor, fid_corr, rot, fid_noise)
+            # registration points' corrections are the fit's residuals, smaller than an unseen point's error (the
+            # registration was fitted to them; no check or target is one): where enough fiducials are not, only
+            # theirs make the profile
+            free = ~fid_registered
+            scored = free if np.count_nonzero(free) >= MIN_FIDUCIALS else None
+            profile = cv_profile(method, fid_sensor, fid_corr, rot, fid_noise, scored)
             if profile is None:
                 warnings.append("no RRBC bound: the correction could not be cross-validated over the fiducials")
             else:

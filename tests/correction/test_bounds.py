@@ -224,3 +224,72 @@ def test_the_drawn_ellipsoid_is_the_covariances_95_percent_region_and_the_bound_
         assert x @ np.linalg.solve(cov, x) == pytest.approx(chi2.ppf(0.95, 3))
     assert np.allclose(axes[1], bound95((0.09 * np.eye(3))[None])[0])
     assert np.all(np.isnan(axes[2]))
+
+
+def _board_and_points_above(seed: int):
+    """A stationing-shaped file (the public stationing data's form): 8 registration points on a board (role `both`:
+    also fiducials), 40 points 160-420 mm above it, every other one a fiducial, the rest checks; an error that grows
+    with the height above the board (a random smooth field times (h / 420 mm)², 3 mm RMS at the top), so the
+    board's points carry almost none. Noise 0.05 mm per axis on both sides."""
+    from rrbc_core.io.measurements import MeasurementSet
+
+    rng = np.random.default_rng(seed)
+    board = np.column_stack([rng.uniform(-300, 300, (8, 2)), np.zeros(8)])
+    above = np.column_stack([rng.uniform(-300, 300, (40, 2)), rng.uniform(160, 420, 40)])
+    p = np.vstack([board, above])
+    k = rng.normal(size=(6, 3)) / 300.0  # six random plane waves, wavelengths about 2 m
+    amp, phase = rng.normal(size=(6, 3)), rng.uniform(0, 2 * np.pi, 6)
+    field = np.sin(p @ k.T + phase) @ amp
+    field *= 3.0 / np.sqrt(np.mean(np.sum(field[8:] ** 2, axis=1)))
+    err = field * ((p[:, 2] / 420.0) ** 2)[:, None]
+    sensor = p + rng.normal(0, 0.05, p.shape)
+    robot = p + err + rng.normal(0, 0.05, p.shape)
+    roles = ["both"] * 8 + ["fiducial" if i % 2 == 0 else "check" for i in range(40)]
+    n = len(roles)
+    return MeasurementSet(
+        tuple(f"P{i}" for i in range(n)),
+        tuple(roles),
+        sensor,
+        robot,
+        np.full(n, np.nan),
+        tuple(range(2, n + 2)),
+        "board",
+    )
+
+
+@pytest.mark.parametrize("method", ["idw", "tps"])
+def test_bounds_hold_where_the_registration_points_carry_no_error_and_the_checks_do(method):
+    """The registration points' corrections are fit residuals (the registration was fitted to them) and, on a board
+    below the work, nearly nothing: held out in the cross-validation they would tell the bounds the error is small.
+    Only the fiducials that are not registration points make the profile (and rigid's error) when there are six of
+    them: between 90 and 99 % of the bounded checks within their bound, up to two binomial standard errors, rigid
+    and RRBC alike, and sharp (the median bound at most twice the 95th percentile error)."""
+    pairs, pairs_rigid = [], []
+    for seed in range(16):
+        res = correct_measurements(_board_and_points_above(seed), MethodOptions.named("least-squares", method))
+        pairs.append((res.error_rrbc, res.bounds.checks.bound95_mm))
+        pairs_rigid.append((res.error_rigid, res.bounds.checks_rigid.bound95_mm))
+    for p in (pairs, pairs_rigid):
+        cover, n = _coverage(p)
+        se = np.sqrt(0.95 * 0.05 / n)
+        assert 0.90 - 2 * se <= cover <= 0.99 + 2 * se, (cover, n)
+        e, b = np.concatenate([x[0] for x in p]), np.concatenate([x[1] for x in p])
+        ok = np.isfinite(b)
+        assert np.median(b[ok]) <= 2.0 * np.percentile(e[ok], 95)
+
+
+def test_the_predictive_factor_makes_a_bound_from_an_estimated_variance_hold_95_percent():
+    """A variance estimated from n points' 3-D errors, then a new point: the plug-in bound (the χ² radius of the
+    estimate) holds less than 95 %; times `predictive_factor(3 n)` it holds 95 % (the ratio is F(3, 3n)-distributed
+    for normal errors), within three Monte Carlo standard errors."""
+    from rrbc_core.correction.bounds import predictive_factor
+
+    rng = np.random.default_rng(11)
+    trials, n = 40_000, 8
+    sigma2 = np.mean(rng.normal(size=(trials, n, 3)) ** 2, axis=(1, 2))  # per axis
+    new = np.sum(rng.normal(size=(trials, 3)) ** 2, axis=1)
+    plug_in = np.sqrt(chi2.ppf(0.95, 3) * sigma2)
+    se = np.sqrt(0.95 * 0.05 / trials)
+    assert np.mean(np.sqrt(new) <= plug_in) < 0.95 - 3 * se
+    assert abs(np.mean(np.sqrt(new) <= plug_in * predictive_factor(3 * n)) - 0.95) < 3 * se
+    assert predictive_factor(10**6) == pytest.approx(1.0, abs=1e-4)
