@@ -196,16 +196,26 @@ def landing_offsets(t, i: int) -> tuple[np.ndarray, np.ndarray, bool]:
     return t.robot_rigid[i] - ref, t.robot_rrbc[i] - ref, known
 
 
-def landing_display(t, i: int, marker_mm: float, vec=None, ring_mm: float | None = None) -> LandingDisplay:
+#: after a drag the bullseye keeps its ring while its largest offset stays within this many rings of the centre and
+#: above a tenth of a ring (beyond, the offsets would leave the bullseye or shrink to dots: the ring is fitted again)
+KEEP_RINGS = 3.0
+
+
+def landing_display(
+    t, i: int, marker_mm: float, vec=None, ring_mm: float | None = None, keep_fitting: bool = False
+) -> LandingDisplay:
     """The landing bullseye of target i of `t` (evaluation.TargetResult), with VEC's landing `vec` (3,) robot frame
     mm when given. It floats beside the target, away from the robot's base (the arm reaches the target from that
     side, its wrist straight above it) and above it. `ring_mm`: keep this ring (and so the drawing scale) instead of
-    fitting the ring to the offsets (during a drag: a doubled error is drawn twice as far out)."""
+    fitting the ring to the offsets (during a drag: a doubled error is drawn twice as far out); with `keep_fitting`
+    (after the drag) only while the largest offset lies between a tenth of a ring and `KEEP_RINGS` rings."""
     off_rigid, off_rrbc, known = landing_offsets(t, i)
     off_vec = None if vec is None else np.asarray(vec, float) - (t.truth[i] if known else t.robot_rigid[i])
     biggest = float(max(np.linalg.norm(off_rigid), np.linalg.norm(off_rrbc)))
     if off_vec is not None:
         biggest = max(biggest, float(np.linalg.norm(off_vec)))
+    if ring_mm is not None and keep_fitting and not 0.1 * ring_mm <= biggest <= KEEP_RINGS * ring_mm:
+        ring_mm = None
     ring = float(ring_mm) if ring_mm is not None else nice_up(biggest) if biggest > 0 else 0.1
     radius = RING_MARKERS * marker_mm
     scale = radius / ring

@@ -101,8 +101,9 @@ def changed_targets(state: AppState, ev: Evaluation) -> tuple[tuple[str, float],
 
 
 def scene_picture(session: ExplorerSession, state: AppState, ev: Evaluation) -> ScenePicture:
-    """What the scene shows for `ev` in `state` (module docstring). During a drag the bullseye keeps the ring of the
-    one last shown (`state.landing`), so a doubled error is drawn twice as far out."""
+    """What the scene shows for `ev` in `state` (module docstring). The bullseye keeps the ring of the one last shown
+    for the same target (`state.landing`): during a drag always, so a doubled error is drawn twice as far out, and
+    after it while the offsets still fit (`node_values.landing_display`), so releasing does not rescale it."""
     display = state.display
     t = ev.targets
     landing = None
@@ -110,9 +111,10 @@ def scene_picture(session: ExplorerSession, state: AppState, ev: Evaluation) -> 
     if len(t.ids):
         sel = state.selected
         i = t.ids.index(sel[1]) if sel is not None and sel[0] == "targets" and sel[1] in t.ids else 0
-        held = state.landing if state.drag_active else None
+        held = state.landing
         ring = held.ring_mm if held is not None and held.target == t.ids[i] else None
-        landing = landing_display(t, i, display.marker_mm, state.vec_landings().get(t.ids[i]), ring)
+        vec = state.vec_landings().get(t.ids[i])
+        landing = landing_display(t, i, display.marker_mm, vec, ring, keep_fitting=not state.drag_active)
         tool = session.target_tools.get(t.ids[i])
     true_pose = session.sensor_to_robot
     mapping = ev.registration.mapping

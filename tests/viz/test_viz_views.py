@@ -11,7 +11,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session import figures
 from rrbc_viz import colors, selection_card, teaching
 from rrbc_viz.camera import PRESETS, CellGeometry, preset_view
-from rrbc_viz.node_values import landing_display, nice_up
+from rrbc_viz.node_values import KEEP_RINGS, landing_display, nice_up
 
 
 def test_delta_e_is_cie76_and_every_data_colour_stands_apart_from_the_gizmo_axes():
@@ -261,8 +261,10 @@ def test_the_headline_is_the_summarys_rigid_to_rrbc(app, measured):
         assert sm["gain"] == verdict and f'color:{colour}">{rr:.3f}' in head, (verdict, head)
 
 
-def test_the_bullseye_keeps_its_scale_during_a_drag_and_refits_after(app):
-    """A doubled error must look doubled while dragging: the ring (the drawing scale) is held until the drag ends."""
+def test_the_bullseye_keeps_its_scale_during_a_drag_and_after_while_the_offsets_fit(app):
+    """A doubled error must look doubled while dragging: the ring (the drawing scale) is held during the drag and
+    after it (issue 39: no jump on release) while the largest offset stays within `KEEP_RINGS` rings; fitted again
+    once it does not."""
     land0 = app.state.landing
     p0 = np.array(app.session.layout["targets"].positions[0], float)
     app.evaluate.handle_drag("targets", "H1", p0, "start")
@@ -275,7 +277,17 @@ def test_the_bullseye_keeps_its_scale_during_a_drag_and_refits_after(app):
     app.evaluate.handle_drag("targets", "H1", p0 + [120.0, 0.0, 0.0], "end")
     t = app.session.last.targets
     biggest = max(np.linalg.norm(t.robot_rigid[0] - t.truth[0]), np.linalg.norm(t.robot_rrbc[0] - t.truth[0]))
-    assert app.state.landing.ring_mm >= biggest  # refitted at the end
+    ring = land0.ring_mm
+    if 0.1 * ring <= biggest <= KEEP_RINGS * ring:
+        assert app.state.landing.ring_mm == ring and app.state.landing.scale == pytest.approx(land0.scale)
+    else:
+        assert app.state.landing.ring_mm >= biggest  # fitted again
+    # the rule itself, on these offsets: kept within [a tenth, KEEP_RINGS] rings, fitted again outside
+    m = app.state.display.marker_mm
+    for held, kept in ((biggest / 2, True), (biggest / 5, False), (biggest * 20, False), (biggest * 5, True)):
+        got = landing_display(t, 0, m, None, held, keep_fitting=True).ring_mm
+        assert (got == held) == kept, (held, got, biggest)
+        assert landing_display(t, 0, m, None, held).ring_mm == held  # during a drag: always kept
 
 
 @pytest.mark.parametrize("present", [True, False], ids=["projector", "normal"])
