@@ -10,7 +10,9 @@ the same budget as `rrbc correct`'s (`correction.bounds`, docs/uncertainty.md) w
   (`analysis.calibration.Calibration.prediction_cov`);
 - *interpolation*: each method's cross-validated error over the fiducials (the folds `rrbc calibrate` scores with)
   against the held-out fiducial's distance from the nearest fiducial of its station left in
-  (`correction.bounds.profile_from_squares`); for rigid and VEC it is the correction they do not make.
+  (`correction.bounds.profile_from_squares`); for rigid and VEC it is the correction they do not make. Held-out
+  registration points count only when fewer than `MIN_FIDUCIALS` other fiducials were held out (their errors are
+  fit residuals), as in `rrbc correct`.
 
 A point farther from its station's fiducials than the folds tested gets no bound (NaN), as in `rrbc correct`.
 Units mm, robot frame.
@@ -21,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from rrbc_core.correction.bound_inputs import estimate_noise, tested_from
+from rrbc_core.correction.bound_inputs import MIN_FIDUCIALS, estimate_noise, tested_from
 from rrbc_core.correction.bounds import (
     assemble_bounds,
     no_bounds,
@@ -92,6 +94,11 @@ def method_bounds(
         return dict.fromkeys(METHODS, none), instrument, warnings
     dist = _held_distances(folds, rows_fid, s, g)
     finite = np.isfinite(dist)
+    # registration points' errors are fit residuals: only the other fiducials' make the profiles when there are
+    # enough of them (as `rrbc correct`'s, `correction.bounds`)
+    free = finite & ~np.isin(np.concatenate([rows_fid[h] for h in folds]), rows_reg)
+    if np.count_nonzero(free) >= MIN_FIDUCIALS:
+        finite = free
     tested = tested_from(dist)
     gp = g[rows_pts]
     sp = s[rows_pts]

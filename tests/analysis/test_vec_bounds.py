@@ -69,3 +69,37 @@ def test_calibrates_bounds_hold_on_held_out_checks(ur5):
         cover = float(np.mean(v[:, 0] <= v[:, 1]))
         se = np.sqrt(0.95 * 0.05 / n)
         assert n > 200 and 0.90 - 2 * se <= cover <= 0.99 + 2 * se, (k, cover, n)
+
+
+def test_held_out_registration_points_do_not_make_the_profiles_when_enough_other_fiducials_were_held_out():
+    """Registration points that are fiducials too (role `both`) are held out like the others, but their errors are
+    fit residuals: with at least six other held-out fiducials, what they show does not move any bound (as in
+    `rrbc correct`, `correction.bounds`); scaling their held-out errors a hundredfold leaves every bound as it was."""
+    import dataclasses
+
+    from rrbc_core.analysis.robot_model import robot_chain
+    from rrbc_core.analysis.vec_bounds import method_bounds
+    from rrbc_core.analysis.vec_compare import _cv_squared, _idw_by_group, cv_folds, fit_methods
+    from rrbc_core.io.joints import joint_values
+    from rrbc_core.studies.vec_study import TOOL_MM, joint_measurements
+
+    m = joint_measurements(4, n_reg=12, n_fid=30, n_chk=10, n_tgt=0)
+    m = dataclasses.replace(m, roles=tuple("both" if r == "registration" else r for r in m.roles))
+    chain = robot_chain("ur5", None, None, None, TOOL_MM)
+    q = joint_values(m, chain)
+    roles = np.array(m.roles)
+    s, b = np.asarray(m.sensor), np.asarray(m.robot)
+    rows_reg = np.flatnonzero(roles == "both")
+    rows_fid = np.flatnonzero(np.isin(roles, ("both", "fiducial")))
+    rows_pts = np.flatnonzero(roles == "check")
+    folds = cv_folds(rows_reg, rows_fid)
+    held = np.concatenate([rows_fid[h] for h in folds])
+    assert np.isin(held, rows_reg).any() and np.count_nonzero(~np.isin(held, rows_reg)) >= 6
+    fit = fit_methods(rows_reg, rows_fid, s, b, q, chain)
+    sq = _cv_squared(folds, rows_reg, rows_fid, s, b, q, chain, None)
+    inflated = {k: np.where(np.isin(held, rows_reg), 100.0 * v, v) for k, v in sq.items()}
+    args = (rows_reg, rows_fid, rows_pts, s, b, q, None, _idw_by_group)
+    before, _, _ = method_bounds(m, fit, folds, sq, *args)
+    after, _, _ = method_bounds(m, fit, folds, inflated, *args)
+    for name in METHODS:
+        assert np.allclose(before[name].bound95_mm, after[name].bound95_mm, equal_nan=True), name
