@@ -342,9 +342,17 @@ def _load_mesh_file(path: Path):
     Raises ValueError/OSError-derived exceptions from trimesh; the loader wraps them."""
     import trimesh
 
-    from rrbc_core.io.mesh_file import check_mesh_file
+    from rrbc_core.io.mesh_file import check_mesh_file, read_binary_stl
 
     check_mesh_file(path)  # too large, or declaring too many triangles: refused before it is parsed
+    if Path(path).suffix.lower() == ".stl":  # binary STL: read in bounded memory (issue 42), one part
+        stl = read_binary_stl(path)
+        if stl is not None:
+            if not len(stl[1]):
+                raise ValueError("the file holds no triangles")
+            mesh = trimesh.Trimesh(stl[0], stl[1], process=False)
+            mesh.metadata["parts"] = [(Path(path).name, 0, len(stl[1]))]
+            return mesh
     loaded: Any = trimesh.load(str(path), force="scene")  # a trimesh.Scene (force="scene")
     parts, meshes = [], []
     start = 0
