@@ -350,9 +350,9 @@ def _load_mesh_file(path: Path):
         if stl is not None:
             if not len(stl[1]):
                 raise ValueError("the file holds no triangles")
-            mesh = trimesh.Trimesh(stl[0], stl[1], process=False)
-            mesh.metadata["parts"] = [(Path(path).name, 0, len(stl[1]))]
-            return mesh
+            single = trimesh.Trimesh(stl[0], stl[1], process=False)
+            single.metadata["parts"] = [(Path(path).name, 0, len(stl[1]))]
+            return single
     loaded: Any = trimesh.load(str(path), force="scene")  # a trimesh.Scene (force="scene")
     parts, meshes = [], []
     start = 0
