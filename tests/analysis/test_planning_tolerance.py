@@ -41,9 +41,9 @@ def test_an_unreachable_tolerance_says_what_limits_it(scene):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="known limit (docs/uncertainty.md): on the demo scene 0.85 of 320 target draws lie within the planned "
-    "bound (0.84 within each draw's own); the 7 fiducials the plan needs cannot show how the UR5's kinematic bias "
-    "curves at H2 and H3, whose 95th-percentile errors (0.27-0.28 mm) exceed their 0.20 mm bound",
+    reason="known limit (docs/uncertainty.md): on the demo scene 0.74 of 320 target draws lie within the planned "
+    "bound (0.88 within each draw's own); the 8 fiducials the plan needs cannot show how the UR5's kinematic bias "
+    "curves at H2 and H3, whose 95th-percentile errors (0.27 and 0.25 mm) exceed their 0.16 mm bound",
 )
 def test_the_scenes_monte_carlo_confirms_the_planned_bounds(scene):
     """The planned layout measured again with 40 other noise draws: each target's RRBC error against the bound the
