@@ -49,6 +49,8 @@ STATISTICS = {
     "p95_xy": ("p95 horizontal (xy)", "horizontal error, robot frame"),
     "p95_z": ("p95 vertical (z)", "vertical error, robot frame"),
 }
+#: the text table's width in characters (`CheckStatistics.lines`: a label of 22 and three columns of 9)
+TABLE_WIDTH = 54
 
 
 def _stats(e: np.ndarray) -> dict:
@@ -125,9 +127,19 @@ class CheckStatistics:
                 + (f"{c:+8.1f}%" if c is not None else f"{'-':>9}")
             )
         out.append(
-            f"  RRBC is worse than rigid at {len(self.worse)} of {self.n} check points"
-            + (f": {', '.join(self.worse[:20])}{' …' if len(self.worse) > 20 else ''}" if self.worse else "")
+            f"  RRBC is worse than rigid at {len(self.worse)} of {self.n} check points" + (":" if self.worse else "")
         )
+        # the ids wrapped as wide as the table (the app shows these lines in its side panel)
+        names = list(self.worse[:20]) + (["…"] if len(self.worse) > 20 else [])
+        row = "   "
+        for k, name in enumerate(names):
+            item = name + ("," if k < len(names) - 1 and names[k + 1] != "…" else "")
+            if len(row) + 1 + len(item) > TABLE_WIDTH and row.strip():
+                out.append(row)
+                row = "   "
+            row += " " + item
+        if row.strip():
+            out.append(row)
         return out
 
 

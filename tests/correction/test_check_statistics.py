@@ -113,3 +113,20 @@ def test_correct_diagnose_and_the_app_show_the_same_statistics(capsys):
         assert "<table" not in panel.points.content and "| " not in panel.points.content  # one table: the targets'
     finally:
         app.stop()
+
+
+def test_the_checks_rrbc_made_worse_are_listed_as_wide_as_the_table():
+    """The app shows these lines in its side panel: the ids of the checks RRBC made worse are wrapped at the
+    table's width (the first 20, then "…"), every one listed once."""
+    from rrbc_core.correction.check_statistics import TABLE_WIDTH
+
+    rng = np.random.default_rng(4)
+    n = 60
+    ids = [f"check_{i:03d}" for i in range(n)]
+    truth = rng.normal(size=(n, 3))
+    stats = check_statistics(ids, truth + 0.1 * rng.normal(size=(n, 3)), truth + rng.normal(size=(n, 3)), truth)
+    lines = stats.lines()
+    assert len(stats.worse) > 20 and max(len(line) for line in lines[1:]) <= TABLE_WIDTH
+    at = next(k for k, line in enumerate(lines) if "RRBC is worse than rigid at" in line)
+    listed = " ".join(lines[at + 1 :]).replace(",", " ").split()
+    assert listed == list(stats.worse[:20]) + ["…"]
