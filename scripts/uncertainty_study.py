@@ -50,7 +50,7 @@ contribution of each source), for RRBC's position and for rigid's (`bound95_rigi
   rigid scales them up by n/(n - 2).
 - **estimated, not known**: the profile's size is estimated from the n held-out fiducials, so each bound is widened
   by the predictive factor sqrt(3 F(3, 3n - k) / χ²(3)) at 95 % (k the fitted parameters: 2 for A and B, 1 for
-  rigid's mean; `predictive_factor`), which makes a bound from an estimated normal variance hold 95 % of new
+  rigid's mean; `correction.bound_inputs.predictive_factor`), which makes a bound from an estimated normal variance hold 95 % of new
   points (a test checks it by Monte Carlo); it is 1.08 for 8 held-out fiducials and 1.006 for 100.
 - Off coplanar (or collinear) fiducials nothing measures the field's change with height: a point h off their plane
   adds g² h², with g² the field's mean squared rate of change along the plane (assumed the same across it).

@@ -50,7 +50,7 @@ from rrbc_core.analysis.vec_bounds import bounds_rows, method_bounds
 from rrbc_core.correction.configuration_check import configuration_check
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
-from rrbc_core.io.groups import GROUP_COLUMN, group_names, has_groups
+from rrbc_core.io.groups import station_index
 from rrbc_core.io.joints import joint_values
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.chain import Chain
@@ -182,21 +182,6 @@ def cv_folds(rows_reg: np.ndarray, rows_fid: np.ndarray, gi=None) -> list[np.nda
         if len(held):
             folds.append(held)
     return folds
-
-
-def _stations(mset: MeasurementSet) -> tuple[tuple[str, ...], np.ndarray | None]:
-    """The stations' names and each row's station index (R,), or ((), None) without a group column; a station
-    without 3 registration rows is refused naming it (the reader already checks this for files)."""
-    if not has_groups(mset):
-        return (), None
-    names = group_names(mset)
-    index = {g: k for k, g in enumerate(names)}
-    gi = np.array([index[v] for v in mset.extra[GROUP_COLUMN]], int)
-    reg = np.isin(np.array(mset.roles), ("registration", "both"))
-    for k, g in enumerate(names):
-        if np.sum(reg & (gi == k)) < MIN_REGISTRATION:
-            raise InputError(f"{mset.source}, group {g!r}: fewer than {MIN_REGISTRATION} registration rows")
-    return names, gi
 
 
 def _rms(a, b) -> float:
@@ -417,7 +402,7 @@ def compare(
             "identify the arm (at least 8; more, in varied configurations, identify more; or reuse a saved arm "
             "with --model)"
         )
-    names, gi = _stations(mset)
+    names, gi = station_index(mset, MIN_REGISTRATION)
     known = np.union1d(rows_reg, rows_fid)
     model_check = require_model(chain, q[known], b[known], mset.source)
     folds = cv_folds(rows_reg, rows_fid, gi)

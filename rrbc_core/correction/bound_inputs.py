@@ -12,6 +12,8 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import nnls
 from scipy.spatial import cKDTree
+from scipy.stats import chi2
+from scipy.stats import f as f_dist
 
 from rrbc_core.interpolation.auto import folds_of
 from rrbc_core.models.instrument import Instrument
@@ -168,3 +170,10 @@ def tested_from(distances: np.ndarray) -> float:
     d = np.asarray(distances, float)
     d = d[np.isfinite(d)]
     return float(np.percentile(d, TESTED_PERCENTILE)) if len(d) else 0.0
+
+
+def predictive_factor(dof: int, level: float = 0.95) -> float:
+    """How much wider a `level` bound on a new point's 3-D error must be when its variance is estimated with `dof`
+    degrees of freedom rather than known: sqrt(3 F_level(3, dof) / chi²_level(3)) (the new error's squared length
+    over the estimate is 3 F(3, dof) for a normal error; docs/uncertainty.md). 1 as dof grows."""
+    return float(np.sqrt(3.0 * f_dist.ppf(level, 3, max(int(dof), 1)) / chi2.ppf(level, 3)))

@@ -41,7 +41,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
-from scipy.stats import f as f_dist
 
 from rrbc_core.correction.bound_inputs import (
     MIN_FIDUCIALS,
@@ -50,6 +49,7 @@ from rrbc_core.correction.bound_inputs import (
     field_slope,
     fit_quadratic,
     fold_distances,
+    predictive_factor,
     tested_distance,
 )
 from rrbc_core.errors import InputError
@@ -244,13 +244,6 @@ def tail_factor(sq: np.ndarray, model: np.ndarray, shape: np.ndarray, fitted: in
     z = np.sqrt(sq[ok] / model[ok])
     empirical = max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
     return empirical * predictive_factor(3 * n - fitted)
-
-
-def predictive_factor(dof: int, level: float = LEVEL) -> float:
-    """How much wider a `level` bound on a new point's 3-D error must be when its variance is estimated with `dof`
-    degrees of freedom rather than known: sqrt(3 F_level(3, dof) / chi²_level(3)) (the new error's squared length
-    over the estimate is 3 F(3, dof) for a normal error; docs/uncertainty.md). 1 as dof grows."""
-    return float(np.sqrt(3.0 * f_dist.ppf(level, 3, max(int(dof), 1)) / chi2.ppf(level, 3)))
 
 
 def own_cov(inst: Instrument, rotation: np.ndarray, p_sensor: np.ndarray, count) -> np.ndarray:

@@ -7,6 +7,9 @@ it. Format: docs/formats/measurement-file.md, "Stations".
 
 from __future__ import annotations
 
+import numpy as np
+
+from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import GROUP_COLUMN, MeasurementSet, select_rows
 
 __all__ = ["GROUP_COLUMN", "group_label", "group_names", "has_groups", "select_rows", "split_groups"]
@@ -39,3 +42,18 @@ def split_groups(mset: MeasurementSet) -> tuple[tuple[str, MeasurementSet], ...]
         rows = [i for i, v in enumerate(values) if v == name]
         out.append((name, select_rows(mset, rows, group_label(mset.source, name))))
     return tuple(out)
+
+
+def station_index(mset: MeasurementSet, min_registration: int) -> tuple[tuple[str, ...], np.ndarray | None]:
+    """The stations' names and each row's station index (R,), or ((), None) without a group column; a station
+    without `min_registration` registration rows is refused naming it (the reader already checks this for files)."""
+    if not has_groups(mset):
+        return (), None
+    names = group_names(mset)
+    index = {g: k for k, g in enumerate(names)}
+    gi = np.array([index[v] for v in mset.extra[GROUP_COLUMN]], int)
+    reg = np.isin(np.array(mset.roles), ("registration", "both"))
+    for k, g in enumerate(names):
+        if np.sum(reg & (gi == k)) < min_registration:
+            raise InputError(f"{mset.source}, group {g!r}: fewer than {min_registration} registration rows")
+    return names, gi

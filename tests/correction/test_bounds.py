@@ -281,7 +281,7 @@ def test_the_predictive_factor_makes_a_bound_from_an_estimated_variance_hold_95_
     """A variance estimated from n points' 3-D errors, then a new point: the plug-in bound (the χ² radius of the
     estimate) holds less than 95 %; times `predictive_factor(3 n)` it holds 95 % (the ratio is F(3, 3n)-distributed
     for normal errors), within three Monte Carlo standard errors."""
-    from rrbc_core.correction.bounds import predictive_factor
+    from rrbc_core.correction.bound_inputs import predictive_factor
 
     rng = np.random.default_rng(11)
     trials, n = 40_000, 8
