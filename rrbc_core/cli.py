@@ -64,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="an acceptance report: every method, every point, a verdict against a tolerance (HTML or JSON)",
         description="The integrator's acceptance report of a measured cell: what was measured, the registration, "
         "the methods side by side with the recommended one, before/after figures, every point with its error and "
-        "95 %% bound, what rrbc diagnose names, and a verdict against --tolerance (docs/cli.md).",
+        "95 % bound, what rrbc diagnose names, and a verdict against --tolerance (docs/cli.md).",
     )
     rp.add_argument("measurements", help="measurement CSV (docs/formats/measurement-file.md)")
     rp.add_argument("--tolerance", type=positive_float, default=None, metavar="MM", help="the tolerance, mm")

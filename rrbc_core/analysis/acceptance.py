@@ -200,6 +200,8 @@ def acceptance(
             "arm": None if calibration is None else calibration["robot"],
         },
         "registration": regs,
+        # VEC's sensor-to-robot transform, identified with the arm (calibrate's `sensor_to_robot`): null without a model
+        "arm_transform": None if calibration is None else calibration["sensor_to_robot"],
         "check_statistics": cj.get("check_statistics"),
         "diagnosis": {"effects": effects, "limits": limits, "rrbc_gain": gain},
         "warnings": list(cj.get("warnings") or []),

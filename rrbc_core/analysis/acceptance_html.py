@@ -56,6 +56,30 @@ def _mm(v) -> str:
     return "—" if v is None or not np.isfinite(v) else f"{v:.3f}"
 
 
+def _beyond(v, tolerance) -> str:
+    """A failing figure (mm) with as many decimals (3 to 6) as it takes to read it beyond the tolerance (0.0501, not
+    0.050 against 0.05)."""
+    for digits in range(3, 7):
+        if tolerance is None or round(float(v), digits) > float(tolerance):
+            return f"{float(v):.{digits}f}"
+    return f"{float(v):.6g}"
+
+
+def _method_words(name: str, fig: dict) -> str:
+    """A method's name for the table: RRBC with its interpolation and options (`interpolation` in correct's JSON)."""
+    interp = fig.get("interpolation")
+    if name != "rrbc" or not isinstance(interp, dict) or not interp.get("method"):
+        return METHOD_NAMES[name]
+    opts = ", ".join(
+        f"{k.replace('_', ' ')} {v:g}" if isinstance(v, float) else f"{k.replace('_', ' ')} {v}"
+        for k, v in interp.items()
+        if k not in ("method", "chosen", "candidates") and v is not None and not isinstance(v, (dict, list))
+    )
+    chosen = interp.get("chosen")
+    method = str(interp["method"]) + (f": {chosen}" if isinstance(chosen, str) else "")
+    return f"{METHOD_NAMES[name]} ({escape(method)}{', ' + escape(opts) if opts else ''})"
+
+
 def _png(fig) -> str:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
@@ -146,19 +170,15 @@ def report_html(acc: dict, title: str = "RRBC acceptance report") -> str:
         + f". <b>{escape(acc['reason'])}</b>.</p>",
     ]
     if acc["failing"]:
+        grouped = any(f["group"] is not None for f in acc["failing"])
         rows = [
-            [
-                escape(f["id"]),
-                f["role"],
-                escape(str(f["group"] or "")),
-                "95 % bound" if f["what"] == "bound95" else "error",
-                _mm(f["mm"]),
-            ]
+            [escape(f["id"]), f["role"]]
+            + ([escape(str(f["group"] or ""))] if grouped else [])
+            + ["95 % bound" if f["what"] == "bound95" else "error", _beyond(f["mm"], acc["tolerance_mm"])]
             for f in acc["failing"]
         ]
-        parts.append(
-            "<h2>Points beyond the tolerance</h2>" + _table(["point", "role", "station", "what", "mm"], rows, 4)
-        )
+        head = ["point", "role"] + (["station"] if grouped else []) + ["what", "mm"]
+        parts.append("<h2>Points beyond the tolerance</h2>" + _table(head, rows, len(head) - 1))
     parts.append("<h2>What was measured</h2>")
     inst = m["instrument"] or {}
     rows = [
@@ -173,7 +193,9 @@ def report_html(acc: dict, title: str = "RRBC acceptance report") -> str:
     parts.append(_table(None, rows, 2))
     parts.append("<h2>Registration (robot = R · sensor + t)</h2>")
     rows = []
-    for r in acc["registration"]:
+    arm = acc.get("arm_transform")
+    arm_rows = [] if arm is None else ([arm] if isinstance(arm, dict) else list(arm))
+    for r in list(acc["registration"]) + [{**a, "method": "VEC: identified with the arm"} for a in arm_rows]:
         xyz = r.get("xyz_mm")
         rpy = r.get("rpy_rad")
         rows.append(
@@ -198,7 +220,7 @@ def report_html(acc: dict, title: str = "RRBC acceptance report") -> str:
     rows = []
     for name, fig in acc["methods"].items():
         rms = fig.get("calibrate_rmst_mm", fig.get("rmst_mm"))
-        row = [METHOD_NAMES[name] + (" (recommended)" if name == rec else ""), _mm(rms)]
+        row = [_method_words(name, fig) + (" (recommended)" if name == rec else ""), _mm(rms)]
         rows.append(row + ([_mm(fig.get("cv_rmst_mm"))] if with_cv else []))
     head = ["method", "RMS at the checks (mm)"] + (["cross-validated over the fiducials (mm)"] if with_cv else [])
     parts.append(_table(head, rows, 1))

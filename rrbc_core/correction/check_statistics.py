@@ -49,8 +49,9 @@ STATISTICS = {
     "p95_xy": ("p95 horizontal (xy)", "horizontal error, robot frame"),
     "p95_z": ("p95 vertical (z)", "vertical error, robot frame"),
 }
-#: the text table's width in characters (`CheckStatistics.lines`: a label of 22 and three columns of 9)
-TABLE_WIDTH = 54
+#: the text table's width in characters (`CheckStatistics.lines`: a label of 19, two columns of 8 and one of 7;
+#: the app shows it in its side panel)
+TABLE_WIDTH = 47
 
 
 def _stats(e: np.ndarray) -> dict:
@@ -117,18 +118,16 @@ class CheckStatistics:
     def lines(self) -> list[str]:
         """The statistics as a text table (the command line's and the app's), one line each."""
         out = [
-            f"check errors over {self.n} check points (robot frame, mm):",
-            f"  {'':<22} {'rigid':>9} {'RRBC':>9} {'change':>9}",
+            f"errors at {self.n} checks (robot frame, mm):",
+            f"  {'':<19} {'rigid':>8} {'RRBC':>8} {'change':>7}",
         ]
         for name, (label, _) in STATISTICS.items():
             c = self.change(name)
             out.append(
-                f"  {label:<22} {self.rigid[name]:9.4f} {self.rrbc[name]:9.4f} "
-                + (f"{c:+8.1f}%" if c is not None else f"{'-':>9}")
+                f"  {label:<19} {self.rigid[name]:8.4f} {self.rrbc[name]:8.4f} "
+                + (f"{f'{c:+.1f}%' if abs(c) < 1000 else f'{c:+.0f}%':>7}" if c is not None else f"{'-':>7}")
             )
-        out.append(
-            f"  RRBC is worse than rigid at {len(self.worse)} of {self.n} check points" + (":" if self.worse else "")
-        )
+        out.append(f"  RRBC worse than rigid at {len(self.worse)} of {self.n}" + (":" if self.worse else ""))
         # the ids wrapped as wide as the table (the app shows these lines in its side panel)
         names = list(self.worse[:20]) + (["…"] if len(self.worse) > 20 else [])
         row = "   "

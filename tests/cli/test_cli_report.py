@@ -72,6 +72,13 @@ def test_the_verdict_flips_at_the_worst_point_and_its_figures_are_rrbc_corrects(
     for p in acc["points"]:
         assert f'<td class="l">{p["id"]}</td>' in html
     assert f">{acc['verdict']}</span>" in html
+    assert "RRBC (idw, neighbors 4, power 2)" in html  # the chosen interpolation, named on the page
+    # a failing figure is printed with the decimals it takes to read it beyond the tolerance
+    tight, tol = tmp_path / "tight.html", worst - 1e-5  # only the worst point beyond, by 0.00001 mm
+    assert run("report", EXAMPLE, "--tolerance", tol, "--out", tight).returncode == 0
+    beyond = tight.read_text().split("<h2>Points beyond the tolerance</h2>")[1].split("</table>")[0]
+    cells = re.findall(r'<td class="">([0-9.]+)</td></tr>', beyond)
+    assert len(cells) == 1 and float(cells[0]) > tol, (tol, cells)
 
 
 def test_stations_and_joints(tmp_path):
@@ -87,6 +94,10 @@ def test_stations_and_joints(tmp_path):
     cal = compare(read_measurements(arm), robot="ur5", tool=100.0)  # rrbc calibrate's function
     assert set(acc["methods"]) == {"rigid", "rrbc", "vec", "vec_rrbc"}
     assert acc["recommended"] == cal["recommended"]
+    assert acc["arm_transform"] == cal["sensor_to_robot"] and "matrix_4x4" in acc["arm_transform"]
+    page = tmp_path / "arm.html"
+    assert run("report", arm, "--robot", "ur5", "--tool", "100", "--out", page).returncode == 0
+    assert "VEC: identified with the arm" in page.read_text()
     checks = {c["id"]: c for c in cal["check_points"]}
     for p in acc["points"]:
         if p["role"] == "check":
