@@ -28,6 +28,7 @@ import class_load  # noqa: E402
 import interactive  # noqa: E402
 import montecarlo  # noqa: E402
 import reproduce_speed  # noqa: E402
+import startup  # noqa: E402
 import threads_policy  # noqa: E402
 
 BENCHMARKS = [
@@ -46,6 +47,7 @@ BENCHMARKS = [
     bounds_cost.correct_bounds,
     big_inputs.big_inputs,
     reproduce_speed.reproduce_speed,
+    startup.startup,
 ]
 
 

@@ -407,9 +407,9 @@ def _cmd_view(args) -> str:
 def main(argv=None) -> int:
     from rrbc_core.runtime.threads import apply_process_policy
 
-    apply_process_policy()  # one BLAS thread for the whole command (docs/threads.md)
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser().parse_args(argv)  # --help and a bad flag end here, before any library is loaded
+        apply_process_policy()  # one BLAS thread for the whole command (docs/threads.md)
         out = args.run(args)
     except (UsageError, InputError) as exc:
         msg = one_line(str(exc))

@@ -20,7 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.points import as_points
@@ -154,6 +153,8 @@ def frame_points(
         Its look-at point lies on the optical axis at the depth of the points' bounding-box centre. Along the
         direction the points do not fill, they are centred in the window (`_centre`).
     """
+    from scipy.optimize import linprog
+
     p = as_points(points, "points to frame", empty=False)
     if not (0.0 < fov_y < np.pi) or not (aspect > 0) or not (0.0 <= panel_fraction <= 0.8) or not (0 <= margin < 0.5):
         raise InputError("camera framing needs 0 < fov_y < π, aspect > 0, 0 ≤ panel_fraction ≤ 0.8, 0 ≤ margin < 0.5")

@@ -19,7 +19,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from rrbc_core.errors import InputError
 
@@ -94,6 +93,8 @@ def collinear_ratio_batch(triples: np.ndarray) -> np.ndarray:
 
 def check_registration_points(points, what: str = "registration points", minimum: int = 3) -> np.ndarray:
     """Refuse sets that cannot define a rigid transform: too few, coincident, or (nearly) collinear points."""
+    from scipy.spatial import cKDTree
+
     p = as_points(points, what)
     if len(p) < minimum:
         raise InputError(f"{what}: {len(p)} given, at least {minimum} distinct points are needed")

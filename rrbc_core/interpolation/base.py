@@ -9,9 +9,6 @@ from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.points import COINCIDENT_MM, LocalFrame, as_points
@@ -83,6 +80,10 @@ def too_few(method: str, needed: int, frame_dim: int, given: int, why: str = "")
 
 def coincident_groups(local: np.ndarray, tol: float) -> np.ndarray:
     """Group label per point: points closer than tol (chained) share a label (labels 0..G-1)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
     pairs = cKDTree(local).query_pairs(tol, output_type="ndarray")
     n = len(local)
     if len(pairs) == 0:

@@ -8,9 +8,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.linalg import LinAlgError, cho_solve, cholesky, solve_triangular
-from scipy.optimize import minimize
-from scipy.spatial.distance import cdist
 
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.base import (
@@ -64,6 +61,8 @@ def _neg_reml(c: np.ndarray, dcs: list[np.ndarray], f: np.ndarray, y: np.ndarray
     dcs: derivatives of C with respect to the optimised parameters. Returns (value, grad) or None when a
     Cholesky factorisation fails.
     """
+    from scipy.linalg import LinAlgError, cho_solve, cholesky
+
     n, q = f.shape
     try:
         lc = cholesky(c, lower=True)
@@ -102,6 +101,10 @@ class _FittedGP(Fitted):
     method = "gp"
 
     def __init__(self, points, values, kernel: str, noise_mm: float | None):
+        from scipy.linalg import cholesky, solve_triangular
+        from scipy.optimize import minimize
+        from scipy.spatial.distance import cdist
+
         self.hull = Hull(points)
         n = len(points)
         self.n_fiducials = n
@@ -201,6 +204,9 @@ class _FittedGP(Fitted):
         self._alpha = solve_triangular(lc.T, wres, lower=False)  # C^-1 (Y - F beta)
 
     def _predict(self, q, local_q):
+        from scipy.linalg import solve_triangular
+        from scipy.spatial.distance import cdist
+
         m = len(q)
         values = np.empty((m, 3))
         base = np.empty(m)

@@ -19,13 +19,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial import ConvexHull, Delaunay, QhullError
 
 from rrbc_core.errors import InputError
 from rrbc_core.geometry.points import LocalFrame, as_points
+
+if TYPE_CHECKING:
+    from scipy.spatial import Delaunay
 
 #: Tolerance of the inside-hull test: local units (RMS fiducial distance from their centroid = 1) for dim 1-3,
 #: mm for dim 0.
@@ -66,6 +69,8 @@ class Hull:
     triangulation itself is built only when `linear` interpolation asks for it (`tri`)."""
 
     def __init__(self, points: np.ndarray):
+        from scipy.spatial import ConvexHull, QhullError
+
         self.frame = LocalFrame.of(points)
         self.local = self.frame.to_local(points)
         self._tri: Delaunay | None = None
@@ -93,6 +98,8 @@ class Hull:
     @property
     def tri(self) -> Delaunay:
         """Delaunay triangulation of the local coordinates (dim 2/3; built on first use)."""
+        from scipy.spatial import Delaunay, QhullError
+
         if self._tri is None:
             try:
                 self._tri = Delaunay(self.local)

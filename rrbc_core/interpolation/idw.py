@@ -7,7 +7,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from rrbc_core.interpolation.base import (
     EXACT_MM,
@@ -55,6 +54,8 @@ class _FittedIDW(Fitted):
     method = "idw"
 
     def __init__(self, points, values, k, power):
+        from scipy.spatial import cKDTree
+
         self.hull = Hull(points)
         self.n_fiducials = len(points)
         self.points = points

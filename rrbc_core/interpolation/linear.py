@@ -4,10 +4,9 @@ local coordinates, extended linearly outside the hull from well-shaped boundary 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
-from scipy.spatial import Delaunay
 
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.base import (
@@ -20,6 +19,9 @@ from rrbc_core.interpolation.base import (
     near_groups,
     too_few,
 )
+
+if TYPE_CHECKING:
+    from scipy.spatial import Delaunay
 
 #: Linear extension outside the hull never uses a boundary simplex whose shape quality (d!·volume divided by
 #: its longest edge to the power d: 0.5 for a right isosceles triangle, 0 for a flat one) is below this. Noisy

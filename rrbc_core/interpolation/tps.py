@@ -6,8 +6,6 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from scipy.interpolate import RBFInterpolator
-from scipy.linalg import LinAlgError
 
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.base import (
@@ -75,6 +73,9 @@ class _FittedTPS(Fitted):
         self.smoothing_used = self._bounded(x, v, smoothing)
 
     def _fit(self, x, v, smoothing):
+        from scipy.interpolate import RBFInterpolator
+        from scipy.linalg import LinAlgError
+
         try:
             return RBFInterpolator(x, v, kernel="thin_plate_spline", degree=1, smoothing=smoothing)
         except (LinAlgError, np.linalg.LinAlgError, ValueError) as exc:
