@@ -12,8 +12,9 @@ point (a wrist roll with a short tool) still separates configurations: its lever
 the median lever. The interpolation is IDW as in `rrbc correct` (the k = 4 nearest, weights 1/d²), per station.
 
 Which space each method uses is decided by the cross-validation `rrbc calibrate` already runs over the fiducials
-(`choose_spaces`): configuration only where its held-out error is lower than position's by more than one standard
-error of the paired difference (position is the published method and the simpler one: the one-standard-error rule).
+(`choose_spaces`): configuration only where its held-out error is lower than position's by more than `CLEAR_SE`
+standard errors of the paired difference (position is the published method and the simpler one, and interpolating
+over the joints claims the error follows them: that claim needs clear evidence, as a load term does).
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ from scipy.spatial import cKDTree
 
 from rrbc_core.models.chain import Chain
 
-SPACES = ("position", "configuration")
 #: the methods that interpolate corrections from the fiducials, so have a space
 INTERPOLATED = ("rrbc", "vec_rrbc")
 #: a joint's lever is at least this share of the median joint's (module docstring)
@@ -75,7 +75,7 @@ def configuration_idw(src_q: np.ndarray, values: np.ndarray, dst_q: np.ndarray, 
 
 def choose_spaces(sq: dict) -> dict[str, str]:
     """Per interpolating method, "configuration" where its held-out squared errors (sq[configuration_key(m)], (H,)
-    mm²) are lower than position's (sq[m]) by more than one standard error of the paired difference, else
+    mm²) are lower than position's (sq[m]) by more than `CLEAR_SE` standard errors of the paired difference, else
     "position" (also with fewer than 2 held-out points)."""
     out = {}
     for m in INTERPOLATED:

@@ -7,6 +7,7 @@ estimated from the data when no instrument is given (`estimate_noise`), the inst
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 
 import numpy as np
@@ -172,8 +173,10 @@ def tested_from(distances: np.ndarray) -> float:
     return float(np.percentile(d, TESTED_PERCENTILE)) if len(d) else 0.0
 
 
+@functools.cache
 def predictive_factor(dof: int, level: float = 0.95) -> float:
     """How much wider a `level` bound on a new point's 3-D error must be when its variance is estimated with `dof`
     degrees of freedom rather than known: sqrt(3 F_level(3, dof) / chi²_level(3)) (the new error's squared length
-    over the estimate is 3 F(3, dof) for a normal error; docs/uncertainty.md). 1 as dof grows."""
+    over the estimate is 3 F(3, dof) for a normal error; docs/uncertainty.md). 1 as dof grows. Cached: a drag's
+    bounds ask for it with the same few dof again and again."""
     return float(np.sqrt(3.0 * f_dist.ppf(level, 3, max(int(dof), 1)) / chi2.ppf(level, 3)))

@@ -20,6 +20,7 @@ reproduce them.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -129,16 +130,15 @@ class CheckStatistics:
             )
         out.append(f"  RRBC worse than rigid at {len(self.worse)} of {self.n}" + (":" if self.worse else ""))
         # the ids wrapped as wide as the table (the app shows these lines in its side panel)
-        names = list(self.worse[:20]) + (["…"] if len(self.worse) > 20 else [])
-        row = "   "
-        for k, name in enumerate(names):
-            item = name + ("," if k < len(names) - 1 and names[k + 1] != "…" else "")
-            if len(row) + 1 + len(item) > TABLE_WIDTH and row.strip():
-                out.append(row)
-                row = "   "
-            row += " " + item
-        if row.strip():
-            out.append(row)
+        listed = ", ".join(self.worse[:20]) + (" …" if len(self.worse) > 20 else "")
+        out += textwrap.wrap(
+            listed,
+            TABLE_WIDTH,
+            initial_indent=" " * 4,
+            subsequent_indent=" " * 4,
+            break_long_words=False,
+            break_on_hyphens=False,
+        )
         return out
 
 
