@@ -169,7 +169,7 @@ def read_binary_stl(path) -> tuple[np.ndarray, np.ndarray] | None:
     """A binary STL's vertices (V, 3) float64 and triangles (F, 3) int64, corners with identical coordinates merged
     into one vertex; None when the file is not a binary STL (its count field disagrees with its length). Read as
     one array of records and merged by their bytes, so the peak memory is a few times the file's size
-    (tests/io/test_mesh_file.py holds the traced peak under 6x the size; trimesh's reader took 11x on that file).
+    (tests/io/test_mesh_file.py holds the traced peak under 6x the size and under half of trimesh's reader's).
 
     Raises
     ------
