@@ -11,7 +11,8 @@
 and the panels (`controls.Controls`, `planning_panel.PlanningPanel`), then one controller per feature
 (`controllers/`), each with a narrow interface (`actions`): `evaluate` (drags, settings, display options, layers),
 `present` (an evaluation onto every view), `views` (camera, presentation, slice, selection, lesson), `plan`,
-`diagnose`, `montecarlo`, `vec`, `authoring` and `files`. The panels are handed the app as `actions.Actions` and
+`montecarlo`, `vec`, `authoring` and `files`; and the plug-in tabs' controllers (`tabs`: Diagnose, Model; see
+`tab_plugin`). The panels are handed the app as `actions.Actions` and
 call the controllers; the controllers give the scene views and panels values, never touching their handles.
 
 Shared state, by design. ONE session, one scene and one control panel are shared by every browser tab (viser's
@@ -35,7 +36,9 @@ from __future__ import annotations
 import contextlib
 import io
 import threading
+from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import viser
@@ -46,11 +49,9 @@ from rrbc_core.session.explorer import ExplorerSession
 from . import sources, upload_spool
 from .camera import OPENING, CameraDirector, preset_view
 from .context import AppContext
-from .controllers.diagnose import DiagnoseController
 from .controllers.edit import AuthoringController
 from .controllers.evaluate import EvaluateController
 from .controllers.load import FileController
-from .controllers.model_check import ModelCheckController
 from .controllers.plan import PlanController
 from .controllers.present import Presenter
 from .controllers.simulate import MonteCarloController
@@ -65,6 +66,8 @@ from .planning_panel import PlanningPanel
 from .slice_nodes import SliceNode
 from .stage import Stage
 from .state import AppState
+from .tab_plugin import TabController, TabSpec
+from .tabs import TABS
 
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
 
@@ -82,6 +85,7 @@ class RunningApp:
         viser_server: viser.ViserServer | None = None,
         library: sources.Library | None = None,
         arm_meshes: bool = True,
+        tabs: Sequence[TabSpec] = TABS,
     ):
         if viser_server is None:  # the app draws on the server itself (every tab)
             assert isinstance(server, viser.ViserServer), "a stage other than the server needs viser_server"
@@ -94,7 +98,7 @@ class RunningApp:
         self._stopped = False
         # the views first (they call the controllers only when the user acts), then the context, then the controllers
         nodes = SceneNodes(server, self._on_drag, self._on_point_click, arm_meshes)
-        controls = Controls(server, self)
+        controls = Controls(server, self, [(t.name, t.label, t.icon, t.panel) for t in tabs])
         ctx = AppContext(
             server,
             viser_server,
@@ -114,8 +118,10 @@ class RunningApp:
         self.present = Presenter(ctx)
         self.views = ViewController(ctx)
         self.plan = PlanController(ctx)
-        self.diagnose = DiagnoseController(ctx)
-        self.model_check = ModelCheckController(ctx)
+        #: the plug-in tabs' controllers by name (`tab_plugin`, `tabs.TABS`), each handed its own panel
+        self.tabs: dict[str, TabController[Any]] = {
+            spec.name: spec.controller(ctx, controls.tabs[spec.name]) for spec in tabs
+        }
         self.vec = VecController(ctx)
         self.authoring = AuthoringController(ctx)
         self.files = FileController(ctx)
@@ -204,6 +210,8 @@ class RunningApp:
         self.evaluate.stop()
         self.montecarlo.close()
         self.plan.stop()
+        for tab in self.tabs.values():
+            tab.stop()
         self.authoring.remove_upload()  # the uploaded mesh's temporary copy (a per-tab app too, when its tab goes)
         upload_spool.close(self.ctx.server.gui)  # uploads still arriving, and what they stored
         if not self.owns_server:
@@ -229,8 +237,6 @@ class RunningApp:
             st.heat_map = None
             st.mc_plots = None
             st.heat_stale = True
-            self.diagnose.reset()
-            self.model_check.reset()
             st.display = self._default_display(ev)
             if st.presentation:
                 st.display = replace(st.display, marker_mm=st.display.marker_mm * PRESENTATION_MARKERS)
@@ -259,7 +265,8 @@ class RunningApp:
                     "The nine steps of RRBC, one at a time, each shown in the scene with live numbers. Press **Next** "
                     "to start."
                 )
-                ctx.controls.diagnose.show_prompt()
+                for tab in self.tabs.values():
+                    tab.installed()
                 ctx.controls.file.show_stations(session.stations, session.station)
                 self.present.show(ev, heat=True)
                 self._frame_camera(loaded.mesh, ev)

@@ -10,7 +10,7 @@ controller changes the session and the state only under `lock`, and sends one ch
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -26,13 +26,12 @@ if TYPE_CHECKING:
     from .actions import (
         Actions,
         AuthoringActions,
-        DiagnoseActions,
         EvaluateActions,
         FileActions,
-        ModelCheckActions,
         MonteCarloActions,
         PlanActions,
         PresentActions,
+        TabHooks,
         VecActions,
         ViewActions,
     )
@@ -98,12 +97,9 @@ class AppContext:
         return self.app.plan
 
     @property
-    def diagnose(self) -> DiagnoseActions:
-        return self.app.diagnose
-
-    @property
-    def model_check(self) -> ModelCheckActions:
-        return self.app.model_check
+    def tabs(self) -> Mapping[str, TabHooks]:
+        """The plug-in tabs' controllers by name (`tab_plugin`): reached through their hooks."""
+        return self.app.tabs
 
     @property
     def montecarlo(self) -> MonteCarloActions:

@@ -1,7 +1,8 @@
 """The control panel (shared by every browser tab): one panel class per tab, each owning its widgets.
 
 `ExplorePanel` (results, method, errors), `ViewPanel` (display, layers, heat map), `LearnPanel` (the lesson),
-`MonteCarloPanel`, `DiagnosePanel`, `FilePanel`, and the Plan tab (`planning_panel.PlanningPanel`).
+`MonteCarloPanel`, `FilePanel`, the Plan tab (`planning_panel.PlanningPanel`), and the plug-in tabs the app hands in
+(`tab_plugin.TabSpec`: Diagnose, Model, …; their panels in `Controls.tabs`).
 `Controls` lays the tabs out and holds the status line. A panel only forwards user input to the app (through
 `actions.Actions`) and shows what the app hands back; it holds no RRBC state of its own. Programmatic updates
 (`sync_*`) run under the shared `Syncing` flag so that the value callbacks they re-enter (viser runs `on_update`
@@ -10,7 +11,7 @@ when Python assigns `.value`) do nothing.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import viser
@@ -23,9 +24,7 @@ from .authoring_panel import AuthoringPanel
 from .camera import PANEL_WIDTH_PX, PRESENTATION_PANEL_WIDTH_PX, PRESETS
 from .checks_panel import ChecksPanel
 from .colors import legend_html
-from .diagnosis_panel import PROMPT
 from .file_panel import FilePanel
-from .model_check_panel import ModelCheckPanel
 from .node_values import LAYERS, Display
 from .picture import BOUND_SCALES
 from .planning_panel import PlanningPanel
@@ -35,8 +34,14 @@ from .syncing import Syncing, clamped
 from .vec_panel import VecPanel
 
 if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
     from .actions import Actions
     from .stage import Stage
+
+    #: a plug-in tab's panel as the control panel builds it: (name, label, icon (a `viser.Icon` name), the panel's
+    #: class or factory, called with the gui and a function returning the tab's controller); `tab_plugin.TabSpec`
+    TabPanel = tuple[str, str, str, Callable[[Any, Callable[[], Any]], Any]]
 
 LAYER_LABELS = {
     "mesh": "Work-cell mesh",
@@ -414,31 +419,15 @@ class MonteCarloPanel:
         self.mc_stop.disabled = not running
 
 
-class DiagnosePanel:
-    """Diagnose tab: the button and the verdict."""
-
-    def __init__(self, gui, app: Actions):
-        self.diagnose = gui.add_button(
-            "Diagnose current data",
-            icon=viser.Icon.STETHOSCOPE,
-            hint="Test the registration points and fiducials (not the targets) for effects a rigid fit misses",
-        )
-        self.diagnosis = gui.add_markdown(PROMPT)
-        self.diagnose.on_click(lambda event: app.diagnose.run(client=event.client))
-
-    def show(self, markdown: str) -> None:
-        """The verdict (`diagnosis_panel.render`), an error, or the verdict marked stale."""
-        self.diagnosis.content = markdown
-
-    def show_prompt(self) -> None:
-        self.diagnosis.content = PROMPT
+def _controller_of(app: Actions, name: str) -> Callable[[], Any]:
+    """A function returning the plug-in tab `name`'s controller (built after its panel)."""
+    return lambda: app.tabs[name]
 
 
-#: The text areas the app writes, and the panel that owns each.
 class Controls:
     """The control panel: the status line and the tabs, one panel each (module docstring)."""
 
-    def __init__(self, server: Stage, app: Actions):
+    def __init__(self, server: Stage, app: Actions, plugins: Sequence[TabPanel] = ()):
         self.app = app
         self.syncing = Syncing()
         gui = server.gui
@@ -453,7 +442,7 @@ class Controls:
             self.legend = gui.add_html(legend_html())
         with gui.add_folder("Colours", expand_by_default=False, visible=False) as self.legend_closed:
             self.legend_closed_html = gui.add_html(legend_html())
-        tabs = gui.add_tab_group()
+        tabs = self._tab_group = gui.add_tab_group()
         with tabs.add_tab("Explore", icon=viser.Icon.ADJUSTMENTS):
             self.selection = SelectionPanel(gui, app, self.syncing)
             self.explore = ExplorePanel(gui, app, self.syncing)
@@ -464,10 +453,11 @@ class Controls:
             self.learn = LearnPanel(gui, app)
         with tabs.add_tab("Monte Carlo", icon=viser.Icon.CHART_HISTOGRAM):
             self.montecarlo = MonteCarloPanel(gui, app, self.syncing)
-        with tabs.add_tab("Diagnose", icon=viser.Icon.STETHOSCOPE):
-            self.diagnose = DiagnosePanel(gui, app)
-        with tabs.add_tab("Model", icon=viser.Icon.CHECKLIST):
-            self.model_check = ModelCheckPanel(gui, app)
+        #: the plug-in tabs' panels by name (each handed a function returning its controller, built after it)
+        self.tabs: dict[str, Any] = {}
+        for name, label, icon, panel in plugins:
+            with tabs.add_tab(label, icon=getattr(viser.Icon, icon)):
+                self.tabs[name] = panel(gui, _controller_of(app, name))
         with tabs.add_tab("Arm (VEC)", icon=viser.Icon.ROBOT):
             self.vec = VecPanel(gui, app, self.syncing)
         with tabs.add_tab("Plan", icon=viser.Icon.MAP_PIN):
@@ -485,6 +475,10 @@ class Controls:
         if hasattr(self, "style"):
             self.style.content = PRESENTATION_CSS if presentation else NORMAL_CSS
             self.show_legend(not presentation)
+
+    def tab_labels(self) -> tuple[str, ...]:
+        """The tab bar's labels, in order."""
+        return tuple(self._tab_group._tab_labels)
 
     def show_legend(self, open_: bool) -> None:
         """The colour legend open (exploring) or closed to its title (presentation mode, a lesson)."""

@@ -1,4 +1,5 @@
-"""Markdown of the Diagnose tab: which data it diagnosed and, unchanged, the lines `rrbc diagnose` prints.
+"""The Diagnose tab (`DiagnosePanel`, a plug-in tab: `tab_plugin`) and its Markdown: which data it diagnosed and,
+unchanged, the lines `rrbc diagnose` prints.
 
 Every word of the verdict comes from `rrbc_core.analysis.diagnosis_text.diagnosis_lines` (the command line's own
 text), escaped for Markdown; this module adds only the heading (which data, the equivalent command).
@@ -7,6 +8,10 @@ text), escaped for Markdown; this module adds only the heading (which data, the 
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import viser
 
 from rrbc_core.analysis.diagnosis import Diagnosis
 from rrbc_core.analysis.diagnosis_text import diagnosis_lines
@@ -52,3 +57,29 @@ def render(d: Diagnosis, data: SessionData, stale: bool = False) -> str:
 
 def render_error(message: str, stale: bool = False) -> str:
     return ((STALE + "\n\n") if stale else "") + f"⚠ Cannot diagnose: {' '.join(str(message).split())}"
+
+
+class DiagnoseTabActions(Protocol):
+    """What the Diagnose tab asks of its controller (`controllers.diagnose.DiagnoseController`)."""
+
+    def run(self, client: Any = None) -> Diagnosis | None: ...
+
+
+class DiagnosePanel:
+    """Diagnose tab: the button and the verdict. `controller` returns the tab's controller (built after the panel)."""
+
+    def __init__(self, gui, controller: Callable[[], DiagnoseTabActions]):
+        self.diagnose = gui.add_button(
+            "Diagnose current data",
+            icon=viser.Icon.STETHOSCOPE,
+            hint="Test the registration points and fiducials (not the targets) for effects a rigid fit misses",
+        )
+        self.diagnosis = gui.add_markdown(PROMPT)
+        self.diagnose.on_click(lambda event: controller().run(client=event.client))
+
+    def show(self, markdown: str) -> None:
+        """The verdict (`render`), an error, or the verdict marked stale."""
+        self.diagnosis.content = markdown
+
+    def show_prompt(self) -> None:
+        self.diagnosis.content = PROMPT

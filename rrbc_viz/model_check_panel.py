@@ -1,11 +1,13 @@
 """The Model tab (`ModelCheckPanel`): hold the open scene's error model against a measurement file the app offers
 (`rrbc check-model`): the file, the button, the command's own lines, *Extend the model* and the extended scene's
-download. Built inside its tab by `controls.Controls`; handed the app as `actions.Actions`. Its markdown comes from
+download. A plug-in tab (`tab_plugin`, listed in `tabs.TABS`): built inside its tab by `controls.Controls`, handed
+a function returning its controller (`controllers.model_check.ModelCheckController`). Its markdown comes from
 `render` (the command line's lines, escaped)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
 
 import viser
 
@@ -13,8 +15,6 @@ from .diagnosis_panel import escape
 
 if TYPE_CHECKING:
     from rrbc_core.analysis.scene_check import SceneCheck
-
-    from .actions import Actions
 
 NO_FILE = "(no measurement file offered)"
 PROMPT = (
@@ -56,10 +56,18 @@ def render(res: SceneCheck, lines: list[str], head: str = "") -> str:
     return "\n\n".join(([head] if head else []) + body)
 
 
-class ModelCheckPanel:
-    """Model tab (module docstring)."""
+class ModelCheckTabActions(Protocol):
+    """What the Model tab asks of its controller."""
 
-    def __init__(self, gui, app: Actions):
+    def run(self, label: str, client: Any = None, head: str = "") -> SceneCheck | None: ...
+    def extend(self, client: Any = None) -> SceneCheck | None: ...
+    def download(self, client: Any = None) -> tuple[str, bytes] | None: ...
+
+
+class ModelCheckPanel:
+    """Model tab (module docstring). `controller` returns the tab's controller (built after the panel)."""
+
+    def __init__(self, gui, controller: Callable[[], ModelCheckTabActions]):
         self._file = gui.add_dropdown(
             "Measurement file", (NO_FILE,), initial_value=NO_FILE, hint="A .csv the app offers (scenes/, --data)"
         )
@@ -72,9 +80,9 @@ class ModelCheckPanel:
         )
         self._download = gui.add_button("Download extended scene (TOML)", icon=viser.Icon.DOWNLOAD, disabled=True)
         self._text = gui.add_markdown(PROMPT)
-        self._check.on_click(lambda event: app.model_check.run(self._file.value, client=event.client))
-        self._extend.on_click(lambda event: app.model_check.extend(client=event.client))
-        self._download.on_click(lambda event: app.model_check.download(client=event.client))
+        self._check.on_click(lambda event: controller().run(self._file.value, client=event.client))
+        self._extend.on_click(lambda event: controller().extend(client=event.client))
+        self._download.on_click(lambda event: controller().download(client=event.client))
 
     def offer(self, files: list[str]) -> None:
         """The measurement files the tab offers (labels)."""

@@ -1,6 +1,7 @@
 """The Diagnose tab (`DiagnoseController`): `rrbc diagnose` on the session's data set (`session.data_set`: the file as
 opened or edited, or the scene's simulated data set as the CSV download writes it), run outside the app's lock, its
-lines shown as the command prints them (`diagnosis_panel`), and marked stale when the data change."""
+lines shown as the command prints them (`diagnosis_panel`), and marked stale when the data change. A plug-in tab
+(`tab_plugin`, listed in `tabs.TABS`)."""
 
 from __future__ import annotations
 
@@ -13,25 +14,36 @@ from rrbc_core.session import data_set
 from rrbc_core.session.data_set import data_key
 
 from .. import diagnosis_panel
+from ..diagnosis_panel import DiagnosePanel
+from ..tab_plugin import TabController
 
 if TYPE_CHECKING:
+    from rrbc_core.session.evaluation import Evaluation
+
     from ..context import AppContext
 
 
-class DiagnoseController:
-    """`actions.DiagnoseActions`: what it shows is in the app's state (`diagnosis`, `diagnosis_data`,
+class DiagnoseController(TabController[DiagnosePanel]):
+    """`diagnosis_panel.DiagnoseTabActions`: what it shows is in the app's state (`diagnosis`, `diagnosis_data`,
     `diagnosis_stale`)."""
 
-    def __init__(self, ctx: AppContext):
-        self.ctx = ctx
-        self.reset()
+    def __init__(self, ctx: AppContext, panel: DiagnosePanel):
+        super().__init__(ctx, panel)
+        self._forget()
 
-    def reset(self) -> None:
-        """Nothing diagnosed (a new source)."""
+    def _forget(self) -> None:
         st = self.ctx.state
         st.diagnosis, st.diagnosis_data, st.diagnosis_stale = None, None, False
         self._diagnosis_key: tuple | None = None
         self._diagnosis_text = ""
+
+    def installed(self) -> None:
+        """Nothing diagnosed (a new source): the tab's prompt."""
+        self._forget()
+        self.panel.show_prompt()
+
+    def evaluated(self, ev: Evaluation) -> None:
+        self.check_stale()
 
     # ------------------------------------------------------------------------------------------ diagnosis
     def run(self, client=None) -> Diagnosis | None:
@@ -68,7 +80,7 @@ class DiagnoseController:
             self._diagnosis_text = text
             self.ctx.state.diagnosis_stale = False
             with self.ctx.server.atomic():
-                self.ctx.controls.diagnose.show(text)
+                self.panel.show(text)
             self.check_stale()  # the data changed while it ran: say so at once
         if result is None:
             self.ctx.message("diagnosis failed: see the Diagnose tab", client, title="Not diagnosed")
@@ -82,4 +94,4 @@ class DiagnoseController:
             return
         if data_key(self.ctx.session) != self._diagnosis_key:
             self.ctx.state.diagnosis_stale = True
-            self.ctx.controls.diagnose.show(diagnosis_panel.STALE + "\n\n" + self._diagnosis_text)
+            self.panel.show(diagnosis_panel.STALE + "\n\n" + self._diagnosis_text)

@@ -202,8 +202,8 @@ class EvaluateController:
                 ctx.controls.sync_display(new, ctx.session.kind)
                 heat = any(k in changes for k in ("region_zoom", "heat_value"))
                 ctx.present.show(ctx.session.last, heat=heat)
-                if "magnification" in changes or "marker_mm" in changes:
-                    ctx.model_check.show_rows()
+                for tab in ctx.tabs.values():
+                    tab.display_changed()
                 if any(k.startswith("slice_") for k in changes):
                     ctx.views.update_slice()
 

@@ -74,7 +74,8 @@ class FileController:
             self.ctx.controls.file.offer(
                 [name for name, _ in self.ctx.library.sources()], [name for name, _ in self.ctx.library.meshes()]
             )
-            self.ctx.model_check.offer()
+            for tab in self.ctx.tabs.values():
+                tab.files_offered()
 
     def load_station(self, station: str, client=None) -> bool:
         """Open another station of the current file (a file with a group column); the settings are kept."""

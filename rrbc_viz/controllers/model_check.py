@@ -3,14 +3,13 @@ a measurement file the app offers (`analysis.scene_check.check_scene_model`, run
 the tab shows the command's own lines (`analysis.scene_check_text.check_lines`), the scene shows each compared row
 inside or outside its predicted region (`model_check_nodes`); *Extend the model* installs the scene with the added
 terms and checks it again against the same file; the download is the scene's own text with the terms appended, as
-`rrbc check-model --out` writes it."""
+`rrbc check-model --out` writes it. A plug-in tab (`tab_plugin`, listed in `tabs.TABS`)."""
 
 from __future__ import annotations
 
 import dataclasses
 import traceback
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from rrbc_core.analysis.scene_check import SceneCheck, check_scene_model
 from rrbc_core.analysis.scene_check_text import check_lines
@@ -19,36 +18,28 @@ from rrbc_core.io.measurements import read_measurements
 from rrbc_core.io.scene_extend import extended_scene_text
 
 from .. import model_check_panel
+from ..model_check_panel import ModelCheckPanel
 from ..sources import scene_loaded
-
-if TYPE_CHECKING:
-    from ..context import AppContext
+from ..tab_plugin import TabController
 
 TRIALS = 200
 FOLDS = 5
 
 
-class ModelCheckController:
-    """`actions.ModelCheckActions`: what it shows is in the app's state (`model_check`, `model_check_file`,
-    `model_check_head`)."""
+class ModelCheckController(TabController[ModelCheckPanel]):
+    """`model_check_panel.ModelCheckTabActions`: what it shows is in the app's state (`model_check`,
+    `model_check_file`, `model_check_head`)."""
 
-    def __init__(self, ctx: AppContext):
-        self.ctx = ctx
-
-    def reset(self) -> None:
+    def installed(self) -> None:
         """Nothing checked (a new source), unless an extension is being loaded (`extend` sets the head)."""
         st = self.ctx.state
         st.model_check, st.model_check_scene_text = None, None
         self.ctx.check_node.hide()
-        self.ctx.controls.model_check.show(
-            model_check_panel.PROMPT if self.ctx.session.kind == "scene" else model_check_panel.NOT_A_SCENE
-        )
+        self.panel.show(model_check_panel.PROMPT if self.ctx.session.kind == "scene" else model_check_panel.NOT_A_SCENE)
 
-    def offer(self) -> None:
+    def files_offered(self) -> None:
         """The measurement files the tab offers (caller holds the lock)."""
-        self.ctx.controls.model_check.offer(
-            [name for name, path in self.ctx.library.sources() if path.suffix.lower() == ".csv"]
-        )
+        self.panel.offer([name for name, path in self.ctx.library.sources() if path.suffix.lower() == ".csv"])
 
     def run(self, label: str, client=None, head: str = "") -> SceneCheck | None:
         """Check the open scene's model against the offered file `label`; None (and the reason shown) on bad input."""
@@ -56,7 +47,7 @@ class ModelCheckController:
             session = self.ctx.session
             scene = session.scene if session.kind == "scene" else None
         if scene is None:
-            self.ctx.controls.model_check.show(model_check_panel.NOT_A_SCENE)
+            self.panel.show(model_check_panel.NOT_A_SCENE)
             return None
         result, text = None, ""
         try:
@@ -81,11 +72,14 @@ class ModelCheckController:
                 text = model_check_panel.render(result, lines, head)
             with self.ctx.server.atomic():
                 added = result is not None and bool(result.added)
-                self.ctx.controls.model_check.show(text, extendable=added, downloadable=added or extended)
+                self.panel.show(text, extendable=added, downloadable=added or extended)
                 self.show_rows()
         if result is None:
             self.ctx.message("the model was not checked: see the Model tab", client, title="Not checked")
         return result
+
+    def display_changed(self) -> None:
+        self.show_rows()
 
     def show_rows(self) -> None:
         """Draw the compared rows (caller holds the lock)."""

@@ -1,6 +1,6 @@
 """The presenter: pushes an `Evaluation` to every scene view and panel (`Presenter.show`), the one place a change
 of the session becomes pixels — the scene nodes (points, arrows, hull, regions, bullseye), the Explore tab's results,
-the lesson's text, the selected point's card, the Diagnose tab's stale mark, the Plan tab, the heat map, the error
+the lesson's text, the selected point's card, the plug-in tabs (the Diagnose tab's stale mark), the Plan tab, the heat map, the error
 slice and the check statistics. Callers hold the app's lock and an open `server.atomic()` block."""
 
 from __future__ import annotations
@@ -44,7 +44,8 @@ class Presenter:
         if ctx.state.lesson_index is not None:
             ctx.controls.learn.show_text(teaching.render(ctx.state.lesson_index, ev, self.lesson_context()))
         ctx.state.heat_stale = True
-        ctx.diagnose.check_stale()
+        for tab in ctx.tabs.values():
+            tab.evaluated(ev)  # the Diagnose tab's stale mark, …
         ctx.plan.refresh(session, due=plan)
         ctx.views.show_selection(ev)  # after the Plan tab: the card shows its coverage of the selected target
         if heat:

@@ -21,8 +21,6 @@ PANELS = {
     "view",
     "learn",
     "montecarlo",
-    "diagnose",
-    "model_check",
     "vec",
     "file",
     "authoring",
@@ -42,6 +40,9 @@ def _view_uses(tree: ast.AST) -> list[tuple[int, str]]:
         return isinstance(parent, ast.Call) and parent.func is node
 
     def view_of(node: ast.AST) -> str | None:
+        if isinstance(node, ast.Attribute) and node.attr == "panel":  # a plug-in tab's own panel (tab_plugin)
+            if isinstance(node.value, ast.Name) and node.value.id == "self":
+                return "panel"
         if isinstance(node, ast.Attribute) and node.attr in VIEWS:
             base = node.value  # ctx, self.ctx, self._ctx
             if (isinstance(base, ast.Name) and base.id in ("ctx", "context")) or (
@@ -103,9 +104,11 @@ def test_the_check_sees_reads_writes_and_reaching_into_a_panel():
         "    c.explore.show_results(1, 2, 3)\n"
         "    k = c.plan.k\n"  # a read through the alias
         "    return self.ctx.nodes\n"  # the app's property
+        "    self.panel.show('x')\n"  # a plug-in tab's own panel: a verb
+        "    t = self.panel._text.content\n"  # and a read
     )
     lines = sorted(line for line, _ in _view_uses(ast.parse(code)))
-    assert lines == [2, 3, 4, 5, 11], lines
+    assert lines == [2, 3, 4, 5, 11, 14], lines
 
 
 def test_the_state_is_the_one_owner_of_what_the_scene_shows():

@@ -30,7 +30,7 @@ def _cli(capsys, *args) -> str:
 
 def _tab_lines(app) -> list[str]:
     """The tab's paragraphs after its heading, as plain text (a fenced block's lines as they are)."""
-    paragraphs = app.controls.diagnose.diagnosis.content.split("\n\n")
+    paragraphs = app.controls.tabs["diagnose"].diagnosis.content.split("\n\n")
     assert paragraphs[0].startswith(("Diagnosis of", "**Edited data.**")), paragraphs[0]
     out = []
     for p in paragraphs[1:]:
@@ -42,8 +42,8 @@ def _tab_lines(app) -> list[str]:
 
 
 def _assert_tab_is_cli(app, capsys, path, *options) -> None:
-    _press(app.controls.diagnose.diagnose)
-    assert app.state.diagnosis is not None, app.controls.diagnose.diagnosis.content
+    _press(app.controls.tabs["diagnose"].diagnose)
+    assert app.state.diagnosis is not None, app.controls.tabs["diagnose"].diagnosis.content
     text = _cli(capsys, path, *options)
     assert _tab_lines(app) == text.rstrip("\n").split("\n")
     assert app.state.diagnosis.to_json() == json.loads(_cli(capsys, path, *options, "--json"))
@@ -96,7 +96,7 @@ def test_the_tab_shows_what_rrbc_diagnose_prints_for_a_file_as_opened(which, tmp
     try:
         _assert_tab_is_cli(app, capsys, path)
         assert app.state.diagnosis_data.measurements is app.session.mset  # the file as opened, every row
-        head = app.controls.diagnose.diagnosis.content.split("\n\n")[0]
+        head = app.controls.tabs["diagnose"].diagnosis.content.split("\n\n")[0]
         assert "as opened" in head and "Edited" not in head
         if which == "example":
             # the numbers the issue measured on the CLI, now in the tab: noise from the repeats, the field, checks
@@ -112,8 +112,8 @@ def test_edited_measured_data_are_diagnosed_as_edited_and_the_download_reproduce
     try:
         fid = app.session.last.fiducial_ids
         app.evaluate.toggle_fiducial(fid[5])  # exclude one fiducial
-        _press(app.controls.diagnose.diagnose)
-        head = unescape(app.controls.diagnose.diagnosis.content.split("\n\n")[0])
+        _press(app.controls.tabs["diagnose"].diagnose)
+        head = unescape(app.controls.tabs["diagnose"].diagnosis.content.split("\n\n")[0])
         assert head.startswith("**Edited data.**") and fid[5] in head
         rows = app.state.diagnosis_data.measurements
         assert fid[5] not in rows.ids and len(rows) < len(app.session.mset)
@@ -144,21 +144,21 @@ def test_a_scenes_tab_is_rrbc_diagnose_of_its_download_which_is_what_rrbc_simula
         data = data_set.session_data(app.session)
         assert data.robot == "ur5" and data.tool_mm == 100.0  # the scene's arm reads the joint columns
         _assert_tab_is_cli(app, capsys, download, "--robot", "ur5", "--tool", "100")
-        assert "rrbc diagnose DATA.csv --tool 100" in app.controls.diagnose.diagnosis.content
+        assert "rrbc diagnose DATA.csv --tool 100" in app.controls.tabs["diagnose"].diagnosis.content
         # after edits and new settings the tab diagnoses the data as they are now, and the download follows
         app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
         app.evaluate.change_settings(bias_scale=0.5, seed=11)
         name, content = app.files.export("csv")
         download.write_bytes(content)
         _assert_tab_is_cli(app, capsys, download, "--tool", "100")
-        assert "seed 11, noise x1, bias x0.5" in unescape(app.controls.diagnose.diagnosis.content)
+        assert "seed 11, noise x1, bias x0.5" in unescape(app.controls.tabs["diagnose"].diagnosis.content)
     finally:
         app.stop()
 
 
 def test_the_verdict_goes_stale_when_its_data_change_not_when_the_method_does(app):
-    panel = app.controls.diagnose.diagnosis
-    _press(app.controls.diagnose.diagnose)
+    panel = app.controls.tabs["diagnose"].diagnosis
+    _press(app.controls.tabs["diagnose"].diagnose)
     fresh = panel.content
     app.evaluate.set_display(magnification=50.0)
     app.evaluate.change_settings(interpolation="tps")
@@ -169,7 +169,7 @@ def test_the_verdict_goes_stale_when_its_data_change_not_when_the_method_does(ap
     assert panel.content == "**(data changed since — press again)**\n\n" + fresh
     app.evaluate.handle_drag("fiducials", "F12", [760.0, 0.0, 120.0], "end")
     assert panel.content.count("data changed since") == 1
-    _press(app.controls.diagnose.diagnose)
+    _press(app.controls.tabs["diagnose"].diagnose)
     assert "data changed since" not in panel.content and not app.state.diagnosis_stale
 
 
@@ -183,10 +183,10 @@ def test_the_tab_says_why_it_cannot_diagnose_and_a_new_file_clears_it(tmp_path, 
     small.write_text("\n".join(rows) + "\n")
     app = serve(small, port=0)
     try:
-        panel = app.controls.diagnose.diagnosis
+        panel = app.controls.tabs["diagnose"].diagnosis
         app.evaluate.toggle_fiducial("P4")
         app.evaluate.toggle_fiducial("P5")  # 4 paired points left: too few
-        _press(app.controls.diagnose.diagnose)
+        _press(app.controls.tabs["diagnose"].diagnose)
         assert app.state.diagnosis is None and panel.content.startswith("⚠ Cannot diagnose:")
         # the command line refuses the same download with the same words
         name, content = app.files.export("csv")

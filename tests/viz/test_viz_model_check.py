@@ -45,8 +45,8 @@ def test_the_tab_is_the_command_and_extending_loads_the_extended_scene(folder, c
     app = serve(DEMO, port=0, data_dirs=[folder])
     try:
         label = f"{folder.name}/planted.csv"
-        result = app.model_check.run(label)
-        assert result is not None, app.controls.model_check.text()
+        result = app.tabs["model_check"].run(label)
+        assert result is not None, app.controls.tabs["model_check"].text()
         # the command's JSON and lines (the first line names the files as each was given)
         capsys.readouterr()
         monkeypatch.chdir(DEMO.parent)
@@ -58,7 +58,7 @@ def test_the_tab_is_the_command_and_extending_loads_the_extended_scene(folder, c
         text = capsys.readouterr().out.rstrip("\n").split("\n")
         assert text == check_lines(result, str(folder / "planted.csv"), DEMO.name)  # the command's lines
         # the tab: the same lines (its own hints), the figures as a table of the same numbers
-        tab = _tab_lines(app.controls.model_check.text())
+        tab = _tab_lines(app.controls.tabs["model_check"].text())
         same = check_lines(result, "planted.csv", DEMO.name, hints=model_check_panel.APP_HINTS)
         rest = next(i for i, line in enumerate(same) if line.startswith("rows outside"))
         assert tab[0] == same[0] and tab[2:] == same[rest:]
@@ -70,23 +70,23 @@ def test_the_tab_is_the_command_and_extending_loads_the_extended_scene(folder, c
         assert app.check_node.shown() == result.n_rows == len(result.z)
         assert int(np.sum(result.z > 2.7955)) == len(cli["outside"])
         # the download: the scene's own text with the added terms
-        name, content = app.model_check.download()
+        name, content = app.tabs["model_check"].download()
         assert name == "demo_workcell-extended.toml"
         doc = tomllib.loads(content.decode())
         assert len(doc["error_model"]["robot"]) == len(load_scene(DEMO).error_model.robot) + len(result.added)
         # extend: the scene with the added terms is loaded and checked again against the same file
-        again = app.model_check.extend()
+        again = app.tabs["model_check"].extend()
         assert again is not None
         assert app.session.kind == "scene"
         robot_terms = [t.kind for t in app.session.scene.error_model.robot]
         assert robot_terms[-len(result.added) :] == [t.table["type"] for t in result.added]
-        shown = app.controls.model_check.text()
+        shown = app.controls.tabs["model_check"].text()
         assert shown.startswith("**Extended model loaded**") and "smooth_field" not in {
             e.name for e in again.unexplained
         }
         assert "as extended here" in shown  # the re-check says which model it held
         # the loaded extension can be downloaded: the first terms, and any new ones after them
-        _, content2 = app.model_check.download()
+        _, content2 = app.tabs["model_check"].download()
         assert content2.decode().startswith(content.decode().rstrip("\n"))
     finally:
         app.stop()
@@ -95,9 +95,9 @@ def test_the_tab_is_the_command_and_extending_loads_the_extended_scene(folder, c
 def test_on_measured_data_the_tab_asks_for_a_scene(folder):
     app = serve(EXAMPLE_CSV, port=0, data_dirs=[folder])
     try:
-        assert app.controls.model_check.text() == model_check_panel.NOT_A_SCENE
-        assert app.model_check.run(f"{folder.name}/planted.csv") is None
-        assert app.controls.model_check.text() == model_check_panel.NOT_A_SCENE
+        assert app.controls.tabs["model_check"].text() == model_check_panel.NOT_A_SCENE
+        assert app.tabs["model_check"].run(f"{folder.name}/planted.csv") is None
+        assert app.controls.tabs["model_check"].text() == model_check_panel.NOT_A_SCENE
     finally:
         app.stop()
 
@@ -105,8 +105,8 @@ def test_on_measured_data_the_tab_asks_for_a_scene(folder):
 def test_a_file_not_offered_is_refused_in_the_tab(folder):
     app = serve(DEMO, port=0, data_dirs=[folder])
     try:
-        assert app.model_check.run("/etc/passwd") is None
-        assert "not one of the files offered" in app.controls.model_check.text()
+        assert app.tabs["model_check"].run("/etc/passwd") is None
+        assert "not one of the files offered" in app.controls.tabs["model_check"].text()
         assert app.check_node.shown() == 0
     finally:
         app.stop()
