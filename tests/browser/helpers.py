@@ -264,13 +264,59 @@ def node_screen_position(
     return float(res["x"]), float(res["y"])
 
 
+_JS_FRAMES = """(n) => new Promise((done) => {
+  const next = (k) => (k > 0 ? requestAnimationFrame(() => next(k - 1)) : done(true)); next(n); })"""
+
+
+def next_frames(page: Any, n: int = 2) -> None:
+    """Return once the page has drawn ``n`` more animation frames (what it received before is on the screen)."""
+    page.evaluate(_JS_FRAMES, int(n))
+
+
+def page_caught_up(page: Any, server: Any, timeout_s: float = 30.0) -> None:
+    """Return once the page has applied every scene message the server sent it before this call, and drawn it: a
+    marker node sent after them (one websocket delivers in order) is waited for in the page, removed, and two
+    frames drawn. ``server`` is the app's viser server (or stage) whose scene the page shows."""
+    page_caught_up.count = getattr(page_caught_up, "count", 0) + 1
+    name = f"/__caught_up__/{page_caught_up.count}"
+    marker = server.scene.add_frame(name, show_axes=False, visible=False)
+    try:
+        wait_for(lambda: node_exists(page, name), timeout_s, message="the page to catch up with the server", page=page)
+    finally:
+        marker.remove()
+    next_frames(page, 2)
+
+
+_JS_CAMERA = """() => { const m = window.__viserMutable; const obj = m.nodeRefFromName['/mesh'];
+  obj.updateWorldMatrix(true, false); const c = obj.worldToLocal(m.camera.position.clone()); return [c.x, c.y, c.z]; }"""
+
+
+def wait_camera(page: Any, app: Any) -> None:
+    """Wait until the page renders with the camera the server last sent it (the app's one tab), and draws with it."""
+    cid = next(iter(app.server.get_clients()))
+
+    def arrived() -> bool:  # the pose last sent, read again each time: the server may have sent a newer one
+        sent = app.ctx.camera.last[cid].position
+        return bool(np.linalg.norm(np.array(page.evaluate(_JS_CAMERA)) - sent) < 1e-3 * np.linalg.norm(sent))
+
+    wait_for(
+        arrived,
+        30.0,
+        message="the page's camera",
+    )
+    next_frames(page, 2)  # drawn with it
+    # viser's own "software WebGL" notice (headless only; a user closes it once) can come late, top left
+    dismiss_software_webgl_notification(page, timeout_s=0.2)
+
+
 def drag(page: Any, from_xy: Sequence[float], to_xy: Sequence[float], steps: int = 15, step_ms: int = 20) -> None:
-    """Left-button drag with the real mouse: hover, press, ``steps`` intermediate moves (``step_ms`` apart, so
-    the client's 50 ms-throttled updates see several positions), release."""
+    """Left-button drag with the real mouse: hover, press, ``steps`` intermediate moves, release. The moves are
+    paced as a hand would move (``step_ms`` apart, so the client's 50 ms-throttled updates see several positions):
+    that is the input's speed, not a wait on the app."""
     x0, y0 = float(from_xy[0]), float(from_xy[1])
     x1, y1 = float(to_xy[0]), float(to_xy[1])
     page.mouse.move(x0, y0)
-    page.wait_for_timeout(50)  # let the hover raycast run before pressing
+    next_frames(page, 2)  # the hover raycast runs with the frame after the move, before pressing
     page.mouse.down()
     for i in range(1, steps + 1):
         f = i / steps

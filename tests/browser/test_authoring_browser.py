@@ -9,7 +9,7 @@ import pytest
 
 from rrbc_viz.serve import serve
 
-from .helpers import wait_for
+from .helpers import wait_camera, wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -59,7 +59,7 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     page.get_by_role("option", name="fiducial", exact=True).click()
     wait_for(lambda: app.state.click_mode == "fiducials", 10, message="click mode on the server", page=page)
     app.views.show_camera("work area")  # the target and the registration points over it
-    page.wait_for_timeout(1500)
+    wait_camera(page, app)
     n = len(app.session.last.fiducial_ids)
     t1 = app.session.last.targets.positions[0]
     spot = np.array([t1[0] + 60.0, t1[1] + 40.0, 50.0])  # on the slab beside T1

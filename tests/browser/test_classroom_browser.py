@@ -12,7 +12,13 @@ import pytest
 from rrbc_viz.camera import PRESENTATION_PANEL_WIDTH_PX
 from rrbc_viz.serve import serve
 
-from .helpers import UNDRAWN_TAB_SCRIPT, dismiss_software_webgl_notification, wait_for
+from .helpers import UNDRAWN_TAB_SCRIPT, dismiss_software_webgl_notification, next_frames, wait_camera, wait_for
+
+#: a watcher in tab 2's page: window.__sawGp turns true the moment its text shows "Interpolation gp"
+_JS_WATCH_GP = """() => { window.__sawGp = false;
+  const look = () => { if ((document.body.innerText || '').includes('Interpolation gp')) window.__sawGp = true; };
+  new MutationObserver(look).observe(document.body, {subtree: true, childList: true, characterData: true});
+  look(); return true; }"""
 
 pytestmark = pytest.mark.browser
 
@@ -50,14 +56,20 @@ def test_per_client_mode_gives_each_tab_its_own_session(viser_app, page_for):
     assert apps[0].session is not apps[1].session
     for p in (first, second):
         p.get_by_text("Interpolation idw", exact=False).first.wait_for(state="visible", timeout=30_000)
+    second.evaluate(_JS_WATCH_GP)  # from now on, note whether tab 2 ever shows gp
     # a setting changed in tab 1 through its own panel changes tab 1's session only
     first.get_by_label("Interpolation").click()
     first.get_by_role("option", name="gp", exact=True).click()
     wait_for(lambda: "Interpolation gp" in first.inner_text("body"), 20, message="tab 1 to show gp", page=first)
     gp = [a for a in app.apps.values() if a.session.settings.interpolation == "gp"]
     assert len(gp) == 1
-    second.wait_for_timeout(1500)
-    assert "Interpolation gp" not in second.inner_text("body") and "Interpolation idw" in second.inner_text("body")
+    # tab 2 never showed it: a setting changed in tab 2 afterwards reaches its page after anything sent to it before
+    # (one websocket, in order), and a watcher in the page notes whether gp was ever shown
+    second.get_by_label("Interpolation").click()
+    second.get_by_role("option", name="linear", exact=True).click()
+    wait_for(lambda: "Interpolation linear" in second.inner_text("body"), 20, message="tab 2's own change", page=second)
+    assert second.evaluate("() => window.__sawGp") is False
+    assert "Interpolation gp" in first.inner_text("body")
     # closing a tab stops its app (the other keeps running)
     second.close()
     wait_for(lambda: len(app.apps) == 1, 15, message="the closed tab's app stopped", page=first)
@@ -72,7 +84,7 @@ def test_presentation_mode_is_legible_on_a_1280x720_projector(viser_app, browser
         page.wait_for_function("() => window.__viserMutable && window.__viserMutable.canvas", timeout=30_000)
         page.get_by_text("Selected point").first.wait_for(state="visible", timeout=30_000)
         dismiss_software_webgl_notification(page, timeout_s=5.0)
-        page.wait_for_timeout(1500)  # the tab reports its camera; the app frames the view for it
+        wait_camera(page, app)  # the tab reports its camera; the app frames the view for it
         sizes = page.evaluate(_JS_FONT_SIZES)
         total = sum(sizes.values())
         big = sum(n for fs, n in sizes.items() if float(fs) >= 24.0 - 0.1)
@@ -117,8 +129,10 @@ def test_every_tab_of_the_panel_can_be_scrolled_to_its_last_control(
         tabs = [t for t in page.get_by_role("tab").all_inner_texts() if t.strip()]
         assert {"Explore", "Learn", "File"} <= set(tabs), tabs
         for name in tabs:
-            page.get_by_role("tab", name=name, exact=True).click()
-            page.wait_for_timeout(300)
+            tab = page.get_by_role("tab", name=name, exact=True)
+            tab.click()
+            wait_for(lambda t=tab: t.get_attribute("aria-selected") == "true", 10, message=f"tab {name}", page=page)
+            next_frames(page, 2)  # its panel laid out and drawn
             box = page.evaluate(_JS_PANEL_SCROLL)
             assert box["bottom"] <= height + 1, (name, box)
             assert box["lastBottom"] <= height + 1, (name, box)

@@ -21,7 +21,10 @@ from .helpers import (
     decode_png,
     dismiss_software_webgl_notification,
     drag,
+    next_frames,
     node_screen_position,
+    page_caught_up,
+    wait_camera,
     wait_for,
 )
 
@@ -50,31 +53,9 @@ _JS_PROJECT_MANY = """(pts) => {
   return {points: out, camera: [c.x, c.y, c.z], canvas: [r.left, r.top, r.width, r.height]};
 }"""
 
-_JS_CAMERA = """() => { const m = window.__viserMutable; const obj = m.nodeRefFromName['/mesh'];
-  obj.updateWorldMatrix(true, false); const c = obj.worldToLocal(m.camera.position.clone()); return [c.x, c.y, c.z]; }"""
-
-
 _JS_SOLID_CELL = (
     """() => { const o = window.__viserMutable.nodeRefFromName['/mesh/cell']; return !!(o && o.visible); }"""
 )
-
-
-def _wait_camera(page, app) -> None:
-    """Wait until the page renders with the camera the server last sent it, and a moment more (a frame)."""
-    cid = next(iter(app.server.get_clients()))
-
-    def arrived() -> bool:  # the pose last sent, read again each time: the server may have sent a newer one
-        sent = app.ctx.camera.last[cid].position
-        return bool(np.linalg.norm(np.array(page.evaluate(_JS_CAMERA)) - sent) < 1e-3 * np.linalg.norm(sent))
-
-    wait_for(
-        arrived,
-        30.0,
-        message="the page's camera",
-    )
-    page.wait_for_timeout(300)
-    # viser's own "software WebGL" notice (headless only; a user closes it once) can come late, top left
-    dismiss_software_webgl_notification(page, timeout_s=0.2)
 
 
 def _step_objects(app, step) -> dict[str, np.ndarray]:
@@ -132,7 +113,7 @@ def _project_past_software_notice(page, pts: np.ndarray) -> dict:
         if not any(SOFTWARE_WEBGL_TITLE in p["notice"] or "software mode" in (p["over"] or "") for p in covered):
             return res
         page.evaluate(_JS_HIDE_SOFTWARE_NOTICE, SOFTWARE_WEBGL_TITLE)
-        page.wait_for_timeout(200)
+        next_frames(page, 2)
         res = page.evaluate(_JS_PROJECT_MANY, pts.tolist())
     return res
 
@@ -149,7 +130,7 @@ def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_
     mesh = app.loaded.mesh
     for i, step in enumerate(teaching.STEPS):
         app.views.lesson_go(i)
-        _wait_camera(page, app)
+        wait_camera(page, app)
         dismiss_software_webgl_notification(page, timeout_s=0.3)  # on a loaded machine it can come late
         objects = _step_objects(app, step)
         for name, pts in objects.items():
@@ -184,9 +165,9 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
     app = viser_app(lambda: serve(simple_arm=True))
     page, _ = page_for(app.url)
     app.views.show_camera("close-up")
-    _wait_camera(page, app)
+    wait_camera(page, app)
     wait_for(lambda: page.evaluate(_JS_GIZMO_VISIBLE, "/targets/H1/gizmo"), 10.0, message="H1's gizmo")
-    page.wait_for_timeout(500)
+    page_caught_up(page, app.server)
 
     def gizmo_meshes(name: str) -> int:
         wait_for(lambda: page.evaluate("(n) => !!window.__viserMutable.nodeRefFromName[n]", name + "/sphere"), 10.0)
@@ -200,7 +181,7 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
     # a refused drag: pull H1's z arrow far up, beyond the arm's reach. The session keeps the last place it
     # accepted; the handle in the page must end there, not where the mouse let go
     app.views.show_camera("whole cell")
-    _wait_camera(page, app)
+    wait_camera(page, app)
     grip = node_screen_position(page, "/targets/H1/gizmo", (0.0, 0.0, 0.7 * app.nodes.gizmo_scale()))
     drag(page, grip, (grip[0], 5.0), steps=10, step_ms=25)  # each move waits for a frame (software WebGL)
     wait_for(lambda: app.messages, 15.0, message="a refusal message")
@@ -232,18 +213,18 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
     page, _ = page_for(app.url)
     app.evaluate.set_layer("slice", True)
     app.views.show_camera("close-up")
-    _wait_camera(page, app)
+    wait_camera(page, app)
     others = [name for name in app.state.layers if name != "slice" and app.state.layers[name]]
 
     def slice_alone_shot():
         """The view with every layer but the slice hidden: what changes is the slice."""
         for name in others:
             app.evaluate.set_layer(name, False)
-        page.wait_for_timeout(600)
+        page_caught_up(page, app.server)
         png = page.screenshot(animations="disabled")
         for name in others:
             app.evaluate.set_layer(name, True)
-        page.wait_for_timeout(600)
+        page_caught_up(page, app.server)
         return decode_png(png).astype(int)
 
     before = slice_alone_shot()
@@ -255,13 +236,16 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
         if app.state.selected == ("fiducials", "F5"):
             return True
         page.mouse.click(*node_screen_position(page, "/fiducials/F5/gizmo/sphere"))
-        page.wait_for_timeout(500)
-        return app.state.selected == ("fiducials", "F5")
+        try:  # the click's answer, or a second click
+            wait_for(lambda: app.state.selected == ("fiducials", "F5"), 2.0, message="F5 selected", page=page)
+        except TimeoutError:
+            return False
+        return True
 
     wait_for(click_f5, 30.0, interval_s=0.2, message="F5 selected by a click", page=page)
     wait_for(lambda: page.evaluate(_JS_GIZMO_VISIBLE, "/fiducials/F5/gizmo"), 5.0, message="F5's gizmo shown")
     assert page.evaluate(_JS_GIZMO_VISIBLE, "/targets/H1/gizmo") == 0
-    page.wait_for_timeout(300)
+    page_caught_up(page, app.server)
     image0 = np.array(app.slice_node.handle.image)
     f0 = np.array(app.evaluate.gizmo("fiducials", "F5").position)
     scale = app.nodes.gizmo_scale()
@@ -269,8 +253,13 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
     b = node_screen_position(page, "/fiducials/F5/gizmo", (2.5 * scale, 0.0, 0.0))
     drag(page, a, b, steps=8)
     wait_for(lambda: not np.allclose(app.evaluate.gizmo("fiducials", "F5").position, f0), 5.0, message="F5 moved")
-    page.wait_for_timeout(800)  # the drag's end: the slice is recomputed and sent
-    assert not np.array_equal(np.array(app.slice_node.handle.image), image0)
+    # the drag's end: the slice is recomputed and sent
+    wait_for(
+        lambda: not np.array_equal(np.array(app.slice_node.handle.image), image0),
+        30.0,
+        message="a new slice",
+        page=page,
+    )
     # only the slice is drawn in both shots (same camera): pixels that changed are the slice's new colours; the new
     # image reaches the browser and is drawn when it is drawn (a loaded machine takes seconds), so poll for it
     for name in others:
