@@ -4,7 +4,8 @@ Run: .venv/bin/python examples/03_drive_the_app.py [--keep]   (--keep: leave the
 
 `serve` starts the app on a free port and returns at once; the returned app has one controller per feature
 (docs/architecture.md): `app.evaluate` moves points and changes settings, `app.views` the camera and the selection,
-`app.diagnose` runs `rrbc diagnose` on the session's data, `app.plan` suggests fiducials. Each call updates every
+`app.plan` suggests fiducials, and the plug-in tabs' controllers (`app.tab(name, class)`) do what their tabs do: the
+Diagnose tab's runs `rrbc diagnose` on the session's data. Each call updates every
 open browser tab, exactly as the same action in the browser would; the numbers come from `app.session`.
 """
 
@@ -14,6 +15,7 @@ import time
 import numpy as np
 
 from rrbc_core.analysis.diagnosis_text import diagnosis_lines
+from rrbc_viz.controllers.diagnose import DiagnoseController
 from rrbc_viz.serve import serve
 
 app = serve()  # the bundled work cell; serve("my_scene.toml") or serve("data.csv") for your own
@@ -38,7 +40,9 @@ try:
     app.views.select("targets", app.session.last.targets.ids[0])  # the info card and bullseye show this target
     app.evaluate.set_layer("heatmap", True)
 
-    diagnosis = app.diagnose.run()  # the Diagnose tab: the same lines `rrbc diagnose` prints for this data set
+    diagnosis = app.tab(
+        "diagnose", DiagnoseController
+    ).run()  # the Diagnose tab: the same lines `rrbc diagnose` prints for this data set
     if diagnosis is None:
         print("diagnose refused:", app.last_message)
     else:

@@ -38,7 +38,7 @@ import io
 import threading
 from collections.abc import Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import viser
@@ -69,6 +69,7 @@ from .state import AppState
 from .tab_plugin import TabController, TabSpec
 from .tabs import TABS
 
+T = TypeVar("T")
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
 
 
@@ -139,6 +140,14 @@ class RunningApp:
         self.views.on_point_click(kind, pid, client=client)
 
     # ------------------------------------------------------------------------------------------ what it holds
+    def tab(self, name: str, kind: type[T]) -> T:
+        """The plug-in tab `name`'s controller (`tabs`), checked to be a `kind` (its class), so that a caller's
+        use of it is type-checked (examples/03_drive_the_app.py runs the Diagnose tab's this way)."""
+        controller = self.tabs[name]
+        if not isinstance(controller, kind):
+            raise TypeError(f"tab {name!r} is a {type(controller).__name__}, not a {kind.__name__}")
+        return controller
+
     @property
     def session(self) -> ExplorerSession:
         return self.ctx.session

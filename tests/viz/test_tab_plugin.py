@@ -12,6 +12,7 @@ import io
 from collections.abc import Callable
 from typing import Any, Protocol
 
+import pytest
 import viser
 
 from rrbc_viz import sources
@@ -93,8 +94,12 @@ def test_a_tab_added_by_a_spec_is_laid_out_reached_and_told():
         tab.hooks.clear()
         app.install(sources.load_source(None, None))
         assert tab.hooks[0] == "installed" and panel.text() == "not counted"
-        # the other tabs still work beside it
-        assert app.tabs["diagnose"].run() is not None
+        # the other tabs still work beside it; a caller gets a tab's controller typed (a wrong class is refused)
+        from rrbc_viz.controllers.diagnose import DiagnoseController
+
+        assert app.tab("diagnose", DiagnoseController).run() is not None
+        with pytest.raises(TypeError, match="not a DiagnoseController"):
+            app.tab("counter", DiagnoseController)
     finally:
         app.stop()
     assert tab.hooks[-1] == "stop"
