@@ -35,6 +35,7 @@ prismatic → R a. An input's column sums the columns of the joints it drives, t
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,13 +48,24 @@ _AXIS_NAMES = ("x", "y", "z")
 
 def rotation(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Rotations (..., 3, 3) about unit `axes` (..., 3) or one axis (3,) by `angles` (...) rad (Rodrigues)."""
-    a = np.broadcast_to(np.asarray(axes, float), np.shape(angles) + (3,))
     c, s = np.cos(angles)[..., None, None], np.sin(angles)[..., None, None]
+    if np.ndim(axes) == 1:  # one axis: I + sin K + (1 - cos) K², K its cross-product matrix
+        x, y, z = np.asarray(axes, float)
+        k1 = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+        return np.eye(3) + s * k1 + (1.0 - c) * (k1 @ k1)
+    a = np.broadcast_to(np.asarray(axes, float), np.shape(angles) + (3,))
     k = np.zeros(a.shape[:-1] + (3, 3))
     k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
     k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = a[..., 2], -a[..., 1], a[..., 0]
     outer = a[..., :, None] * a[..., None, :]
     return c * np.eye(3) + s * k + (1.0 - c) * outer
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b over axis 1 of (N, 3, M) arrays (broadcast): np.cross without its per-call overhead."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=1)
 
 
 def _rotvec(v: np.ndarray) -> np.ndarray:
@@ -157,6 +169,12 @@ class Chain:
 
     def _directions(self) -> list[tuple[int, str, str, np.ndarray]]:
         """Per parameter: (joint index or -1 for the tool, kind "offset"/"rot"/"pos", name suffix, direction)."""
+        return self._parameters[0]
+
+    @functools.cached_property
+    def _parameters(self) -> tuple[list[tuple[int, str, str, np.ndarray]], np.ndarray, np.ndarray, np.ndarray]:
+        """(`_directions`, their directions (P, 3), whether each is a rotation (P,) bool, whether its Jacobian column
+        is a moment arm (P,) bool: a rotation or a revolute joint's offset); computed once per chain."""
         out: list[tuple[int, str, str, np.ndarray]] = []
         for k, j in enumerate(self.joints):
             out.append((k, "offset", "offset", j.axis))
@@ -166,7 +184,12 @@ class Chain:
             out += [(k, "rot", "r" + n, d) for d, n in rots]
             out += [(k, "pos", n, d) for d, n in poss]
         out += [(-1, "pos", n, np.eye(3)[i]) for i, n in enumerate(_AXIS_NAMES)]
-        return out
+        directions = np.array([d for _, _, _, d in out], float)
+        is_rot = np.array([kind == "rot" for _, kind, _, _ in out])
+        arm = np.array([kind == "rot" or (kind == "offset" and not self.joints[k].prismatic) for k, kind, _, _ in out])
+        for a in (directions, is_rot, arm):
+            a.setflags(write=False)
+        return out, directions, is_rot, arm
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -228,7 +251,7 @@ class Chain:
         """
         qa = self._check_q(q)
         n = len(qa)
-        dirs = self._directions()
+        _, directions, is_rot, arm = self._parameters
         d = np.zeros(self.n_params) if delta is None else np.asarray(delta, float).reshape(self.n_params)
         v = self._values(qa) + (0.0 if dv is None else np.asarray(dv, float))
         rot = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
@@ -236,12 +259,9 @@ class Chain:
         frames = []  # per joint: (R of G_k (N,3,3), o of G_k (N,3)) before the motion
         for k, j in enumerate(self.joints):
             base = 6 * k
-            rv, e_pos = np.zeros(3), np.zeros(3)
-            for idx in range(base + 1, base + 6):
-                if dirs[idx][1] == "rot":
-                    rv = rv + d[idx] * dirs[idx][3]
-                else:
-                    e_pos = e_pos + d[idx] * dirs[idx][3]
+            sl = slice(base + 1, base + 6)
+            w = d[sl][:, None] * directions[sl]
+            rv, e_pos = w[is_rot[sl]].sum(axis=0), w[~is_rot[sl]].sum(axis=0)
             e_rot = _rotvec(rv) if drot is None or not np.any(drot[:, k]) else _rotvecs(rv + drot[:, k])
             o_rot = j.origin[:3, :3] @ e_rot
             o_pos = j.origin[:3, :3] @ e_pos + j.origin[:3, 3]
@@ -258,22 +278,16 @@ class Chain:
         if not jacobians:
             return p, None, None
         d_params = np.empty((n, 3, self.n_params))
-        joint_cols = np.empty((n, 3, len(self.joints)))
-        for col, (k, kind, _, direction) in enumerate(dirs):
-            if k < 0:
-                d_params[:, :, col] = rot @ (self.tail[:3, :3] @ direction)
-                continue
-            r_k, o_k = frames[k]
-            world = r_k @ direction
-            if kind == "pos" or (kind == "offset" and self.joints[k].prismatic):
-                d_params[:, :, col] = world
-            else:
-                d_params[:, :, col] = np.cross(world, p - o_k)
-            if kind == "offset":
-                joint_cols[:, :, k] = d_params[:, :, col]
+        for k, (r_k, o_k) in enumerate(frames):  # a joint's six columns at once
+            sl = slice(6 * k, 6 * k + 6)
+            world = r_k @ directions[sl].T  # (N, 3, 6)
+            lever = (p - o_k)[:, :, None]
+            cols = np.where(arm[sl], _cross(world, lever), world)
+            d_params[:, :, sl] = cols
+        d_params[:, :, -3:] = rot @ (self.tail[:3, :3] @ directions[-3:].T)
         d_inputs = np.zeros((n, 3, len(self.inputs)))
         for k, j in enumerate(self.joints):
-            d_inputs[:, :, j.driver] += j.multiplier * joint_cols[:, :, k]
+            d_inputs[:, :, j.driver] += j.multiplier * d_params[:, :, 6 * k]
         return p, d_params, d_inputs
 
     def joint_error(self, k: int, delta) -> np.ndarray:
