@@ -67,6 +67,16 @@ def _nll(z2: np.ndarray, d: np.ndarray, lam: np.ndarray) -> tuple[float, float]:
     return 3 * m * np.log(s2) + float(np.sum(np.log(den))), s2
 
 
+def _nll_many(z2: np.ndarray, d: np.ndarray, lams: np.ndarray) -> np.ndarray:
+    """`_nll`'s value (T,) for each row of lams (T, 3) at once (inf where σ̂² is not positive)."""
+    m = len(d)
+    den = lams[:, None, :] * d[None, :, None] + 1.0  # (T, M, 3)
+    s2 = np.sum(z2[None] / den, axis=(1, 2)) / (3 * m)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = 3 * m * np.log(s2) + np.sum(np.log(den), axis=(1, 2))
+    return np.where(s2 > 0, out, np.inf)
+
+
 _EIGS_LOCK = threading.Lock()
 _EIGS: OrderedDict[bytes, tuple] = OrderedDict()  # the points' bytes -> their kernels' eigendecompositions
 _EIGS_KEPT = 2  # point sets kept (at most 18 x 2 MB each at MAX_POINTS)
@@ -113,7 +123,7 @@ def fit_field(points: np.ndarray, residuals: np.ndarray) -> FieldModel:
             for a in range(3):
                 trial = np.repeat(lam[None], len(_LAMBDAS), axis=0)
                 trial[:, a] = _LAMBDAS
-                lam[a] = _LAMBDAS[int(np.argmin([_nll(z2, d, t)[0] for t in trial]))]
+                lam[a] = _LAMBDAS[int(np.argmin(_nll_many(z2, d, trial)))]
         nll, s2 = _nll(z2, d, lam)
         if best is None or nll < best[0]:
             best = (nll, ell, lam.copy(), s2, u, d, z)
