@@ -117,9 +117,9 @@ def test_the_shipped_plugin_tabs_have_the_three_file_shape():
         assert spec.controller.__module__.startswith("rrbc_viz.controllers."), spec.controller.__module__
         assert issubclass(spec.controller, TabController)  # type: ignore[arg-type]
         tree = ast.parse((ROOT / (panel_mod.replace(".", "/") + ".py")).read_text())
-        imported = {
-            (n.module or "") for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
-        } | {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        imported = {(n.module or "") for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)} | {
+            a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names
+        }
         assert not any("controllers" in m or m.endswith("app") for m in imported), (panel_mod, imported)
         for name, text in wiring.items():
             for word in (spec.panel.__name__, spec.controller.__name__):  # type: ignore[union-attr]
