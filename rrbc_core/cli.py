@@ -87,6 +87,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
     add_robot_model_options(g, "with joint columns")
+    from rrbc_core.models.instrument import INSTRUMENTS  # numpy only: the parser stays light
+
+    g.add_argument(
+        "--instrument",
+        choices=list(INSTRUMENTS),
+        default=None,
+        help="the sensor: a scale beyond what it plausibly has is said to be implausible (docs/limits.md)",
+    )
     g.add_argument("--json", action="store_true", help="print one JSON object")
     g.set_defaults(run=_cmd_diagnose)
 
@@ -287,7 +295,9 @@ def _cmd_diagnose(args) -> str:
 
     mset = read_measurements(args.measurements)
     tool = args.tool if args.tool is not None else file_tool(mset)
-    dg = diagnose_stations(mset, alpha=args.alpha, seed=args.seed, tool_mm=tool, **robot_model_args(args))
+    dg = diagnose_stations(
+        mset, alpha=args.alpha, seed=args.seed, tool_mm=tool, instrument=args.instrument, **robot_model_args(args)
+    )
     if args.json:
         return json.dumps(dg.to_json(), allow_nan=False) + "\n"
     if isinstance(dg, StationsDiagnosis):

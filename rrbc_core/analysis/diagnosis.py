@@ -31,7 +31,15 @@ from pathlib import Path
 import numpy as np
 
 from rrbc_core.analysis.diagnosis_arm import MIN_POINTS as ARM_MIN_POINTS
-from rrbc_core.analysis.diagnosis_arm import ArmModel, arm_columns, arm_untested_hint
+from rrbc_core.analysis.diagnosis_arm import (
+    ArmModel,
+    arm_columns,
+    arm_untested_hint,
+    configuration_columns,
+    implausible_scale,
+    joint_like_columns,
+    short_field,
+)
 from rrbc_core.analysis.diagnosis_field import fit_field, krige_outliers, noise_beside_field
 from rrbc_core.analysis.diagnosis_stats import (
     noise_cov,
@@ -45,6 +53,7 @@ from rrbc_core.analysis.diagnosis_verdict import rrbc_verdict
 from rrbc_core.correction.check_statistics import CheckStatistics, GainTest
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
+from rrbc_core.models.instrument import INSTRUMENTS
 from rrbc_core.registration.strategies import least_squares
 from rrbc_core.runtime.threads import thread_limited
 
@@ -154,6 +163,8 @@ def diagnose(
     urdf: str | Path | None = None,
     tip: str | None = None,
     base: str | None = None,
+    configuration: bool = True,
+    instrument: str | None = None,
 ) -> Diagnosis:
     """What, beyond a rigid transform plus isotropic noise, is in measured point pairs; and whether RRBC will help.
 
@@ -171,6 +182,13 @@ def diagnose(
         tip and base links (columns named after its joints); a tool length along the DH flange's z axis or a point
         (3,) in the tip link's frame (mm). Without robot or urdf, q1..q6 columns are tried as a UR5 and skipped with
         a limit if it does not describe them.
+    configuration : bool
+        Without an arm model (none given, the UR5 not describing the columns), test whether the residuals follow
+        the file's joint-like columns (`diagnosis_arm.configuration_columns`: harmonics of the joint values); named,
+        it is the `kinematic` effect with `model` "none" (not identified: give the model to identify it).
+    instrument : str, optional
+        The sensor (`models.instrument.INSTRUMENTS`): a named scale beyond what it plausibly has
+        (`PLAUSIBLE_SCALE_PPM`) is said to be implausible in the limits, with the likelier cause.
 
     Returns
     -------
@@ -187,11 +205,15 @@ def diagnose(
     """
     if not (0 < float(alpha) < 1):
         raise InputError(f"alpha must be between 0 and 1, got {alpha!r}")
+    if instrument is not None and instrument not in INSTRUMENTS:
+        raise InputError(f"unknown instrument {instrument!r}: one of {', '.join(INSTRUMENTS)}")
     d = paired(mset)
     n_all = len(d.ids)
     limits: list[str] = []
     model = ArmModel(robot, None if urdf is None else str(urdf), tip, base, tool_mm if tool_mm else None)
     arm = arm_columns(mset, d.rows, d.row_point, n_all, model, limits)
+    if arm is None and configuration and not model.chosen:
+        arm = configuration_columns(mset, d.rows, d.row_point, n_all, limits)  # no model: the joints' harmonics
     if arm is not None and n_all < ARM_MIN_POINTS:
         limits.append(f"only {n_all} paired points with joint angles: the arm's kinematic error was not tested")
         arm = None
@@ -275,6 +297,12 @@ def diagnose(
         # the field's RMS over the points: the rigid residual less drift and the arm, less the noise
         bias_f = resid - systematic_at(d, arm, ps, inl)
         rms = float(np.sqrt(max(float(np.mean(np.sum(bias_f**2, axis=1))) - noise_pp, 0.0)))
+        # ... and never more than the rigid bias leaves beside what the arm explains (its honest size): where the arm's
+        # columns nearly coincide with the field's linear part, the two fitted displacements cancel and the field's
+        # alone is no size
+        arm_sq = sum(effects[k].magnitude_mm ** 2 for k in ("kinematic", "compliance") if k in effects)
+        total_sq = max(float(np.mean(np.sum(resid**2, axis=1))) - noise_pp, 0.0)
+        rms = min(rms, float(np.sqrt(max(total_sq - arm_sq, 0.0))))
         i_obs, i_mean, k_nb = ps.moran
         dropped = [f"{nm} (p {fmt_p(pv)} beside {bs})" for nm, pv, bs in ps.rejudged if bs == "the field"]
         effects["smooth_field"] = Effect(
@@ -321,9 +349,14 @@ def diagnose(
                 "absorbed by the arm's columns, may go unnamed"
             )
 
-    hint = arm_untested_hint(mset, arm is not None, effects)
-    if hint is not None:
-        limits.append(hint)
+    hint = arm_untested_hint(mset, arm is not None and not arm.model_free, effects, instrument)
+    for line in (
+        hint,
+        implausible_scale(effects, instrument, bool(joint_like_columns(mset))),
+        short_field(effects, reg.mapping.apply(d.sensor[inl])),
+    ):
+        if line is not None:
+            limits.append(line)
 
     # bias, and RRBC on the file as given: rrbc correct's own figure on its check rows, else leave-one-out
     bias = float(np.sqrt(max(0.0, float(np.mean(np.sum(resid**2, axis=1))) - noise_pp)))

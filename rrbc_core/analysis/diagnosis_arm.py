@@ -44,13 +44,15 @@ class ArmColumns:
     robot: str
     tip: str
     tool_mm: tuple
-    check: ModelCheck
+    check: ModelCheck | None
     #: the load terms the data can see (`models.loads.candidate_terms`; empty without link masses), their columns
     #: per point (T, N, 3) and per row (R, 3, T) in mm per scaled coefficient, and the scales (T,) (mm per rad/Nm)
     load_terms: tuple = ()
     load_fields: np.ndarray | None = None
     load_row_fields: np.ndarray | None = None
     load_scales: np.ndarray | None = None
+    #: no arm model: the columns are harmonics of the file's joint-like columns (`configuration_columns`), named here
+    model_free: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -156,7 +158,9 @@ def joint_like_columns(mset: MeasurementSet) -> list[str]:
     return [c for c in mset.extra if JOINT_LIKE.search(str(c).strip())]
 
 
-def arm_untested_hint(mset: MeasurementSet, arm_tested: bool, effects: dict) -> str | None:
+def arm_untested_hint(
+    mset: MeasurementSet, arm_tested: bool, effects: dict, instrument: str | None = None
+) -> str | None:
     """A limit for a file with joint columns whose arm was not tested (no model given, or the default UR5 does not
     describe it): the sensor effects named may be the arm's, and how to give its model; with a named `scale`
     beyond `INSTRUMENT_SCALE_PPM`, that it is more than a measuring instrument's. None when nothing applies."""
@@ -171,9 +175,11 @@ def arm_untested_hint(mset: MeasurementSet, arm_tested: bool, effects: dict) -> 
         "tested: an arm's kinematic or load errors show in the sensor frame as a scale, an affine term or a smooth "
         "field"
     )
+    if "kinematic" in effects:
+        text += " (what follows the joint configuration itself is named kinematic, without its parameters)"
     if sensor:
         text += f", so what is named here ({', '.join(sensor)}) may be the arm's"
-    if "scale" in effects:
+    if "scale" in effects and instrument is None:  # (with an instrument, `implausible_scale` says it)
         ppm = float(effects["scale"].parameters.get("ppm", 0.0))
         if abs(ppm) > INSTRUMENT_SCALE_PPM:
             text += (
@@ -183,4 +189,123 @@ def arm_untested_hint(mset: MeasurementSet, arm_tested: bool, effects: dict) -> 
     return (
         text + "; give the arm's model (--robot ur5|ur10, or --urdf ROBOT.urdf --tip LINK) and its tool (--tool) "
         "to test it, and rrbc calibrate to correct it"
+    )
+
+
+#: the model-free configuration test (`configuration_columns`): sums of up to this many consecutive angle columns
+CONFIGURATION_CHAIN = 3
+#: at least this many paired points per harmonic (each harmonic is 3 columns: one per robot axis)
+CONFIGURATION_POINTS_PER_HARMONIC = 3
+
+
+def configuration_columns(
+    mset: MeasurementSet, rows: np.ndarray, row_point: np.ndarray, n_points: int, limits: list
+) -> ArmColumns | None:
+    """Without an arm model, columns that let `rrbc diagnose` test whether the residuals follow the arm's joint
+    configuration (docs/theory.md §6.5): the file's joint-like columns (`JOINT_LIKE`) as angles (radians, or degrees
+    when a column goes beyond 2π) give sin and cos of each joint and of the sums of up to `CONFIGURATION_CHAIN`
+    consecutive joints (a serial arm's error is built of such terms: parallel joints add their angles); a column
+    beyond 400 (a prismatic joint, mm) gives its value and its square. Each harmonic h(q) enters as three columns
+    h(q)·e_a, one per robot axis: its fields (3H, N, 3). None, with a limit saying why, when the file has no usable
+    joint-like column or too few points for the harmonics (`CONFIGURATION_POINTS_PER_HARMONIC` each)."""
+    names = joint_like_columns(mset)
+    if not names:
+        return None
+    q = np.empty((len(rows), len(names)))
+    for k, name in enumerate(names):
+        try:
+            q[:, k] = [float(v) for v in np.asarray(mset.extra[name], dtype=object)[rows]]
+        except (TypeError, ValueError):
+            limits.append(f"the joint-like column {name} is not numeric on every row: the configuration was not tested")
+            return None
+    if not np.all(np.isfinite(q)):
+        limits.append("the joint-like columns have empty or non-finite values: the configuration was not tested")
+        return None
+    feats: list[np.ndarray] = []
+    angles: list[np.ndarray] = []
+    for k in range(len(names)):
+        col = q[:, k]
+        if np.ptp(col) <= 0:
+            continue  # a joint that does not move
+        big = float(np.max(np.abs(col)))
+        if big <= 2 * np.pi + 0.1:
+            angles.append(col)
+        elif big <= 400.0:
+            angles.append(np.radians(col))
+        else:
+            z = (col - col.mean()) / np.std(col)
+            feats += [z, z**2]
+    rest: list[np.ndarray] = []
+    for length in range(1, CONFIGURATION_CHAIN + 1):
+        for start in range(1, len(angles) - length + 1):
+            a = np.sum(angles[start : start + length], axis=0)
+            rest += [np.sin(a), np.cos(a)]
+    if angles:
+        first = [np.sin(angles[0]), np.cos(angles[0])]
+        feats += first + rest + [f * r for f in first for r in rest]
+    if not feats:
+        return None
+    h = np.array(feats)  # (H, R)
+    h = h - h.mean(axis=1, keepdims=True)  # the constant part is the rigid translation's
+    need = CONFIGURATION_POINTS_PER_HARMONIC * len(h)
+    if n_points < need:
+        limits.append(
+            f"the file has joint columns ({', '.join(names[:8])}) but only {n_points} paired points: testing whether "
+            f"the residuals follow the arm's configuration without its model needs {need} ({len(h)} harmonics of the "
+            "joint values); give the arm's model to test it with fewer"
+        )
+        return None
+    row_fields = np.zeros((len(rows), 3, 3 * len(h)))
+    for a in range(3):
+        row_fields[:, a, a::3] = h.T
+    return ArmColumns(
+        _per_point(row_fields, row_point, n_points),
+        row_fields,
+        "",
+        "",
+        (),
+        None,
+        model_free=tuple(names),
+    )
+
+
+def implausible_scale(effects: dict, instrument: str | None, has_joints: bool) -> str | None:
+    """A limit when the named `scale` is more than the given instrument plausibly has
+    (`models.instrument.PLAUSIBLE_SCALE_PPM`): the cause is then likelier elsewhere (the arm, when the file has
+    joint columns; the two frames' units or a thermal state otherwise). None when nothing applies."""
+    from rrbc_core.models.instrument import PLAUSIBLE_SCALE_PPM
+
+    if instrument is None or "scale" not in effects:
+        return None
+    ppm = float(effects["scale"].parameters.get("ppm", 0.0))
+    limit = PLAUSIBLE_SCALE_PPM[instrument]
+    if abs(ppm) <= limit:
+        return None
+    cause = (
+        "the arm (its lengths, or its kinematic error seen as a scale) is the likelier cause"
+        if has_joints
+        else "look for another cause: the robot's own scale (its lengths), a unit or a temperature left uncompensated"
+    )
+    return (
+        f"the scale of {ppm:+.4g} ppm is more than a {instrument} plausibly has (at most {limit:g} ppm, "
+        f"docs/limits.md): {cause}"
+    )
+
+
+def short_field(effects: dict, points: np.ndarray) -> str | None:
+    """A limit when the named smooth field's correlation length is shorter than the points' typical spacing (the
+    median distance to the nearest other point): neighbouring points do not share such a 'field', and no sensor
+    distorts its space that way. None when nothing applies."""
+    if "smooth_field" not in effects or len(points) < 3:
+        return None
+    from scipy.spatial import cKDTree
+
+    length = float(effects["smooth_field"].parameters.get("length_scale_mm", np.inf))
+    spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
+    if not length < 0.5 * spacing:
+        return None
+    return (
+        f"the smooth field's correlation length ({length:.3g} mm) is shorter than half the points' typical spacing "
+        f"({spacing:.3g} mm): neighbouring points do not share it, so it is no sensor's smooth distortion; an error "
+        "that changes from pose to pose (the arm's configuration, a loose tool) or noise beyond the model is likelier"
     )

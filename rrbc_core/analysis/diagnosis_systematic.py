@@ -115,21 +115,49 @@ def _scale_rate(g: Geometry, y: np.ndarray, blocks: dict, found: dict, tests: di
     blocks["scale_rate"] = col
 
 
+def _model_free_effect(arm, q_k, nu_k, f_k, p_k, p_kf, rss_a, rss_k, rms_k) -> Effect:
+    """`kinematic` without an arm model (`diagnosis_arm.configuration_columns`): the residuals follow the joint
+    values; the arm is named as the cause, its parameters are not identified."""
+    cols = ", ".join(arm.model_free[:8]) + (", ..." if len(arm.model_free) > 8 else "")
+    return Effect(
+        "kinematic",
+        {
+            "robot": None,
+            "model": "none",
+            "joint_columns": list(arm.model_free),
+            "combinations": int(q_k),
+            "rms_mm": rms_k,
+        },
+        p_k,
+        f"the residuals follow the arm's joint configuration, not only the position: {q_k} directions of the "
+        f"harmonics of the joint columns ({cols}; no arm model was given) reduce the residual sum of squares beside "
+        f"the accepted terms from {rss_a:.3g} to {rss_k:.3g} (F({q_k}, {nu_k}) = {f_k:.3g}, p {fmt_p(p_k)}), more "
+        f"than a smooth field of position alone explains (p {fmt_p(p_kf)}): the arm's kinematic or load error, not "
+        "the sensor's. Give the arm's model (--robot ur5|ur10, or --urdf ROBOT.urdf --tip LINK, with --tool) to "
+        "identify it, and `rrbc calibrate` to correct it.",
+        magnitude_mm=rms_k,
+    )
+
+
 def _honest_arm_sizes(g: Geometry, y: np.ndarray, blocks: dict, found: dict, wsum: float) -> None:
     """The sizes of the accepted arm effects (kinematic, compliance) as what each explains beyond every other
     accepted term: the RMS (weighted, in mm, unwhitened) of the fit's change when it is left out, like scale's and
     drift's. The RMS of the arm's own fitted
     displacement is no size: where its columns nearly coincide with the affine ones the joint fit is a cancelling
-    pair, hundreds of mm each on millimetre data. This size is never more than the residual it explains."""
+    pair, hundreds of mm each on millimetre data. This size is never more than the residual it explains, nor than
+    the rigid fit's residual RMS."""
     names = [k for k in ("kinematic", "compliance") if k in found and k in blocks]
     if not names:
         return
     res_all = fit(y, np.hstack(list(blocks.values())))[1]
     w = g.sw.reshape(g.n, 3)[:, 0] ** 2
+    # what the rigid fit leaves (mm): no effect explains more than that
+    rigid_res = mm_cols(g, fit(y, blocks["rigid"])[1][:, None])[:, 0].reshape(g.n, 3)
+    most = float(np.sqrt(np.sum(w * np.sum(rigid_res**2, axis=1)) / wsum))
     for name in names:
         res_without = fit(y, np.hstack([v for k, v in blocks.items() if k != name]))[1]
         part = mm_cols(g, (res_without - res_all)[:, None])[:, 0].reshape(g.n, 3)  # in mm, unwhitened
-        size = float(np.sqrt(np.sum(w * np.sum(part**2, axis=1)) / wsum))
+        size = min(float(np.sqrt(np.sum(w * np.sum(part**2, axis=1)) / wsum)), most)
         e = found[name]
         found[name] = replace(
             e,
@@ -267,22 +295,26 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             rejudged += rejudge(y, blocks, found, a_each, "the arm", tests)
             delta = k_map @ fit(y, x_of(blocks))[0][-kfull.shape[1] :]
             rms_k = float(np.sqrt(np.mean(np.sum(np.einsum("knc,k->nc", arm.fields[:, inl], delta) ** 2, axis=1))))
-            found["kinematic"] = Effect(
-                "kinematic",
-                {
-                    "robot": arm.robot,
-                    "tip": arm.tip,
-                    "tool_mm": list(arm.tool_mm),
-                    "combinations": int(q_k),
-                    "rms_mm": rms_k,
-                },
-                p_k,
-                f"the residuals follow the arm's joint configuration: {q_k} combinations of its kinematic "
-                f"parameters, identifiable at these poses beside the accepted terms, reduce the residual sum of "
-                f"squares from {rss_a:.3g} to {rss_k:.3g} (F({q_k}, {nu_k}) = {f_k:.3g}, p {fmt_p(p_k)}), and "
-                f"more than a smooth field of position alone explains (p {fmt_p(p_kf)}); `rrbc calibrate` "
-                "identifies them and compares model-based correction with RRBC.",
-                magnitude_mm=rms_k,
+            found["kinematic"] = (
+                _model_free_effect(arm, q_k, nu_k, f_k, p_k, p_kf, rss_a, rss_k, rms_k)
+                if arm.model_free
+                else Effect(
+                    "kinematic",
+                    {
+                        "robot": arm.robot,
+                        "tip": arm.tip,
+                        "tool_mm": list(arm.tool_mm),
+                        "combinations": int(q_k),
+                        "rms_mm": rms_k,
+                    },
+                    p_k,
+                    f"the residuals follow the arm's joint configuration: {q_k} combinations of its kinematic "
+                    f"parameters, identifiable at these poses beside the accepted terms, reduce the residual sum of "
+                    f"squares from {rss_a:.3g} to {rss_k:.3g} (F({q_k}, {nu_k}) = {f_k:.3g}, p {fmt_p(p_k)}), and "
+                    f"more than a smooth field of position alone explains (p {fmt_p(p_kf)}); `rrbc calibrate` "
+                    "identifies them and compares model-based correction with RRBC.",
+                    magnitude_mm=rms_k,
+                )
             )
         if arm.load_fields is not None:
             c_delta, c_map = _compliance(g, p, y, blocks, found, tests, limits, arm, inl, kfull, base, a_each, x_of)

@@ -253,7 +253,7 @@ def _name(
 ) -> tuple[list[Effect], MeasurementSet, Diagnosis]:
     """What the model leaves unexplained in rows `rows`, in diagnose's vocabulary (module docstring)."""
     rem = _remainder(mset, meas, mean, cov, rows, seed)
-    diag = diagnose(rem, alpha=alpha, seed=seed, **arm)
+    diag = diagnose(rem, alpha=alpha, seed=seed, configuration=False, **arm)  # a scene's arm is its model
     kinds = set(model.kinds)
     effects = [e for e in diag.effects if not any(k in kinds for k in _HAS.get(e.name, ()))]
     noise = _noise_effect(diag, cov, rows, alpha)

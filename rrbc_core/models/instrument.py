@@ -34,6 +34,12 @@ PRESETS: dict[str, dict] = {
     "cmm": {"polar": False, "sigma_mm": 0.001},
 }
 INSTRUMENTS = tuple(PRESETS)
+#: the largest scale error (ppm) each instrument plausibly has (`rrbc diagnose`'s plausibility limits; docs/limits.md,
+#: "What a sensor can plausibly have"): a tracker's or a CMM's distances are good to a few ppm once compensated for
+#: temperature (about 1 ppm per kelvin of air for a tracker, 11.5 ppm per kelvin of a steel scale left
+#: uncompensated); a total station's to 1.5 ppm plus its atmospheric correction (1 ppm per kelvin or per 3.6 hPa
+#: left out); a stereo camera's scale rests on its calibrated baseline, often a tenth of a per cent off
+PLAUSIBLE_SCALE_PPM: dict[str, float] = {"tracker": 10.0, "total-station": 20.0, "stereo": 5000.0, "cmm": 15.0}
 #: an override larger than this (mm, or µrad for angles) is refused: it is not a measuring instrument's noise
 MAX_SIGMA_MM = 100.0
 MAX_ANGLE_URAD = 1e5
