@@ -57,7 +57,10 @@ def test_an_arm_error_is_named_as_the_arm_without_a_model(seed):
     assert 0 < k.magnitude_mm <= _rigid_rms(m) + 3 * 0.02  # (the files' noise: 0.02 mm per axis)
     # the same file with its model: the arm tested and identified, as before
     tested = diagnose(joint_measurements(seed, dh_size=3.0, n_fid=200, n_chk=60), robot="ur5", tool_mm=TOOL_MM)
-    assert "kinematic" in {e.name for e in tested.effects}
+    by_model = {e.name: e for e in tested.effects}
+    assert "kinematic" in by_model
+    # and the size without the model is the arm's: within 10 % of the size the model gives
+    assert abs(k.magnitude_mm / by_model["kinematic"].magnitude_mm - 1) < 0.10
 
 
 def test_a_clean_arm_names_nothing_of_the_arm():
