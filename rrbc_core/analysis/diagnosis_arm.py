@@ -206,8 +206,10 @@ def configuration_columns(
     when a column goes beyond 2π) give sin and cos of each joint and of the sums of up to `CONFIGURATION_CHAIN`
     consecutive joints (a serial arm's error is built of such terms: parallel joints add their angles); a column
     beyond 400 (a prismatic joint, mm) gives its value and its square. Each harmonic h(q) enters as three columns
-    h(q)·e_a, one per robot axis: its fields (3H, N, 3). None, with a limit saying why, when the file has no usable
-    joint-like column or too few points for the harmonics (`CONFIGURATION_POINTS_PER_HARMONIC` each)."""
+    h(q)·e_a, one per robot axis: its fields (3H, N, 3). The products of the first angle's sin and cos with the
+    others' (the base joint turning the rest of the arm) are added where the points allow
+    (`CONFIGURATION_POINTS_PER_HARMONIC` per harmonic). None, with a limit saying why, when the file has no usable
+    joint-like column or too few points even without the products."""
     names = joint_like_columns(mset)
     if not names:
         return None
@@ -240,14 +242,15 @@ def configuration_columns(
         for start in range(1, len(angles) - length + 1):
             a = np.sum(angles[start : start + length], axis=0)
             rest += [np.sin(a), np.cos(a)]
-    if angles:
-        first = [np.sin(angles[0]), np.cos(angles[0])]
-        feats += first + rest + [f * r for f in first for r in rest]
-    if not feats:
+    first = [np.sin(angles[0]), np.cos(angles[0])] if angles else []
+    full = feats + first + rest + [f * r for f in first for r in rest]
+    # fewer points than the products need: the harmonics without them (the base joint's turn of the rest not followed)
+    smaller = feats + first + rest
+    if not full:
         return None
-    h = np.array(feats)  # (H, R)
+    need = CONFIGURATION_POINTS_PER_HARMONIC * len(smaller)
+    h = np.array(full if n_points >= CONFIGURATION_POINTS_PER_HARMONIC * len(full) else smaller)  # (H, R)
     h = h - h.mean(axis=1, keepdims=True)  # the constant part is the rigid translation's
-    need = CONFIGURATION_POINTS_PER_HARMONIC * len(h)
     if n_points < need:
         limits.append(
             f"the file has joint columns ({', '.join(names[:8])}) but only {n_points} paired points: testing whether "

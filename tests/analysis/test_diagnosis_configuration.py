@@ -131,3 +131,15 @@ def test_a_field_shorter_than_the_points_spacing_is_called_no_sensors_distortion
     assert short is not None and "(5 mm) is shorter than half the points' typical spacing (100 mm)" in short
     assert short_field(field(300.0), grid) is None
     assert short_field({}, grid) is None
+
+
+def test_fewer_poses_use_the_harmonics_without_the_base_joints_products():
+    """148 paired points: too few for the 74 harmonics with products (222 needed), enough for the 26 without."""
+    m = _renamed(joint_measurements(2, dh_size=3.0, n_fid=120, n_chk=20))
+    from rrbc_core.analysis.diagnosis_stats import paired
+
+    d = paired(m)
+    cols = configuration_columns(m, d.rows, d.row_point, len(d.ids), [])
+    assert cols is not None and cols.fields.shape[0] == 3 * 26
+    k = {e.name: e for e in diagnose(m, alpha=ALPHA, seed=0).effects}.get("kinematic")
+    assert k is not None and k.parameters["model"] == "none"
