@@ -312,7 +312,8 @@ def diagnose(
             f"neighbouring residuals point the same way (Moran's I = {i_obs:.3g} with {k_nb} nearest "
             f"neighbours; white-noise bootstrap mean {i_mean:.3g}, p {fmt_p(tests['smooth_field'])}) after removing "
             f"the accepted lower-order terms; rms_mm is the RMS of the whole non-rigid bias at the points (its linear "
-            f"part included, drift and the arm excluded), the length is the maximum-likelihood correlation length"
+            f"part included, drift and the arm excluded; never more than the rigid bias leaves beside the arm's own size), "
+            "the length is the maximum-likelihood correlation length"
             + (f"; judged beside the field, {', '.join(dropped)} is part of it" if dropped else "")
             + ".",
             magnitude_mm=rms,
