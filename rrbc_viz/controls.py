@@ -25,7 +25,7 @@ from .camera import PANEL_WIDTH_PX, PRESENTATION_PANEL_WIDTH_PX, PRESETS
 from .checks_panel import ChecksPanel
 from .colors import legend_html
 from .file_panel import FilePanel
-from .node_values import LAYERS, Display
+from .node_values import LAYER_LABELS, LAYERS, Display
 from .picture import BOUND_SCALES
 from .planning_panel import PlanningPanel
 from .selection_panel import Bullseye, SelectionPanel
@@ -43,23 +43,6 @@ if TYPE_CHECKING:
     #: class or factory, called with the gui and a function returning the tab's controller); `tab_plugin.TabSpec`
     TabPanel = tuple[str, str, str, Callable[[Any, Callable[[], Any]], Any]]
 
-LAYER_LABELS = {
-    "mesh": "Work-cell mesh",
-    "arm": "Robot arm (reaching the selected target)",
-    "sensor": "Sensor cameras and their views",
-    "frames": "Robot and sensor frames",
-    "registration": "Registration points",
-    "fiducials": "Fiducials",
-    "corrections": "Correction arrows",
-    "hull": "Fiducials' hull",
-    "targets": "Targets",
-    "regions": "Regions of variability",
-    "bounds": "95 % bounds of the targets",
-    "landing": "Landing points (rigid vs RRBC)",
-    "labels": "Labels",
-    "heatmap": "Heat map of predicted error",
-    "slice": "Error slice (predicted error on a plane)",
-}
 HEAT_CHOICES = {
     "scene": (("RRBC error", "rrbc"), ("rigid error", "rigid")),
     "measurements": (("correction size", "correction"), ("correction std (gp)", "std")),
@@ -267,7 +250,7 @@ class ViewPanel:
             hint="Regions of variability and heat-map samples drawn this many times larger about their target",
         )
         with gui.add_folder("Layers"):
-            self.layers = {name: gui.add_checkbox(LAYER_LABELS.get(name, name), True) for name in LAYERS}
+            self.layers = {name: gui.add_checkbox(LAYER_LABELS[name], True) for name in LAYERS}
         with gui.add_folder("Heat map"):
             self.heat_value = gui.add_dropdown("Colour by", tuple(k for k, _ in HEAT_CHOICES["scene"]))
             self.legend = gui.add_markdown(

@@ -29,6 +29,25 @@ LAYERS = (
     "heatmap",
     "slice",
 )
+#: what the View tab calls each layer (a layer is its name above, its label here, its nodes in a scene class and
+#: what it draws in `picture.ScenePicture`)
+LAYER_LABELS = {
+    "mesh": "Work-cell mesh",
+    "arm": "Robot arm (reaching the selected target)",
+    "sensor": "Sensor cameras and their views",
+    "frames": "Robot and sensor frames",
+    "registration": "Registration points",
+    "fiducials": "Fiducials",
+    "corrections": "Correction arrows",
+    "hull": "Fiducials' hull",
+    "targets": "Targets",
+    "regions": "Regions of variability",
+    "bounds": "95 % bounds of the targets",
+    "landing": "Landing points (rigid vs RRBC)",
+    "labels": "Labels",
+    "heatmap": "Heat map of predicted error",
+    "slice": "Error slice (predicted error on a plane)",
+}
 
 
 def node_key(pid: str) -> str:

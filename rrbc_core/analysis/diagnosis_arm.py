@@ -196,6 +196,9 @@ def arm_untested_hint(
 CONFIGURATION_CHAIN = 3
 #: at least this many paired points per harmonic (each harmonic is 3 columns: one per robot axis)
 CONFIGURATION_POINTS_PER_HARMONIC = 3
+#: the model-free test's columns are never bigger than this many numbers (80 MB), whatever the file's size: the
+#: harmonics without the products beyond it, and no test beyond that
+CONFIGURATION_MAX_ELEMENTS = 10_000_000
 
 
 def configuration_columns(
@@ -249,7 +252,21 @@ def configuration_columns(
     if not full:
         return None
     need = CONFIGURATION_POINTS_PER_HARMONIC * len(smaller)
-    h = np.array(full if n_points >= CONFIGURATION_POINTS_PER_HARMONIC * len(full) else smaller)  # (H, R)
+
+    def fits(harmonics: list) -> bool:  # enough points, and columns of a bounded size
+        return (
+            n_points >= CONFIGURATION_POINTS_PER_HARMONIC * len(harmonics)
+            and 3 * max(len(rows), n_points) * 3 * len(harmonics) <= CONFIGURATION_MAX_ELEMENTS
+        )
+
+    if not fits(smaller) and n_points >= need:
+        limits.append(
+            f"the file has joint columns ({', '.join(names[:8])}) but {len(rows):,} paired rows: testing whether the "
+            "residuals follow the arm's configuration without its model was left out (its columns would pass "
+            f"{CONFIGURATION_MAX_ELEMENTS:,} numbers); give the arm's model to test it"
+        )
+        return None
+    h = np.array(full if fits(full) else smaller)  # (H, R)
     h = h - h.mean(axis=1, keepdims=True)  # the constant part is the rigid translation's
     if n_points < need:
         limits.append(

@@ -143,3 +143,21 @@ def test_fewer_poses_use_the_harmonics_without_the_base_joints_products():
     assert cols is not None and cols.fields.shape[0] == 3 * 26
     k = {e.name: e for e in diagnose(m, alpha=ALPHA, seed=0).effects}.get("kinematic")
     assert k is not None and k.parameters["model"] == "none"
+
+
+def test_the_model_free_columns_stay_bounded_on_a_big_file(monkeypatch):
+    """Past the element bound the smaller basis is used, and past that none, with a limit: never unbounded memory."""
+    from rrbc_core.analysis import diagnosis_arm
+    from rrbc_core.analysis.diagnosis_stats import paired
+
+    m = _renamed(joint_measurements(2, dh_size=3.0, n_fid=200, n_chk=60))
+    d = paired(m)
+    n = len(d.ids)
+    args = (m, d.rows, d.row_point, n)
+    assert configuration_columns(*args, []).fields.shape[0] == 3 * 74
+    monkeypatch.setattr(diagnosis_arm, "CONFIGURATION_MAX_ELEMENTS", 9 * n * 26)
+    assert configuration_columns(*args, []).fields.shape[0] == 3 * 26
+    monkeypatch.setattr(diagnosis_arm, "CONFIGURATION_MAX_ELEMENTS", 9 * n * 26 - 1)
+    limits: list[str] = []
+    assert configuration_columns(*args, limits) is None
+    assert any("was left out" in x for x in limits), limits

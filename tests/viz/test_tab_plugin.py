@@ -124,3 +124,12 @@ def test_the_shipped_plugin_tabs_have_the_three_file_shape():
         for name, text in wiring.items():
             for word in (spec.panel.__name__, spec.controller.__name__):  # type: ignore[union-attr]
                 assert word not in text, f"{name} names {word}: a plug-in tab is wired by tabs.TABS only"
+
+
+def test_a_layer_is_named_and_labelled_in_one_place():
+    """A new layer of the 3-D scene: its name and its View-tab label in `node_values` (the control panel reads both
+    from there), its nodes in a scene class, what it draws in `picture.ScenePicture`."""
+    from rrbc_viz.node_values import LAYER_LABELS, LAYERS
+
+    assert list(LAYER_LABELS) == list(LAYERS)
+    assert "LAYER_LABELS = " not in (ROOT / "rrbc_viz" / "controls.py").read_text()
