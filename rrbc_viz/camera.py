@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.geometry.framing import CameraPose, frame_points
+from rrbc_core.geometry.framing import CameraPose, frame_points, in_view
 
 if TYPE_CHECKING:
     from .stage import Stage
@@ -125,6 +125,31 @@ class CameraDirector:
                 cam.look_at = tuple(pose.look_at)
             self.last[client.client_id] = pose
             out[client.client_id] = pose
+        return out
+
+    def keep_in_view(self, point, context: np.ndarray, clients=None) -> dict[int, CameraPose]:
+        """Bring `point` (3,) robot frame, mm, back into the view of each tab (default: every connected one) that no
+        longer sees it beside the panel (a target dragged out of the frame): that tab's camera keeps its viewing
+        direction and frames `context` (N, 3) with the point. Tabs that see it are left as they are. Returns the
+        poses sent."""
+        p = np.asarray(point, float).reshape(1, 3)
+        out = {}
+        targets = list(self.server.get_clients().values()) if clients is None else list(clients)
+        for client in targets:
+            cam = client.camera
+            try:
+                aspect, width, fov = float(cam.aspect), float(cam.image_width), float(cam.fov)
+                position, look_at = np.asarray(cam.position, float), np.asarray(cam.look_at, float)
+            except AssertionError:  # no camera message from this tab yet
+                continue
+            if not (aspect > 0 and width > 0) or np.allclose(position, look_at):
+                continue
+            now = CameraPose(position, look_at, np.array([0.0, 0.0, 1.0]), fov, aspect)
+            panel = float(np.clip(self.panel_px / width, 0.0, 0.6))
+            if bool(in_view(p, now, panel, margin=0.02)[0]):
+                continue
+            view = View(np.vstack([np.asarray(context, float).reshape(-1, 3), p]), look_at - position)
+            out.update(self.show(view, [client]))
         return out
 
 

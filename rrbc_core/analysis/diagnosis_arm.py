@@ -192,6 +192,8 @@ def arm_untested_hint(
     )
 
 
+#: a joint-like column whose name says it is a linear axis (a lift column, a rail): its value, not its angle
+PRISMATIC_LIKE = re.compile(r"prism|lift|linear|slide|rail|track|gantry", re.IGNORECASE)
 #: the model-free configuration test (`configuration_columns`): sums of up to this many consecutive angle columns
 CONFIGURATION_CHAIN = 3
 #: at least this many paired points per harmonic (each harmonic is 3 columns: one per robot axis)
@@ -208,7 +210,8 @@ def configuration_columns(
     configuration (docs/theory.md §6.5): the file's joint-like columns (`JOINT_LIKE`) as angles (radians, or degrees
     when a column goes beyond 2π) give sin and cos of each joint and of the sums of up to `CONFIGURATION_CHAIN`
     consecutive joints (a serial arm's error is built of such terms: parallel joints add their angles); a column
-    beyond 400 (a prismatic joint, mm) gives its value and its square. Each harmonic h(q) enters as three columns
+    beyond 400, or named like a linear axis (`PRISMATIC_LIKE`: a lift column, a rail), gives its value and
+    its square. Each harmonic h(q) enters as three columns
     h(q)·e_a, one per robot axis: its fields (3H, N, 3). The products of the first angle's sin and cos with the
     others' (the base joint turning the rest of the arm) are added where the points allow
     (`CONFIGURATION_POINTS_PER_HARMONIC` per harmonic). None, with a limit saying why, when the file has no usable
@@ -233,13 +236,13 @@ def configuration_columns(
         if np.ptp(col) <= 0:
             continue  # a joint that does not move
         big = float(np.max(np.abs(col)))
-        if big <= 2 * np.pi + 0.1:
-            angles.append(col)
-        elif big <= 400.0:
-            angles.append(np.radians(col))
-        else:
+        if PRISMATIC_LIKE.search(names[k]) or big > 400.0:  # a linear axis: its value and its square
             z = (col - col.mean()) / np.std(col)
             feats += [z, z**2]
+        elif big <= 2 * np.pi + 0.1:
+            angles.append(col)
+        else:
+            angles.append(np.radians(col))
     rest: list[np.ndarray] = []
     for length in range(1, CONFIGURATION_CHAIN + 1):
         for start in range(1, len(angles) - length + 1):

@@ -76,6 +76,17 @@ def project(points, pose: CameraPose) -> tuple[np.ndarray, np.ndarray]:
     return ndc, depth
 
 
+def in_view(points, pose: CameraPose, panel_fraction: float = 0.0, margin: float = 0.0) -> np.ndarray:
+    """(N,) bool: each point (N, 3) robot frame, mm, in front of `pose` and inside the part of its image a panel
+    over the right-hand `panel_fraction` of the width leaves free, `margin` (a fraction of the half-size) in from
+    every edge."""
+    ndc, depth = project(points, pose)
+    x, y = ndc[:, 0], ndc[:, 1]
+    lim = 1.0 - float(margin)
+    with np.errstate(invalid="ignore"):
+        return (depth > 0) & (x >= -lim) & (x <= lim - 2.0 * float(panel_fraction)) & (np.abs(y) <= lim)
+
+
 def _inside(p, position, f, r, u, tx, ty, window, min_distance, tol=1e-9) -> bool:
     d = p - position
     depth = d @ f

@@ -113,6 +113,8 @@ class EvaluateController:
                 ctx.nodes.resnap(kind, pid)
             if end:
                 self._refused.discard(key)
+                if kind == "targets":  # a target dragged out of the frame is brought back into every tab's view
+                    ctx.camera.keep_in_view(ev.targets.positions[ev.targets.ids.index(pid)], ctx.views.work_points())
         if end:
             ctx.montecarlo.request()
         return ev

@@ -70,6 +70,11 @@ class ViewController:
             sensor_kind=None if scene is None else scene.sensor_kind,
         )
 
+    def work_points(self) -> np.ndarray:
+        """(N, 3) robot frame, mm: the targets and fiducials (what a reframed view keeps beside a dragged point)."""
+        g = self.cell_geometry()
+        return np.vstack([g.targets, g.fiducials])
+
     def focus_points(self, names) -> np.ndarray:
         """Robot-frame points (K, 3) of what a lesson step talks about (teaching.Step.focus)."""
         cell = self.cell_geometry()

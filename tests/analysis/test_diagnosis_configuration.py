@@ -161,3 +161,17 @@ def test_the_model_free_columns_stay_bounded_on_a_big_file(monkeypatch):
     limits: list[str] = []
     assert configuration_columns(*args, limits) is None
     assert any("was left out" in x for x in limits), limits
+
+
+def test_a_column_named_like_a_lift_is_a_linear_axis_not_an_angle():
+    """A lift column in metres (values within 2π) is taken as a linear axis by its name: its value and its square,
+    not sin and cos, and not the 'first joint' whose turn the others' harmonics are multiplied by."""
+    from rrbc_core.analysis.diagnosis_stats import paired
+
+    m = _renamed(joint_measurements(2, dh_size=3.0, n_fid=200, n_chk=60))
+    lift = np.random.default_rng(0).uniform(0.0, 1.5, len(m.ids))
+    m = dataclasses.replace(m, extra={"lift_joint": tuple(f"{v:.4f}" for v in lift), **m.extra})
+    d = paired(m)
+    cols = configuration_columns(m, d.rows, d.row_point, len(d.ids), [])
+    assert cols is not None and cols.fields.shape[0] == 3 * (2 + 74)
+    assert cols.model_free[0] == "lift_joint"

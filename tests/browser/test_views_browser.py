@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from rrbc_viz import teaching
+from rrbc_viz.camera import PANEL_WIDTH_PX
 from rrbc_viz.serve import serve
 
 from .helpers import (
@@ -274,3 +275,33 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
         return counts[-1] > 2000
 
     wait_for(slice_changed, 30.0, interval_s=0.5, message="the slice redrawn (over 2000 pixels changed)", page=page)
+
+
+def test_a_target_dragged_out_of_the_frame_comes_back_into_view(viser_app, page_for):
+    """Issue 39: a target dragged beyond what the camera shows is brought back into the view (beside the panel) at
+    the drag's end; the camera keeps its viewing direction."""
+    app = viser_app(lambda: serve(simple_arm=True))
+    page, _ = page_for(app.url)
+    app.views.show_camera("close-up")
+    wait_camera(page, app)
+    cid = next(iter(app.server.get_clients()))
+    before = app.ctx.camera.last[cid]
+    i = app.session.last.targets.ids.index("H1")
+    start = np.array(app.session.last.targets.positions[i], float)
+    # far to the side of the close-up, still within the arm's reach
+    away = start + np.array([0.0, 450.0, 0.0])
+    res = page.evaluate(_JS_PROJECT_MANY, [away.tolist()])
+    assert not res["points"][0]["onCanvas"] or res["points"][0]["x"] > res["canvas"][2] - 400, res  # out of view
+    assert app.evaluate.handle_drag("targets", "H1", start, "start") is not None
+    ev = app.evaluate.handle_drag("targets", "H1", away, "end")
+    assert ev is not None, app.last_message
+    wait_for(lambda: app.ctx.camera.last[cid] is not before, 10.0, message="the camera moved", page=page)
+    after = app.ctx.camera.last[cid]
+    np.testing.assert_allclose(after.forward, before.forward, atol=1e-6)  # the same viewing direction
+    wait_camera(page, app)
+
+    def seen() -> bool:
+        p = page.evaluate(_JS_PROJECT_MANY, [away.tolist()])["points"][0]
+        return bool(p["onCanvas"] and p["inFront"] and p["x"] < 1280 - PANEL_WIDTH_PX)
+
+    wait_for(seen, 15.0, message="H1 in the page's view, left of the panel", page=page)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from rrbc_core.errors import InputError
-from rrbc_core.geometry.framing import CameraPose, camera_basis, frame_points, project
+from rrbc_core.geometry.framing import CameraPose, camera_basis, frame_points, in_view, project
 
 
 @pytest.mark.parametrize("seed", range(12))
@@ -69,3 +69,19 @@ def test_bad_framing_input_is_refused():
         frame_points(np.zeros((2, 3)), [0, 0, 0], 0.9, 1.6)
     with pytest.raises(InputError):
         frame_points(np.zeros((2, 3)), [0, 1, 0], 4.0, 1.6)
+
+
+def test_in_view_is_what_the_framing_framed_and_nothing_behind_or_under_the_panel():
+    rng = np.random.default_rng(4)
+    pts = rng.uniform(-200, 200, (30, 3))
+    pose = frame_points(pts, np.array([-0.3, 1.0, -0.7]), np.deg2rad(50), 1.6, panel_fraction=0.3)
+    assert in_view(pts, pose, 0.3).all()  # framed: every point beside the panel
+    f, r, u = camera_basis(pose.forward, pose.up)
+    depth = float((pts.mean(0) - pose.position) @ f)
+    behind = pose.position - 100.0 * f
+    tx = pose.aspect * np.tan(pose.fov_y / 2)
+    under_panel = pose.position + depth * (f + 0.8 * tx * r)  # x_ndc = 0.8: under a panel over the right 30 %
+    far_left = pose.position + depth * (f - 1.5 * tx * r)  # outside the image
+    got = in_view(np.array([behind, under_panel, far_left]), pose, 0.3)
+    assert not got.any(), got
+    assert in_view(under_panel[None], pose, 0.0)[0]  # without the panel it is seen
