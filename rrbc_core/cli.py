@@ -8,10 +8,12 @@ printed, so a failure never leaves partial output.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import sys
 import time
+from collections.abc import Iterator
 
 from rrbc_core.cli_options import (
     Parser,
@@ -226,7 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _cmd_correct(args) -> str:
+def _cmd_correct(args) -> str | Iterator[str]:
     from rrbc_core.correction.stations import StationsResult, correct_stations
     from rrbc_core.io.measurements import read_measurements
     from rrbc_core.methods import MethodOptions, method_flags
@@ -240,14 +242,17 @@ def _cmd_correct(args) -> str:
     opts = MethodOptions.named(args.registration, args.interpolation, seed=args.seed, **flags)
     result = correct_stations(mset, opts, instrument_of(args))
     written = ""
-    j = result.to_json() if args.out is not None or args.json else {}  # built once for the file and stdout
+    # one object for the file and stdout; its rows are made while they are written (a million rows stay small)
+    j = result.to_json(lazy=True) if args.out is not None or args.json else {}
     if args.out is not None:
         from rrbc_core.io.corrected_write import write_corrected
 
         n = write_corrected(args.out, j)
         written = f"wrote {n} corrected targets and checks to {args.out}\n"
     if args.json:
-        return json.dumps(j, allow_nan=False) + "\n"
+        from rrbc_core.io.json_stream import json_chunks
+
+        return itertools.chain(json_chunks(j), ["\n"])
     return (stations_text(result) if isinstance(result, StationsResult) else correct_text(result)) + written
 
 
@@ -436,10 +441,19 @@ def main(argv=None) -> int:
         )
         return 1
     try:
-        sys.stdout.write(printable(out))
+        if isinstance(out, str):
+            sys.stdout.write(printable(out))
+        else:  # written as it is made (`io.json_stream`)
+            for piece in out:
+                sys.stdout.write(printable(piece))
         sys.stdout.flush()
     except BrokenPipeError:
         return 0
+    except Exception as exc:  # made while written: the same one line as above
+        if os.environ.get("RRBC_DEBUG"):
+            raise
+        print(f"rrbc: internal error: {type(exc).__name__}: {one_line(str(exc))}", file=sys.stderr)
+        return 1
     return 0
 
 

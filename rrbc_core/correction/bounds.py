@@ -123,12 +123,14 @@ class PointBounds:
         ``cov{suffix}_mm2`` (`rows_json` gives every point's at once)."""
         return self.rows_json(suffix, cov)[k]
 
-    def rows_json(self, suffix: str = "", cov: bool = True) -> list[dict]:
-        """Every point's `row_json`, built from whole arrays (a million rows stay cheap)."""
-        bounds = self.bound95_mm.tolist()
-        covs = self.cov_mm2.tolist() if cov else None
+    def rows_json(self, suffix: str = "", cov: bool = True, start: int = 0, stop: int | None = None) -> list[dict]:
+        """Points `start`..`stop`'s (default every point's) `row_json`, built from whole arrays (a million rows stay
+        cheap)."""
+        sl = slice(start, stop)
+        bounds = self.bound95_mm[sl].tolist()
+        covs = self.cov_mm2[sl].tolist() if cov else None
         names = list(self.budget_mm)
-        budgets = list(zip(*(self.budget_mm[n].tolist() for n in names))) if names else [()] * len(bounds)
+        budgets = list(zip(*(self.budget_mm[n][sl].tolist() for n in names))) if names else [()] * len(bounds)
         out = []
         for k, b in enumerate(bounds):
             if b != b:  # NaN: no bound

@@ -22,6 +22,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.interpolation.auto import AutoChoice
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
+from rrbc_core.io.json_stream import LazyRows
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
 from rrbc_core.methods import MethodOptions
 from rrbc_core.models.instrument import Instrument
@@ -141,9 +142,29 @@ class CorrectionResult:
             + (tuple(self.bounds.warnings) if with_bounds else ())
         )
 
-    def to_json(self, with_bounds: bool = True) -> dict:
+    def _fiducials_json(self, lazy: bool) -> list | LazyRows:
+        ids, sensor, corr = self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections
+
+        def rows(start: int = 0, stop: int | None = None) -> list:
+            sl = slice(start, stop)
+            return [
+                {"id": i, "sensor": s, "correction_mm": e}
+                for i, s, e in zip(ids[sl], sensor[sl].tolist(), corr[sl].tolist())
+            ]
+
+        if not lazy:
+            return rows()
+
+        def make():
+            for start in range(0, len(ids), ROWS_PER_CHUNK):
+                yield from rows(start, start + ROWS_PER_CHUNK)
+
+        return LazyRows(len(ids), make)
+
+    def to_json(self, with_bounds: bool = True, lazy: bool = False) -> dict:
         """The JSON object of `rrbc correct --json` (docs/cli.md); `with_bounds` False leaves the per-point bounds out
-        (what they cost: benchmarks/bounds_cost.py)."""
+        (what they cost: benchmarks/bounds_cost.py); `lazy`: the fiducials', targets' and checks' rows as
+        `io.json_stream.LazyRows`, made while they are written (`json_chunks`), `ROWS_PER_CHUNK` at a time."""
         reg = self.registration
         bounds = self.bounds if with_bounds else None
         reg_json = {"method": reg.method, **reg.mapping.as_dict(), "fre_rms_mm": reg.fre_rms_mm}
@@ -153,13 +174,16 @@ class CorrectionResult:
         return {
             "registration": reg_json,
             "interpolation": self.interpolation_json(),
-            "fiducials": [
-                {"id": i, "sensor": s.tolist(), "correction_mm": e.tolist()}
-                for i, s, e in zip(self.fiducials.ids, self.fiducials.sensor, self.fiducial_corrections)
-            ],
-            "targets": _points_json(self.targets, self.targets_corrected, bounds=bounds, kind="targets"),
-            "checks": _points_json(
-                self.checks, self.checks_corrected, self.error_rigid, self.error_rrbc, bounds=bounds, kind="checks"
+            "fiducials": self._fiducials_json(lazy),
+            "targets": _rows(lazy, self.targets, self.targets_corrected, bounds=bounds, kind="targets"),
+            "checks": _rows(
+                lazy,
+                self.checks,
+                self.checks_corrected,
+                self.error_rigid,
+                self.error_rrbc,
+                bounds=bounds,
+                kind="checks",
             ),
             "summary": self.summary(),
             "check_statistics": None if (st := self.statistics()) is None else st.to_json(),
@@ -168,29 +192,52 @@ class CorrectionResult:
         }
 
 
+#: rows made at a time by a lazy `to_json` (whole arrays to lists per chunk: a million rows stay cheap and small)
+ROWS_PER_CHUNK = 20_000
+
+
+def _rows(lazy: bool, group: PointGroup, corrected: CorrectedPoints | None, *args, **kwargs) -> list | LazyRows:
+    """`_points_json`'s rows, or (lazy) the same rows made `ROWS_PER_CHUNK` at a time when read."""
+    if not lazy:
+        return _points_json(group, corrected, *args, **kwargs)
+    n = 0 if corrected is None else len(group.ids)
+
+    def make():
+        for start in range(0, n, ROWS_PER_CHUNK):
+            yield from _points_json(group, corrected, *args, start=start, stop=start + ROWS_PER_CHUNK, **kwargs)
+
+    return LazyRows(n, make)
+
+
 def _points_json(
     group: PointGroup,
     corrected: CorrectedPoints | None,
     err_rigid=None,
     err_rrbc=None,
+    *,
     bounds: Bounds | None = None,
     kind: str = "targets",
+    start: int = 0,
+    stop: int | None = None,
 ) -> list:
+    """The JSON rows of points `start`..`stop` (default all) of `group`."""
     rows: list[dict] = []
     if corrected is None:
         return rows
+    sl = slice(start, stop)
     pb = getattr(bounds, kind) if bounds is not None else None
     pb_rigid = getattr(bounds, kind + "_rigid") if bounds is not None else None
-    b_rows = pb.rows_json() if pb is not None else None
-    b_rigid_rows = pb_rigid.rows_json("_rigid", cov=False) if pb_rigid is not None else None
+    b_rows = pb.rows_json(start=start, stop=stop) if pb is not None else None
+    b_rigid_rows = pb_rigid.rows_json("_rigid", cov=False, start=start, stop=stop) if pb_rigid is not None else None
     c = corrected  # whole arrays to lists once: a million rows stay cheap
-    sensor, corr, rigid, rrbc = (a.tolist() for a in (c.sensor, c.correction, c.robot_rigid, c.robot_rrbc))
-    extra = c.extrapolated.tolist()
-    std = c.correction_std.tolist() if c.correction_std is not None else None
-    off = c.off_plane_mm.tolist()
+    sensor, corr, rigid, rrbc = (a[sl].tolist() for a in (c.sensor, c.correction, c.robot_rigid, c.robot_rrbc))
+    extra = c.extrapolated[sl].tolist()
+    std = c.correction_std[sl].tolist() if c.correction_std is not None else None
+    off = c.off_plane_mm[sl].tolist()
     if err_rigid is not None:
-        truth, e_rigid, e_rrbc = group.robot.tolist(), np.asarray(err_rigid).tolist(), np.asarray(err_rrbc).tolist()
-    for k, pid in enumerate(group.ids):
+        truth = group.robot[sl].tolist()
+        e_rigid, e_rrbc = np.asarray(err_rigid)[sl].tolist(), np.asarray(err_rrbc)[sl].tolist()
+    for k, pid in enumerate(group.ids[sl]):
         row = {
             "id": pid,
             "sensor": sensor[k],

@@ -74,11 +74,11 @@ class StationsResult:
         """Every station's warnings, each prefixed ``group 'g': ``."""
         return tuple(f"group {g!r}: {w}" for g, r in zip(self.groups, self.stations) for w in r.warnings())
 
-    def to_json(self) -> dict:
+    def to_json(self, lazy: bool = False) -> dict:
         """The JSON of `rrbc correct --json` on a file with groups: ``groups`` (one object per station: ``group`` and
         the keys of a file without groups), pooled ``summary``, ``check_statistics`` and ``warnings``, and the
-        ``interpolation`` used."""
-        stations = [{"group": g, **r.to_json()} for g, r in zip(self.groups, self.stations)]
+        ``interpolation`` used; `lazy` as `CorrectionResult.to_json`."""
+        stations = [{"group": g, **r.to_json(lazy=lazy)} for g, r in zip(self.groups, self.stations)]
         return {
             "interpolation": self.options.interpolation_json(),
             "groups": stations,

@@ -96,8 +96,8 @@ def test_joint_values_of_another_robot_are_refused_with_the_disagreement_in_mm(t
 
 
 def test_q1_to_q6_of_another_arm_are_not_taken_for_a_ur5(tmp_path):
-    """UR10 configurations in q1..q6: --robot ur5 refuses them; diagnose without a model names no kinematic effect
-    and says why."""
+    """UR10 configurations in q1..q6: --robot ur5 refuses them; diagnose without a model tests no UR5 on them (and
+    says why): the arm it names is the model-free one (the joints' harmonics), never a UR5's parameters."""
     from rrbc_core.models.chain import Chain
     from rrbc_core.models.kinematics import UR10
 
@@ -106,7 +106,8 @@ def test_q1_to_q6_of_another_arm_are_not_taken_for_a_ur5(tmp_path):
     r = _run("calibrate", path, "--robot", "ur5")
     assert r.returncode == 2 and "does not describe this robot" in r.stderr and "q1" not in r.stdout
     out = json.loads(_run("diagnose", path, "--json").stdout)
-    assert "kinematic" not in [e["name"] for e in out["effects"]]
+    kinematic = [e for e in out["effects"] if e["name"] == "kinematic"]
+    assert all(e["parameters"]["model"] == "none" and e["parameters"]["robot"] is None for e in kinematic), kinematic
     assert any("not a UR5's" in lim for lim in out["limits"])
     ok = json.loads(_run("calibrate", path, "--robot", "ur10", "--json").stdout)
     assert ok["recommended"] in ("vec", "vec_rrbc")

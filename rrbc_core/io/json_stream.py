@@ -1,0 +1,95 @@
+"""JSON written as it is made: a result's long lists of rows (`LazyRows`) are encoded one row at a time, so that
+`rrbc correct --json` on a million rows never holds every row's object, nor the whole text, at once.
+
+`json_chunks(obj)` yields the text of `json.dumps(obj, allow_nan=False)` (the same separators) in pieces of about
+`CHUNK_CHARS` characters; a `LazyRows` inside it is a list whose rows are made while they are written. Anything
+else is encoded by `json.dumps` as it is.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
+
+CHUNK_CHARS = 1 << 20  # about 1 MB of text per piece written
+
+
+class LazyRows:
+    """A JSON list of `n` rows made by `make()` (a fresh iterator each time: the rows can be read more than once,
+    as `rrbc correct --out` and `--json` both do). Iterating it makes the rows; `len` is known without them."""
+
+    def __init__(self, n: int, make: Callable[[], Iterable[Any]]):
+        self.n = int(n)
+        self._make = make
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter(self._make())
+
+    def __eq__(self, other: object) -> bool:  # compared as the list it stands for (tests)
+        return list(self) == (list(other) if isinstance(other, (list, tuple, LazyRows)) else other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def _has_lazy(value: Any) -> bool:
+    if isinstance(value, LazyRows):
+        return True
+    if isinstance(value, dict):
+        return any(_has_lazy(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return any(isinstance(v, (dict, list, tuple, LazyRows)) and _has_lazy(v) for v in value)
+    return False
+
+
+def _pieces(value: Any) -> Iterator[str]:
+    if isinstance(value, LazyRows):
+        yield "["
+        first = True
+        for row in value:
+            yield ("" if first else ", ") + json.dumps(row, allow_nan=False)
+            first = False
+        yield "]"
+    elif isinstance(value, dict) and _has_lazy(value):
+        yield "{"
+        for i, (k, v) in enumerate(value.items()):
+            yield ("" if i == 0 else ", ") + json.dumps(str(k)) + ": "
+            yield from _pieces(v)
+        yield "}"
+    elif isinstance(value, (list, tuple)) and _has_lazy(value):
+        yield "["
+        for i, v in enumerate(value):
+            if i:
+                yield ", "
+            yield from _pieces(v)
+        yield "]"
+    else:
+        yield json.dumps(value, allow_nan=False)
+
+
+def json_chunks(obj: Any) -> Iterator[str]:
+    """The JSON text of `obj` (module docstring) in pieces of about `CHUNK_CHARS` characters."""
+    buf: list[str] = []
+    size = 0
+    for piece in _pieces(obj):
+        buf.append(piece)
+        size += len(piece)
+        if size >= CHUNK_CHARS:
+            yield "".join(buf)
+            buf, size = [], 0
+    if buf:
+        yield "".join(buf)
+
+
+def to_plain(obj: Any) -> Any:
+    """`obj` with every `LazyRows` made into the list it stands for (for callers that want plain JSON values)."""
+    if isinstance(obj, LazyRows):
+        return [to_plain(r) for r in obj]
+    if isinstance(obj, dict):
+        return {k: to_plain(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [to_plain(v) for v in obj]
+    return obj
