@@ -282,14 +282,16 @@ def test_a_target_dragged_out_of_the_frame_comes_back_into_view(viser_app, page_
     the drag's end; the camera keeps its viewing direction."""
     app = viser_app(lambda: serve(simple_arm=True))
     page, _ = page_for(app.url)
-    app.views.show_camera("close-up")
+    app.views.select("targets", "H1")
+    app.views.show_camera("selected point")  # a tight view of H1 and its bullseye
     wait_camera(page, app)
     cid = next(iter(app.server.get_clients()))
     before = app.ctx.camera.last[cid]
     i = app.session.last.targets.ids.index("H1")
     start = np.array(app.session.last.targets.positions[i], float)
-    # far to the side of the close-up, still within the arm's reach
-    away = start + np.array([0.0, 450.0, 0.0])
+    # well out of that view to its left (across the viewing direction), still within the arm's reach
+    right = np.cross(before.forward, [0.0, 0.0, 1.0])
+    away = start - 250.0 * right / np.linalg.norm(right)
     res = page.evaluate(_JS_PROJECT_MANY, [away.tolist()])
     assert not res["points"][0]["onCanvas"] or res["points"][0]["x"] > res["canvas"][2] - 400, res  # out of view
     assert app.evaluate.handle_drag("targets", "H1", start, "start") is not None
