@@ -22,6 +22,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.interpolation.auto import AutoChoice
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
+from rrbc_core.io.json_rows import Field, rows_text
 from rrbc_core.io.json_stream import LazyRows
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
 from rrbc_core.methods import MethodOptions
@@ -159,7 +160,13 @@ class CorrectionResult:
             for start in range(0, len(ids), ROWS_PER_CHUNK):
                 yield from rows(start, start + ROWS_PER_CHUNK)
 
-        return LazyRows(len(ids), make)
+        def encoded():  # the same rows' text from the columns (`io.json_rows`)
+            for start in range(0, len(ids), ROWS_PER_CHUNK):
+                sl = slice(start, start + ROWS_PER_CHUNK)
+                fields = [Field("id", ids[sl], "str"), Field("sensor", sensor[sl]), Field("correction_mm", corr[sl])]
+                yield rows_text(fields, len(ids[sl]))
+
+        return LazyRows(len(ids), make, encoded)
 
     def to_json(self, with_bounds: bool = True, lazy: bool = False) -> dict:
         """The JSON object of `rrbc correct --json` (docs/cli.md); `with_bounds` False leaves the per-point bounds out
@@ -206,7 +213,62 @@ def _rows(lazy: bool, group: PointGroup, corrected: CorrectedPoints | None, *arg
         for start in range(0, n, ROWS_PER_CHUNK):
             yield from _points_json(group, corrected, *args, start=start, stop=start + ROWS_PER_CHUNK, **kwargs)
 
-    return LazyRows(n, make)
+    def encoded():  # the same rows' text from the columns
+        if corrected is None:
+            return
+        for start in range(0, n, ROWS_PER_CHUNK):
+            yield _points_text(group, corrected, *args, start=start, stop=start + ROWS_PER_CHUNK, **kwargs)
+
+    return LazyRows(n, make, encoded)
+
+
+def _points_text(
+    group: PointGroup,
+    corrected: CorrectedPoints,
+    err_rigid=None,
+    err_rrbc=None,
+    *,
+    bounds: Bounds | None = None,
+    kind: str = "targets",
+    start: int = 0,
+    stop: int | None = None,
+) -> str:
+    """`_points_json`'s rows as JSON text made from the columns (`io.json_rows`; tests/io/test_json_rows.py holds
+    the two equal)."""
+    sl = slice(start, stop)
+    c = corrected
+    ids = group.ids[sl]
+    fields = [
+        Field("id", ids, "str"),
+        Field("sensor", c.sensor[sl]),
+        Field("correction_mm", c.correction[sl]),
+        Field("robot_rigid", c.robot_rigid[sl]),
+        Field("robot_rrbc", c.robot_rrbc[sl]),
+        Field("extrapolated", c.extrapolated[sl], "bool"),
+    ]
+    if c.correction_std is not None:
+        fields.append(Field("correction_std_mm", c.correction_std[sl]))
+    off = np.asarray(c.off_plane_mm[sl], float)
+    fields.append(Field("off_plane_mm", off, present=off > 0))
+    if err_rigid is not None:
+        e_rigid, e_rrbc = np.asarray(err_rigid, float)[sl], np.asarray(err_rrbc, float)[sl]
+        fields += [
+            Field("robot_truth", group.robot[sl]),
+            Field("error_rigid_mm", e_rigid),
+            Field("error_rrbc_mm", e_rrbc),
+            Field("rrbc_worse", e_rrbc > e_rigid, "bool"),
+        ]
+    pb = getattr(bounds, kind) if bounds is not None else None
+    pb_rigid = getattr(bounds, kind + "_rigid") if bounds is not None else None
+    if pb is not None and pb_rigid is not None:
+        for b, suffix, cov in ((pb, "", True), (pb_rigid, "_rigid", False)):
+            none = ~np.isfinite(b.bound95_mm[sl])
+            fields.append(Field(f"bound95{suffix}_mm", b.bound95_mm[sl], null=none))
+            budget = {name: v[sl] for name, v in b.budget_mm.items()}
+            fields.append(Field(f"budget{suffix}_mm", budget, "obj", null=none))
+            if cov:
+                fields.append(Field(f"cov{suffix}_mm2", b.cov_mm2[sl], null=none))
+    return rows_text(fields, len(ids))
 
 
 def _points_json(

@@ -1,9 +1,10 @@
-"""JSON written as it is made: a result's long lists of rows (`LazyRows`) are encoded one row at a time, so that
+"""JSON written as it is made: a result's long lists of rows (`LazyRows`) are encoded a batch at a time, so that
 `rrbc correct --json` on a million rows never holds every row's object, nor the whole text, at once.
 
-`json_chunks(obj)` yields the text of `json.dumps(obj, allow_nan=False)` (the same separators) in pieces of about
-`CHUNK_CHARS` characters; a `LazyRows` inside it is a list whose rows are made while they are written. Anything
-else is encoded by `json.dumps` as it is.
+`json_chunks(obj)` yields compact JSON text of `obj` (no spaces after `,` and `:`; the same document as
+`json.dumps(obj, allow_nan=False)`: `json.loads` gives equal values) in pieces of about `CHUNK_CHARS`
+characters; a `LazyRows` inside it is a list whose rows are made while they are written, from columns where it
+has its own encoder (`io.json_rows`). Anything else is encoded by `json.dumps` as it is.
 """
 
 from __future__ import annotations
@@ -17,11 +18,14 @@ CHUNK_CHARS = 1 << 20  # about 1 MB of text per piece written
 
 class LazyRows:
     """A JSON list of `n` rows made by `make()` (a fresh iterator each time: the rows can be read more than once,
-    as `rrbc correct --out` and `--json` both do). Iterating it makes the rows; `len` is known without them."""
+    as `rrbc correct --out` and `--json` both do). Iterating it makes the rows; `len` is known without them.
+    `encoded()`, when given, yields the same rows' JSON text a batch at a time (rows joined by commas, no brackets;
+    `io.json_rows`): what `json_chunks` writes instead of encoding the rows one by one."""
 
-    def __init__(self, n: int, make: Callable[[], Iterable[Any]]):
+    def __init__(self, n: int, make: Callable[[], Iterable[Any]], encoded: Callable[[], Iterable[str]] | None = None):
         self.n = int(n)
         self._make = make
+        self.encoded = encoded
 
     def __len__(self) -> int:
         return self.n
@@ -45,29 +49,50 @@ def _has_lazy(value: Any) -> bool:
     return False
 
 
+ROWS_PER_DUMP = 1000  # rows encoded by one json.dumps call
+
+
+def _dumps(value: Any) -> str:
+    return json.dumps(value, allow_nan=False, separators=(",", ":"))
+
+
+def _batches(rows: Iterable[Any]) -> Iterator[list]:
+    """`rows` in lists of `ROWS_PER_DUMP` (none empty)."""
+    batch: list = []
+    for row in rows:
+        batch.append(row)
+        if len(batch) == ROWS_PER_DUMP:
+            yield batch
+            batch = []
+    if batch:
+        yield batch
+
+
 def _pieces(value: Any) -> Iterator[str]:
     if isinstance(value, LazyRows):
         yield "["
         first = True
-        for row in value:
-            yield ("" if first else ", ") + json.dumps(row, allow_nan=False)
-            first = False
+        texts = value.encoded() if value.encoded is not None else (_dumps(b)[1:-1] for b in _batches(value))
+        for text in texts:  # a batch of rows at a time, without the list's brackets
+            if text:
+                yield ("" if first else ",") + text
+                first = False
         yield "]"
     elif isinstance(value, dict) and _has_lazy(value):
         yield "{"
         for i, (k, v) in enumerate(value.items()):
-            yield ("" if i == 0 else ", ") + json.dumps(str(k)) + ": "
+            yield ("" if i == 0 else ",") + json.dumps(str(k)) + ":"
             yield from _pieces(v)
         yield "}"
     elif isinstance(value, (list, tuple)) and _has_lazy(value):
         yield "["
         for i, v in enumerate(value):
             if i:
-                yield ", "
+                yield ","
             yield from _pieces(v)
         yield "]"
     else:
-        yield json.dumps(value, allow_nan=False)
+        yield _dumps(value)
 
 
 def json_chunks(obj: Any) -> Iterator[str]:

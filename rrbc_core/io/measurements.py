@@ -39,6 +39,22 @@ import numpy as np
 
 from rrbc_core.errors import InputError, excerpt
 from rrbc_core.geometry.points import check_registration_points
+from rrbc_core.io.measurement_format import (
+    COLUMNAR_MIN_CHARS,
+    COORDINATE_LIMIT_MM,
+    FIDUCIAL_ROLES,
+    FILE_LIMIT_BYTES,
+    GROUP_COLUMN,
+    NUMBER_PATTERN,
+    REGISTRATION_ROLES,
+    REQUIRED_COLUMNS,
+    ROBOT_COLUMNS,
+    ROBOT_REQUIRED_ROLES,
+    ROLES,
+    SENSOR_COLUMNS,
+    STANDARD_COLUMNS,
+    TIME_LIMIT_S,
+)
 from rrbc_core.io.measurement_messages import MAX_LISTED
 from rrbc_core.io.measurement_messages import error as _error
 from rrbc_core.io.measurement_messages import listed as _listed
@@ -59,24 +75,9 @@ __all__ = [
     "validate",
 ]
 
-ROLES = ("registration", "fiducial", "both", "target", "check")
-REGISTRATION_ROLES = ("registration", "both")
-FIDUCIAL_ROLES = ("fiducial", "both")
-ROBOT_REQUIRED_ROLES = ("registration", "fiducial", "both", "check")
+_NUMBER = re.compile(NUMBER_PATTERN, re.ASCII)  # ASCII digits only
 
-SENSOR_COLUMNS = ("sensor_x", "sensor_y", "sensor_z")
-ROBOT_COLUMNS = ("robot_x", "robot_y", "robot_z")
-REQUIRED_COLUMNS = ("id", "role") + SENSOR_COLUMNS + ROBOT_COLUMNS
-STANDARD_COLUMNS = REQUIRED_COLUMNS + ("time",)
-#: the optional column naming each row's station (io.groups): rows with one value are registered and corrected apart
-GROUP_COLUMN = "group"
 
-# A plain decimal number (what `repr(float)` and spreadsheets write); stricter than float(), which would also
-# take '1_000', 'nan', 'infinity' and non-ASCII digits.
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)  # ASCII digits only
-COORDINATE_LIMIT_MM = 1e9  # |coordinate| at most this (a km-scale cell is 1e6 mm): larger is a unit or format slip
-FILE_LIMIT_BYTES = 512 * 2**20  # a measurement file is read only up to this size (about 5 million rows)
-TIME_LIMIT_S = 1e12  # |time| at most this (30 000 years of seconds; Unix times are ~1.7e9)
 # ------------------------------------------------------------------------------------------------ data types
 
 
@@ -121,7 +122,7 @@ class MeasurementSet:
         set_("source", src)
         set_("ids", tuple(self.ids))
         set_("roles", tuple(self.roles))
-        set_("lines", tuple(int(n) for n in self.lines))
+        set_("lines", tuple(map(int, self.lines)))
         set_("extra", {str(k): tuple(v) for k, v in dict(self.extra).items()})
         for name in ("sensor", "robot", "time"):
             try:
@@ -131,7 +132,7 @@ class MeasurementSet:
             set_(name, arr)
         robot = self.robot
         if robot.ndim == 2 and robot.shape[1:] == (3,) and len(robot) == len(self.roles):
-            is_target = np.array([r == "target" for r in self.roles], dtype=bool)
+            is_target = self._role_codes() == ROLES.index("target")
             if is_target.any():
                 robot[is_target] = np.nan
         for name in ("sensor", "robot", "time"):
@@ -140,10 +141,22 @@ class MeasurementSet:
     def __len__(self) -> int:
         return len(self.ids)
 
+    def _role_codes(self) -> np.ndarray:
+        """(R,) each row's role as its index in `ROLES` (-1: not a role), computed once."""
+        codes = self.__dict__.get("_codes")
+        if codes is None:
+            index = {r: k for k, r in enumerate(ROLES)}
+            try:
+                codes = np.fromiter(map(index.__getitem__, self.roles), dtype=int, count=len(self.roles))
+            except (KeyError, TypeError):  # a set not yet validated: a row without a valid role is -1
+                codes = np.fromiter((index.get(r, -1) for r in self.roles), dtype=int, count=len(self.roles))
+            object.__setattr__(self, "_codes", codes)
+        return codes
+
     def rows(self, role: str) -> np.ndarray:
         """Indices of the rows selected by `role` (registration: registration or both; fiducial: fiducial or both)."""
-        wanted = _selected_roles(role)
-        return np.fromiter((i for i, r in enumerate(self.roles) if r in wanted), dtype=int)
+        wanted = [ROLES.index(r) for r in _selected_roles(role)]
+        return np.flatnonzero(np.isin(self._role_codes(), wanted))
 
     def points(self, role: str) -> PointGroup:
         """Points of a role aggregated per distinct id, in order of first appearance; repeated rows are averaged.
@@ -232,6 +245,10 @@ def read_measurements(path: str | PathLike) -> MeasurementSet:
         raise _error(
             source, None, None, f"larger than {FILE_LIMIT_BYTES // 2**20} MiB, the limit of a measurement file"
         )
+    if len(data) >= COLUMNAR_MIN_CHARS:  # a long file: read by columns where that reader decides (the same set)
+        read = _read_columnar(data, source)
+        if read is not None:
+            return read
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -244,6 +261,18 @@ def read_measurements(path: str | PathLike) -> MeasurementSet:
             f"not UTF-8 text (byte 0x{data[exc.start]:02x} at column {column}); save the file as UTF-8",
         ) from None
     return parse_measurements(text, source)
+
+
+def _read_columnar(data: str | bytes, source: str) -> MeasurementSet | None:
+    """The validated set `io.measurements_columnar` reads, or None where it leaves the file to the row reader."""
+    from rrbc_core.io.measurements_columnar import parse_columnar
+
+    read = parse_columnar(data, source, _check_header)
+    if read is None:
+        return None
+    mset = MeasurementSet(read.ids, read.roles, read.sensor, read.robot, read.time, read.lines, source, read.extra)
+    _validate(mset, header_line=read.header_line, rows_checked=True)
+    return mset
 
 
 class _LineFeed:
@@ -334,6 +363,10 @@ def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
     source = str(source)
     if text.startswith("\ufeff"):
         text = text[1:]
+    if len(text) >= COLUMNAR_MIN_CHARS:  # a long file: read by columns where that reader decides (the same set)
+        read = _read_columnar(text, source)
+        if read is not None:
+            return read
     records = _records(text, source)
     try:
         header_line, header = next(records)
@@ -407,7 +440,7 @@ def parse_measurements(text: str, source: str = "<text>") -> MeasurementSet:
         source=source,
         extra={name: tuple(values) for name, values in extra.items()},
     )
-    _validate(mset, header_line=header_line)
+    _validate(mset, header_line=header_line, rows_checked=True)
     return mset
 
 
@@ -494,7 +527,8 @@ def validate(mset: MeasurementSet) -> None:
     _validate(mset, header_line=0)
 
 
-def _validate(mset: MeasurementSet, header_line: int) -> None:
+def _validate(mset: MeasurementSet, header_line: int, rows_checked: bool = False) -> None:
+    """`validate`'s checks; `rows_checked`: the per-row ones were made while the rows were read (not again)."""
     source = mset.source
     n = len(mset.ids)
     shapes = {
@@ -517,10 +551,10 @@ def _validate(mset: MeasurementSet, header_line: int) -> None:
             raise _error(source, None, name, f"extra column has {len(values)} values, expected {n} (one per row)")
 
     if GROUP_COLUMN in mset.extra:  # stations (io.groups): each is validated as a file of its own, named in messages
-        _validate_groups(mset, header_line)
+        _validate_groups(mset, header_line, rows_checked)
         return
     seen: dict[str, tuple[str, int]] = {}
-    for i in range(n):
+    for i in range(0 if rows_checked else n):
         line = mset.lines[i]
         _check_row(
             source,
@@ -552,7 +586,7 @@ def _validate(mset: MeasurementSet, header_line: int) -> None:
             raise _registration_error(source, frame, reg, pts, last_line, exc) from None
 
 
-def _validate_groups(mset: MeasurementSet, header_line: int) -> None:
+def _validate_groups(mset: MeasurementSet, header_line: int, rows_checked: bool) -> None:
     for i, value in enumerate(mset.extra[GROUP_COLUMN]):
         if value.strip() == "":
             raise _error(
@@ -562,8 +596,12 @@ def _validate_groups(mset: MeasurementSet, header_line: int) -> None:
                 "empty group; with a group column every row names its station (docs/formats/measurement-file.md)",
             )
     values = mset.extra[GROUP_COLUMN]
-    for name in dict.fromkeys(values):
-        rows = [i for i, v in enumerate(values) if v == name]
+    index: dict[str, int] = {}
+    code = np.fromiter((index.setdefault(v, len(index)) for v in values), dtype=int, count=len(values))
+    order = np.argsort(code, kind="stable")  # each station's rows in file order
+    ends = np.cumsum(np.bincount(code, minlength=len(index)))
+    for g, name in enumerate(index):
+        rows = order[(ends[g - 1] if g else 0) : ends[g]]
         station = select_rows(mset, rows, f"{mset.source}, group {name!r}")  # as io.groups.group_label names it
         station = replace(station, extra={k: v for k, v in station.extra.items() if k != GROUP_COLUMN})
-        _validate(station, header_line)
+        _validate(station, header_line, rows_checked)
