@@ -1,10 +1,10 @@
 """What the per-point bounds cost (issue 37, item 5), in the user's own process, idle and with a busy core beside it.
 
 - `correct_bounds_1000`: `rrbc correct FILE --json` on 1000 fiducials and 1000 targets, run in this process
-  (`rrbc_core.cli.main`: the file read, corrected, bounded and printed as JSON; the interpreter's start-up, the same
-  with or without, left out), against the same steps without the bounds (read, `correct_stations`,
-  `to_json(with_bounds=False)`, `json.dumps`): goal, the loaded time with bounds at most 2x the time without (ratio =
-  without / with, so >= 0.5). The note adds the in-memory part alone (`correct_measurements` and `to_json`, no file,
+  (`rrbc_core.cli.main`: the arguments parsed, the file read, corrected, bounded and printed as JSON; the
+  interpreter's start-up, the same with or without, left out), against the same command with its result's JSON
+  made without the bounds (`CorrectionResult.to_json(with_bounds=False)`: nothing of the bounds is computed or
+  written): goal, the loaded time with bounds at most 2x the time without (ratio = without / with, so >= 0.5). The note adds the in-memory part alone (`correct_measurements` and `to_json`, no file,
   no text), where the bounds' K-fold cross-validation weighs most.
 - `drag_bounds_fiducial`: one step of a fiducial's drag in the default scene's session (`ExplorerSession.move`, the
   evaluation the app draws, bounds included) against the same step with the bounds' basis already cached (a
@@ -33,15 +33,14 @@ def correct_bounds(quick: bool) -> list[dict]:
     """Rows `correct_bounds_1000` and `drag_bounds_fiducial` (module docstring)."""
     import contextlib
     import io
-    import json
     import tempfile
+    from functools import partialmethod
     from pathlib import Path
+    from unittest import mock
 
     from rrbc_core.cli import main
-    from rrbc_core.correction.stations import correct_stations
-    from rrbc_core.io.measurements import read_measurements
+    from rrbc_core.correction.pipeline import CorrectionResult
     from rrbc_core.io.measurements_write import write_measurements
-    from rrbc_core.methods import MethodOptions
 
     n = 300 if quick else 1000
     mset = _targets_file(n)
@@ -53,9 +52,11 @@ def correct_bounds(quick: bool) -> list[dict]:
         with contextlib.redirect_stdout(io.StringIO()):
             assert main(["correct", str(path), "--json"]) == 0
 
-    def command_without() -> None:  # the same steps (rrbc_core.cli._cmd_correct) without the bounds
-        result = correct_stations(read_measurements(path), MethodOptions.named("least-squares", "idw"))
-        json.dumps(result.to_json(with_bounds=False), allow_nan=False)
+    no_bounds = partialmethod(CorrectionResult.to_json, with_bounds=False)
+
+    def command_without() -> None:  # the same command, its result's JSON made without the bounds
+        with mock.patch.object(CorrectionResult, "to_json", no_bounds):
+            command()
 
     def measure():
         without, _ = median_time(command_without, repeats)

@@ -47,7 +47,7 @@ def estimate_noise(
     closest quarter of those pairs' mean |R(c_i − c_j)|² / 6, an upper bound (the field's own change is in it). None
     with fewer than 3 fiducials and no repeats.
     """
-    if data is not None:
+    if data is not None and len(set(data.ids)) < len(data.ids):  # some id read more than once
         rows = np.flatnonzero(np.isfinite(data.robot).all(axis=1))
         ids = [data.ids[i] for i in rows]
         index: dict = {}

@@ -69,8 +69,6 @@ class Hull:
     triangulation itself is built only when `linear` interpolation asks for it (`tri`)."""
 
     def __init__(self, points: np.ndarray):
-        from scipy.spatial import ConvexHull, QhullError
-
         self.frame = LocalFrame.of(points)
         self.local = self.frame.to_local(points)
         self._tri: Delaunay | None = None
@@ -78,16 +76,25 @@ class Hull:
         own = float(np.max(self.frame.off_axis(points))) if dim in (1, 2) else 0.0
         #: distance (mm) from the fiducials' plane (line) beyond which a point is outside (dim 1, 2)
         self.plane_tol_mm = max(OFF_PLANE_TOL_MM, own)
-        if dim >= 2:
-            try:
-                self.equations = ConvexHull(self.local).equations  # (F, dim + 1)
-            except QhullError as exc:  # pragma: no cover - the dim classification should prevent this
-                raise self._degenerate(exc) from None
-        elif dim == 1:
+        self._equations: np.ndarray | None = None  # dim 2/3: built on the first inside test (`equations`)
+        if dim == 1:
             self.lo = float(self.local[:, 0].min())
             self.hi = float(self.local[:, 0].max())
         else:
             self.radius = float(np.max(np.linalg.norm(points - self.frame.centroid, axis=1)))
+
+    @property
+    def equations(self) -> np.ndarray:
+        """(F, dim + 1): the hull's facet equations in local coordinates (dim 2/3; built on first use: a fit whose
+        flags are never asked for, as the bounds' transform lever, does not pay for them)."""
+        from scipy.spatial import ConvexHull, QhullError
+
+        if self._equations is None:
+            try:
+                self._equations = ConvexHull(self.local).equations
+            except QhullError as exc:  # pragma: no cover - the dim classification should prevent this
+                raise self._degenerate(exc) from None
+        return self._equations
 
     def _degenerate(self, exc: Exception) -> InputError:
         return InputError(
