@@ -93,10 +93,10 @@ def _peak_rss_mb(pid: int) -> float | None:
     return None
 
 
-def run_command(args, repeats: int = 3, cwd=None) -> tuple[float, float, str]:
+def run_command(args, repeats: int = 3, cwd=None, keep_output: bool = True) -> tuple[float, float, str]:
     """Run the real command `repeats` times, each a fresh process with the caller's environment minus any
     *_NUM_THREADS variable. Returns (median wall time s, largest peak resident memory MB, stdout of the last
-    run); raises RuntimeError if a run fails.
+    run, "" when not `keep_output`: a gigabyte of JSON need not be read back); raises RuntimeError if a run fails.
 
     Peak memory is the child's own high-water mark (VmHWM in /proc/PID/status), read every 2 ms while it runs;
     the last reading before it exits is its peak (the mark never falls). (The kernel's ru_maxrss of a child would
@@ -117,7 +117,7 @@ def run_command(args, repeats: int = 3, cwd=None) -> tuple[float, float, str]:
                 time.sleep(0.002)
             times.append(time.perf_counter() - t0)
             fout.seek(0), ferr.seek(0)
-            out, err = fout.read().decode(), ferr.read().decode()
+            out, err = (fout.read().decode() if keep_output else ""), ferr.read().decode()
         if proc.returncode != 0:
             raise RuntimeError(f"{' '.join(map(str, args))} failed ({proc.returncode}): {err[-500:]}")
         rss = max(rss, peak)

@@ -34,7 +34,7 @@ from rrbc_core.cli_options import (
     where,
 )
 from rrbc_core.cli_text import correct_text, plan_text, report_text, simulate_text, stations_text
-from rrbc_core.errors import InputError, one_line, printable
+from rrbc_core.errors import InputError, one_line, printable, printable_bytes
 
 __all__ = ["build_parser", "main"]
 
@@ -228,7 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _cmd_correct(args) -> str | Iterator[str]:
+def _cmd_correct(args) -> str | Iterator[str | bytes]:
     from rrbc_core.correction.stations import StationsResult, correct_stations
     from rrbc_core.io.measurements import read_measurements
     from rrbc_core.methods import MethodOptions, method_flags
@@ -250,9 +250,9 @@ def _cmd_correct(args) -> str | Iterator[str]:
         n = write_corrected(args.out, j)
         written = f"wrote {n} corrected targets and checks to {args.out}\n"
     if args.json:
-        from rrbc_core.io.json_stream import json_chunks
+        from rrbc_core.io.json_stream import json_bytes
 
-        return itertools.chain(json_chunks(j), ["\n"])
+        return itertools.chain(json_bytes(j), [b"\n"])
     return (stations_text(result) if isinstance(result, StationsResult) else correct_text(result)) + written
 
 
@@ -443,9 +443,16 @@ def main(argv=None) -> int:
     try:
         if isinstance(out, str):
             sys.stdout.write(printable(out))
-        else:  # written as it is made (`io.json_stream`)
+        else:  # written as it is made (`io.json_stream`): text or, for a long JSON, UTF-8 bytes
+            buffer = getattr(sys.stdout, "buffer", None)
             for piece in out:
-                sys.stdout.write(printable(piece))
+                if not isinstance(piece, bytes):
+                    sys.stdout.write(printable(piece))
+                elif buffer is not None:
+                    sys.stdout.flush()
+                    buffer.write(printable_bytes(piece))
+                else:
+                    sys.stdout.write(printable(piece.decode("utf-8", errors="replace")))
         sys.stdout.flush()
     except BrokenPipeError:
         return 0

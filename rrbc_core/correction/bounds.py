@@ -293,7 +293,13 @@ def point_registration_cov(
     """(M, 3, 3): G θ Gᵀ with G = [−[R lever]×, weight·I] (lever (M, 3) sensor frame, weight (M,))."""
     q = np.asarray(lever_sensor, float) @ np.asarray(rotation, float).T
     g = np.concatenate([-_skew(q), np.asarray(weight, float)[:, None, None] * np.eye(3)], axis=2)
-    return (g @ np.asarray(theta_cov, float)) @ g.transpose(0, 2, 1)
+    m = len(g)
+    a = (g.reshape(-1, 6) @ np.asarray(theta_cov, float)).reshape(m, 3, 6)  # G θ: one product for every point
+    out = np.empty((m, 3, 3))
+    for i in range(3):  # (G θ) Gᵀ: its six distinct entries, symmetric
+        for j in range(i, 3):
+            out[:, i, j] = out[:, j, i] = np.einsum("mk,mk->m", a[:, i], g[:, j])
+    return out
 
 
 def cv_profile(
@@ -552,9 +558,25 @@ def bounds_basis(
     )
 
 
-def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]) -> Bounds:
-    """The bounds of `points` {"targets": (sensor (M, 3), count (M,), off_plane_mm (M,)), "checks": ...} from a
-    basis (`bounds_basis`)."""
+#: points bounded in one pass (`bound_points`): 100 000 points' covariances are a few MB per array
+POINTS_PER_PASS = 100_000
+
+
+def _joined(parts: list[PointBounds]) -> PointBounds:
+    if len(parts) == 1:
+        return parts[0]
+    names = list(parts[0].budget_mm)
+    return PointBounds(
+        np.concatenate([b.bound95_mm for b in parts]),
+        np.concatenate([b.cov_mm2 for b in parts]),
+        {n: np.concatenate([b.budget_mm[n] for b in parts]) for n in names},
+    )
+
+
+def _bound_pass(basis: BoundsBasis, p, count, d, v_off, beyond, project: bool) -> tuple[PointBounds, PointBounds]:
+    """Rigid's and RRBC's bounds of points p (M, 3) sensor frame (`bound_points`): their row counts, distances d
+    from the nearest fiducial, off-plane variances v_off, whether each is beyond what the folds tested, and
+    whether points are projected onto the fiducials' plane for the hull test."""
     inst, rot, theta, fid_sensor, profile, fw = (
         basis.instrument,
         basis.rotation,
@@ -563,8 +585,37 @@ def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndar
         basis.profile,
         basis.fitted,
     )
+    own = own_cov(inst, rot, p, count)
+    rigid_int = (basis.tail_rigid**2 * (basis.v_rigid + v_off))[:, None, None] * basis.shape_rigid
+    rigid = assemble_bounds(
+        {
+            "instrument": own,
+            "registration": point_registration_cov(rot, p, np.ones(len(p)), theta),
+            "interpolation": rigid_int,
+        },
+        beyond,
+    )
+    if not basis.interpolating:
+        return rigid, rigid
+    if profile is None or len(fid_sensor) == 0:
+        return rigid, no_bounds(len(p))
+    if fw is not None:
+        lever = p - fw[0].values_at(p)
+        weight = np.zeros(len(p)) if fw[1] is None else 1.0 - fw[1].values_at(p).mean(axis=1)
+    else:  # the transform's error at the point, not cancelled (wider)
+        lever, weight = p, np.ones(len(p))
+    reg = point_registration_cov(rot, lever, weight, theta)
+    q = _onto_plane(fid_sensor, p) if project else p
+    inside = ~basis.hull.flags(q)[0] if basis.hull is not None else covered(fid_sensor, q)  # `covered`'s test
+    interp = (profile.variance(d, inside) + profile.tail**2 * v_off)[:, None, None] * profile.shape
+    return rigid, assemble_bounds({"instrument": own, "registration": reg, "interpolation": interp}, beyond)
+
+
+def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]) -> Bounds:
+    """The bounds of `points` {"targets": (sensor (M, 3), count (M,), off_plane_mm (M,)), "checks": ...} from a
+    basis (`bounds_basis`)."""
+    inst, fid_sensor, profile = basis.instrument, basis.fid_sensor, basis.profile
     interpolating, tested, slope = basis.interpolating, basis.tested_mm, basis.slope
-    v_rigid, shape_rigid, tail_rigid = basis.v_rigid, basis.shape_rigid, basis.tail_rigid
     warnings = list(basis.warnings)
     n_fid = len(fid_sensor)
     tree = cKDTree(fid_sensor) if n_fid else None
@@ -583,33 +634,16 @@ def bound_points(basis: BoundsBasis, points: dict[str, tuple[np.ndarray, np.ndar
                 f"than the {tested:.4g} mm their cross-validation tested (the error there is not in the data)"
             )
         v_off = slope * h**2  # off coplanar (collinear) fiducials: the field's change over the height
-        own = own_cov(inst, rot, p, count)
-        rigid_int = (tail_rigid**2 * (v_rigid + v_off))[:, None, None] * shape_rigid
-        rigid = assemble_bounds(
-            {
-                "instrument": own,
-                "registration": point_registration_cov(rot, p, np.ones(len(p)), theta),
-                "interpolation": rigid_int,
-            },
-            beyond,
-        )
-        out[name + "_rigid"] = rigid
-        if not interpolating:
-            out[name] = rigid
-            continue
-        if profile is None or tree is None:
-            out[name] = no_bounds(len(p))
-            continue
-        if fw is not None:
-            lever = p - fw[0].values_at(p)
-            weight = np.zeros(len(p)) if fw[1] is None else 1.0 - fw[1].values_at(p).mean(axis=1)
-        else:  # the transform's error at the point, not cancelled (wider)
-            lever, weight = p, np.ones(len(p))
-        reg = point_registration_cov(rot, lever, weight, theta)
-        q = _onto_plane(fid_sensor, p) if np.any(h > 0) else p
-        inside = ~basis.hull.flags(q)[0] if basis.hull is not None else covered(fid_sensor, q)  # `covered`'s test
-        interp = (profile.variance(d, inside) + profile.tail**2 * v_off)[:, None, None] * profile.shape
-        out[name] = assemble_bounds({"instrument": own, "registration": reg, "interpolation": interp}, beyond)
+        count = np.broadcast_to(np.asarray(count, float), (len(p),))
+        project = bool(np.any(h > 0))
+        rigids, rrbcs = [], []
+        for k in range(0, len(p), POINTS_PER_PASS):  # a pass's (M, 3, 3) arrays stay in the cache, not gigabytes
+            sl = slice(k, k + POINTS_PER_PASS)
+            rigid, rrbc = _bound_pass(basis, p[sl], count[sl], d[sl], v_off[sl], beyond[sl], project)
+            rigids.append(rigid)
+            rrbcs.append(rrbc)
+        out[name + "_rigid"] = _joined(rigids)
+        out[name] = _joined(rrbcs) if interpolating else out[name + "_rigid"]
     return Bounds(
         inst,
         profile,

@@ -232,8 +232,8 @@ def _points_text(
     kind: str = "targets",
     start: int = 0,
     stop: int | None = None,
-) -> str:
-    """`_points_json`'s rows as JSON text made from the columns (`io.json_rows`; tests/io/test_json_rows.py holds
+) -> bytes:
+    """`_points_json`'s rows as JSON text (ASCII bytes) made from the columns (`io.json_rows`; tests/io/test_json_rows.py holds
     the two equal)."""
     sl = slice(start, stop)
     c = corrected

@@ -12,6 +12,7 @@ null in some (`null`). `rows_text` gives `json.loads`-equal text to `json.dumps`
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -35,18 +36,39 @@ class Field:
     null: np.ndarray | None = None
 
 
-def number_texts(values: np.ndarray) -> list[bytes]:
-    """Each row of a float array (M,) or (M, ...) as JSON text (nested lists for more dimensions; NaN null)."""
+def _number_parts(values: np.ndarray) -> tuple[list[bytes], bytes, bytes]:
+    """Each row of a float array (M,) or (M, ...) as JSON text less its outer brackets, and those brackets (the
+    opening and the closing ones; empty for (M,))."""
     a = np.ascontiguousarray(values, dtype=float)
     if len(a) == 0:
-        return []
+        return [], b"", b""
     text = orjson.dumps(a, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]  # the rows, joined by commas
     depth = a.ndim - 1
     if depth == 0:
-        return text.split(b",")
+        return text.split(b","), b"", b""
     # a row of depth d opens with d brackets and closes with d; between rows: d closing, a comma, d opening
     inner = text[depth:-depth].split(b"]" * depth + b"," + b"[" * depth)
-    return [b"[" * depth + row + b"]" * depth for row in inner]
+    return inner, b"[" * depth, b"]" * depth
+
+
+def number_texts(values: np.ndarray) -> list[bytes]:
+    """Each row of a float array (M,) or (M, ...) as JSON text (nested lists for more dimensions; NaN null)."""
+    inner, opening, closing = _number_parts(values)
+    return [opening + row + closing for row in inner] if opening else inner
+
+
+#: what a string may hold to be written as it is between quotes: printable ASCII but the quote and the backslash
+_PLAIN = re.compile(r"[^ !#-\[\]-~]")
+
+
+def _string_parts(values: Sequence[str]) -> tuple[list[bytes], bytes, bytes]:
+    """Each string's JSON literal less its quotes, and the quotes (`string_texts`)."""
+    values = list(values)
+    joined = "\n".join(values)
+    plain = joined.count("\n") == len(values) - 1 and not _PLAIN.search(joined.replace("\n", " "))
+    if plain:  # printable ASCII without a quote or a backslash: the string itself
+        return (joined.encode("ascii").split(b"\n") if values else []), b'"', b'"'
+    return string_texts(values), b"", b""
 
 
 def string_texts(values: Sequence[str]) -> list[bytes]:
@@ -63,47 +85,57 @@ def _literal(key: str) -> bytes:
     return string_texts([key])[0].replace(b"%", b"%%")
 
 
-def _texts(field: Field, n: int) -> list[bytes]:
+_TRUE_FALSE = np.array([b"false", b"true"], dtype=object)
+
+
+def _parts(field: Field, n: int) -> tuple[list[bytes], bytes, bytes]:
+    """The field's values as JSON texts less what every one of them opens and closes with, and that."""
     if field.kind == "num":
-        return number_texts(field.values)
+        return _number_parts(field.values)
     if field.kind == "bool":
-        return [b"true" if v else b"false" for v in np.asarray(field.values, bool).tolist()]
+        return _TRUE_FALSE[np.asarray(field.values, bool).astype(np.intp)].tolist(), b"", b""
     if field.kind == "str":
-        return string_texts(field.values)
+        return _string_parts(field.values)
     if field.kind == "obj":
         obj: Mapping[str, np.ndarray] = field.values
         if not obj:
-            return [b"{}"] * n
-        template = b"{" + b",".join(_literal(k) + b":%b" for k in obj) + b"}"
-        return [template % t for t in zip(*(number_texts(v) for v in obj.values()))]
+            return [b""] * n, b"{", b"}"
+        template = b",".join(_literal(k) + b":%b" for k in obj)
+        return [template % t for t in zip(*(number_texts(v) for v in obj.values()))], b"{", b"}"
     raise ValueError(f"unknown field kind {field.kind!r}")
 
 
-def rows_text(fields: Sequence[Field], n: int) -> str:
-    """The n rows as JSON objects joined by commas (no brackets; "" for none), keys in the fields' order."""
+def rows_text(fields: Sequence[Field], n: int) -> bytes:
+    """The n rows as JSON objects joined by commas (no brackets; empty for none), keys in the fields' order:
+    printable ASCII bytes."""
     if n == 0:
-        return ""
+        return b""
     template = [b"{"]
     columns: list[list[bytes]] = []
     first = True
     for f in fields:
-        texts = _texts(f, n)
+        present = None if f.present is None else np.asarray(f.present, bool)
+        if present is not None and not present.any():
+            continue  # in no row
+        texts, opening, closing = _parts(f, n)
         if len(texts) != n:
             raise ValueError(f"field {f.key!r} has {len(texts)} values for {n} rows")
         key = _literal(f.key) + b":"
         lead = b"" if first else b","
-        if f.null is not None:
-            texts = [b"null" if z else t for t, z in zip(texts, np.asarray(f.null, bool).tolist())]
-        if f.present is None:
-            template.append(lead + key + b"%b")
+        null = None if f.null is None else np.asarray(f.null, bool)
+        if null is not None and null.any():  # the value whole, or null
+            texts = [b"null" if z else opening + t + closing for t, z in zip(texts, null.tolist())]
+            opening = closing = b""
+        if present is None or present.all():
+            template.append(lead + key + opening.replace(b"%", b"%%") + b"%b" + closing.replace(b"%", b"%%"))
             first = False
         else:  # the key and its comma only where present (a field that may be absent is never the first)
             if first:
                 raise ValueError("the first field of a row cannot be optional")
-            whole = lead + key
-            texts = [whole + t if p else b"" for t, p in zip(texts, np.asarray(f.present, bool).tolist())]
+            whole = lead + key + opening
+            texts = [whole + t + closing if p else b"" for t, p in zip(texts, present.tolist())]
             template.append(b"%b")
         columns.append(texts)
     template.append(b"}")
     row = b"".join(template)
-    return b",".join([row % t for t in zip(*columns)]).decode("ascii")
+    return b",".join([row % t for t in zip(*columns)])

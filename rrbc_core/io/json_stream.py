@@ -19,10 +19,10 @@ CHUNK_CHARS = 1 << 20  # about 1 MB of text per piece written
 class LazyRows:
     """A JSON list of `n` rows made by `make()` (a fresh iterator each time: the rows can be read more than once,
     as `rrbc correct --out` and `--json` both do). Iterating it makes the rows; `len` is known without them.
-    `encoded()`, when given, yields the same rows' JSON text a batch at a time (rows joined by commas, no brackets;
-    `io.json_rows`): what `json_chunks` writes instead of encoding the rows one by one."""
+    `encoded()`, when given, yields the same rows' JSON text a batch at a time (ASCII bytes, rows joined by commas,
+    no brackets; `io.json_rows`): what `json_bytes` writes instead of encoding the rows one by one."""
 
-    def __init__(self, n: int, make: Callable[[], Iterable[Any]], encoded: Callable[[], Iterable[str]] | None = None):
+    def __init__(self, n: int, make: Callable[[], Iterable[Any]], encoded: Callable[[], Iterable[bytes]] | None = None):
         self.n = int(n)
         self._make = make
         self.encoded = encoded
@@ -52,8 +52,8 @@ def _has_lazy(value: Any) -> bool:
 ROWS_PER_DUMP = 1000  # rows encoded by one json.dumps call
 
 
-def _dumps(value: Any) -> str:
-    return json.dumps(value, allow_nan=False, separators=(",", ":"))
+def _dumps(value: Any) -> bytes:
+    return json.dumps(value, allow_nan=False, separators=(",", ":")).encode("ascii")  # ensure_ascii: ASCII
 
 
 def _batches(rows: Iterable[Any]) -> Iterator[list]:
@@ -68,45 +68,54 @@ def _batches(rows: Iterable[Any]) -> Iterator[list]:
         yield batch
 
 
-def _pieces(value: Any) -> Iterator[str]:
+def _pieces(value: Any) -> Iterator[bytes]:
     if isinstance(value, LazyRows):
-        yield "["
+        yield b"["
         first = True
-        texts = value.encoded() if value.encoded is not None else (_dumps(b)[1:-1] for b in _batches(value))
+        if value.encoded is not None:
+            texts: Iterable[bytes] = value.encoded()
+        else:
+            texts = (_dumps(b)[1:-1] for b in _batches(value))
         for text in texts:  # a batch of rows at a time, without the list's brackets
             if text:
-                yield ("" if first else ",") + text
+                yield (b"" if first else b",") + text
                 first = False
-        yield "]"
+        yield b"]"
     elif isinstance(value, dict) and _has_lazy(value):
-        yield "{"
+        yield b"{"
         for i, (k, v) in enumerate(value.items()):
-            yield ("" if i == 0 else ",") + json.dumps(str(k)) + ":"
+            yield (b"" if i == 0 else b",") + json.dumps(str(k)).encode("ascii") + b":"
             yield from _pieces(v)
-        yield "}"
+        yield b"}"
     elif isinstance(value, (list, tuple)) and _has_lazy(value):
-        yield "["
+        yield b"["
         for i, v in enumerate(value):
             if i:
-                yield ","
+                yield b","
             yield from _pieces(v)
-        yield "]"
+        yield b"]"
     else:
         yield _dumps(value)
 
 
-def json_chunks(obj: Any) -> Iterator[str]:
-    """The JSON text of `obj` (module docstring) in pieces of about `CHUNK_CHARS` characters."""
-    buf: list[str] = []
+def json_bytes(obj: Any) -> Iterator[bytes]:
+    """The JSON text of `obj` (module docstring) as printable ASCII bytes, in pieces of about `CHUNK_CHARS`."""
+    buf: list[bytes] = []
     size = 0
     for piece in _pieces(obj):
         buf.append(piece)
         size += len(piece)
         if size >= CHUNK_CHARS:
-            yield "".join(buf)
+            yield b"".join(buf)
             buf, size = [], 0
     if buf:
-        yield "".join(buf)
+        yield b"".join(buf)
+
+
+def json_chunks(obj: Any) -> Iterator[str]:
+    """The JSON text of `obj` (module docstring) in pieces of about `CHUNK_CHARS` characters (`json_bytes`)."""
+    for piece in json_bytes(obj):
+        yield piece.decode("ascii")
 
 
 def to_plain(obj: Any) -> Any:

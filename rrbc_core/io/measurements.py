@@ -165,6 +165,12 @@ class MeasurementSet:
         both; "both", "target" and "check" select their own rows.
         """
         rows = self.rows(role)
+        ids = tuple(self.ids[i] for i in rows.tolist())
+        if len(set(ids)) == len(ids):  # every id once (most files): no averaging to do
+            n_lines = len(self.lines)
+            lines = tuple(self.lines[i] if i < n_lines else 0 for i in rows.tolist())
+            # + 0.0: the sum the averaging makes (a -0.0 reads back as 0.0 either way)
+            return PointGroup(ids, self.sensor[rows] + 0.0, self.robot[rows] + 0.0, np.ones(len(ids), int), lines)
         index: dict[str, int] = {}
         point = np.fromiter((index.setdefault(self.ids[i], len(index)) for i in rows), dtype=int, count=len(rows))
         order = list(index)

@@ -310,3 +310,21 @@ def test_the_chi2_quantile_curve_is_scipys_to_1e_10():
     s1, s2 = lam.sum(axis=1), (lam**2).sum(axis=1)
     by_eigen = np.sqrt(s2 / s1 * chi2.ppf(0.95, s1**2 / s2))
     assert np.max(np.abs(bound95(cov) / by_eigen - 1.0)) < 1e-10
+
+
+def test_points_bounded_in_passes_are_bounded_as_in_one(monkeypatch):
+    """`bound_points` bounds long point lists in passes (`POINTS_PER_PASS`): the same numbers and warnings as one
+    pass, on a file with points beyond what the folds tested."""
+    from rrbc_core.correction import bounds as bounds_module
+
+    m = field_measurements(21, n_fiducials=40, n_checks=700)
+    whole = correct_measurements(m).bounds
+    monkeypatch.setattr(bounds_module, "POINTS_PER_PASS", 97)
+    passes = correct_measurements(m).bounds
+    assert passes.warnings == whole.warnings
+    for name in ("checks", "checks_rigid"):
+        a, b = getattr(whole, name), getattr(passes, name)
+        assert np.array_equal(a.bound95_mm, b.bound95_mm, equal_nan=True)
+        assert np.array_equal(a.cov_mm2, b.cov_mm2, equal_nan=True)
+        assert a.budget_mm.keys() == b.budget_mm.keys()
+        assert all(np.array_equal(a.budget_mm[k], b.budget_mm[k], equal_nan=True) for k in a.budget_mm)

@@ -69,8 +69,24 @@ def test_the_board_case_has_what_it_claims():
     assert any(r["bound95_mm"] is None for r in rows) and any(r["bound95_mm"] is not None for r in rows)
 
 
-def test_strings_and_numbers_are_escaped_as_json_dumps_does():
-    ids = ["plain", 'q"uote', "back\\slash", "tab\t", "esc\x1b[31m", "del\x7f", "é", "\u0085c1", "%d %s", "𝔘"]
+@pytest.mark.parametrize("plain", [False, True], ids=["hostile ids", "plain ids"])
+def test_strings_and_numbers_are_escaped_as_json_dumps_does(plain):
+    ids = [
+        "plain",
+        'q"uote',
+        "back\\slash",
+        "tab\t",
+        "esc\x1b[31m",
+        "del\x7f",
+        "é",
+        "\u0085c1",
+        "%d %s",
+        "𝔘",
+        "new\nline",
+        "tab\there",
+    ]
+    if plain:
+        ids = [f"P{k} x-y_z.{k}" for k in range(12)]
     texts = string_texts(ids)
     assert all(t.isascii() and t.decode().isprintable() for t in texts)
     assert [json.loads(t) for t in texts] == ids
@@ -87,7 +103,7 @@ def test_strings_and_numbers_are_escaped_as_json_dumps_does():
         Field("flag", np.arange(n) % 3 == 0, "bool"),
         Field("obj", {"a%": np.arange(n * 1.0), "b": -np.arange(n * 1.0)}, "obj", null=np.arange(n) == 1),
     ]
-    rows = json.loads("[" + rows_text(fields, n) + "]")
+    rows = json.loads(b"[" + rows_text(fields, n) + b"]")
     want = []
     for k in range(n):
         r = {"id": ids[k], "v": [3.0 * k, 3.0 * k + 1, 3.0 * k + 2]}
@@ -98,4 +114,4 @@ def test_strings_and_numbers_are_escaped_as_json_dumps_does():
         want.append(r)
     assert rows == want
     assert [list(r) for r in rows] == [list(r) for r in want]  # the keys in the fields' order
-    assert rows_text(fields, 0) == ""
+    assert rows_text(fields, 0) == b""
