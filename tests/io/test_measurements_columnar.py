@@ -137,7 +137,7 @@ def test_the_columnar_reader_reads_every_file_as_the_row_reader_does(tmp_path, m
 def test_a_long_file_is_read_by_columns_and_the_same(tmp_path, monkeypatch):
     """Above `COLUMNAR_MIN_CHARS` the reader reads by columns (it decides on a plain written file) and gives the row
     reader's set; a bad cell far down is named by the row reader's message."""
-    m = field_measurements(4, n_fiducials=60, n_checks=12_000)
+    m = field_measurements(4, n_fiducials=60, n_checks=24_000)
     path = tmp_path / "long.csv"
     write_measurements(path, m)
     text = path.read_text()
@@ -145,6 +145,10 @@ def test_a_long_file_is_read_by_columns_and_the_same(tmp_path, monkeypatch):
     by_columns, _ = _read(text, monkeypatch, columnar=True)
     by_rows, _ = _read(text, monkeypatch, columnar=False)
     assert _same(by_columns, by_rows)
+    monkeypatch.setattr(reader, "COLUMNAR_MIN_CHARS", 0)
+    from_bytes = reader.read_measurements(path)  # the file's bytes read by columns, as `read_measurements` does
+    monkeypatch.setattr(reader, "COLUMNAR_MIN_CHARS", 1 << 62)
+    assert _same(from_bytes, reader.read_measurements(path))
     bad = text.rsplit("\n", 3)
     cells = bad[1].split(",")
     cells[2] = "1,5"
