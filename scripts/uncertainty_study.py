@@ -65,6 +65,12 @@ The bound is the radius holding 95 % of a normal error with the summed covarianc
 variance to the eigenvalues' terms, exact for an isotropic error; over random covariances its own error is at most
 0.3 % (a test draws 20 000 errors from each of 12).
 
+**In the app, while a fiducial is dragged** the bounds follow it at every update, with the cross-validation profile
+(the folds' error against distance, a statistic of all the fiducials) kept from before the drag; when the drag ends
+everything is computed for the new layout, the numbers `rrbc correct` gives (`session.evaluation._target_bounds`; a
+test holds the end equal to a fresh session's). On the 200-fiducial stress scene this keeps a drag update within its
+10 ms budget (`benchmarks/run.py drag_latency`).
+
 **No number where the data say nothing.** A point farther from the fiducials, or off their plane, than the
 cross-validation tested (the 90th percentile of the held-out fiducials' distances) gets no bound (`null`, `-` in the
 text) and a warning says how many and why; so do all points when fewer than 6 fiducials leave nothing to

@@ -485,8 +485,11 @@ def bounds_basis(
     instrument: Instrument | None = None,
     reg_residuals: np.ndarray | None = None,
     fid_registered: np.ndarray | None = None,
+    profile: CVProfile | None = None,
 ) -> BoundsBasis:
-    """The registration's and the fiducials' part of the bounds (`correction_bounds` for the parameters)."""
+    """The registration's and the fiducials' part of the bounds (`correction_bounds` for the parameters); `profile`
+    given, it is used instead of cross-validating the fiducials (the app's live drag update keeps the one from
+    before the drag, `session.evaluation._target_bounds`)."""
     rot = np.asarray(mapping.rotation, float)
     fid_sensor, fid_corr = np.asarray(fid_sensor, float).reshape(-1, 3), np.asarray(fid_corr, float).reshape(-1, 3)
     n_fid = len(fid_sensor)
@@ -514,7 +517,7 @@ def bounds_basis(
         v_rigid = 0.0
         warnings.append("no fiducials and too few registration points: rigid's bound holds the noise only")
 
-    profile, fw = None, None
+    given, profile, fw = profile, None, None
     if interpolating:
         if n_fid < MIN_FIDUCIALS:
             warnings.append(
@@ -527,7 +530,7 @@ def bounds_basis(
             # theirs make the profile
             free = ~fid_registered
             scored = free if np.count_nonzero(free) >= MIN_FIDUCIALS else None
-            profile = cv_profile(method, fid_sensor, fid_corr, rot, fid_noise, scored)
+            profile = given if given is not None else cv_profile(method, fid_sensor, fid_corr, rot, fid_noise, scored)
             if profile is None:
                 warnings.append("no RRBC bound: the correction could not be cross-validated over the fiducials")
             else:

@@ -262,10 +262,14 @@ def _target_bounds(
     coverage,
     check_ids,
     instrument=None,
+    previous=None,
 ):
     """`correction.bounds.correction_bounds` on the session's points, the file's check rows bounded as checks and
     the rest as targets (as `rrbc correct` splits them), then put back in the targets' order. The registration's and
-    fiducials' part (`bounds_basis`) is `cached`: a target's drag recomputes only the points' part."""
+    fiducials' part (`bounds_basis`) is `cached`: a target's drag recomputes only the points' part. During a
+    fiducial's drag (`previous` given) the basis keeps the cross-validation profile of the layout before the drag
+    (the folds' error against distance: a statistic of all the fiducials, not of the one moving) and computes the
+    rest for the layout as it is; the drag's end computes it all (what `rrbc correct` gives)."""
     fid_in = [pid for pid, k in zip(fid_ids, included) if k]
     is_check = np.array([pid in check_ids for pid in tg.ids], bool)
     off = coverage.off_plane_mm if coverage is not None else np.zeros(len(tg.ids))
@@ -292,10 +296,9 @@ def _target_bounds(
         s.noise_scale,
         None if instrument is None else instrument.name,
     )
-    basis = cached(
-        "bounds",
-        key,
-        lambda: bounds_basis(
+
+    def basis_of(profile=None):
+        return bounds_basis(
             data,
             T_robot_sensor,
             reg_r.sensor,
@@ -308,8 +311,23 @@ def _target_bounds(
             instrument,
             np.asarray(reg.residuals, float).reshape(-1, 3),
             np.isin(np.asarray(fid_in, dtype=object), np.asarray(reg_ids, dtype=object)),
-        ),
-    )
+            profile,
+        )
+
+    last = previous("bounds") if previous is not None else None
+    live, kept = False, None
+    if last is not None and last[1].profile is not None:
+        last_key, last_basis = last
+        kept = last_basis.profile
+        live = (
+            last_key != key
+            and last_key[:2] == key[:2]  # the same method and interpolation
+            and len(last_basis.fid_sensor) == int(np.count_nonzero(included))
+        )
+    if live:  # a drag's update: the profile from before the drag, the rest for this layout (never cached as exact)
+        basis = cached("bounds", key + ("live",), lambda: basis_of(kept))
+    else:
+        basis = cached("bounds", key, basis_of)
     b = bound_points(basis, points)
     m = len(tg.ids)
 
@@ -389,6 +407,7 @@ def evaluate(
     check_ids: frozenset = frozenset(),
     data=None,
     instrument=None,
+    previous=None,
 ) -> Evaluation:
     """The nine RRBC steps on a layout: register, correct the included fiducials, interpolate, correct the targets,
     score them against their truth where known. A pure function of its inputs.
@@ -410,6 +429,9 @@ def evaluate(
         The file's rows when the session is a measured file: the bounds read its repeats (`correction.bounds`).
     instrument : Instrument, optional
         The bounds' reading noise (a scene's own, `models.instrument.scene_instrument`; default: estimated).
+    previous : callable, optional
+        A drag's live update: ``previous(name)`` gives the cache's last (key, value) whatever its key; the bounds
+        then keep the fiducials' cross-validation from before the drag (`_target_bounds`). None (default): exact.
     """
     cached = cached or (lambda name, key, compute: compute())
     s = settings
@@ -496,6 +518,7 @@ def evaluate(
             coverage,
             check_ids,
             instrument,
+            previous,
         )
         warnings = warnings + bounds.source.warnings
     return Evaluation(

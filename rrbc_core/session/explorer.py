@@ -321,8 +321,10 @@ class ExplorerSession:
 
     # -------------------------------------------------------------------------------------------- editing
     @thread_limited
-    def move(self, kind: str, pid: str, position) -> Evaluation:
-        """Move a point (robot frame, mm) and re-evaluate. kind: registration, fiducials or targets."""
+    def move(self, kind: str, pid: str, position, live: bool = False) -> Evaluation:
+        """Move a point (robot frame, mm) and re-evaluate. kind: registration, fiducials or targets. `live`: a drag's
+        update, whose bounds keep the fiducials' cross-validation from before the drag (`evaluation.evaluate`'s
+        `previous`); the drag's end moves it without `live` (everything computed for the layout)."""
         if kind not in self.layout:
             raise InputError(f"unknown point kind '{kind}': registration, fiducials or targets")
         p = np.asarray(position, float).reshape(3)
@@ -346,7 +348,7 @@ class ExplorerSession:
         positions[i] = p
         self.layout = {**self.layout, kind: Group(g.ids, positions)}
         try:
-            return self.evaluate()
+            return self.evaluate(live)
         except Exception:  # out of the arm's reach, or anything else: keep the last good layout
             self.layout, self._readings = old_layout, old_readings
             raise
@@ -375,8 +377,9 @@ class ExplorerSession:
 
     # ----------------------------------------------------------------------------------------- evaluating
     @thread_limited
-    def evaluate(self) -> Evaluation:
-        """Measure what changed (scene mode) and run `evaluation.evaluate` on the layout as it is now."""
+    def evaluate(self, live: bool = False) -> Evaluation:
+        """Measure what changed (scene mode) and run `evaluation.evaluate` on the layout as it is now (`live`: a
+        drag's update, `move`)."""
         readings = {kind: self._readings_for(kind) for kind in ("registration", "fiducials", "targets")}
         checks = frozenset(self.mset.points("check").ids) if self.mset is not None else frozenset()
         instrument = None
@@ -384,7 +387,10 @@ class ExplorerSession:
             from rrbc_core.models.instrument import scene_instrument
 
             instrument = scene_instrument(self.measurement_model(), self.sensor_to_robot)
-        self._last = evaluate(self.settings, self.layout, readings, self.cached, checks, self.mset, instrument)
+        previous = self._cache.get if live else None
+        self._last = evaluate(
+            self.settings, self.layout, readings, self.cached, checks, self.mset, instrument, previous
+        )
         return self._last
 
     def cached(self, name: str, key, compute):

@@ -89,7 +89,7 @@ class EvaluateController:
             if group is not None and pid in group.ids:
                 before = np.array(group.positions[group.index(pid)], float)
             try:
-                ev = session.move(kind, pid, position)
+                ev = session.move(kind, pid, position, live=phase == "update")  # exact again at the end
             except InputError as exc:
                 self._refuse(key, before, str(exc), client, phase)
                 return None

@@ -71,6 +71,33 @@ def test_dragging_a_fiducial_in_a_scene_changes_the_targets_bounds():
     assert not np.allclose(np.nan_to_num(after.bound95_mm), np.nan_to_num(ev.bounds.rrbc.bound95_mm))
 
 
+def test_a_fiducials_live_drag_keeps_the_folds_profile_and_its_end_is_exact():
+    """A drag's update (`move(..., live=True)`) keeps the fiducials' cross-validation profile from before the drag
+    (a statistic of all the fiducials) and computes the rest for the layout as it is: the moved fiducial's own
+    geometry changes the bounds at once. The drag's end (`live` False) gives exactly what a fresh session of the same
+    layout gives, as `rrbc correct` would."""
+    from rrbc_core.io.scene import default_scene_path
+    from rrbc_core.io.scene_toml import load_scene
+
+    scene = load_scene(default_scene_path())
+    session = ExplorerSession.from_scene(scene)
+    first = session.evaluate().bounds
+    fid = session.layout["fiducials"].ids[0]
+    start = session.layout["fiducials"].positions[0].copy()
+    goal = start + np.array([60.0, -30.0, 0.0])
+    for k in (1, 2, 3):
+        live = session.move("fiducials", fid, start + (goal - start) * k / 3, live=True).bounds
+        assert live.source.profile is first.source.profile  # kept for the drag
+    assert not np.array_equal(live.rrbc.bound95_mm, first.rrbc.bound95_mm, equal_nan=True)  # followed the fiducial
+    end = session.move("fiducials", fid, goal).bounds
+    assert end.source.profile is not first.source.profile
+    fresh = ExplorerSession.from_scene(scene)
+    exact = fresh.move("fiducials", fid, goal).bounds
+    # (a drag's path and one move differ in rounding only: 1e-14 here, with or without the live updates)
+    np.testing.assert_allclose(end.rrbc.bound95_mm, exact.rrbc.bound95_mm, rtol=1e-12)
+    np.testing.assert_allclose(end.rrbc.cov_mm2, exact.rrbc.cov_mm2, rtol=1e-12, atol=1e-18)
+
+
 def test_the_error_slice_shows_at_a_target_the_bound_the_target_has():
     """The slice's `bound95` at a grid point placed on a target is that target's own 95 % bound (the same basis,
     `correction.bounds.bound_points`; the slice's reading is noise-free, the target's is not: a few µm apart), and the
