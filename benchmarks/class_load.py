@@ -17,6 +17,7 @@ The server runs in this process, as `rrbc view` runs it; the clients on their ow
 from __future__ import annotations
 
 import gc
+import threading
 import time
 
 import numpy as np
@@ -53,6 +54,7 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
     """One run (module docstring): {"max_gap_s", "gaps_s" (per client), "click_s", "rss_before_mb",
     "rss_after_mb", "clients"}."""
     from rrbc_core.runtime.memory import release_memory
+    from rrbc_viz import worker_pool
     from rrbc_viz.serve import serve
     from tests.support.viser_clients import ClientPool
 
@@ -61,6 +63,13 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
     app = serve(port=0, per_client=per_client)
     try:
         rss_started = rss_mb()
+
+        def threads_when_idle() -> int:  # once the server's callback threads have ended (rrbc_viz.worker_pool)
+            deadline = time.monotonic() + worker_pool.IDLE_S + 15
+            while app.worker_pool.threads and time.monotonic() < deadline:
+                time.sleep(0.1)
+            return threading.active_count()
+
         # one tab first, gone again: what a process keeps once it has served a tab (imported modules, compiled
         # Monte Carlo kernels, the robot's meshes) is the baseline a class is judged against
         warm = ClientPool(app.url, 1)
@@ -68,10 +77,17 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
         while per_client and not app.apps and time.monotonic() < t_w + 120:
             time.sleep(0.1)
         time.sleep(settle_s)
+        # it drags once too: the shared app's drag worker, started by a first drag, is the app's for good
+        (name, where), owner = _handles(app.apps[min(app.apps)] if per_client else app)[0], ""
+        if per_client:
+            owner = str(min(app.apps))
+        warm.drag_all([name], lambda k, t: where + np.array([5.0 * t, 0.0, 0.0]), 0.5, RATE_HZ, [owner])
+        time.sleep(1.0)
         warm.close()
         time.sleep(2.0)
         release_memory()
         rss_warm = rss_mb()
+        threads_started = threads_when_idle()  # after one tab: what a served tab starts for good
         pool = ClientPool(app.url, clients)
         try:
             t_open = time.monotonic()
@@ -107,6 +123,8 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
             time.sleep(0.1)  # every tab's app stopped
         time.sleep(3.0)  # and the server has given their memory back
         rss_after = rss_mb()
+        threads_after = threads_when_idle()
+        names_after = sorted(t.name for t in threading.enumerate())
     finally:
         app.stop()
     return {
@@ -119,6 +137,9 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
         "rss_before_mb": rss_warm,
         "rss_process_start_mb": rss0,
         "rss_after_mb": rss_after,
+        "threads_started": threads_started,
+        "threads_after": threads_after,
+        "thread_names_after": names_after,
     }
 
 
@@ -138,7 +159,8 @@ def class_load(quick: bool) -> list[dict]:
             f"{idle['max_gap_s']:.2f} s, click answered in {idle['click_s'] or float('nan'):.2f} s, RSS "
             f"{idle['rss_before_mb']:.0f} MB after one tab -> {idle['rss_after_mb']:.0f} MB after the class left "
             f"({idle['rss_started_mb']:.0f} MB when the server had started); {n} tabs' apps ready in "
-            f"{idle['apps_ready_s']:.1f} s"
+            f"{idle['apps_ready_s']:.1f} s; threads {idle['threads_started']} after one tab, "
+            f"{idle['threads_after']} after the class"
         )
         rows.append(
             row(

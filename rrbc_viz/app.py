@@ -68,6 +68,7 @@ from .stage import Stage
 from .state import AppState
 from .tab_plugin import TabController, TabSpec
 from .tabs import TABS
+from .worker_pool import RetiringExecutor
 
 T = TypeVar("T")
 HEAT_SAMPLES_PER_TARGET = 200  # heat-map samples inside each target's region of variability
@@ -96,6 +97,7 @@ class RunningApp:
         self.port = int(viser_server.get_port())
         self.url = f"http://{host if host not in ('0.0.0.0', '::', '') else 'localhost'}:{self.port}"
         self.quiet = True  # stop() hides viser's "Server stopped" line
+        self.worker_pool: RetiringExecutor | None = None  # set by serve: the server's callback threads
         self._stopped = False
         # the views first (they call the controllers only when the user acts), then the context, then the controllers
         nodes = SceneNodes(server, self._on_drag, self._on_point_click, arm_meshes)

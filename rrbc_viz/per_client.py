@@ -23,6 +23,7 @@ from . import sources
 from .access import AccessGuard
 from .app import RunningApp
 from .stage import ClientStage
+from .worker_pool import RetiringExecutor
 
 
 class PerClientApp:
@@ -52,6 +53,7 @@ class PerClientApp:
         self.apps: dict[int, RunningApp] = {}
         self.quiet = True
         self.guard: AccessGuard | None = None  # set by serve: the tabs it refused get no app
+        self.worker_pool: RetiringExecutor | None = None  # set by serve: the server's callback threads
         self._lock = threading.Lock()
         self._stopped = False
         server.on_client_connect(self._connect)

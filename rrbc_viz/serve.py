@@ -15,7 +15,7 @@ from rrbc_core.runtime.memory import release_memory_soon
 from rrbc_core.runtime.threads import apply_process_policy
 from rrbc_core.session.explorer import ExplorerSession
 
-from . import message_guard, sources, upload_spool
+from . import message_guard, sources, upload_spool, worker_pool
 from .access import AccessGuard, new_token, page_url
 from .app import RunningApp
 from .per_client import PerClientApp
@@ -77,6 +77,7 @@ def serve(
     with contextlib.redirect_stdout(out) if quiet else contextlib.nullcontext():
         server = viser.ViserServer(host=host, port=port, label="RRBC explorer", verbose=False)
     try:
+        pool = worker_pool.install(server)  # callback threads that end when idle: none kept after a class
         guard = AccessGuard(server, new_token() if token is True else (token or None), (*allow_hosts, host))
         server.scene.set_up_direction("+z")
         # no shadow maps: the cell's own meshes never cast or receive them, and on a machine drawing with software
@@ -95,6 +96,7 @@ def serve(
             server.on_client_disconnect(lambda client: release_memory_soon())  # a tab's buffers: back to the OS
         app.quiet = quiet
         app.guard = guard
+        app.worker_pool = pool
         app.url = page_url(app.url, guard.token)
         return app
     except BaseException:

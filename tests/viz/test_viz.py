@@ -12,6 +12,7 @@ import json
 import re
 import subprocess
 import sys
+import time
 import urllib.request
 
 import numpy as np
@@ -515,24 +516,40 @@ def test_cli_view_help_and_bad_scene(tmp_path):
     [([], "one session shared by every tab"), (["--per-client", "--present"], "one session per browser tab")],
 )
 def test_cli_view_starts_and_prints_the_url(flags, mode):
+    """The URL printed, the page served, and Ctrl+C with three tabs still connected stops the server within 10 s
+    (issue 42, item 5), exit 0."""
     import signal
+
+    from tests.support.viser_clients import ClientPool
 
     proc = subprocess.Popen(
         RRBC + ["view", "--port", "0", *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
+    pool = None
+    stopped_in = None
     try:
         line = proc.stdout.readline()
         assert "http://127.0.0.1:" in line and mode in line
         url = line.split(" at ")[1].split()[0]
         with urllib.request.urlopen(url, timeout=10) as r:
             assert r.status == 200
+        pool = ClientPool(url, 3)
+        deadline = time.monotonic() + 60
+        while not all(rec.arrivals for rec in pool.records) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert all(rec.arrivals for rec in pool.records)  # each tab is being sent its scene
     finally:
+        t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)
         try:
-            proc.wait(timeout=20)
+            proc.wait(timeout=10)
+            stopped_in = time.monotonic() - t0
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+        if pool is not None:
+            pool.close()
+    assert stopped_in is not None, "Ctrl+C did not stop the server within 10 s"
     assert proc.returncode == 0
 
 
