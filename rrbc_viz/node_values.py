@@ -15,6 +15,7 @@ from rrbc_core.session.evaluation import Evaluation
 LAYERS = (
     "mesh",
     "arm",
+    "arm_error",
     "sensor",
     "frames",
     "registration",
@@ -34,6 +35,7 @@ LAYERS = (
 LAYER_LABELS = {
     "mesh": "Work-cell mesh",
     "arm": "Robot arm (reaching the selected target)",
+    "arm_error": "Arm's model error at the tool (magnified)",
     "sensor": "Sensor cameras and their views",
     "frames": "Robot and sensor frames",
     "registration": "Registration points",

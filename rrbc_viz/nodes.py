@@ -92,6 +92,7 @@ class SceneNodes:
         self._see_through = False  # the work cell drawn see-through (ghost) instead of solid
         self._label_scale = 1.0  # labels' screen size factor (presentation mode)
         self._arm: ArmNodes | None = None  # scenes with an arm (a DH arm or a URDF)
+        self._arm_marks_allowed = True  # the arm's model-error mark, unless a lesson hides it (`set_arm_marks_visible`)
         self._scene_model: Any = None
         self._session: ExplorerSession | None = None  # the session built (build)
         self._lesson_labels: tuple[str, ...] = ()  # kinds of point whose labels a lesson step shows
@@ -214,6 +215,7 @@ class SceneNodes:
             self._arm = ArmNodes(sc, session.arm, self._server)
             self._arm.build()
             self._poser = ArmPoser(self._arm, self._show_arm)
+        self._show_arm_marks()  # its model-error mark as its layer says
         if scene is not None and scene.sensor_kind != "ground_truth":
             T = scene.sensor_to_robot
             look = scene.sensor_look_at if scene.sensor_look_at is not None else ev.targets.positions.mean(0)
@@ -506,6 +508,8 @@ class SceneNodes:
         self._layers[layer] = bool(visible)
         if layer == "labels":
             self._show_labels()
+        elif layer == "arm_error":
+            self._show_arm_marks()
         elif layer in self._groups:
             self._groups[layer].visible = bool(visible)
 
@@ -528,6 +532,8 @@ class SceneNodes:
             missing.add("mesh")
         if self._arm is None:
             missing.add("arm")
+        if self._arm is None or not self._arm.marks:
+            missing.add("arm_error")
         if self._scene.get_handle_by_name("/sensor/camera0/body") is None:
             missing.add("sensor")
         if not self._regions.any():
@@ -561,9 +567,13 @@ class SceneNodes:
         self._dragging.discard((kind, pid))
 
     def set_arm_marks_visible(self, on: bool) -> None:
-        """Show or hide the arm's model-error mark (a lesson hides it)."""
+        """Let the arm's model-error mark show (its layer permitting) or hide it (a lesson hides it)."""
+        self._arm_marks_allowed = bool(on)
+        self._show_arm_marks()
+
+    def _show_arm_marks(self) -> None:
         if self._arm is not None:
-            self._arm.set_marks_visible(on)
+            self._arm.set_marks_visible(self._arm_marks_allowed and bool(self._layers.get("arm_error", False)))
 
     def set_display(self, display: Display) -> None:
         """New display options; markers, gizmos, arrows and regions resized when their sizes changed."""

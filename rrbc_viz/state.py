@@ -25,7 +25,9 @@ if TYPE_CHECKING:
     from rrbc_core.session.vec_view import VecView
 
 #: Layers shown when a source is loaded: all but labels, the heat map and the error slice.
-DEFAULT_LAYERS = {name: name not in ("labels", "heatmap", "slice", "bounds") for name in LAYERS}
+#: off at first: labels (they would crowd the first picture), the costlier fields, the bounds, and the arm's model
+#: error at the tool (a magnified landing line and its figure, which the first picture does not explain)
+DEFAULT_LAYERS = {name: name not in ("labels", "heatmap", "slice", "bounds", "arm_error") for name in LAYERS}
 
 
 @dataclass

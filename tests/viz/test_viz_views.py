@@ -337,7 +337,8 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
         not nodes.arm_nodes().marks["label"].visible
     )  # the arm's model-error label is not the lesson's: it covered step 9
     app.views.lesson_stop()
-    assert nodes.arm_nodes().marks["label"].visible
+    # after the lesson, the mark as its layer says (off at first: issue 39, the first picture)
+    assert nodes.arm_nodes().marks["label"].visible == app.state.layers["arm_error"]
     if present:
         assert not any(nodes.handle(n).visible for n in nodes.label_names() if n.startswith("/fiducials/"))
 
@@ -383,7 +384,23 @@ def test_a_researcher_sees_checks_as_checks_and_only_the_layers_that_apply(measu
 
 def test_the_app_and_a_scene_keep_every_layer(app):
     shown = {n for n, box in app.controls.view.layers.items() if box.visible}
-    assert {"mesh", "arm", "sensor", "regions"} <= shown
+    assert {"mesh", "arm", "arm_error", "sensor", "regions"} <= shown
+
+
+def test_the_arms_model_error_is_off_in_the_first_picture_and_a_layer_shows_it(app):
+    """The arm's magnified model error at the tool (a line and 'nominal model → real arm's tool: x mm (×100)') is
+    not in the first picture, where nothing explains it and its label met the selected target's (issue 39, item 2):
+    its own View-tab layer, off at first, shows it with its words."""
+    marks = app.nodes.arm_nodes().marks
+    box = app.controls.view.layers["arm_error"]
+    assert box.value is False and not marks["label"].visible and not marks["line"].visible
+    box.value = True
+    try:
+        assert marks["label"].visible and marks["line"].visible
+        assert "nominal model" in marks["label"].text and "real arm" in marks["label"].text
+    finally:
+        box.value = False
+    assert not marks["label"].visible
 
 
 def test_a_simple_arm_is_drawn_as_links_and_joints_and_follows_the_target():
