@@ -233,8 +233,8 @@ def _points_text(
     start: int = 0,
     stop: int | None = None,
 ) -> bytes:
-    """`_points_json`'s rows as JSON text (ASCII bytes) made from the columns (`io.json_rows`; tests/io/test_json_rows.py holds
-    the two equal)."""
+    """`_points_json`'s rows as JSON text (ASCII bytes) made from the columns (`io.json_rows`;
+    tests/io/test_json_rows.py holds the two equal)."""
     sl = slice(start, stop)
     c = corrected
     ids = group.ids[sl]
