@@ -64,11 +64,14 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
     try:
         rss_started = rss_mb()
 
-        def threads_when_idle() -> int:  # once the server's callback threads have ended (rrbc_viz.worker_pool)
+        def threads_when_idle() -> int:
+            """The app's own threads (named rrbc-...: its workers, each tab's app's, the callback pool's), once the
+            server's callback threads have ended (rrbc_viz.worker_pool); other threads of this process (the test
+            clients', other tests') are not the server's."""
             deadline = time.monotonic() + worker_pool.IDLE_S + 15
             while app.worker_pool.threads and time.monotonic() < deadline:
                 time.sleep(0.1)
-            return threading.active_count()
+            return sum(t.name.startswith("rrbc-") for t in threading.enumerate())
 
         # one tab first, gone again: what a process keeps once it has served a tab (imported modules, compiled
         # Monte Carlo kernels, the robot's meshes) is the baseline a class is judged against
@@ -124,7 +127,7 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
         time.sleep(3.0)  # and the server has given their memory back
         rss_after = rss_mb()
         threads_after = threads_when_idle()
-        names_after = sorted(t.name for t in threading.enumerate())
+        names_after = sorted(t.name for t in threading.enumerate() if t.name.startswith("rrbc-"))
     finally:
         app.stop()
     return {
@@ -159,7 +162,7 @@ def class_load(quick: bool) -> list[dict]:
             f"{idle['max_gap_s']:.2f} s, click answered in {idle['click_s'] or float('nan'):.2f} s, RSS "
             f"{idle['rss_before_mb']:.0f} MB after one tab -> {idle['rss_after_mb']:.0f} MB after the class left "
             f"({idle['rss_started_mb']:.0f} MB when the server had started); {n} tabs' apps ready in "
-            f"{idle['apps_ready_s']:.1f} s; threads {idle['threads_started']} after one tab, "
+            f"{idle['apps_ready_s']:.1f} s; the app's threads {idle['threads_started']} after one tab, "
             f"{idle['threads_after']} after the class"
         )
         rows.append(
