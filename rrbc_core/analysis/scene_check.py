@@ -33,6 +33,7 @@ from rrbc_core.analysis.diagnosis import Diagnosis, Effect, diagnose
 from rrbc_core.analysis.diagnosis_stats import TIME_FOLLOWS_POSITION
 from rrbc_core.analysis.scene_extension import AddedTerm, extension_terms
 from rrbc_core.analysis.scene_prediction import (
+    REGISTRATION_ROLES,
     Figures,
     Interval,
     at_physical_points,
@@ -217,11 +218,21 @@ def _remainder(
     )
 
 
+def _anchors(mset: MeasurementSet, rows: np.ndarray) -> np.ndarray:
+    """(len(rows),) True at the registration rows (roles registration and both)."""
+    return np.isin(np.asarray(mset.roles, dtype=object)[rows], REGISTRATION_ROLES)
+
+
+def _levelled_var(cov: np.ndarray, rows: np.ndarray) -> float:
+    """The remainder's noise variance per axis (mm²) that the model predicts for rows `rows`, after `_levelling`."""
+    ev = np.linalg.eigvalsh(cov[rows])
+    return float(np.mean(np.maximum(ev, np.quantile(ev[:, -1], 0.9))))
+
+
 def _noise_effect(diag: Diagnosis, cov: np.ndarray, rows: np.ndarray, alpha: float) -> Effect | None:
     """`isotropic_noise` when the remainder's noise exceeds the model's (module docstring)."""
     s2 = float(np.mean(np.square(diag.noise_sigma_mm)))
-    ev = np.linalg.eigvalsh(cov[rows])
-    pred = float(np.mean(np.maximum(ev, np.quantile(ev[:, -1], 0.9))))  # the levelled remainder's (`_levelling`)
+    pred = _levelled_var(cov, rows)
     nu = max(3 * len(rows) - 6, 1)
     if s2 <= pred:
         return None
@@ -416,7 +427,14 @@ def check_scene_model(
                 stations_off.append(st.name)
 
     effects, rem, _ = _name(mset, meas, mean, cov, paired, model, alpha, seed, arm)
-    added, not_written = extension_terms(effects, rem, None if q is None else (spec, q[paired]))
+    added, not_written = extension_terms(
+        effects,
+        rem,
+        None if q is None else (spec, q[paired]),
+        _levelled_var(cov, paired),
+        alpha,
+        _anchors(mset, paired),
+    )
     extended = model.extended(robot=[t.term for t in added])
     follows = list(dict.fromkeys(FOLLOWS[e.name] for e in effects if e.name in FOLLOWS))
     if stations_off:
@@ -475,7 +493,14 @@ def _score(mset, stations, meas, model, mean, cov, z, paired, trials, folds, see
         terms: list = []
         if extend and len(np.unique(np.asarray(mset.ids, dtype=object)[train])) >= 5:
             effects, rem, _ = _name(mset, meas, mean, cov, train, model, alpha, seed + k + 1, arm)
-            terms, _ = extension_terms(effects, rem, None if joints is None else (joints[0], joints[1][train]))
+            terms, _ = extension_terms(
+                effects,
+                rem,
+                None if joints is None else (joints[0], joints[1][train]),
+                _levelled_var(cov, train),
+                alpha,
+                _anchors(mset, train),
+            )
         if not terms:
             after_err.append(miss[test])
             after_in.append(z[test] <= Z95)

@@ -513,4 +513,4 @@ def error_model_to_dict(model: ErrorModel) -> dict:
 
 # the terms of a field known at points, registered in TERM_TYPES after the ones above (the order messages list)
 from rrbc_core.models.armterms import ArmErrors  # noqa: E402, F401
-from rrbc_core.models.fieldterms import FieldUncertainty, SampledField  # noqa: E402, F401
+from rrbc_core.models.fieldterms import FieldUncertainty, LinearUncertainty, SampledField  # noqa: E402, F401

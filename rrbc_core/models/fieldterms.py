@@ -1,6 +1,8 @@
-"""Error terms for a field known at points (`errormodels.ErrorTerm`): `sampled_field`, a fixed smooth field through
-measured values, and `field_uncertainty`, what such a field's estimate does not know (a Gaussian process's
-posterior). What `rrbc check-model` writes for a measured smooth field (docs/check_model.md)."""
+"""Error terms for effects estimated from measurements (`errormodels.ErrorTerm`): `sampled_field`, a fixed smooth
+field through measured values; `field_uncertainty`, what such a field's estimate does not know (a Gaussian
+process's posterior); and `linear_uncertainty`, what a least-squares fit of a linear map of position and a drift
+does not know (its coefficients' covariance). What `rrbc check-model` writes for what it measured
+(docs/check_model.md)."""
 
 from __future__ import annotations
 
@@ -12,9 +14,11 @@ import numpy as np
 from rrbc_core.errors import InputError
 from rrbc_core.models.errormodels import PointSet, _check_trials, _number, _set, _Term, _vector
 
-__all__ = ["MAX_FIELD_SAMPLES", "FieldUncertainty", "SampledField"]
+__all__ = ["LINEAR_BASES", "MAX_FIELD_SAMPLES", "FieldUncertainty", "LinearUncertainty", "SampledField"]
 
 MAX_FIELD_SAMPLES = 2000  # points of a sampled field: its solve is O(M³) once, its evaluation O(P·M)
+#: `linear_uncertainty`'s bases -> their columns after the constant: position (x, y, z about center_mm), time (t − t0_s)
+LINEAR_BASES = {"position": 3, "time": 1, "position_time": 4}
 
 
 @dataclass(frozen=True)
@@ -129,6 +133,70 @@ class FieldUncertainty(_Term):
             root = vec * np.sqrt(np.clip(w, 0.0, None))
             out[:, :, a] = rng.standard_normal((trials, n)) @ root.T
         return out
+
+
+@dataclass(frozen=True)
+class LinearUncertainty(_Term):
+    """How uncertain a fitted linear term is (random, redrawn every trial): per axis a, the displacement
+    φ(x, t) · c_a with φ = [1, x − center_mm, t − t0_s] (the columns `basis` names: "position" [1, x, y, z],
+    "time" [1, t], "position_time" [1, x, y, z, t]) and coefficients c_a ~ N(0, var_mm2[a] · design_inverse):
+    the covariance of least-squares coefficients, `design_inverse` = (ΦᵀΦ)⁻¹ of the fit's design (k x k, k the
+    columns; units mm⁻² and s⁻² as the columns') and `var_mm2` (3,) the fit's residual variance per axis. What
+    `rrbc check-model` writes beside an `affine` or `drift` term it fitted, so that a prediction holds what the fit
+    does not know (docs/check_model.md). One draw per trial is shared by the points of one call. Either side.
+    """
+
+    basis: str
+    center_mm: tuple[float, float, float]
+    t0_s: float
+    design_inverse: tuple
+    var_mm2: tuple[float, float, float]
+    kind: ClassVar[str] = "linear_uncertainty"
+    random: ClassVar[bool] = True
+    _root: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        if self.basis not in LINEAR_BASES:
+            raise InputError(f"basis must be one of {', '.join(LINEAR_BASES)}, got {self.basis!r}")
+        k = LINEAR_BASES[self.basis] + 1
+        _set(self, "center_mm", _vector("center_mm", self.center_mm, 3, unit="mm"))
+        _set(self, "t0_s", _number("t0_s", self.t0_s, unit="s", limit=1e11))
+        _set(self, "var_mm2", _vector("var_mm2", self.var_mm2, 3, minimum=0, unit="mm²"))
+        rows = self.design_inverse
+        if isinstance(rows, (str, bytes, dict)) or not hasattr(rows, "__len__") or len(rows) != k:
+            raise InputError(f"design_inverse must be a {k}x{k} matrix for basis {self.basis!r}, got {rows!r}")
+        mat = np.array([_vector(f"design_inverse[{i}]", r, k) for i, r in enumerate(rows)])
+        if not np.allclose(mat, mat.T, rtol=1e-6, atol=1e-15):
+            raise InputError("design_inverse must be symmetric (the inverse of a least-squares fit's ΦᵀΦ)")
+        w, vec = np.linalg.eigh(mat)
+        if w[0] < -1e-9 * max(abs(w[-1]), 1e-300):
+            raise InputError("design_inverse must be positive semi-definite (the inverse of a fit's ΦᵀΦ)")
+        _set(self, "design_inverse", tuple(tuple(float(v) for v in r) for r in mat))
+        root = vec * np.sqrt(np.clip(w, 0.0, None))
+        root.setflags(write=False)
+        _set(self, "_root", root)
+
+    def design(self, points: PointSet, side: str) -> np.ndarray:
+        """The columns φ at the points: (P, k)."""
+        x = points.frame(self._side(side))
+        cols = [np.ones((len(x), 1))]
+        if self.basis != "time":
+            cols.append(x - np.asarray(self.center_mm))
+        if self.basis != "position":
+            cols.append((np.asarray(points.time, float) - self.t0_s)[:, None])
+        return np.hstack(cols)
+
+    def covariance(self, points: PointSet, side: str = "robot") -> np.ndarray:
+        """Per-point covariance (P, 3, 3) mm² (diagonal: the axes' fits are independent)."""
+        phi = self.design(points, side)
+        q = np.einsum("pi,ij,pj->p", phi, np.asarray(self.design_inverse), phi)
+        return q[:, None, None] * (np.asarray(self.var_mm2)[None, :, None] * np.eye(3)[None])
+
+    def sample(self, points: PointSet, side: str, rng: np.random.Generator, trials: int) -> np.ndarray:
+        phi = self.design(points, side)
+        coef = rng.standard_normal((_check_trials(trials), 3, phi.shape[1])) @ self._root.T  # (T, 3, k)
+        coef *= np.sqrt(np.asarray(self.var_mm2))[None, :, None]
+        return np.einsum("pk,tak->tpa", phi, coef)
 
 
 def _gauss(x: np.ndarray, p: np.ndarray, length: float) -> np.ndarray:

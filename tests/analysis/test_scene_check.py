@@ -210,11 +210,15 @@ def test_two_effects_at_once_are_both_named(scene):
 def test_time_that_follows_position_is_said(scene):
     cell = _cell(scene)
     rate = np.array([0.5, 0.0, 0.0]) / float(np.ptp(cell.time))
-    m = _file(scene, [Drift(rate_mm_per_s=tuple(rate))], seed=60)
+    terms = [Drift(rate_mm_per_s=tuple(rate))]
+    m = _file(scene, terms, seed=60)
     r = check_scene_model(m, scene, trials=TRIALS, folds=FOLDS, seed=0)
     assert r.unexplained
     if {"drift", "affine", "scale"} & {e.name for e in r.unexplained}:
         assert any("time follows position" in s for s in r.limits), r.limits
+    # the sum of the confounded terms still predicts, their fit's uncertainty included (`linear_uncertainty`)
+    assert "linear_uncertainty" in [t.table["type"] for t in r.added]
+    _second_files_inside(scene, r, terms, 0)
     # diagnose does not test a scale that changes with time where time follows position, and says so
     from rrbc_core.analysis.diagnosis import diagnose
 

@@ -477,6 +477,7 @@ def test_table_round_trip():
         "arm_errors",
         "sampled_field",
         "field_uncertainty",
+        "linear_uncertainty",
     }
     fields = {
         "robot": [
