@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.geometry.framing import CameraPose, frame_points, in_view
+from rrbc_core.geometry.framing import DEFAULT_MARGIN, CameraPose, frame_points, in_view
 
 if TYPE_CHECKING:
     from .stage import Stage
@@ -33,6 +33,16 @@ PANEL_PX = PANEL_WIDTH_PX + PANEL_GAP_PX
 def panel_px(presentation: bool) -> float:
     """What the panel takes of a view's width (its width and a gap, CSS px): a framed view leaves it free."""
     return float((PRESENTATION_PANEL_WIDTH_PX if presentation else PANEL_WIDTH_PX) + PANEL_GAP_PX)
+
+
+#: The free border of a framed view (a fraction of the free area's half-size): in presentation mode the labels are
+#: larger (`nodes` label scale), and a label centred over a point at the frame's edge needs the room.
+PRESENTATION_MARGIN = 0.2
+
+
+def frame_margin(presentation: bool) -> float:
+    """The free border a framed view keeps (`geometry.framing.frame_points`' margin)."""
+    return PRESENTATION_MARGIN if presentation else DEFAULT_MARGIN
 
 
 #: The image the initial camera is framed for (tabs report their own size once connected).
@@ -59,13 +69,15 @@ class View:
     position: np.ndarray | None = None
 
 
-def _pose_from(view: View, fov_y: float, aspect: float, width_px: float, panel_px: float = PANEL_PX) -> CameraPose:
+def _pose_from(
+    view: View, fov_y: float, aspect: float, width_px: float, panel_px: float = PANEL_PX, margin: float = DEFAULT_MARGIN
+) -> CameraPose:
     panel = float(np.clip(panel_px / max(width_px, 1.0), 0.0, 0.6))
     if view.position is not None:  # from a fixed place: look at the points' centre, framed by the fov alone
         centre = 0.5 * (view.points.min(0) + view.points.max(0))
         up = np.array([0.0, 0.0, 1.0])
         return CameraPose(np.asarray(view.position, float), centre, up, fov_y, aspect)
-    return frame_points(view.points, view.direction, fov_y, aspect, panel_fraction=panel)
+    return frame_points(view.points, view.direction, fov_y, aspect, panel_fraction=panel, margin=margin)
 
 
 class CameraDirector:
@@ -76,11 +88,12 @@ class CameraDirector:
         self.last: dict[int, CameraPose] = {}  # client id -> the pose last sent to it
         self.initial: CameraPose | None = None
         self.panel_px = float(PANEL_PX)  # the panel's width and gap: what a framed view leaves free
+        self.margin = float(DEFAULT_MARGIN)  # the free border it keeps (`frame_margin`)
 
     def set_initial(self, view: View, near: float, far: float) -> CameraPose:
         """The camera every newly opened tab starts with."""
         w, h = DEFAULT_IMAGE
-        pose = _pose_from(view, FOV_Y, w / h, w, self.panel_px)
+        pose = _pose_from(view, FOV_Y, w / h, w, self.panel_px, self.margin)
         cam = self.server.initial_camera
         cam.fov = float(FOV_Y)
         cam.near = near
@@ -91,9 +104,11 @@ class CameraDirector:
         self.initial = pose
         return pose
 
-    def set_panel(self, px: float) -> None:
-        """The panel's width and gap (`panel_px`): what views framed from now on leave free."""
+    def set_panel(self, px: float, margin: float = DEFAULT_MARGIN) -> None:
+        """The panel's width and gap (`panel_px`): what views framed from now on leave free; and the free border they
+        keep (`frame_margin`)."""
         self.panel_px = float(px)
+        self.margin = float(margin)
 
     def reframe_initial(self, view: View) -> CameraPose | None:
         """The initial camera framed again for `view` (the panel's width changed), near and far kept; the pose, or
@@ -118,7 +133,7 @@ class CameraDirector:
                 continue
             if not (aspect > 0 and width > 0):
                 continue
-            pose = _pose_from(view, float(cam.fov), aspect, width, self.panel_px)
+            pose = _pose_from(view, float(cam.fov), aspect, width, self.panel_px, self.margin)
             with client.atomic():
                 cam.up_direction = (0.0, 0.0, 1.0)
                 cam.position = tuple(pose.position)  # moves look_at along: set it after

@@ -67,7 +67,18 @@ PRESENTATION_CSS = (
     ".mantine-Paper-root .mantine-Button-root, .mantine-Paper-root .mantine-Tabs-tab "
     "{ font-size: 0.875rem !important; } "
     # the panel's bullseye (an SVG with a viewBox) as wide as the panel: its ring scale and axes grow with it
-    ".mantine-Paper-root svg[data-ring-mm] { width: 100%; height: auto; }</style>"
+    ".mantine-Paper-root svg[data-ring-mm] { width: 100%; height: auto; } "
+    # the tabs on one row: every tab an icon, the open one also named (the others' names stay readable by a screen
+    # reader and by the page's text), so a lesson's text starts in the window's upper half
+    # (viser 1.1.1's tab bar: role tablist, tabs role tab with aria-selected, an icon div then a label span; a tab's
+    # title attribute names it on hover)
+    ".mantine-Paper-root [role=tablist] { flex-wrap: nowrap !important; overflow-x: auto; } "
+    ".mantine-Paper-root [role=tab] { padding: 0 0.45em !important; flex-shrink: 0; } "
+    ".mantine-Paper-root [role=tab][aria-selected=false] > span "
+    "{ position: absolute; width: 1px; height: 1px; overflow: hidden; clip-path: inset(50%); white-space: nowrap; } "
+    ".mantine-Paper-root [role=tab][aria-selected=false] > div { margin-right: 0 !important; } "
+    # the headline on one line, its note small
+    ".rrbc-headline-main { font-size: 1rem !important; } .rrbc-headline-note { font-size: 0.7rem !important; margin-bottom: 0.35rem; }</style>"
 )
 NORMAL_CSS = f"<style>{PANEL_CSS}</style>"
 
@@ -457,16 +468,16 @@ class Controls:
         self.gui.main_panel.set_width(PRESENTATION_PANEL_WIDTH_PX if presentation else PANEL_WIDTH_PX)
         if hasattr(self, "style"):
             self.style.content = PRESENTATION_CSS if presentation else NORMAL_CSS
-            self.show_legend(not presentation)
 
     def tab_labels(self) -> tuple[str, ...]:
         """The tab bar's labels, in order."""
         return tuple(self._tab_group._tab_labels)
 
-    def show_legend(self, open_: bool) -> None:
-        """The colour legend open (exploring) or closed to its title (presentation mode, a lesson)."""
-        self.legend_open.visible = bool(open_)
-        self.legend_closed.visible = not open_
+    def show_legend(self, open_: bool | None) -> None:
+        """The colour legend open (exploring), closed to its title (a lesson) or, None, not shown (presentation mode:
+        a projector needs the room; a lesson's text names the colours it shows)."""
+        self.legend_open.visible = open_ is True
+        self.legend_closed.visible = open_ is False
 
     # -------------------------------------------------------------------------------- what the app shows here
     def show_headline(self, html: str) -> None:

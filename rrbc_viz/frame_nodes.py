@@ -47,7 +47,7 @@ class FrameNodes:
             "/frames/sensor_registered",
             axes_length=axes * 1.3,
             axes_radius=axes * 0.012,
-            origin_color=(255, 255, 255),
+            origin_color=(20, 20, 20),  # black: seen against the cell's light surfaces
             wxyz=wxyz(registered.rotation),
             position=np.asarray(registered.translation, float),
         )

@@ -17,10 +17,12 @@ def declutter(
     panel_px: float,
     font_scale: float,
     anchor: str,
+    first_anchor: str | None = None,
 ) -> frozenset[str]:
     """The names of `labels` (name -> (where it is drawn (3,) robot frame mm, its text)) to hide so that none
     overlaps another or runs under the panel when seen by `pose` (a `CameraPose`) in an image of `image_px` (width,
-    height) CSS px: `first` (the selected point's label) is placed first and never hidden, the others in order."""
+    height) CSS px: `first` (the selected point's label, drawn with `first_anchor` if given) is placed first and
+    never hidden, the others in order."""
     names = list(labels)
     if first in names:
         names.remove(first)
@@ -30,5 +32,21 @@ def declutter(
     anchors = np.array([labels[n][0] for n in names])
     texts = [labels[n][1] for n in names]
     boxes = label_boxes(anchors, texts, pose, image_px, font_scale, anchor)
+    if first_anchor is not None and names[0] == first:
+        boxes[0] = label_boxes(anchors[:1], texts[:1], pose, image_px, font_scale, first_anchor)[0]
     keep = uncluttered(boxes, image_px, panel_px)
     return frozenset(n for n, k in zip(names, keep) if not k and n != first)
+
+
+def inside_anchor(point, text: str, pose, image_px, panel_px: float, font_scale: float, anchor: str) -> str:
+    """The anchor that keeps a label (`text` drawn at `point` (3,) robot frame mm) inside the view's free part
+    (left of the panel) when seen by `pose`: `anchor` when its box fits, else "bottom-left" (the text runs right
+    from a point near the left edge) or "bottom-right" (left from a point near the panel)."""
+    box = label_boxes(np.reshape(point, (1, 3)), [text], pose, image_px, font_scale, anchor)[0]
+    if not np.all(np.isfinite(box)):
+        return anchor
+    if box[0] < 0:
+        return "bottom-left"
+    if box[2] > float(image_px[0]) - panel_px:
+        return "bottom-right"
+    return anchor

@@ -91,6 +91,7 @@ class SceneNodes:
         self._selected: tuple[str, str] | None = None  # the point carrying the drag gizmo
         self._see_through = False  # the work cell drawn see-through (ghost) instead of solid
         self._label_scale = 1.0  # labels' screen size factor (presentation mode)
+        self._reanchored: str | None = None  # the label drawn with its own anchor to stay in view (a lesson's)
         self._arm: ArmNodes | None = None  # scenes with an arm (a DH arm or a URDF)
         self._arm_marks_allowed = True  # the arm's model-error mark, unless a lesson hides it (`set_arm_marks_visible`)
         self._scene_model: Any = None
@@ -555,10 +556,23 @@ class SceneNodes:
         lesson = tuple(f"/{k}/" for k in self._lesson_labels)
         names = [n for n in self._labels if n.startswith(lesson)]
         mine = None if self._selected is None else f"{gizmo_name(*self._selected)}/label"
-        anchor = "bottom-center" if self._label_scale > 1.0 else "bottom-left"
+        anchor: Any = "bottom-center" if self._label_scale > 1.0 else "bottom-left"
         labels = {n: (self.label_anchor(n), str(self._labels[n].text)) for n in names}
         scale = 0.75 * self._label_scale
-        self._lesson_hidden = lesson_labels.declutter(labels, mine, pose, image_px, panel_px, scale, anchor)
+        first_anchor: Any = None
+        moved, self._reanchored = self._reanchored, None
+        if moved in self._labels and moved != mine:  # an earlier selection's label back to the common anchor
+            self._labels[moved].anchor = anchor
+        if mine is not None and mine in self._labels:  # the selected point's label kept inside the view
+            text = str(self._labels[mine].text)
+            first_anchor = lesson_labels.inside_anchor(
+                self.label_anchor(mine), text, pose, image_px, panel_px, scale, anchor
+            )
+            self._labels[mine].anchor = first_anchor
+            self._reanchored = mine
+        self._lesson_hidden = lesson_labels.declutter(
+            labels, mine, pose, image_px, panel_px, scale, anchor, first_anchor
+        )
         self._show_labels()
         return self._lesson_hidden
 

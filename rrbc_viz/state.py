@@ -69,6 +69,8 @@ class AppState:
         The lesson step shown (0-based), None outside the lesson.
     lesson_saved_layers : dict or None
         The layers before the lesson started (restored when it ends).
+    lesson_saved_zoom : float or None
+        The regions' zoom before the lesson started (a step may draw them larger; restored when it ends).
     lesson_labels : tuple of str
         Kinds of point whose labels the lesson step shows.
     messages : list of str
@@ -125,6 +127,7 @@ class AppState:
     landing: LandingDisplay | None = None
     lesson_index: int | None = None
     lesson_saved_layers: dict[str, bool] | None = None
+    lesson_saved_zoom: float | None = None
     lesson_labels: tuple[str, ...] = ()
     messages: list[str] = field(default_factory=list)
     heat_map: HeatMap | None = None

@@ -74,10 +74,12 @@ def headline(ev: Evaluation, kind: str) -> str:
     # green for a gain the scored points show, red for a loss they show, grey when they cannot tell (gain_test)
     colour = {"gain": "#1a7f37", "loss": "#b42318"}.get(sm.get("gain") or "", "#555555")
     return (
-        '<div style="padding:0 0.75rem"><div style="font-size:1.25em;line-height:1.3;margin:2px 0 0 0">'
+        '<div style="padding:0 0.75rem"><div class="rrbc-headline-main" '
+        'style="font-size:1.25em;line-height:1.3;margin:2px 0 0 0">'
         f'rigid <b>{_mm(rig)}</b> → RRBC <b style="color:{colour}">{_mm(rr)}</b> mm '
         f'<span style="font-size:0.8em;color:{colour}">{change}</span></div>'
-        f'<div style="font-size:0.875rem;color:#555">RMS error over {sm["scored"]} {what}</div></div>'
+        f'<div class="rrbc-headline-note" style="font-size:0.875rem;color:#555">RMS error over {sm["scored"]} {what}'
+        "</div></div>"
     )
 
 

@@ -39,6 +39,12 @@ class Step:
     direction: tuple[float, float, float] | None = None  # the camera's viewing direction (None: camera.OBLIQUE)
     #: the kinds of point ("registration", "fiducials", "targets") whose labels the step shows: what its text names
     labels: tuple[str, ...] = ()
+    #: the targets' regions drawn this many times larger at this step (None: as the View tab has them)
+    region_zoom: float | None = None
+
+
+#: The regions' zoom at the step that names them.
+REGION_ZOOM = 10.0
 
 
 def _v(x) -> str:
@@ -80,7 +86,7 @@ def _step2(ev: Evaluation, ctx: LessonContext) -> str:
     )
     if ctx.kind == "scene":
         s += (
-            f" The registered sensor frame (thin axes, white origin) is drawn beside the true one with its error "
+            f" The registered sensor frame (thin axes, black origin) is drawn beside the true one with its error "
             f"magnified ×{ctx.frame_magnification:g}."
         )
     return s
@@ -96,7 +102,8 @@ def _step3(ev: Evaluation, ctx: LessonContext) -> str:
             what = "extents" if r.kind == "box" else "radii"
             s += (
                 f" Each has a region of variability where the part may really be; {t.ids[0]}'s is a {r.kind} with "
-                f"{what} {dims} mm (translucent; enlarge it with *Region zoom* in the View tab)."
+                f"{what} {dims} mm (translucent, drawn ×{REGION_ZOOM:g} at this step: *Region zoom* in the View "
+                "tab)."
             )
     return s
 
@@ -194,6 +201,7 @@ STEPS: tuple[Step, ...] = (
         ("mesh", "arm", "sensor", "frames", "registration", "labels"),
         _step1,
         focus=("registration", "robot"),
+        labels=("registration",),  # its text names R1-R6
     ),
     Step(
         "Register the sensor to the robot",
@@ -204,7 +212,14 @@ STEPS: tuple[Step, ...] = (
         see_through=True,  # the frames' origins lie inside the sensor's casing
         labels=("registration",),
     ),
-    Step("Identify the targets", ("mesh", "targets", "regions"), _step3, focus=("targets",), labels=("targets",)),
+    Step(
+        "Identify the targets",
+        ("mesh", "targets", "regions"),
+        _step3,
+        focus=("targets",),
+        labels=("targets",),
+        region_zoom=REGION_ZOOM,  # a few-millimetre region is hidden inside its target's marker at true size
+    ),
     Step("Choose fiducials around the targets", ("mesh", "targets", "fiducials", "hull", "regions"), _step4),
     Step(
         "Map the robot's fiducials back",

@@ -27,7 +27,8 @@ GAP_PX = 2.0
 def label_boxes(anchors, texts, pose: CameraPose, image_px, font_scale: float, anchor: str = "bottom-left"):
     """Screen boxes (N, 4) [left, top, right, bottom] (CSS px) of labels `texts` (N,) at `anchors` (N, 3) seen by
     `pose` in an image of `image_px` (width, height); rows of labels behind the camera are NaN. `anchor`:
-    "bottom-left" (the text starts at the point) or "bottom-center" (centred over it)."""
+    "bottom-left" (the text starts at the point), "bottom-center" (centred over it) or "bottom-right" (it ends
+    there)."""
     a = np.asarray(anchors, float).reshape(-1, 3)
     w_img, h_img = (float(v) for v in image_px)
     ndc, depth = project(a, pose)
@@ -36,7 +37,7 @@ def label_boxes(anchors, texts, pose: CameraPose, image_px, font_scale: float, a
     em = LABEL_EM_PX * float(font_scale)
     width = np.array([CHAR_EM * em * max(len(str(t)), 1) for t in texts], float)
     height = LINE_EM * em
-    left = x - width / 2.0 if anchor == "bottom-center" else x
+    left = {"bottom-center": x - width / 2.0, "bottom-right": x - width}.get(anchor, x)
     boxes = np.stack([left, y - height, left + width, y], axis=1)
     boxes[~(depth > 0)] = np.nan
     return boxes

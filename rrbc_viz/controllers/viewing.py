@@ -21,6 +21,7 @@ from ..camera import (
     PRESETS,
     CellGeometry,
     View,
+    frame_margin,
     panel_px,
     preset_view,
 )
@@ -166,15 +167,23 @@ class ViewController:
             if on == self.ctx.state.presentation:
                 return
             self.ctx.state.presentation = on
-            self.ctx.camera.set_panel(panel_px(on))
+            self.ctx.camera.set_panel(panel_px(on), frame_margin(on))
             with self.ctx.server.atomic():
                 self.ctx.controls.apply_theme(on)
+                self.ctx.controls.show_legend(self._legend())
                 self.ctx.controls.sync_presentation(on)
                 self.ctx.nodes.set_label_scale(PRESENTATION_LABEL_SCALE if on else 1.0)
                 marker = self.ctx.state.display.marker_mm * (PRESENTATION_MARKERS if on else 1 / PRESENTATION_MARKERS)
                 self.ctx.evaluate.set_display(marker_mm=float(marker))
                 self.ctx.state.initial_camera = self.ctx.camera.reframe_initial(self.current_view())
                 self.ctx.camera.show(self.current_view())
+
+    def _legend(self) -> bool | None:
+        """The colour legend: open while exploring, closed to its title during a lesson (it needs the room), not
+        shown in presentation mode (a projector needs the room; a lesson's text names the colours it shows)."""
+        if self.ctx.state.presentation:
+            return None
+        return self.ctx.state.lesson_index is None
 
     def set_see_through(self, on: bool) -> None:
         """Draw the work cell see-through (View tab checkbox; lesson steps whose arrows point into surfaces)."""
@@ -298,10 +307,15 @@ class ViewController:
             index = int(np.clip(index, 0, len(teaching.STEPS) - 1))
             if self.ctx.state.lesson_index is None:
                 self.ctx.state.lesson_saved_layers = dict(self.ctx.state.layers)
-                self.ctx.controls.show_legend(False)  # the lesson needs the room: the legend closes to its title
+                self.ctx.state.lesson_saved_zoom = float(self.ctx.state.display.region_zoom)
+
             self.ctx.state.lesson_index = index
+            self.ctx.controls.show_legend(self._legend())
             step = teaching.STEPS[index]
             with self.ctx.server.atomic():
+                zoom = step.region_zoom or self.ctx.state.lesson_saved_zoom or 1.0
+                if float(self.ctx.state.display.region_zoom) != zoom:
+                    self.ctx.evaluate.set_display(region_zoom=float(zoom))
                 for name in LAYERS:
                     self.ctx.evaluate.set_layer(name, name in step.layers)
                 self.ctx.state.target_arrows = step.target_arrows
@@ -338,9 +352,13 @@ class ViewController:
     def lesson_stop(self) -> None:
         with self.ctx.lock:
             saved = self.ctx.state.lesson_saved_layers
+            zoom = self.ctx.state.lesson_saved_zoom
             self.ctx.state.lesson_index = None
             self.ctx.state.lesson_saved_layers = None
-            self.ctx.controls.show_legend(not self.ctx.state.presentation)
+            self.ctx.state.lesson_saved_zoom = None
+            if zoom is not None and float(self.ctx.state.display.region_zoom) != zoom:
+                self.ctx.evaluate.set_display(region_zoom=float(zoom))
+            self.ctx.controls.show_legend(self._legend())
             with self.ctx.server.atomic():
                 for name, visible in (saved or {}).items():
                     self.ctx.evaluate.set_layer(name, visible)
