@@ -114,6 +114,7 @@ class SceneNodes:
         self._heat = HeatMapNodes(self._scene)  # the heat map's samples and rings
         self._bullseye = LandingNodes(self._scene)  # the selected target's landing bullseye
         self._frames = FrameNodes(self._scene)  # the robot's and the sensor's frames
+        self._sensor: SensorNodes | None = None  # the sensor's cameras (scene mode)
         self._regions = RegionNodes(self._scene)  # the targets' regions of variability and coverage halos
         self._bounds = BoundNodes(self._scene)  # the targets' 95 % bound ellipsoids
 
@@ -217,10 +218,12 @@ class SceneNodes:
             self._arm.build()
             self._poser = ArmPoser(self._arm, self._show_arm)
         self._show_arm_marks()  # its model-error mark as its layer says
+        self._sensor = None
         if scene is not None and scene.sensor_kind != "ground_truth":
             T = scene.sensor_to_robot
             look = scene.sensor_look_at if scene.sensor_look_at is not None else ev.targets.positions.mean(0)
-            SensorNodes(sc).build(scene.sensor_kind, T.rotation, T.translation, look)
+            self._sensor = SensorNodes(sc)
+            self._sensor.build(scene.sensor_kind, T.rotation, T.translation, look)
 
         # frames ---------------------------------------------------------------------------------------
         self._frames.build(self._extent_mm, session.sensor_to_robot, ev.registration.mapping, self._label)
@@ -579,6 +582,11 @@ class SceneNodes:
     def drag_ended(self, kind: str, pid: str) -> None:
         """The user let go of a point's handle: the app places it again from now on."""
         self._dragging.discard((kind, pid))
+
+    def show_sight_lines(self, points) -> None:
+        """The sensor's lines of sight to `points` (N, 3) robot frame mm, or none (None); scene mode only."""
+        if self._sensor is not None:
+            self._sensor.show_sight_lines(points)
 
     def set_arm_marks_visible(self, on: bool) -> None:
         """Let the arm's model-error mark show (its layer permitting) or hide it (a lesson hides it)."""

@@ -30,6 +30,7 @@ JOINT_RGB = (70, 110, 160)
 TOOL_RGB = (60, 60, 60)
 SENSOR_RGB = (40, 40, 40)
 FRUSTUM_RGB = (90, 90, 90)
+SIGHT_RGB = FRUSTUM_RGB  # lines of sight (a lesson's step 7): the sensor's own colour
 STEREO_BASELINE_MM = 120.0
 CAMERA_FOV = np.deg2rad(50.0)
 
@@ -283,6 +284,8 @@ class SensorNodes:
     def __init__(self, scene: viser.SceneApi):
         self.scene = scene
         self.cameras: list = []
+        self._sight: Any = None  # /sensor/sight: lines of sight to the points a lesson step measures
+        self._sight_key: bytes | None = None
 
     def build(self, kind: str, rotation, position, look_at) -> None:
         sc = self.scene
@@ -316,6 +319,23 @@ class SensorNodes:
                 font_screen_scale=0.7,
                 anchor="bottom-left",
             )
+
+    def show_sight_lines(self, points) -> None:
+        """Lines of sight from each camera to `points` (N, 3) robot frame mm (a lesson step where the sensor measures
+        them); None or no points removes them. Unchanged points are not sent again."""
+        pts = None if points is None else np.asarray(points, float).reshape(-1, 3)
+        key = None if pts is None or not len(pts) or not self.cameras else pts.tobytes()
+        if key == self._sight_key:
+            return
+        self._sight_key = key
+        if self._sight is not None:
+            self._sight.remove()
+            self._sight = None
+        if key is None or pts is None:
+            return
+        starts = np.array([c[1] for c in self.cameras], float)
+        segments = np.stack([np.repeat(starts, len(pts), axis=0), np.tile(pts, (len(starts), 1))], axis=1)
+        self._sight = self.scene.add_line_segments("/sensor/sight", segments, colors=SIGHT_RGB, line_width=1.5)
 
 
 #: While a drag is under way the arm is posed at most this often (s); always at the drag's end.

@@ -41,6 +41,7 @@ class Step:
     labels: tuple[str, ...] = ()
     #: the targets' regions drawn this many times larger at this step (None: as the View tab has them)
     region_zoom: float | None = None
+    sight_lines: bool = False  # the sensor's lines of sight to the targets (the step where it measures them)
 
 
 #: The regions' zoom at the step that names them.
@@ -157,8 +158,9 @@ def _step7(ev: Evaluation, ctx: LessonContext) -> str:
     if not len(t.ids):
         return "There are no targets."
     return (
-        f"The sensor measures the {len(t.ids)} targets; **{t.ids[0]}** reads x = {_v(t.sensor[0])} mm "
-        "(sensor frame). Drag a target's handle to move it: everything below follows live."
+        f"The sensor (its lines of sight to the targets drawn) measures the {len(t.ids)} targets; "
+        f"**{t.ids[0]}** reads x = {_v(t.sensor[0])} mm (sensor frame). Drag a target's handle to move it: "
+        "everything below follows live."
     )
 
 
@@ -241,7 +243,10 @@ STEPS: tuple[Step, ...] = (
         "Measure the targets",
         ("mesh", "sensor", "targets", "fiducials"),
         _step7,
+        focus=("targets", "sensor"),  # the sensor that measures them, in view
         labels=("targets",),
+        sight_lines=True,
+        see_through=True,  # the sensor's mast stands between the camera and the lines
     ),
     Step(
         "Interpolate corrections to the targets",

@@ -59,6 +59,9 @@ class Presenter:
         picture = scene_picture(self.ctx.session, self.ctx.state, ev)
         self.ctx.state.landing = picture.landing
         self.ctx.nodes.show(picture)
+        lesson = self.ctx.state.lesson_index
+        sight = lesson is not None and teaching.STEPS[lesson].sight_lines
+        self.ctx.nodes.show_sight_lines(ev.targets.positions if sight else None)
         return picture
 
     def build_scene(self, ev: Evaluation) -> None:

@@ -446,3 +446,24 @@ def test_a_simple_arm_is_drawn_as_links_and_joints_and_follows_the_target():
         assert full.nodes.handle("/arm/urdf") is not None and full.nodes.handle("/arm/link0") is None
     finally:
         full.stop()
+
+
+def test_the_step_where_the_sensor_measures_the_targets_draws_its_lines_of_sight(app):
+    """Issue 39: step 7 says the sensor measures the targets; the sensor is framed and a line runs from each of its
+    cameras to each target; the other steps, and the lesson's end, draw none."""
+    ev = app.session.last
+    k = next(i for i, s in enumerate(teaching.STEPS) if s.sight_lines)
+    assert "sensor" in teaching.STEPS[k].focus and "sensor" in teaching.STEPS[k].layers
+    app.views.lesson_go(k)
+    lines = app.nodes.handle("/sensor/sight")
+    seg = np.asarray(lines.points)
+    bodies = [app.nodes.handle(f"/sensor/camera{i}/body") for i in range(8)]
+    cams = np.array([b.position for b in bodies if b is not None])
+    assert seg.shape == (len(cams) * len(ev.targets.ids), 2, 3)
+    assert np.allclose(np.unique(seg[:, 0], axis=0), np.unique(cams, axis=0))
+    assert np.allclose(np.unique(seg[:, 1], axis=0), np.unique(ev.targets.positions, axis=0))
+    app.views.lesson_go(k + 1)
+    assert app.nodes.handle("/sensor/sight") is None
+    app.views.lesson_go(k)
+    app.views.lesson_stop()
+    assert app.nodes.handle("/sensor/sight") is None
