@@ -335,7 +335,9 @@ class SensorNodes:
             return
         starts = np.array([c[1] for c in self.cameras], float)
         segments = np.stack([np.repeat(starts, len(pts), axis=0), np.tile(pts, (len(starts), 1))], axis=1)
-        self._sight = self.scene.add_line_segments("/sensor/sight", segments, colors=SIGHT_RGB, line_width=1.5)
+        self._sight = self.scene.add_line_segments(
+            "/sensor/sight", segments, colors=SIGHT_RGB, thickness=1.5, thickness_units="screen"
+        )
 
 
 #: While a drag is under way the arm is posed at most this often (s); always at the drag's end.
