@@ -25,6 +25,7 @@ sys.path.insert(0, str(HERE.parent))  # run from a checkout without installing
 import big_inputs  # noqa: E402
 import bounds_cost  # noqa: E402
 import class_load  # noqa: E402
+import gp_scale  # noqa: E402
 import interactive  # noqa: E402
 import montecarlo  # noqa: E402
 import reproduce_speed  # noqa: E402
@@ -44,6 +45,7 @@ BENCHMARKS = [
     interactive.diagnose_command,
     interactive.calibrate_urdf,
     interactive.auto_interpolation,
+    gp_scale.gp_scale,
     bounds_cost.correct_bounds,
     big_inputs.big_inputs,
     reproduce_speed.reproduce_speed,

@@ -21,6 +21,7 @@ from rrbc_core.interpolation.base import (
     too_few,
 )
 from rrbc_core.option_specs import check_options, option
+from rrbc_core.runtime.threads import thread_limited
 
 # ---------------------------------------------------------------------------------------------------------------
 # Gaussian process with a linear mean (universal kriging)
@@ -32,6 +33,7 @@ _GP_ELL_STARTS = (0.1, 0.3, 1.0, 3.0, 10.0)
 _GP_G_STARTS = (1e-6, 1e-3, 1e-1)
 _GP_REFINE = 3  # number of best grid starts refined by L-BFGS-B
 _GP_FIXED_JITTER = 1e-8  # added to g when the noise is fixed by the user (keeps the Cholesky well posed)
+FIT_SUBSAMPLE = 300  # the hyper-parameters are fitted on at most this many fiducials (issue 41)
 _GP_FLOOR_REL = 1e-9  # residual RMS below this fraction of the correction size counts as zero (clean data)
 
 
@@ -62,11 +64,15 @@ def _neg_reml(c: np.ndarray, dcs: list[np.ndarray], f: np.ndarray, y: np.ndarray
     Cholesky factorisation fails.
     """
     from scipy.linalg import LinAlgError, cho_solve, cholesky
+    from scipy.linalg.lapack import dpotri
 
     n, q = f.shape
     try:
         lc = cholesky(c, lower=True)
-        ci = cho_solve((lc, True), np.eye(n))
+        ci, info = dpotri(lc, lower=1)  # C⁻¹ from the factor (a third of a solve against the identity)
+        if info != 0:
+            return None
+        ci = np.tril(ci) + np.tril(ci, -1).T
         cif = ci @ f
         a = f.T @ cif
         la = cholesky(a, lower=True)
@@ -85,7 +91,7 @@ def _neg_reml(c: np.ndarray, dcs: list[np.ndarray], f: np.ndarray, y: np.ndarray
     else:
         value = 0.5 * np.sum(ypy) + 1.5 * logdet
         w = np.ones(y.shape[1])
-    grad = np.array([-0.5 * np.einsum("ic,ij,jc,c->", py, dc, py, w) + 1.5 * np.sum(p * dc) for dc in dcs])
+    grad = np.array([-0.5 * float(np.sum((dc @ py) * py, axis=0) @ w) + 1.5 * float(np.vdot(p, dc)) for dc in dcs])
     if not (np.isfinite(value) and np.all(np.isfinite(grad))):
         return None
     return float(value), grad
@@ -94,8 +100,10 @@ def _neg_reml(c: np.ndarray, dcs: list[np.ndarray], f: np.ndarray, y: np.ndarray
 class _FittedGP(Fitted):
     """A fitted GP. Attributes for reports: length_scale (local units) and length_scale_mm, noise_ratio
     g = sigma_n^2 / sigma_f^2, signal_var (3,) sigma_f^2 per component (mm^2), signal_std_mm and noise_std_mm (3,),
-    beta ((dim+1) x 3 trend coefficients in local coordinates). Fitting costs O(N^3) per likelihood evaluation
-    (about a hundred evaluations), prediction O(N^2) per query.
+    beta ((dim+1) x 3 trend coefficients in local coordinates), fit_points (how many fiducials the
+    hyper-parameters were fitted on). The hyper-parameters cost O(M^3) per likelihood evaluation (about sixty), M
+    = min(N, FIT_SUBSAMPLE): above FIT_SUBSAMPLE fiducials a fixed-seed random subset of them; the kriging itself
+    one O(N^3) factorisation on all N; prediction O(N^2) per query.
     """
 
     method = "gp"
@@ -115,13 +123,18 @@ class _FittedGP(Fitted):
         x = self.hull.local
         f = _design(x)
         q = f.shape[1]
-        dist = cdist(x, x)
-        eye = np.eye(n)
         # Residual size after an ordinary least-squares plane fit: sets the variance floor and scales.
         resid = values - f @ np.linalg.lstsq(f, values, rcond=None)[0]
         size = float(np.max(np.abs(values))) if np.any(values) else 1.0
         floor = max((_GP_FLOOR_REL * size) ** 2, 1e-300)
         self._x = x
+        # the hyper-parameters from at most FIT_SUBSAMPLE fiducials (a fixed-seed random subset: each likelihood
+        # evaluation is cubic in their number), then one factorisation on all of them
+        self.fit_points = min(n, FIT_SUBSAMPLE)
+        sub = np.sort(np.random.default_rng(0).choice(n, FIT_SUBSAMPLE, replace=False)) if n > FIT_SUBSAMPLE else None
+        xs, fs, ys = (x, f, values) if sub is None else (x[sub], f[sub], values[sub])
+        dist = cdist(xs, xs)
+        eye = np.eye(len(xs))
 
         if noise_mm is None:
             lb = np.log([_GP_ELL_BOUNDS[0], _GP_G_BOUNDS[0]])
@@ -130,7 +143,7 @@ class _FittedGP(Fitted):
             def objective(theta):
                 ell, g = np.exp(theta)
                 r, dr = _corr(dist, ell, kernel)
-                return _neg_reml(r + g * eye, [dr, g * eye], f, values, None, floor)
+                return _neg_reml(r + g * eye, [dr, g * eye], fs, ys, None, floor)
 
             starts = [np.log([ell, g]) for ell in _GP_ELL_STARTS for g in _GP_G_STARTS]
         else:
@@ -143,7 +156,7 @@ class _FittedGP(Fitted):
                 ell, sf2 = np.exp(theta)
                 r, dr = _corr(dist, ell, kernel)
                 c = sf2 * r + (sn2 + _GP_FIXED_JITTER * sf2) * eye
-                return _neg_reml(c, [sf2 * dr, sf2 * (r + _GP_FIXED_JITTER * eye)], f, values, 0.0, floor)
+                return _neg_reml(c, [sf2 * dr, sf2 * (r + _GP_FIXED_JITTER * eye)], fs, ys, 0.0, floor)
 
             starts = [np.log([ell, v * r]) for ell in _GP_ELL_STARTS for r in (0.1, 1.0, 10.0)]
 
@@ -185,8 +198,13 @@ class _FittedGP(Fitted):
         self.noise_ratio = float(g)  # noise variance / signal variance
         self.fixed_noise = noise_mm is not None
 
-        r, _ = _corr(dist, ell, kernel)
-        lc = cholesky(r + g * eye, lower=True)
+        del dist, eye
+        r = np.empty((n, n))
+        for i in range(0, n, 256):  # by blocks of rows: one N x N array, not the kernel's temporaries
+            r[i : i + 256] = _corr(cdist(x[i : i + 256], x), ell, kernel)[0]
+        r[np.diag_indices(n)] += g
+        lc = cholesky(r, lower=True, overwrite_a=True)
+        del r
         fi = solve_triangular(lc, f, lower=True)  # L^-1 F
         yi = solve_triangular(lc, values, lower=True)  # L^-1 Y
         qf, rf = np.linalg.qr(fi)
@@ -225,7 +243,7 @@ class _FittedGP(Fitted):
         return values, std, None
 
 
-MAX_FIDUCIALS = 1000  # fiducials gp fits at most (2000 took > 45 s, 10 000 needed 5.6 GB: issue 16)
+MAX_FIDUCIALS = 5000  # fiducials gp fits at most: one O(N³) factorisation and a few N x N arrays (N = 5000: 200 MB each)
 
 
 @dataclass(frozen=True)
@@ -266,11 +284,13 @@ class GP:
             object.__setattr__(self, "noise_mm", check_float("gp noise_mm", self.noise_mm, positive=False))
         check_options(self, "gp")
 
+    @thread_limited
     def fit(self, points, values) -> FittedInterpolator:
         p, v = check_data(points, values)
         if len(p) > MAX_FIDUCIALS:
             raise InputError(
-                f"gp interpolates at most {MAX_FIDUCIALS} fiducials (its fit costs O(N³) per step), got {len(p)}: "
+                f"gp interpolates at most {MAX_FIDUCIALS} fiducials (its fit factorises an N x N matrix, O(N³)), got "
+                f"{len(p)}: "
                 "use idw, linear or tps for more"
             )
         return _FittedGP(p, v, self.kernel, self.noise_mm)

@@ -68,7 +68,7 @@ def test_super_linear_work_has_stated_limits():
     from rrbc_core.interpolation.gp import GP, MAX_FIDUCIALS
 
     pts = np.random.default_rng(0).uniform(0, 1000, (MAX_FIDUCIALS + 1, 3))
-    with pytest.raises(InputError, match="at most 1000 fiducials"):
+    with pytest.raises(InputError, match=f"at most {MAX_FIDUCIALS} fiducials"):
         GP().fit(pts, np.zeros_like(pts))
 
 
