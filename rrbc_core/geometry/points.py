@@ -91,14 +91,23 @@ def collinear_ratio_batch(triples: np.ndarray) -> np.ndarray:
     return r
 
 
+#: sets up to this many points are checked for coincident pairs all at once (N² distances, 2 MB at 500)
+SMALL_SET = 500
+
+
 def check_registration_points(points, what: str = "registration points", minimum: int = 3) -> np.ndarray:
     """Refuse sets that cannot define a rigid transform: too few, coincident, or (nearly) collinear points."""
-    from scipy.spatial import cKDTree
-
     p = as_points(points, what)
     if len(p) < minimum:
         raise InputError(f"{what}: {len(p)} given, at least {minimum} distinct points are needed")
-    pairs = cKDTree(p).query_pairs(COINCIDENT_MM, output_type="ndarray")  # O(N log N), not an N x N matrix
+    if len(p) <= SMALL_SET:  # the usual few: every pair at once (and no scipy.spatial import for reading a file)
+        d2 = np.sum((p[:, None, :] - p[None, :, :]) ** 2, axis=-1)
+        i, j = np.nonzero(np.triu(d2 < COINCIDENT_MM**2, k=1))
+        pairs = np.column_stack([i, j])
+    else:
+        from scipy.spatial import cKDTree
+
+        pairs = cKDTree(p).query_pairs(COINCIDENT_MM, output_type="ndarray")  # O(N log N), not an N x N matrix
     if len(pairs):
         a, b = sorted(min(map(tuple, pairs)))
         raise InputError(

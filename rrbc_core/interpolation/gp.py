@@ -198,7 +198,6 @@ class _FittedGP(Fitted):
         self.noise_ratio = float(g)  # noise variance / signal variance
         self.fixed_noise = noise_mm is not None
 
-        del dist, eye
         r = np.empty((n, n))
         for i in range(0, n, 256):  # by blocks of rows: one N x N array, not the kernel's temporaries
             r[i : i + 256] = _corr(cdist(x[i : i + 256], x), ell, kernel)[0]

@@ -42,6 +42,8 @@ from rrbc_core.io.measurement_format import (
 # control characters other than tab (Python's strip removes some of them from a cell's ends; pyarrow's does not)
 _CONTROL = r"[\x00-\x08\x0a-\x1f\x7f]"
 _SPACE = " \t"
+#: the columns a file's numbers are in (read as numbers when every cell of them is one)
+NUMERIC_COLUMNS = frozenset((*SENSOR_COLUMNS, *ROBOT_COLUMNS, "time"))
 
 
 class _NotDecided(Exception):
@@ -153,8 +155,11 @@ def _parse(body: bytes, start: int, header_line: int, header: list[str]) -> Colu
             return "skip"
         return "error"
 
-    try:
-        table = pcsv.read_csv(
+    numeric = {f"c{k}" for k, name in enumerate(header) if name in NUMERIC_COLUMNS}
+
+    def read(typed: bool):
+        skipped.clear()
+        return pcsv.read_csv(
             pa.BufferReader(pa.py_buffer(body)[start:]),  # no copy
             # one block: each column one array (the file is at most `FILE_LIMIT_BYTES`, far below a block's limit)
             read_options=pcsv.ReadOptions(column_names=names, use_threads=False, block_size=len(body) - start + 1),
@@ -167,23 +172,44 @@ def _parse(body: bytes, start: int, header_line: int, header: list[str]) -> Colu
                 invalid_row_handler=other_count,
             ),
             convert_options=pcsv.ConvertOptions(
-                column_types={n: pa.string() for n in names}, strings_can_be_null=False, check_utf8=False
+                column_types={n: pa.float64() if typed and n in numeric else pa.string() for n in names},
+                null_values=[""],  # (only an empty cell is "no value"; strings are never null)
+                strings_can_be_null=False,
+                check_utf8=False,
             ),
         )
+
+    # the number columns parsed as numbers while the file is read (pyarrow's float parser is the cast's: module
+    # docstring); where one cell is not a number (a comment line, a target's junk robot cell, a padded file)
+    # every column is read as text and checked below, as before
+    typed = True
+    try:
+        table = read(True)
     except (pa.ArrowInvalid, ValueError):
-        raise _NotDecided from None
+        typed = False
+        try:
+            table = read(False)
+        except (pa.ArrowInvalid, ValueError):
+            raise _NotDecided from None
     if table.num_rows == 0:  # no rows: the row-by-row reader says what is missing
         raise _NotDecided
     padded = body.find(b" ", start) >= 0 or body.find(b"\t", start) >= 0
+    if typed and padded:  # (whether the float parser trims a cell is pyarrow's business: read as text)
+        typed = False
+        table = read(False)
     columns = [table.column(k).combine_chunks() for k in range(n_col)]
     if padded:
         columns = [pc.utf8_trim(col, _SPACE) for col in columns]
+
+    def blank(col):  # a cell without a value: an empty string, or a null number
+        return pc.is_null(col) if pa.types.is_floating(col.type) else pc.equal(col, "")
+
     # rows the row-by-row reader skips although they have the header's cell count: comments and empty cells
     drop = np.asarray(pc.starts_with(columns[0], "#"), dtype=bool)
-    if padded or any(pc.any(pc.equal(col, "")).as_py() for col in columns):
-        empty = pc.equal(columns[0], "")
+    if padded or any(pc.any(blank(col)).as_py() for col in columns):
+        empty = blank(columns[0])
         for col in columns[1:]:
-            empty = pc.and_(empty, pc.equal(col, ""))
+            empty = pc.and_(empty, blank(col))
         drop |= np.asarray(empty, dtype=bool)
     n_lines = body.count(b"\n", start) + (0 if body.endswith(b"\n") or start >= len(body) else 1)
     if skipped:
@@ -214,6 +240,12 @@ def _parse(body: bytes, start: int, header_line: int, header: list[str]) -> Colu
 
     def numbers(col, wanted: np.ndarray, limit: float) -> np.ndarray:
         """The column's numbers where `wanted` (NaN elsewhere)."""
+        if pa.types.is_floating(col.type):  # parsed while read: the same checks of value and size
+            v = np.asarray(col.fill_null(np.nan), dtype=float)
+            w = v[wanted]
+            if not (np.all(np.isfinite(w)) and np.all(np.abs(w) <= limit)):
+                raise _NotDecided
+            return np.where(wanted, v, np.nan)
         if wanted.all():
             return cast_numbers(col, limit)
         out = np.full(n, np.nan)
@@ -222,7 +254,7 @@ def _parse(body: bytes, start: int, header_line: int, header: list[str]) -> Colu
         return out
 
     def given(col) -> np.ndarray:
-        return np.asarray(pc.not_equal(col, ""), dtype=bool)
+        return ~np.asarray(blank(col), dtype=bool)
 
     every = np.ones(n, bool)
     sensor = np.empty((n, 3))

@@ -185,3 +185,37 @@ def test_a_number_cell_is_taken_exactly_when_the_plain_decimal_pattern_takes_it(
         except _NotDecided:
             got = None
         assert got == want, (s, got, want)
+
+
+def test_a_number_column_read_as_numbers_takes_the_same_cells_as_the_cast():
+    """The reader parses the number columns as numbers while reading (`NUMERIC_COLUMNS`) and reads the file as text
+    where a cell is not one: pyarrow's CSV float conversion takes exactly the cells `cast_numbers` takes (every
+    string of up to three characters from digits, signs, points, exponents and the letters of nan and inf, and
+    3000 longer seeded ones; cells with spaces go the text way) with the same floats."""
+    import io
+    import itertools
+    import math
+
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    from rrbc_core.io.measurements_columnar import _NotDecided, cast_numbers
+
+    alphabet = "01.eE+-naifIN_x"
+    strings = ["".join(t) for n in (1, 2, 3) for t in itertools.product(alphabet, repeat=n)]
+    rng = np.random.default_rng(8)
+    letters = np.array(list("0123456789.eE+-naif"))
+    strings += ["".join(c) for c in letters[rng.integers(0, len(letters), (2000, 7))]]
+    strings += [repr(float(x)) for x in rng.normal(size=1000) * 10.0 ** rng.integers(-30, 30, 1000)]
+    options = pcsv.ConvertOptions(column_types={"x": pa.float64()}, null_values=[""], strings_can_be_null=False)
+    for s in strings:
+        try:
+            cast = float(cast_numbers(pa.array([s]), math.inf)[0])
+        except _NotDecided:
+            cast = None
+        try:
+            v = pcsv.read_csv(io.BytesIO(b"x\n" + s.encode()), convert_options=options).column(0)[0].as_py()
+            typed = v if v is not None and math.isfinite(v) else None
+        except pa.ArrowInvalid:
+            typed = None
+        assert typed == cast, (s, typed, cast)
