@@ -242,7 +242,9 @@ class _FittedGP(Fitted):
         return values, std, None
 
 
-MAX_FIDUCIALS = 5000  # fiducials gp fits at most: one O(N³) factorisation and a few N x N arrays (N = 5000: 200 MB each)
+MAX_FIDUCIALS = (
+    5000  # fiducials gp fits at most: one O(N³) factorisation and a few N x N arrays (N = 5000: 200 MB each)
+)
 
 
 @dataclass(frozen=True)
