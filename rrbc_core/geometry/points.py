@@ -107,7 +107,9 @@ def check_registration_points(points, what: str = "registration points", minimum
     else:
         from scipy.spatial import cKDTree
 
-        pairs = cKDTree(p).query_pairs(COINCIDENT_MM, output_type="ndarray")  # O(N log N), not an N x N matrix
+        # O(N log N), not an N x N matrix; the sliding-midpoint tree without compacting builds about 3x faster
+        tree = cKDTree(p, balanced_tree=False, compact_nodes=False)
+        pairs = tree.query_pairs(COINCIDENT_MM, output_type="ndarray")
     if len(pairs):
         a, b = sorted(min(map(tuple, pairs)))
         raise InputError(
