@@ -253,11 +253,7 @@ def report(sim: list[dict], real_rows: list[dict] | None, commit: str | None) ->
         "as an `arm_errors` term: `rrbc calibrate`'s identification (`analysis.calibration.calibrate`) of the arm's "
         "parameters and the named load terms from what the model leaves. `anisotropic_noise` is named but not "
         "written. Beside them: every least-squares fit of a linear map or a drift writes its coefficients' "
-        "covariance as a `linear_uncertainty` term (drawn every trial); and when what all the written terms leave "
-        "(less a rigid motion) is more than the model's noise, over all rows or at the registration rows (a "
-        "prediction re-registers on them, so a miss there moves every point), it is written too (effect "
-        "`remainder`): a `sampled_field` through it with its `field_uncertainty`, and `isotropic_noise` for what "
-        "even that leaves.",
+        "covariance as a `linear_uncertainty` term (drawn every trial).",
         "5. **Score.** K folds (the stations when the file has at least two, else the points): the naming and "
         "extending are repeated without each fold, and the extended model predicts the held-out rows. The "
         "prediction error is the RMS over held-out rows of |measured − predicted mean residual|; the coverage the "
@@ -265,8 +261,9 @@ def report(sim: list[dict], real_rows: list[dict] | None, commit: str | None) ->
         "",
         "Limits: a drift cannot be told from a linear map of position when the measurement order follows position "
         "(the command says so, and the sum of the two still predicts); an effect smaller than what diagnose can "
-        "detect on the file is not named (docs/diagnosis_power.md), though the rest it leaves is written when it "
-        "shows; the uncertainty of the extension's sizes is in the prediction for the field and the linear terms, "
+        "detect on the file is not named (docs/diagnosis_power.md); a field's non-affine part that diagnose names "
+        "as affine is left out, and where it lies at the registration rows it moves every check (one smooth-field "
+        "seed below); the uncertainty of the extension's sizes is in the prediction for the field and the linear terms, "
         "not for the arm's parameters, a scale or outliers; a term's uncertainty is drawn for each station on its own "
         "(in a file of stations the shared error of a fit is drawn as if it were each station's).",
         "",

@@ -33,7 +33,6 @@ from rrbc_core.analysis.diagnosis import Diagnosis, Effect, diagnose
 from rrbc_core.analysis.diagnosis_stats import TIME_FOLLOWS_POSITION
 from rrbc_core.analysis.scene_extension import AddedTerm, extension_terms
 from rrbc_core.analysis.scene_prediction import (
-    REGISTRATION_ROLES,
     Figures,
     Interval,
     at_physical_points,
@@ -216,11 +215,6 @@ def _remainder(
         source=mset.source,
         extra=extra,
     )
-
-
-def _anchors(mset: MeasurementSet, rows: np.ndarray) -> np.ndarray:
-    """(len(rows),) True at the registration rows (roles registration and both)."""
-    return np.isin(np.asarray(mset.roles, dtype=object)[rows], REGISTRATION_ROLES)
 
 
 def _levelled_var(cov: np.ndarray, rows: np.ndarray) -> float:
@@ -427,14 +421,7 @@ def check_scene_model(
                 stations_off.append(st.name)
 
     effects, rem, _ = _name(mset, meas, mean, cov, paired, model, alpha, seed, arm)
-    added, not_written = extension_terms(
-        effects,
-        rem,
-        None if q is None else (spec, q[paired]),
-        _levelled_var(cov, paired),
-        alpha,
-        _anchors(mset, paired),
-    )
+    added, not_written = extension_terms(effects, rem, None if q is None else (spec, q[paired]))
     extended = model.extended(robot=[t.term for t in added])
     follows = list(dict.fromkeys(FOLLOWS[e.name] for e in effects if e.name in FOLLOWS))
     if stations_off:
@@ -493,14 +480,7 @@ def _score(mset, stations, meas, model, mean, cov, z, paired, trials, folds, see
         terms: list = []
         if extend and len(np.unique(np.asarray(mset.ids, dtype=object)[train])) >= 5:
             effects, rem, _ = _name(mset, meas, mean, cov, train, model, alpha, seed + k + 1, arm)
-            terms, _ = extension_terms(
-                effects,
-                rem,
-                None if joints is None else (joints[0], joints[1][train]),
-                _levelled_var(cov, train),
-                alpha,
-                _anchors(mset, train),
-            )
+            terms, _ = extension_terms(effects, rem, None if joints is None else (joints[0], joints[1][train]))
         if not terms:
             after_err.append(miss[test])
             after_in.append(z[test] <= Z95)

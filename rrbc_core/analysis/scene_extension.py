@@ -25,16 +25,11 @@ whichever instrument carries it, and its numbers read as `diagnose` reports them
 - `isotropic_noise` -> `isotropic_noise` with the missing sigma;
 - `outliers` -> `outliers` with the share of points flagged and their RMS distance.
 
-Beside them, what the fits do not know and what they leave:
-
-- each least-squares fit of a linear map and / or a drift -> `linear_uncertainty`: its coefficients' covariance
-  (residual variance per axis times (ΦᵀΦ)⁻¹), drawn every trial, so that a prediction holds the fit's own error
-  (large where time follows position and the two are confounded);
-- the rest (the remainder less every written term and a rigid motion) when it is more than the model's noise, over
-  all rows or at the registration rows (`_rest_tables`; a prediction re-registers on them, so a miss there moves every
-  point) -> effect `remainder`: a `sampled_field` through it with its `field_uncertainty`, and `isotropic_noise` for
-  what even that leaves. An effect too small or too local to be named, or one the vocabulary does not have, then
-  moves and widens the prediction instead of being left out.
+Beside them, what the fits do not know: each least-squares fit of a linear map and / or a drift ->
+`linear_uncertainty`, its coefficients' covariance (residual variance per axis times (ΦᵀΦ)⁻¹), drawn every trial, so
+that a prediction holds the fit's own error (large where time follows position and the two are confounded). What the
+written terms leave is not written: a field through it was tried and made a lift arm's prediction of other files
+low (a field through a few registration rows takes their noise as systematic).
 
 Not written (listed with the reason): `kinematic` and `compliance` (their parameters are identified by
 `rrbc calibrate`, not by diagnose) and `anisotropic_noise` (diagnose's axis is not a line of sight).
@@ -45,7 +40,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from rrbc_core.analysis.diagnosis import Effect
 from rrbc_core.io.measurements import MeasurementSet
@@ -167,78 +161,10 @@ def _arm_table(by: dict, resid: np.ndarray, arm) -> tuple[dict, str, int]:
     )
 
 
-def _rigid_free(pts: np.ndarray, left: np.ndarray) -> np.ndarray:
-    """`left` (N, 3) less its least-squares small rigid motion t + ω × (x − centroid): what a registration leaves."""
-    n = len(pts)
-    c = pts - pts.mean(axis=0)
-    design = np.zeros((3 * n, 6))  # translation, then ω; three rows per point
-    for a in range(3):
-        design[a::3, a] = 1.0
-    design[0::3, 4], design[0::3, 5] = c[:, 2], -c[:, 1]
-    design[1::3, 3], design[1::3, 5] = -c[:, 2], c[:, 0]
-    design[2::3, 3], design[2::3, 4] = c[:, 1], -c[:, 0]
-    flat = left.reshape(-1)
-    coef, *_ = np.linalg.lstsq(design, flat, rcond=None)
-    return (flat - design @ coef).reshape(n, 3)
-
-
-def _excess(left: np.ndarray, dof: float, noise_var: float) -> tuple[float, float]:
-    """(the variance per axis of `left` (N, 3) on `dof` degrees of freedom, the one-sided χ² p-value of it against
-    `noise_var` (mm²))."""
-    s2 = float(np.sum(left**2)) / dof
-    return s2, float(stats.chi2.sf(dof * s2 / noise_var, dof))
-
-
-def _rest_tables(
-    pts: np.ndarray, left: np.ndarray, anchors: np.ndarray, n_params: float, noise_var: float, alpha: float
-) -> list[tuple[str, dict, str]]:
-    """What the written terms leave (`left` (N, 3) at `pts`), when it is more than the model's noise (`noise_var`
-    mm² per axis): tested over all rows (3N − `n_params` degrees of freedom) and over the registration rows
-    (`anchors`; a prediction re-registers on them, so a miss there moves every point through the registration's
-    rotation, while a miss elsewhere stays at its row), each at alpha / 2. A rest the vocabulary did not name is
-    written as a `sampled_field` (the field model of `diagnosis_field.fit_field` fitted to it) with its
-    `field_uncertainty`; what even that leaves beyond the noise as `isotropic_noise`. So an effect too small or too
-    local to be named, or a mis-sized term, widens and moves the prediction instead of being left out."""
-    n = len(pts)
-    dof = 3 * n - n_params
-    if n < 5 or dof < 3 or noise_var <= 0:
-        return []
-    rest = _rigid_free(pts, left)
-    s2, p_all = _excess(rest, dof, noise_var)
-    n_a = int(np.sum(anchors))
-    s2_a, p_a = _excess(rest[anchors], 3 * n_a, noise_var) if n_a else (0.0, 1.0)
-    if not ((s2 > noise_var and p_all < alpha / 2) or (s2_a > noise_var and p_a < alpha / 2)):
-        return []
-    out = []
-    table, smooth, unknown, field_dof = _field_table(pts, rest)
-    field = SampledField(**{k: v for k, v in table.items() if k != "type"}).field(pts)
-    rms = float(np.sqrt(np.mean(np.sum(field**2, axis=1))))
-    what = f"{np.sqrt(s2):.3g} mm per axis against the model's {np.sqrt(noise_var):.3g} mm"
-    if n_a:
-        what += f"; {np.sqrt(s2_a):.3g} mm at the registration rows"
-    out.append(("remainder", table, f"what the terms above leave ({what}), smoothed at its points ({rms:.3g} mm RMS)"))
-    out.append(("remainder", unknown, "what that smoothed rest does not know (its posterior covariance)"))
-    s2, p_all = _excess(rest - field, dof - field_dof, noise_var) if dof - field_dof >= 3 else (0.0, 1.0)
-    if s2 > noise_var and p_all < alpha / 2:
-        sigma = float(np.sqrt(s2 - noise_var))
-        out.append(
-            (
-                "remainder",
-                {"type": "isotropic_noise", "sigma_mm": round(sigma, 6)},
-                f"what even the smoothed rest leaves beyond the model's noise ({np.sqrt(s2):.3g} against "
-                f"{np.sqrt(noise_var):.3g} mm per axis), as noise",
-            )
-        )
-    return out
-
-
 def extension_terms(
     effects: list[Effect],
     remainder: MeasurementSet,
     arm=None,
-    noise_var: float | None = None,
-    alpha: float = 0.01,
-    anchors: np.ndarray | None = None,
 ) -> tuple[list[AddedTerm], list[str]]:
     """The added terms for `effects` (module docstring), fitted on `remainder` (`scene_check`: sensor = each row's
     mapped reading in the robot frame, robot = that plus what the model leaves unexplained). `arm`: (the arm's
@@ -259,10 +185,8 @@ def extension_terms(
     tables: list[tuple[str, dict, str]] = []
     fitted: list[tuple] = []  # (basis, design, residual, coefficients' covariance) of the linear fits written
     explained = np.zeros_like(resid)
-    n_params = 6.0  # what the fits took from the remainder's 3N numbers: the registration's rigid motion, and below
     if arm is not None and ("kinematic" in by or "compliance" in by):  # first: diagnose judged the rest beside it
-        table, how, rank = _arm_table(by, resid, arm)
-        n_params += rank
+        table, how, _ = _arm_table(by, resid, arm)
         tables.append(("kinematic" if "kinematic" in by else "compliance", table, how))
         arm_term = ArmErrors(**{k: v for k, v in table.items() if k != "type"}).on_arm(**arm[0])
         explained += arm_term.displacement(PointSet(pts, pts, np.zeros(len(pts)), joints=arm[1]))
@@ -275,7 +199,6 @@ def extension_terms(
         coef, ccov = _fit(design, resid)
         g, joint_rate = coef[1:4].T, (coef[4] if with_time else None)
         fitted.append(("position_time" if with_time else "position", design, resid - design @ coef, ccov))
-        n_params += 3 * design.shape[1] - 6  # (its offset and rotation are the registration's)
         tables.append(
             (
                 "affine",
@@ -291,14 +214,12 @@ def extension_terms(
         table = {"type": "scale", "ppm": ppm, "center_mm": centre}
         tables.append(("scale", table, "diagnose's uniform scale"))
         explained += ppm * 1e-6 * (pts - pts.mean(axis=0))
-        n_params += 1
     if "scale" in by and "ppm_per_s" in by["scale"].parameters and np.all(np.isfinite(time)):
         ppm_s, t_ref = float(by["scale"].parameters["ppm_per_s"]), float(by["scale"].parameters["t0_s"])
         if "affine" in by or not tables or tables[-1][0] != "scale":  # the constant part is the affine's
             tables.append(("scale", {"type": "scale", "ppm": 0.0, "center_mm": centre}, "diagnose's scale rate"))
         tables[-1][1].update({"ppm_per_s": ppm_s, "t0_s": round(t_ref, 3)})
         explained += (ppm_s * 1e-6 * (time - t_ref))[:, None] * (pts - pts.mean(axis=0))
-        n_params += 1
     if "drift" in by and np.all(np.isfinite(time)):
         rate = by["drift"].parameters.get("rate_mm_per_s") or []
         how = "diagnose's drift rate"
@@ -310,7 +231,6 @@ def extension_terms(
             design = _design(None, centre, time, t0)
             coef, ccov = _fit(design, resid - explained)
             fitted.append(("time", design, resid - explained - design @ coef, ccov))
-            n_params += 3
         tables.append(("drift", {"type": "drift", "rate_mm_per_s": [float(v) for v in rate], "t0_s": t0}, how))
         explained += np.outer(time - t0, rate)
     if "smooth_field" in by:
@@ -326,11 +246,10 @@ def extension_terms(
                     "the field's linear part over these points (a zero-mean field cannot carry a trend)",
                 )
             )
-        table, smooth, unknown, field_dof = _field_table(pts, rest - x @ coef)
+        table, smooth, unknown, _ = _field_table(pts, rest - x @ coef)
         rms = float(np.sqrt(np.mean(np.sum(smooth**2, axis=1))))
         tables.append(("smooth_field", table, f"the measured field smoothed at its points ({rms:.3g} mm RMS)"))
         explained += x @ coef + SampledField(**{k: v for k, v in table.items() if k != "type"}).field(pts)
-        n_params += 6 + field_dof  # its linear part beyond a rigid motion, and the smoother's
         tables.append(
             (
                 "smooth_field",
@@ -360,15 +279,9 @@ def extension_terms(
                 "covariance)",
             )
         )
-    noise2 = noise_var
     if "isotropic_noise" in by:
         sigma = float(by["isotropic_noise"].parameters["sigma_mm"])
         tables.append(("isotropic_noise", {"type": "isotropic_noise", "sigma_mm": sigma}, "the noise the model lacks"))
-        noise2 = None if noise_var is None else noise_var + sigma**2
-    if tables and noise2 is not None:
-        keep = ~is_out if "outliers" in by else np.ones(len(pts), bool)
-        marks = np.zeros(len(pts), bool) if anchors is None else np.asarray(anchors, bool)
-        tables += _rest_tables(pts[keep], (resid - explained)[keep], marks[keep], n_params, noise2, alpha)
     not_written = []
     for name, why in (
         ("kinematic", "the file has no joint columns of the scene's arm; `rrbc calibrate` identifies it"),
