@@ -46,7 +46,6 @@ from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.armterms import ArmErrors
 from rrbc_core.models.errormodels import ErrorTerm, PointSet
 from rrbc_core.models.errorterms import error_model_from_dict
-from rrbc_core.models.fieldterms import SampledField
 
 __all__ = ["AddedTerm", "extension_terms"]
 
@@ -95,30 +94,26 @@ def _uncertainty_table(basis: str, design: np.ndarray, left: np.ndarray, cov: np
     on N − k degrees of freedom."""
     n, k = design.shape
     var = np.sum(left**2, axis=0) / max(n - k, 1)
-    inv = cov
     return {
         "type": "linear_uncertainty",
         "basis": basis,
         "center_mm": centre,
         "t0_s": t0,
-        "design_inverse": inv.tolist(),
+        "design_inverse": cov.tolist(),
         "var_mm2": [float(v) for v in var],
     }
 
 
-def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, np.ndarray, dict, float]:
-    """The `sampled_field` table (the field's posterior mean at the points), those values (N, 3) mm, the
-    `field_uncertainty` table (its posterior covariance: the fitted prior variances and noise) and the smoother's
-    degrees of freedom (its trace, summed over the axes)."""
+def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, float, dict]:
+    """The `sampled_field` table (the field's posterior mean at the points), its RMS (mm) and the
+    `field_uncertainty` table (its posterior covariance: the fitted prior variances and noise)."""
     from rrbc_core.analysis.diagnosis_field import fit_field
 
     fm = fit_field(points, resid - resid.mean(axis=0))
     smooth = np.empty((len(fm.index), 3))
-    dof = 0.0
     for a in range(3):
         shrink = fm.lam[a] * fm.d / (fm.lam[a] * fm.d + 1.0)
         smooth[:, a] = fm.u @ (shrink * fm.z[:, a])
-        dof += float(np.sum(shrink))
     table = {
         "type": "sampled_field",
         "points_mm": np.round(fm.points, 4).tolist(),
@@ -132,10 +127,10 @@ def _field_table(points: np.ndarray, resid: np.ndarray) -> tuple[dict, np.ndarra
         "field_var_mm2": [float(v) for v in fm.lam * fm.sigma2],
         "noise_var_mm2": float(fm.sigma2),
     }
-    return table, smooth, unknown, dof
+    return table, float(np.sqrt(np.mean(np.sum(smooth**2, axis=1)))), unknown
 
 
-def _arm_table(by: dict, resid: np.ndarray, arm) -> tuple[dict, str, int]:
+def _arm_table(by: dict, resid: np.ndarray, arm) -> tuple[dict, str]:
     """The `arm_errors` table for a named kinematic / compliance effect: `rrbc calibrate`'s identification
     (`calibration.calibrate`) of the arm's parameters and the named load terms from the remainder, as the pseudo
     sensor readings FK(q) − remainder (robot frame) against the nominal arm at the rows' joints."""
@@ -157,15 +152,10 @@ def _arm_table(by: dict, resid: np.ndarray, arm) -> tuple[dict, str, int]:
     return (
         table,
         f"rrbc calibrate's identification of the arm's {what} error from what the model leaves ({cal.rank} combinations)",
-        int(cal.rank),
     )
 
 
-def extension_terms(
-    effects: list[Effect],
-    remainder: MeasurementSet,
-    arm=None,
-) -> tuple[list[AddedTerm], list[str]]:
+def extension_terms(effects: list[Effect], remainder: MeasurementSet, arm=None) -> tuple[list[AddedTerm], list[str]]:
     """The added terms for `effects` (module docstring), fitted on `remainder` (`scene_check`: sensor = each row's
     mapped reading in the robot frame, robot = that plus what the model leaves unexplained). `arm`: (the arm's
     spec for `armterms.arm_chain`, the rows' joint values (N, I)) when the file has the scene's arm's joints: a
@@ -186,7 +176,7 @@ def extension_terms(
     fitted: list[tuple] = []  # (basis, design, residual, coefficients' covariance) of the linear fits written
     explained = np.zeros_like(resid)
     if arm is not None and ("kinematic" in by or "compliance" in by):  # first: diagnose judged the rest beside it
-        table, how, _ = _arm_table(by, resid, arm)
+        table, how = _arm_table(by, resid, arm)
         tables.append(("kinematic" if "kinematic" in by else "compliance", table, how))
         arm_term = ArmErrors(**{k: v for k, v in table.items() if k != "type"}).on_arm(**arm[0])
         explained += arm_term.displacement(PointSet(pts, pts, np.zeros(len(pts)), joints=arm[1]))
@@ -246,10 +236,8 @@ def extension_terms(
                     "the field's linear part over these points (a zero-mean field cannot carry a trend)",
                 )
             )
-        table, smooth, unknown, _ = _field_table(pts, rest - x @ coef)
-        rms = float(np.sqrt(np.mean(np.sum(smooth**2, axis=1))))
+        table, rms, unknown = _field_table(pts, rest - x @ coef)
         tables.append(("smooth_field", table, f"the measured field smoothed at its points ({rms:.3g} mm RMS)"))
-        explained += x @ coef + SampledField(**{k: v for k, v in table.items() if k != "type"}).field(pts)
         tables.append(
             (
                 "smooth_field",
