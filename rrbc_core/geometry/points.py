@@ -76,7 +76,11 @@ def principal_spreads(points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def spread_ratios(points) -> tuple[float, float]:
     """(sigma_2 / sigma_1, sigma_3 / sigma_1) of the centred points; (0, 0) for coincident points."""
-    _, s, _ = principal_spreads(points)
+    p = np.asarray(points, dtype=float)
+    if len(p) > SMALL_SET:  # the singular values of the QR's 3 x 3 R are the points' (Householder: as stable)
+        s = np.linalg.svd(np.linalg.qr(p - p.mean(axis=0), mode="r"), compute_uv=False)
+    else:
+        _, s, _ = principal_spreads(p)
     if s[0] <= 0:
         return 0.0, 0.0
     return float(s[1] / s[0]), float(s[2] / s[0])
@@ -93,6 +97,45 @@ def collinear_ratio_batch(triples: np.ndarray) -> np.ndarray:
 
 #: sets up to this many points are checked for coincident pairs all at once (N² distances, 2 MB at 500)
 SMALL_SET = 500
+#: the sweep (`coincident_pairs`) compares each point with at most this many next ones along its direction
+SWEEP_WINDOW = 32
+#: the sweep's direction and a second one across it: fixed and along no axis or grid diagonal, so a plane or grid of
+#: points spreads on them
+_SWEEP = np.linalg.qr(np.array([[0.5377, 0.6411, 0.5470], [-0.7412, 0.1291, 0.6589]]).T)[0].T
+
+
+def coincident_pairs(p: np.ndarray, tol: float = COINCIDENT_MM) -> np.ndarray:
+    """Index pairs (K, 2), i < j, of points (N, 3) closer than `tol` (mm).
+
+    Up to `SMALL_SET` points: every pair at once. Above: sort and sweep. Two points closer than tol are closer than
+    tol along any direction, so after sorting the points' projections on one direction each point is compared with
+    its next neighbours in that order while any of them is within tol along it (and only those within tol along a
+    second direction too): O(N log N) with a few vectorised passes, no tree and no scipy import. Where points crowd
+    along the direction (more than `SWEEP_WINDOW` within tol of one another) a k-d tree answers instead."""
+    n = len(p)
+    if n <= SMALL_SET:
+        d2 = np.sum((p[:, None, :] - p[None, :, :]) ** 2, axis=-1)
+        i, j = np.nonzero(np.triu(d2 < tol**2, k=1))
+        return np.column_stack([i, j])
+    xy = p @ _SWEEP.T
+    order = np.argsort(xy[:, 0])
+    xs, ys = xy[order, 0], xy[order, 1]
+    found = []
+    for k in range(1, SWEEP_WINDOW + 1):
+        ahead = xs[k:] - xs[:-k] < tol
+        if not ahead.any():
+            break
+        near = np.flatnonzero(ahead & (np.abs(ys[k:] - ys[:-k]) < tol))  # (closer than tol across the sweep too)
+        d2 = np.sum((p[order[near + k]] - p[order[near]]) ** 2, axis=1)
+        hit = near[d2 < tol**2]
+        found.append(np.column_stack([order[hit], order[hit + k]]))
+    else:
+        from scipy.spatial import cKDTree
+
+        # crowded along the sweep: the sliding-midpoint tree without compacting builds about 3x faster
+        return cKDTree(p, balanced_tree=False, compact_nodes=False).query_pairs(tol, output_type="ndarray")
+    pairs = np.concatenate(found) if found else np.zeros((0, 2), int)
+    return np.sort(pairs, axis=1)
 
 
 def check_registration_points(points, what: str = "registration points", minimum: int = 3) -> np.ndarray:
@@ -100,16 +143,7 @@ def check_registration_points(points, what: str = "registration points", minimum
     p = as_points(points, what)
     if len(p) < minimum:
         raise InputError(f"{what}: {len(p)} given, at least {minimum} distinct points are needed")
-    if len(p) <= SMALL_SET:  # the usual few: every pair at once (and no scipy.spatial import for reading a file)
-        d2 = np.sum((p[:, None, :] - p[None, :, :]) ** 2, axis=-1)
-        i, j = np.nonzero(np.triu(d2 < COINCIDENT_MM**2, k=1))
-        pairs = np.column_stack([i, j])
-    else:
-        from scipy.spatial import cKDTree
-
-        # O(N log N), not an N x N matrix; the sliding-midpoint tree without compacting builds about 3x faster
-        tree = cKDTree(p, balanced_tree=False, compact_nodes=False)
-        pairs = tree.query_pairs(COINCIDENT_MM, output_type="ndarray")
+    pairs = coincident_pairs(p)
     if len(pairs):
         a, b = sorted(min(map(tuple, pairs)))
         raise InputError(

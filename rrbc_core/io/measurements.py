@@ -165,10 +165,14 @@ class MeasurementSet:
         both; "both", "target" and "check" select their own rows.
         """
         rows = self.rows(role)
-        ids = tuple(self.ids[i] for i in rows.tolist())
+        at = rows.tolist()
+        ids = tuple(self.ids) if len(at) == len(self.ids) else tuple(map(self.ids.__getitem__, at))
         if len(set(ids)) == len(ids):  # every id once (most files): no averaging to do
             n_lines = len(self.lines)
-            lines = tuple(self.lines[i] if i < n_lines else 0 for i in rows.tolist())
+            if n_lines == len(self.ids):
+                lines = tuple(self.lines) if len(at) == n_lines else tuple(map(self.lines.__getitem__, at))
+            else:
+                lines = tuple(self.lines[i] if i < n_lines else 0 for i in at)
             # + 0.0: the sum the averaging makes (a -0.0 reads back as 0.0 either way)
             return PointGroup(ids, self.sensor[rows] + 0.0, self.robot[rows] + 0.0, np.ones(len(ids), int), lines)
         index: dict[str, int] = {}
@@ -575,7 +579,7 @@ def _validate(mset: MeasurementSet, header_line: int, rows_checked: bool = False
 
     reg_rows = mset.rows("registration")
     reg = mset.points("registration")
-    last_line = max((mset.lines[i] for i in reg_rows), default=0) or header_line
+    last_line = max(map(mset.lines.__getitem__, reg_rows.tolist()), default=0) or header_line
     if len(reg) < 3:
         listed = f" ({_listed(reg.ids)})" if len(reg) else ""
         raise _error(
