@@ -30,6 +30,8 @@ MODEL_INSIDE: Rgb = (95, 95, 95)  # a measured row inside its predicted 95 % reg
 MODEL_OUTSIDE: Rgb = (130, 0, 0)  # outside it
 MODEL_MISFIT: Rgb = (25, 25, 25)  # measured minus predicted residual, magnified
 BOUND: Rgb = (205, 170, 120)  # a target's 95 % bound (the "bounds" layer)
+READING_SENSOR: Rgb = (30, 30, 30)  # a fiducial's sensor reading placed by (R, t) (lesson step 5)
+READING_ROBOT: Rgb = CORRECTION_FIDUCIAL  # its robot reading: their offset is the fiducial's correction
 
 #: The drag gizmo's axis colours (drei PivotControls' defaults in viser 1.1.1's client: x, y, z). Data colours
 #: keep a CIE76 colour difference of at least MIN_GIZMO_DELTA_E from each (tests/viz check it).

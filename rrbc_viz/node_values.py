@@ -255,3 +255,24 @@ def landing_display(
         scale,
         None if off_vec is None else anchor + scale * off_vec,
     )
+
+
+#: the pair's anchor stands this many marker radii above its fiducial
+LIFT_MARKERS = 4.0
+
+
+@dataclass(frozen=True)
+class FiducialReadings:
+    """One fiducial's readings as the scene draws them: `fiducial` its drawn position, `sensor` R s + t and `robot`
+    b (each (3,) robot frame, mm), `magnification` the drawn offset's scale."""
+
+    pid: str
+    fiducial: np.ndarray
+    sensor: np.ndarray
+    robot: np.ndarray
+    magnification: float
+
+    def drawn(self, marker_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """Where s and b are drawn (robot frame, mm): s above the fiducial, b at s + magnification × (b − s)."""
+        anchor = np.asarray(self.fiducial, float) + np.array([0.0, 0.0, LIFT_MARKERS * marker_mm])
+        return anchor, anchor + self.magnification * (np.asarray(self.robot, float) - np.asarray(self.sensor, float))

@@ -52,6 +52,7 @@ from .landing_nodes import LandingNodes
 from .node_values import (
     LAYERS,
     Display,
+    FiducialReadings,
     fiducial_label,
     fiducial_labels,
     gizmo_name,
@@ -62,6 +63,7 @@ from .node_values import (
     unit_sphere,
 )
 from .picture import ScenePicture
+from .reading_nodes import ReadingNodes
 from .region_nodes import RegionNodes
 from .robot_nodes import ArmNodes, ArmPoser, SensorNodes
 from .stage import Stage
@@ -113,6 +115,7 @@ class SceneNodes:
         self._extent_mm = 1000.0
         self._heat = HeatMapNodes(self._scene)  # the heat map's samples and rings
         self._bullseye = LandingNodes(self._scene)  # the selected target's landing bullseye
+        self._readings = ReadingNodes(self._scene)  # a fiducial's two readings (lesson step 5)
         self._frames = FrameNodes(self._scene)  # the robot's and the sensor's frames
         self._sensor: SensorNodes | None = None  # the sensor's cameras (scene mode)
         self._regions = RegionNodes(self._scene)  # the targets' regions of variability and coverage halos
@@ -168,6 +171,7 @@ class SceneNodes:
         self._nodes.clear()
         self._heat.clear()
         self._bullseye.clear()
+        self._readings.clear()
         self._sent.clear()  # new handles may reuse ids of removed ones
 
     def build(self, session: ExplorerSession, picture: ScenePicture, mesh, layers: dict[str, bool]) -> None:
@@ -582,6 +586,10 @@ class SceneNodes:
     def drag_ended(self, kind: str, pid: str) -> None:
         """The user let go of a point's handle: the app places it again from now on."""
         self._dragging.discard((kind, pid))
+
+    def show_readings(self, readings: FiducialReadings | None) -> None:
+        """A fiducial's two readings beside it (`reading_nodes`), or none (None)."""
+        self._readings.show(readings, self._display.marker_mm)
 
     def show_sight_lines(self, points) -> None:
         """The sensor's lines of sight to `points` (N, 3) robot frame mm, or none (None); scene mode only."""

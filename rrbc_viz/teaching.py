@@ -15,6 +15,8 @@ import numpy as np
 
 from rrbc_core.session.evaluation import Evaluation
 
+from .node_values import FiducialReadings
+
 
 @dataclass(frozen=True)
 class LessonContext:
@@ -42,6 +44,7 @@ class Step:
     #: the targets' regions drawn this many times larger at this step (None: as the View tab has them)
     region_zoom: float | None = None
     sight_lines: bool = False  # the sensor's lines of sight to the targets (the step where it measures them)
+    readings: bool = False  # the first included fiducial's two readings, drawn beside it (`fiducial_readings`)
 
 
 #: The regions' zoom at the step that names them.
@@ -124,11 +127,28 @@ def _step4(ev: Evaluation, ctx: LessonContext) -> str:
     return s
 
 
-def _step5(ev: Evaluation, ctx: LessonContext) -> str:
+def mapped_fiducial(ev: Evaluation) -> int | None:
+    """The fiducial step 5 follows (its text and its picture): the first included one; None without any."""
     inc = np.flatnonzero(ev.included)
-    if not len(inc):
+    return int(inc[0]) if len(inc) else None
+
+
+def fiducial_readings(ev: Evaluation, magnification: float) -> FiducialReadings | None:
+    """Step 5's picture: `mapped_fiducial`'s drawn position, its sensor reading placed by the registration
+    (R s + t) and its robot reading b (robot frame, mm), their offset drawn `magnification` times longer."""
+    i = mapped_fiducial(ev)
+    if i is None:
+        return None
+    sensor = ev.registration.mapping.apply(ev.fiducial_readings.sensor[i][None])[0]
+    return FiducialReadings(
+        ev.fiducial_ids[i], ev.fiducial_positions[i], sensor, ev.fiducial_readings.robot[i], magnification
+    )
+
+
+def _step5(ev: Evaluation, ctx: LessonContext) -> str:
+    i = mapped_fiducial(ev)
+    if i is None:
         return "Every fiducial is excluded: include one (click it) to see it mapped back."
-    i = int(inc[0])
     b = ev.fiducial_readings.robot[i]
     s = ev.fiducial_readings.sensor[i]
     e = ev.corrections[i]
@@ -136,7 +156,8 @@ def _step5(ev: Evaluation, ctx: LessonContext) -> str:
         f"The robot's fiducial readings are taken back into the sensor frame with (R, t)⁻¹. For "
         f"**{ev.fiducial_ids[i]}** the robot read b = {_v(b)} mm (robot frame); the sensor saw s = {_v(s)} mm "
         f"(sensor frame). Mapped back, b lands **{float(np.linalg.norm(e)):.3f} mm** from s: the rigid-body "
-        "condition is broken there."
+        f"condition is broken there. Drawn above {ev.fiducial_ids[i]}: s where (R, t) puts it (black) and b "
+        f"(orange), their offset ×{ctx.magnification:g}."
     )
 
 
@@ -228,8 +249,8 @@ STEPS: tuple[Step, ...] = (
         ("mesh", "frames", "fiducials"),
         _step5,
         focus=("fiducials", "sensor"),
-        labels=("fiducials",),
         see_through=True,  # from the sensor's side some fiducials lie behind parts of the cell
+        readings=True,  # the two readings its text names, labelled beside the fiducial (no other labels to clash)
     ),
     Step(
         "Corrections at the fiducials",

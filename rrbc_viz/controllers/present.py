@@ -62,6 +62,9 @@ class Presenter:
         lesson = self.ctx.state.lesson_index
         sight = lesson is not None and teaching.STEPS[lesson].sight_lines
         self.ctx.nodes.show_sight_lines(ev.targets.positions if sight else None)
+        readings = lesson is not None and teaching.STEPS[lesson].readings
+        magnification = self.ctx.state.display.magnification
+        self.ctx.nodes.show_readings(teaching.fiducial_readings(ev, magnification) if readings else None)
         return picture
 
     def build_scene(self, ev: Evaluation) -> None:

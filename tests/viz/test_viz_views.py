@@ -357,7 +357,8 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
                 b = boxes[j]
                 apart = a[2] + GAP_PX <= b[0] or b[2] + GAP_PX <= a[0] or a[3] + GAP_PX <= b[1] or b[3] + GAP_PX <= a[1]
                 assert apart, (k + 1, shown[i], shown[j])
-    assert {0, 1, 2, 4, 6} <= {k for k, s in enumerate(teaching.STEPS) if s.labels}  # steps 1, 2, 3, 5 and 7
+    assert {0, 1, 2, 6} <= {k for k, s in enumerate(teaching.STEPS) if s.labels}  # steps 1, 2, 3 and 7
+    assert teaching.STEPS[4].readings  # step 5 labels the fiducial's two readings instead
     assert (
         not nodes.arm_nodes().marks["label"].visible
     )  # the arm's model-error label is not the lesson's: it covered step 9
@@ -467,3 +468,32 @@ def test_the_step_where_the_sensor_measures_the_targets_draws_its_lines_of_sight
     app.views.lesson_go(k)
     app.views.lesson_stop()
     assert app.nodes.handle("/sensor/sight") is None
+
+
+def test_the_step_that_maps_a_fiducial_back_draws_its_two_readings(app):
+    """Issue 39: step 5 names a fiducial's two readings (s and b); beside that fiducial the scene draws s where the
+    registration puts it and b at s plus the readings' offset (the fiducial's correction, robot frame) times the
+    magnification its text states, joined by a line; no other step, and not after the lesson, draws them."""
+    ev = app.session.last
+    k = next(i for i, s in enumerate(teaching.STEPS) if s.readings)
+    app.views.lesson_go(k)
+    i = teaching.mapped_fiducial(ev)
+    pid = ev.fiducial_ids[i]
+    mag = app.state.display.magnification
+    s_drawn = np.asarray(app.nodes.handle("/readings/sensor").position, float)
+    b_drawn = np.asarray(app.nodes.handle("/readings/robot").position, float)
+    placed = ev.registration.mapping.apply(ev.fiducial_readings.sensor[i][None])[0]
+    offset = ev.fiducial_readings.robot[i] - placed
+    assert np.allclose(offset, ev.corrections_robot[i], atol=1e-9)  # the offset is the fiducial's correction
+    np.testing.assert_allclose(b_drawn - s_drawn, mag * offset, atol=1e-6)
+    above = s_drawn - ev.fiducial_positions[i]
+    assert above[2] > 2 * app.state.display.marker_mm and np.allclose(above[:2], 0.0)  # clear of its sphere
+    assert f"×{mag:g}" in app.nodes.handle("/readings/robot_label").text
+    assert pid in app.nodes.handle("/readings/sensor_label").text
+    text = app.controls.learn.lesson.content  # what the Learn tab shows
+    assert pid in text and f"×{mag:g}" in text
+    app.views.lesson_go(k + 1)
+    assert app.nodes.handle("/readings/sensor") is None
+    app.views.lesson_go(k)
+    app.views.lesson_stop()
+    assert app.nodes.handle("/readings/robot") is None
