@@ -5,8 +5,8 @@ for each browser tab's own image size (`rrbc_core.geometry.framing.frame_points`
 every point inside the part of the image the floating panel leaves free) and moves that tab's camera, or sets the
 initial camera of tabs still to come. Frames and units: robot frame, mm (the scene frame).
 
-Presets (View tab → Camera): the whole cell (mesh, robot, sensor; measured data: the data and their mesh), the work area (the point sets and the robot's
-base: the opening view), a close-up from above on the targets and fiducials, the sensor's view, the selected point. The Learn tab's steps frame what each step talks about (`teaching.Step.focus`).
+Presets (View tab → Camera): the whole cell (mesh, robot, sensor; measured data: the data and their mesh), the work area (the point sets, looked at
+from their far side with the arm behind them: the opening view), a close-up from above on the targets and fiducials, the sensor's view, the selected point. The Learn tab's steps frame what each step talks about (`teaching.Step.focus`).
 """
 
 from __future__ import annotations
@@ -206,6 +206,29 @@ def _halo(points: np.ndarray, radius: float) -> np.ndarray:
     return np.vstack([points, (points[:, None, :] + d[None]).reshape(-1, 3)])
 
 
+#: how far the work-area view turns from the line through the work to the robot's base (a three-quarter view: the
+#: arm stands behind the work, to one side, not in front of it nor hiding its far half)
+ASIDE_RAD = np.deg2rad(35.0)
+
+
+def facing_robot(work: np.ndarray, base=None) -> np.ndarray:
+    """The work-area view's direction (camera -> scene, robot frame): looking from the work's far side towards the
+    robot's base `base` (3,) (default the origin), turned `ASIDE_RAD` to one side and tilted down as `OBLIQUE`, so
+    the arm is context behind the work and never the wrist in front of it. `OBLIQUE` where the base lies under the
+    work (no side to look from)."""
+    pts = np.asarray(work, float).reshape(-1, 3)
+    base = np.zeros(3) if base is None else np.asarray(base, float)
+    lo, hi = pts.min(0), pts.max(0)
+    toward = (base - 0.5 * (lo + hi))[:2]
+    reach = float(np.linalg.norm(toward))
+    if not len(pts) or reach <= 0.25 * float(np.linalg.norm((hi - lo)[:2])):
+        return OBLIQUE
+    c, s = np.cos(ASIDE_RAD), np.sin(ASIDE_RAD)
+    h = np.array([c * toward[0] - s * toward[1], s * toward[0] + c * toward[1]]) / reach
+    tilt = OBLIQUE[2] / np.linalg.norm(OBLIQUE[:2])
+    return np.array([h[0], h[1], tilt])
+
+
 def preset_view(name: str, cell: CellGeometry, selected=None, marker_mm: float = 8.0) -> View:
     """The View of a camera preset (`PRESETS`). `selected`: (M, 3) points the selected-point view must show (the
     point, its region, its landings), None for the work area."""
@@ -217,10 +240,10 @@ def preset_view(name: str, cell: CellGeometry, selected=None, marker_mm: float =
         if cell.sensor_position is not None and cell.sensor_kind in ("stereo", "mocap", "laser_tracker"):
             return View(_halo(work, 2 * marker_mm), OBLIQUE, position=cell.sensor_position)
         return View(_halo(work, 2 * marker_mm), TOP)  # no camera to look through: straight down on the work
-    if name == "work area":  # where the robot works: registration points, fiducials, targets (and the robot's base
-        # in a modelled cell; measured data carry no cell around the points)
-        names = ("registration", "fiducials", "targets") + (("robot",) if cell.sensor_kind is not None else ())
-        return View(_halo(cell.points(*names), 2 * marker_mm), OBLIQUE)
+    if name == "work area":  # where the robot works: registration points, fiducials, targets; in a modelled cell
+        # looked at from the work's far side, the arm behind it as context (not its base framed: issue 39)
+        pts = cell.points("registration", "fiducials", "targets")
+        return View(_halo(pts, 2 * marker_mm), facing_robot(pts) if cell.sensor_kind is not None else OBLIQUE)
     if name == "close-up":  # the targets and fiducials from above (the fixture plate)
         return View(_halo(work, 2 * marker_mm), STEEP)
     if name == "selected point":

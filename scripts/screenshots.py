@@ -175,6 +175,8 @@ SHOTS.append(
 )
 # The File tab on an integrator's laptop (1440x900).
 SHOTS.append(("file_tab_1440x900.png", [("tab", "File")]))
+# The opening view on a wide screen (1600x900): the work framed, the arm as context (issue 39).
+SHOTS.append(("app_default_1600x900.png", []))
 
 #: Per-shot options: "serve" (keyword arguments of serve: a source, presentation mode) and "viewport" (the
 #: browser window, default helpers.VIEWPORT 1280x800).
@@ -188,6 +190,7 @@ SHOT_OPTIONS: dict[str, dict] = {
     },
     "presentation_1280x720.png": {"serve": {"present": True}, "viewport": {"width": 1280, "height": 720}},
     "file_tab_1440x900.png": {"viewport": {"width": 1440, "height": 900}},
+    "app_default_1600x900.png": {"viewport": {"width": 1600, "height": 900}},
 }
 
 APP_ENTRY = "rrbc_viz.serve:serve"

@@ -84,7 +84,13 @@ def test_camera_presets_show_what_they_name():
     assert work.position is None and work.points.max(0)[2] < 700  # no sensor, no mesh: the work only
     assert work.points.min(0)[0] > 250  # nor the registration points
     area = preset_view("work area", cell)
-    assert area.points.max(0)[2] < 700 and np.any(np.all(area.points == 0, axis=1))  # the robot's base, no sensor
+    assert area.points.max(0)[2] < 700  # no sensor
+    assert not np.any(np.linalg.norm(area.points, axis=1) < 50)  # nor the robot's base (issue 39): the work framed
+    # looked at from the work's far side, the arm's base behind the work (to one side), downwards
+    centre = 0.5 * (area.points.min(0) + area.points.max(0))
+    toward_base = -centre[:2] / np.linalg.norm(centre[:2])
+    horizontal = area.direction[:2] / np.linalg.norm(area.direction[:2])
+    assert float(horizontal @ toward_base) > np.cos(np.deg2rad(60)) and area.direction[2] < 0
     sel = preset_view("selected point", cell, selected=[cell.targets[0]], marker_mm=8.0)
     assert np.abs(sel.points - cell.targets[0]).max() == pytest.approx(32.0)
     no_sensor = CellGeometry(**{**cell.__dict__, "sensor_kind": "ground_truth"})
