@@ -307,3 +307,32 @@ def test_a_target_dragged_out_of_the_frame_comes_back_into_view(viser_app, page_
         return bool(p["onCanvas"] and p["inFront"] and p["x"] < 1280 - PANEL_WIDTH_PX)
 
     wait_for(seen, 15.0, message="H1 in the page's view, left of the panel", page=page)
+
+
+@pytest.mark.parametrize("size", [(1600, 900), (1280, 800)], ids=["1600x900", "1280x800"])
+def test_the_opening_view_frames_the_work_with_the_arm_behind_it(viser_app, page_for, size):
+    """Issue 39, item 3: as the app opens on a wide screen and on the default one, every target and fiducial and the
+    selected target's bullseye (its centre and both landings) are on the canvas beside the panel, none hidden by the
+    cell; and the camera looks at the work from its far side: the robot's base is farther from the camera than the
+    work's centre (the arm stands behind the work as context, not in front of it)."""
+    app = viser_app(lambda: serve())
+    page, _ = page_for(app.url, dismiss_notification=False)
+    page.set_viewport_size({"width": size[0], "height": size[1]})
+    dismiss_software_webgl_notification(page, timeout_s=10.0)
+    app.views.show_camera("work area")  # what a new tab opens with, framed for this tab's size
+    wait_camera(page, app)
+    ev = app.session.last
+    up = np.array([0.0, 0.0, 0.9 * app.state.display.marker_mm])
+    land = app.state.landing
+    pts = np.vstack([ev.targets.positions + up, ev.fiducial_positions + up, [land.anchor, land.rigid, land.rrbc]])
+    res = _project_past_software_notice(page, pts)
+    left, top, w, h = res["canvas"]
+    for j, p in enumerate(res["points"]):
+        assert p["inFront"] and p["onCanvas"], (j, p)
+        assert left <= p["x"] <= left + w - PANEL_WIDTH_PX and top <= p["y"] <= top + h, (j, p)
+    camera = np.array(res["camera"])
+    hidden = _hidden_by_mesh(app.loaded.mesh, camera, pts, slack_mm=0.5 * app.state.display.marker_mm)
+    assert not hidden.any(), np.flatnonzero(hidden)
+    work = np.vstack([ev.targets.positions, ev.fiducial_positions])
+    centre = 0.5 * (work.min(0) + work.max(0))
+    assert np.linalg.norm(camera) > np.linalg.norm(camera - centre) + 0.25 * np.linalg.norm(centre[:2])
