@@ -304,7 +304,7 @@ class RunningApp:
     def _frame_camera(self, mesh, ev: Evaluation) -> None:
         """The initial camera of new tabs, and that of open tabs: the work area, framed beside the panel."""
         cell = self.views.cell_geometry()
-        view = preset_view(OPENING, cell, marker_mm=self.ctx.state.display.marker_mm)
+        view = self.views.preset_view(OPENING)  # (with the selected target's bullseye)
         whole = preset_view("whole cell", cell).points
         radius = max(0.5 * float(np.linalg.norm(whole.max(0) - whole.min(0))), 10.0)
         # mm: near close enough to look at a region of variability, far enough for the whole cell from afar

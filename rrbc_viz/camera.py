@@ -231,7 +231,8 @@ def facing_robot(work: np.ndarray, base=None) -> np.ndarray:
 
 def preset_view(name: str, cell: CellGeometry, selected=None, marker_mm: float = 8.0) -> View:
     """The View of a camera preset (`PRESETS`). `selected`: (M, 3) points the selected-point view must show (the
-    point, its region, its landings), None for the work area."""
+    point, its region, its landings), which the work area shows too (the bullseye beside the selected target stays
+    beside the panel), or None."""
     work = cell.points("targets", "fiducials")
     if name == "whole cell":  # a modelled cell with its robot's base; measured data: the data (and their mesh)
         robot = ("robot",) if cell.sensor_kind is not None else ()
@@ -243,7 +244,10 @@ def preset_view(name: str, cell: CellGeometry, selected=None, marker_mm: float =
     if name == "work area":  # where the robot works: registration points, fiducials, targets; in a modelled cell
         # looked at from the work's far side, the arm behind it as context (not its base framed: issue 39)
         pts = cell.points("registration", "fiducials", "targets")
-        return View(_halo(pts, 2 * marker_mm), facing_robot(pts) if cell.sensor_kind is not None else OBLIQUE)
+        direction = facing_robot(pts) if cell.sensor_kind is not None else OBLIQUE
+        if selected is not None and len(selected):
+            pts = np.vstack([pts, np.asarray(selected, float).reshape(-1, 3)])
+        return View(_halo(pts, 2 * marker_mm), direction)
     if name == "close-up":  # the targets and fiducials from above (the fixture plate)
         return View(_halo(work, 2 * marker_mm), STEEP)
     if name == "selected point":

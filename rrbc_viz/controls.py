@@ -26,7 +26,7 @@ from .checks_panel import ChecksPanel
 from .colors import legend_html
 from .file_panel import FilePanel
 from .node_values import LAYER_LABELS, LAYERS, Display
-from .picture import BOUND_SCALES
+from .picture import BOUND_SCALES, CHECK_ERROR_CHOICES
 from .planning_panel import PlanningPanel
 from .selection_panel import Bullseye, SelectionPanel
 from .slice_nodes import SLICE_AXES, SLICE_CHOICES
@@ -130,6 +130,13 @@ class ExplorePanel:
                 hint="The bounds layer's ellipsoids: magnified as the arrows and landing offsets are (comparable with "
                 "them), or at true size (tenths of a mm: hidden inside the markers unless zoomed in)",
             )
+            self.check_error = gui.add_dropdown(
+                "Check errors drawn",
+                tuple(CHECK_ERROR_CHOICES.values()),
+                initial_value=CHECK_ERROR_CHOICES["rrbc"],
+                hint="A measurement file's check rows: the error of the position RRBC or the rigid transform "
+                "sends the robot to (× the arrow magnification, coloured by size; the largest labelled)",
+            )
             self.scale = gui.add_markdown("")
             self.summary = gui.add_markdown("")
             self.table = gui.add_markdown("")
@@ -185,6 +192,11 @@ class ExplorePanel:
             _forward(self.bound_scale, syncing, lambda **kw: app.evaluate.set_display(**kw), "bound_scale",
                      lambda label: by_label.get(label, label))
         )  # fmt: skip
+        by_check = {label: value for value, label in CHECK_ERROR_CHOICES.items()}
+        self.check_error.on_update(
+            _forward(self.check_error, syncing, lambda **kw: app.evaluate.set_display(**kw), "check_error",
+                     lambda label: by_check.get(label, label))
+        )  # fmt: skip
         self.new_seed.on_click(lambda event: app.evaluate.new_seed(client=event.client))
 
     def sync(self, settings: Settings | None, kind: str, display: Display | None = None) -> None:
@@ -192,6 +204,7 @@ class ExplorePanel:
             if display is not None:
                 self.magnification.value = float(min(max(display.magnification, 1), MAG_MAX))
                 self.bound_scale.value = BOUND_SCALES[display.bound_scale]
+                self.check_error.value = CHECK_ERROR_CHOICES[display.check_error]
                 return
             assert settings is not None
             self.registration.value = settings.registration

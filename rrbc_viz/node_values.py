@@ -25,6 +25,7 @@ LAYERS = (
     "targets",
     "regions",
     "bounds",
+    "check_errors",
     "landing",
     "labels",
     "heatmap",
@@ -45,6 +46,7 @@ LAYER_LABELS = {
     "targets": "Targets",
     "regions": "Regions of variability",
     "bounds": "95 % bounds of the targets",
+    "check_errors": "Check errors (measured rows, × arrows, coloured by size)",
     "landing": "Landing points (rigid vs RRBC)",
     "labels": "Labels",
     "heatmap": "Heat map of predicted error",
@@ -67,6 +69,7 @@ class Display:
 
     magnification: float = 200.0  # arrows and landing offsets drawn this many times longer
     bound_scale: str = "arrows"  # the 95 % bounds drawn ×magnification like the arrows ("arrows") or "true" size
+    check_error: str = "rrbc"  # the check rows' errors drawn (`CheckErrors`): after RRBC ("rrbc") or rigid ("rigid")
     marker_mm: float = 8.0  # radius of fiducial / target spheres
     region_zoom: float = 1.0  # regions and heat-map samples drawn this many times larger about their target
     heat_value: str = "rrbc"  # rrbc | rigid (scene); correction | std (measurements)
@@ -276,3 +279,65 @@ class FiducialReadings:
         """Where s and b are drawn (robot frame, mm): s above the fiducial, b at s + magnification × (b − s)."""
         anchor = np.asarray(self.fiducial, float) + np.array([0.0, 0.0, LIFT_MARKERS * marker_mm])
         return anchor, anchor + self.magnification * (np.asarray(self.robot, float) - np.asarray(self.sensor, float))
+
+
+#: the check rows' largest errors that are labelled in the scene
+CHECK_ERROR_LABELS = 3
+#: the longest check-error arrow is at most this share of the point sets' extent (millimetre errors on a station
+#: several metres wide would otherwise run out of the view at the arrows' magnification)
+CHECK_ERROR_SHARE = 0.15
+
+
+def legible_magnification(largest_mm: float, length_mm: float, limit: float) -> float:
+    """The largest 1-2-5 magnification, at most `limit` and at least 1, that draws `largest_mm` at most `length_mm`
+    long (`limit` itself when that fits)."""
+    if not (largest_mm > 0) or largest_mm * limit <= length_mm:
+        return float(limit)
+    top = length_mm / largest_mm
+    if top <= 1.0:
+        return 1.0
+    decade = 10.0 ** np.floor(np.log10(top))
+    return float(max(m * decade for m in (1.0, 2.0, 5.0) if m * decade <= top))
+
+
+@dataclass(frozen=True, eq=False)
+class CheckErrors:
+    """A measurement file's check rows' errors as the scene draws them: `ids` (K,), `starts` (K, 3) where each is
+    drawn (the row's position), `vectors` (K, 3) its error (corrected position − measured robot position, robot
+    frame, mm) times `magnification`, `sizes_mm` (K,) the error's length (`TargetResult.error_rrbc` or
+    `error_rigid`: the card's and the table's numbers), `method` "rrbc" or "rigid", `magnification` the arrows'
+    (`legible_magnification`), `labelled` the indices of the largest `CHECK_ERROR_LABELS` errors."""
+
+    ids: tuple
+    starts: np.ndarray
+    vectors: np.ndarray
+    sizes_mm: np.ndarray
+    method: str
+    magnification: float
+
+    @property
+    def labelled(self) -> np.ndarray:
+        return np.argsort(-self.sizes_mm, kind="stable")[:CHECK_ERROR_LABELS]
+
+
+def check_errors(ev: Evaluation, method: str, magnification: float, extent_mm: float) -> CheckErrors | None:
+    """The check rows' errors of `ev` after `method` ("rrbc" or "rigid"), drawn at the arrows' `magnification` or
+    less, so the longest is at most `CHECK_ERROR_SHARE` of the point sets' `extent_mm`; None without check rows with
+    a known robot position."""
+    t = ev.targets
+    rows = [i for i, pid in enumerate(t.ids) if pid in ev.check_ids and np.all(np.isfinite(t.truth[i]))]
+    if not rows:
+        return None
+    at = np.asarray(rows, int)
+    landed = (t.robot_rrbc if method == "rrbc" else t.robot_rigid)[at]
+    sizes = np.asarray((t.error_rrbc if method == "rrbc" else t.error_rigid)[at], float)
+    largest = float(np.nanmax(sizes)) if np.any(np.isfinite(sizes)) else 0.0
+    mag = legible_magnification(largest, CHECK_ERROR_SHARE * extent_mm, magnification)
+    return CheckErrors(
+        tuple(t.ids[i] for i in rows),
+        np.asarray(t.positions[at], float),
+        mag * (landed - t.truth[at]),
+        sizes,
+        method,
+        mag,
+    )

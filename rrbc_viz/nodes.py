@@ -20,6 +20,7 @@ Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's)
     /targets/<id>/gizmo/sphere         the target (magenta when extrapolated), …/label
     /regions/<id>                      translucent box / icosphere with per-axis scale
     /bounds/<id>                       translucent ellipsoid: the target's 95 % bound (× the arrows' magnification or true size: Display.bound_scale)
+    /check_errors/arrows, /tips, /label<k>   a measurement file's check rows' errors (check_error_nodes)
     /landing/anchor, /landing/rigid, /landing/rrbc   the landing bullseye of the selected target (LandingDisplay),
     /landing/lines, /landing/rings, /landing/scale   floating above it: stalk, offsets, scale rings, ring label
     /heatmap/points                    point cloud, float32: the samples, in their region (true size × region zoom)
@@ -46,6 +47,7 @@ from rrbc_core.session.explorer import ExplorerSession
 
 from . import colors, lesson_labels
 from .bound_nodes import BoundNodes
+from .check_error_nodes import CheckErrorNodes
 from .frame_nodes import FrameNodes
 from .heatmap_nodes import HeatMapNodes
 from .landing_nodes import LandingNodes
@@ -116,6 +118,7 @@ class SceneNodes:
         self._heat = HeatMapNodes(self._scene)  # the heat map's samples and rings
         self._bullseye = LandingNodes(self._scene)  # the selected target's landing bullseye
         self._readings = ReadingNodes(self._scene)  # a fiducial's two readings (lesson step 5)
+        self._check_errors = CheckErrorNodes(self._scene)  # a measurement file's check rows' errors
         self._frames = FrameNodes(self._scene)  # the robot's and the sensor's frames
         self._sensor: SensorNodes | None = None  # the sensor's cameras (scene mode)
         self._regions = RegionNodes(self._scene)  # the targets' regions of variability and coverage halos
@@ -172,6 +175,7 @@ class SceneNodes:
         self._heat.clear()
         self._bullseye.clear()
         self._readings.clear()
+        self._check_errors.clear()
         self._sent.clear()  # new handles may reuse ids of removed ones
 
     def build(self, session: ExplorerSession, picture: ScenePicture, mesh, layers: dict[str, bool]) -> None:
@@ -431,6 +435,7 @@ class SceneNodes:
             self._assign(self._labels[f"{gizmo_name('targets', pid)}/label"], "text", texts[i])
             self._regions.move(pid, t.positions[i], self._assign)
         self._bounds.show(t.ids, t.positions, picture.bound_rotations, picture.bound_axes, self._assign)
+        self._check_errors.show(picture.check_errors, self._display.marker_mm)
         tarrows = self._nodes["/corrections/targets"]
         if len(t.ids):
             tarrows.points = np.stack([t.positions, t.positions + mag * t.correction_robot], axis=1).astype(np.float32)

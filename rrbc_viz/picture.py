@@ -12,7 +12,15 @@ import numpy as np
 
 from rrbc_core.session.evaluation import Evaluation
 
-from .node_values import Display, LandingDisplay, frame_magnification, landing_display, registered_frame_pose
+from .node_values import (
+    CheckErrors,
+    Display,
+    LandingDisplay,
+    check_errors,
+    frame_magnification,
+    landing_display,
+    registered_frame_pose,
+)
 
 if TYPE_CHECKING:
     from rrbc_core.session.explorer import ExplorerSession
@@ -24,6 +32,8 @@ AXES_SHARE = 0.12
 #: how the 95 % bounds are drawn (`Display.bound_scale`): (label, value); at true size a bound of tenths of a mm is
 #: hidden inside its target's marker, so by default it is magnified as the arrows and landing offsets are
 BOUND_SCALES = {"arrows": "× arrow magnification", "true": "true size"}
+#: which corrected position a check row's drawn error is of (`Display.check_error`): (value, label)
+CHECK_ERROR_CHOICES = {"rrbc": "after RRBC", "rigid": "rigid only"}
 
 
 @dataclass(frozen=True)
@@ -54,6 +64,8 @@ class ScenePicture:
         The leaned tool of the bullseye's target (None: tool down).
     drag_active : bool
         A drag is under way (the arm follows at most a few times a second).
+    check_errors : CheckErrors or None
+        A measurement file's check rows' errors, as `Display.check_error` picks (None without check rows).
     bound_rotations, bound_axes : (M, 3, 3), (M, 3)
         Each target's 95 % bound ellipsoid (`rrbc_core.correction.bounds.PointBounds.ellipsoids` of its RRBC
         position's covariance): axes' rotation and semi-axes, mm (NaN: no bound).
@@ -72,6 +84,7 @@ class ScenePicture:
     tool: tuple[float, float] | None = None
     drag_active: bool = False
     changed: tuple = ()  # (id, change mm) of the targets the last fiducial drag changed most (`changed_targets`)
+    check_errors: CheckErrors | None = None
     bound_rotations: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)), repr=False)
     bound_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
 
@@ -140,6 +153,7 @@ def scene_picture(session: ExplorerSession, state: AppState, ev: Evaluation) -> 
         tool=None if tool is None else (float(tool[0]), float(tool[1])),
         drag_active=state.drag_active,
         changed=changed_targets(state, ev),
+        check_errors=check_errors(ev, display.check_error, display.magnification, state.extent_mm),
         bound_rotations=bound_rot,
         bound_axes=bound_axes,
     )

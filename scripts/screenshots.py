@@ -177,6 +177,38 @@ SHOTS.append(
 SHOTS.append(("file_tab_1440x900.png", [("tab", "File")]))
 # The opening view on a wide screen (1600x900): the work framed, the arm as context (issue 39).
 SHOTS.append(("app_default_1600x900.png", []))
+# A measured file of an arm whose URDF has no geometry (drawn as links between its joints), and a real station of
+# the public stationing data (only with --stationing-data: those data are not ours to ship).
+SHOTS.append(("urdf_without_meshes.png", [("wait_node", "/arm/joint0")]))
+SHOTS.append(("real_station.png", [("wait_node", "/arm/joint0")]))
+
+
+def _lift_arm_file(tmp: Path, stationing_data: Path | None) -> dict | None:
+    """A simulated measurement file of the packaged lift arm (a URDF without visual or collision geometry)."""
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.models.urdf import load_urdf
+    from rrbc_core.simulation.arm_data import chain_measurements
+
+    path = tmp / "lift_arm.csv"
+    write_measurements(path, chain_measurements(load_urdf("lift_arm"), 2, n_fid=12, n_chk=6, n_tgt=2, noise_mm=0.05))
+    return {"source": str(path), "urdf": "lift_arm"}
+
+
+def _real_station(tmp: Path, stationing_data: Path | None) -> dict | None:
+    """The public stationing data's `flat` set converted as `rrbc convert --to csv --urdf trailblazer.urdf` does
+    (docs/real_data.md); None (the shot is skipped) without a copy of those data."""
+    if stationing_data is None:
+        return None
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.io.stationing_yaml import read_stationing_yaml
+    from rrbc_core.models.urdf import load_urdf
+    from rrbc_core.studies.stationing_study import paths
+
+    urdf, files = paths(stationing_data)
+    path = tmp / "flat.csv"
+    write_measurements(path, read_stationing_yaml(files["flat"], load_urdf(str(urdf), tip="prism")))
+    return {"source": str(path), "urdf": str(urdf), "tip": "prism"}
+
 
 #: Per-shot options: "serve" (keyword arguments of serve: a source, presentation mode) and "viewport" (the
 #: browser window, default helpers.VIEWPORT 1280x800).
@@ -191,6 +223,8 @@ SHOT_OPTIONS: dict[str, dict] = {
     "presentation_1280x720.png": {"serve": {"present": True}, "viewport": {"width": 1280, "height": 720}},
     "file_tab_1440x900.png": {"viewport": {"width": 1440, "height": 900}},
     "app_default_1600x900.png": {"viewport": {"width": 1600, "height": 900}},
+    "urdf_without_meshes.png": {"make": _lift_arm_file, "mesh_node": "/registration/points"},
+    "real_station.png": {"make": _real_station, "mesh_node": "/registration/points"},
 }
 
 APP_ENTRY = "rrbc_viz.serve:serve"
@@ -392,10 +426,17 @@ def take_shot(
     actions: list[tuple[str, Any]],
     out: Path,
     max_kb: float = MAX_KB,
+    stationing_data: Path | None = None,
 ) -> Path:
     opts = dict(SHOT_OPTIONS.get(name, {}))
     mesh_node = opts.get("mesh_node", mesh_node)
-    app = serve(port=0, **opts.get("serve", {}))
+    kwargs = dict(opts.get("serve", {}))
+    if "make" in opts:  # a file made for the shot (kept until the shot is taken)
+        made = opts["make"](Path(tempfile.mkdtemp(prefix="rrbc-shot-")), stationing_data)
+        if made is None:
+            raise ShotSkipped("needs --stationing-data")
+        kwargs.update(made)
+    app = serve(port=0, **kwargs)
     try:
         h.wait_for_port(int(app.port), timeout_s=30)
         ctx = browser.new_context(viewport=dict(opts.get("viewport", h.VIEWPORT)))
@@ -438,6 +479,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--max-kb", type=float, default=MAX_KB, help=f"quantise PNGs above this size (default {MAX_KB})")
     ap.add_argument("--only", action="append", default=None, help="only this file name (repeatable)")
+    ap.add_argument(
+        "--stationing-data",
+        type=Path,
+        default=None,
+        help="a copy of github.com/Hilti-Research/construction_robot_stationing_datasets (real_station.png)",
+    )
     ap.add_argument("--app", default=APP_ENTRY, help=f"module:function that starts the app (default {APP_ENTRY})")
     args = ap.parse_args(argv)
 
@@ -464,7 +511,9 @@ def main(argv: list[str] | None = None) -> int:
             for name, actions in shots:
                 t0 = time.monotonic()
                 try:
-                    path = take_shot(browser, h, serve, mesh_node, name, actions, args.out, args.max_kb)
+                    path = take_shot(
+                        browser, h, serve, mesh_node, name, actions, args.out, args.max_kb, args.stationing_data
+                    )
                 except ShotSkipped as exc:
                     print(f"screenshots: {name}: skipped ({exc})", file=sys.stderr)
                     continue

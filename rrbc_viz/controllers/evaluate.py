@@ -180,7 +180,7 @@ class EvaluateController:
         """Display-only options (Display fields): magnification, marker_mm, region_zoom, heat_value, slice_value,
         slice_axis, slice_offset, bound_scale."""
         from ..controls import HEAT_CHOICES
-        from ..picture import BOUND_SCALES
+        from ..picture import BOUND_SCALES, CHECK_ERROR_CHOICES
 
         ctx = self.ctx
         with ctx.lock:
@@ -194,6 +194,10 @@ class EvaluateController:
             if new.heat_value not in heat_values:
                 raise InputError(f"heat_value must be one of {', '.join(heat_values)} here, got {new.heat_value!r}")
             ctx.views.check_slice_display(new)
+            if new.check_error not in CHECK_ERROR_CHOICES:
+                raise InputError(
+                    f"check_error must be one of {', '.join(CHECK_ERROR_CHOICES)}, got {new.check_error!r}"
+                )
             if new.bound_scale not in BOUND_SCALES:
                 raise InputError(f"bound_scale must be one of {', '.join(BOUND_SCALES)}, got {new.bound_scale!r}")
             if not (new.magnification > 0 and new.marker_mm > 0 and new.region_zoom > 0):
