@@ -35,6 +35,7 @@ from rrbc_core.cli_options import (
 )
 from rrbc_core.cli_text import correct_text, plan_text, report_text, simulate_text, stations_text
 from rrbc_core.errors import InputError, one_line, printable, printable_bytes
+from rrbc_core.io.json_stream import PrintableAscii
 
 __all__ = ["build_parser", "main"]
 
@@ -450,7 +451,7 @@ def main(argv=None) -> int:
                     sys.stdout.write(printable(piece))
                 elif buffer is not None:
                     sys.stdout.flush()
-                    buffer.write(printable_bytes(piece))
+                    buffer.write(piece if isinstance(piece, PrintableAscii) else printable_bytes(piece))
                 else:
                     sys.stdout.write(printable(piece.decode("utf-8", errors="replace")))
         sys.stdout.flush()

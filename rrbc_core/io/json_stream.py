@@ -52,8 +52,13 @@ def _has_lazy(value: Any) -> bool:
 ROWS_PER_DUMP = 1000  # rows encoded by one json.dumps call
 
 
+class PrintableAscii(bytes):
+    """Bytes known to hold printable ASCII only (what `json_bytes` yields): a terminal needs no check of them."""
+
+
 def _dumps(value: Any) -> bytes:
-    return json.dumps(value, allow_nan=False, separators=(",", ":")).encode("ascii")  # ensure_ascii: ASCII
+    # ensure_ascii: ASCII, control characters escaped; DEL (ASCII, not escaped by json) too, as json_rows does
+    return json.dumps(value, allow_nan=False, separators=(",", ":")).encode("ascii").replace(b"\x7f", b"\\u007f")
 
 
 def _batches(rows: Iterable[Any]) -> Iterator[list]:
@@ -98,7 +103,7 @@ def _pieces(value: Any) -> Iterator[bytes]:
         yield _dumps(value)
 
 
-def json_bytes(obj: Any) -> Iterator[bytes]:
+def json_bytes(obj: Any) -> Iterator[PrintableAscii]:
     """The JSON text of `obj` (module docstring) as printable ASCII bytes, in pieces of about `CHUNK_CHARS`."""
     buf: list[bytes] = []
     size = 0
@@ -106,10 +111,10 @@ def json_bytes(obj: Any) -> Iterator[bytes]:
         buf.append(piece)
         size += len(piece)
         if size >= CHUNK_CHARS:
-            yield b"".join(buf)
+            yield PrintableAscii(b"".join(buf))
             buf, size = [], 0
     if buf:
-        yield b"".join(buf)
+        yield PrintableAscii(b"".join(buf))
 
 
 def json_chunks(obj: Any) -> Iterator[str]:

@@ -10,7 +10,8 @@ import tracemalloc
 import pytest
 
 from rrbc_core.correction.stations import correct_stations
-from rrbc_core.io.json_stream import LazyRows, json_chunks, to_plain
+from rrbc_core.errors import printable_bytes
+from rrbc_core.io.json_stream import LazyRows, PrintableAscii, json_bytes, json_chunks, to_plain
 from rrbc_core.io.measurements import read_measurements
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.simulation.field_data import field_measurements
@@ -27,6 +28,19 @@ def test_the_streamed_text_is_json_dumps_of_the_whole_object():
     assert list(rows) == list(rows) and len(rows) == 3  # made afresh each time it is read
     with pytest.raises(ValueError):  # NaN refused, as json.dumps(allow_nan=False) does
         "".join(json_chunks({"x": LazyRows(1, lambda: [{"v": float("nan")}])}))
+
+
+def test_the_streamed_bytes_are_printable_ascii_whatever_the_strings_hold():
+    """The CLI writes `json_bytes`' pieces without checking them for a terminal (`PrintableAscii`): a NUL, an escape,
+    DEL, a C1 control and non-ASCII in ids and keys are escaped, and the document reads back the same."""
+    odd = "a\x00b\x1b[31mc\x7fd\x9fé€"
+    rows = LazyRows(2, lambda: ({"id": odd + str(i), odd: [i]} for i in range(2)))
+    obj = {"warning": odd, "rows": rows, odd: {"k": [odd]}}
+    pieces = list(json_bytes(obj))
+    assert pieces and all(isinstance(p, PrintableAscii) for p in pieces)
+    data = b"".join(pieces)
+    assert data.isascii() and printable_bytes(data) == data
+    assert json.loads(data) == to_plain(obj)
 
 
 @pytest.mark.parametrize("grouped", [False, True], ids=["one station", "stations"])
