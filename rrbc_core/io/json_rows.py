@@ -124,12 +124,12 @@ def rows_text(fields: Sequence[Field], n: int) -> bytes:
         lead = b"" if first else b","
         null = None if f.null is None else np.asarray(f.null, bool)
         if null is not None and null.any():  # the value whole, or null (elementwise on an object array: in C)
-            whole = np.empty(len(texts), dtype=object)
-            whole[:] = texts
+            valued = np.empty(len(texts), dtype=object)
+            valued[:] = texts
             if opening or closing:
-                whole = opening + whole + closing
-            whole[null] = b"null"
-            texts = whole.tolist()
+                valued = opening + valued + closing
+            valued[null] = b"null"
+            texts = valued.tolist()
             opening = closing = b""
         if present is None or present.all():
             template.append(lead + key + opening.replace(b"%", b"%%") + b"%b" + closing.replace(b"%", b"%%"))
