@@ -217,11 +217,13 @@ def facing_robot(work: np.ndarray, base=None) -> np.ndarray:
     the arm is context behind the work and never the wrist in front of it. `OBLIQUE` where the base lies under the
     work (no side to look from)."""
     pts = np.asarray(work, float).reshape(-1, 3)
+    if not len(pts):
+        return OBLIQUE
     base = np.zeros(3) if base is None else np.asarray(base, float)
     lo, hi = pts.min(0), pts.max(0)
     toward = (base - 0.5 * (lo + hi))[:2]
     reach = float(np.linalg.norm(toward))
-    if not len(pts) or reach <= 0.25 * float(np.linalg.norm((hi - lo)[:2])):
+    if reach <= 0.25 * float(np.linalg.norm((hi - lo)[:2])):
         return OBLIQUE
     c, s = np.cos(ASIDE_RAD), np.sin(ASIDE_RAD)
     h = np.array([c * toward[0] - s * toward[1], s * toward[0] + c * toward[1]]) / reach

@@ -72,7 +72,7 @@ class CheckErrorNodes:
         if errors is None or not n:
             return
         tips = errors.starts + errors.vectors
-        rgb = colors.scale_colors(errors.sizes_mm, 0.0, float(np.nanmax(errors.sizes_mm)) if n else 1.0)
+        rgb = colors.scale_colors(errors.sizes_mm, 0.0, float(np.nanmax(errors.sizes_mm)))
         self._arrows.points = np.stack([errors.starts, tips], axis=1).astype(np.float32)
         self._arrows.colors = np.repeat(rgb[:, None, :], 2, axis=1)
         self._tips.points = tips.astype(np.float32)
