@@ -177,6 +177,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="draw a scene's arm as links and joints instead of its meshes (lighter on a machine without a GPU)",
     )
+    v.add_argument(
+        "--plain-light",
+        action="store_true",
+        help="light the cell without the environment map (a machine without a GPU draws each frame with less work)",
+    )
     v.add_argument("--tip", default=None, help="with --urdf: the measured link (default: end of the longest chain)")
     v.add_argument("--base", default=None, help="with --urdf: the base link (default: the root link)")
     v.add_argument(
@@ -403,6 +408,7 @@ def _cmd_view(args) -> str:
         base=args.base,
         tool=args.tool,
         simple_arm=args.simple_arm,
+        plain_light=args.plain_light,
     )
     try:
         signal.signal(signal.SIGTERM, signal.default_int_handler)  # stop cleanly on SIGTERM too

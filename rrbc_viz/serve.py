@@ -31,6 +31,20 @@ def _check_host(host: str) -> None:
         raise InputError(f"cannot listen on host {host!r}: {exc.strerror or exc}") from None
 
 
+#: `rrbc view --plain-light`: the hemisphere light (sky, ground RGB, intensity) that stands in for the environment map.
+#: Under software WebGL (Chromium's SwiftShader) the map's image-based lighting made every frame of the demo cell cost
+#: about 2.5x the work, and preparing the map about 10 more CPU-seconds per page load (measured with the browser
+#: tests' Chromium; docs/cli.md). The intensity keeps the cell's colours near the environment map's look.
+PLAIN_LIGHT = ((255, 255, 255), (150, 150, 150), 2.5)
+
+
+def light_plainly(server) -> None:
+    """No environment map; `PLAIN_LIGHT`'s hemisphere light beside viser's default lights (`serve(plain_light=True)`)."""
+    sky, ground, intensity = PLAIN_LIGHT
+    server.scene.configure_environment_map(hdri=None)
+    server.scene.add_light_hemisphere("/plain_light", sky_color=sky, ground_color=ground, intensity=intensity)
+
+
 def serve(
     source=None,
     host: str = "127.0.0.1",
@@ -47,6 +61,7 @@ def serve(
     base: str | None = None,
     tool=None,
     simple_arm: bool = False,
+    plain_light: bool = False,
 ):
     """Start the app on `host`:`port` (0 = a free port) and return at once. `source`: a scene .toml, a measurement
     .csv (with an optional `mesh` file), an ExplorerSession, or None for the bundled default scene. Bad input
@@ -56,7 +71,8 @@ def serve(
     by all; `present`: start in presentation mode (large text, collapsible panel; View → Presentation mode);
     `allow_hosts`: Host names the page may use besides localhost names, IP literals and `host` itself
     (`access.AccessGuard`); `simple_arm`: draw a scene's arm as links and joints instead of its URDF meshes (much lighter where the browser
-    renders in software: a drag redraws the whole cell). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
+    renders in software: a drag redraws the whole cell); `plain_light`: light the cell with viser's default lights and
+    a hemisphere light instead of its image-based environment map (`PLAIN_LIGHT`). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
     server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
     apply_process_policy()
     message_guard.install()  # malformed client messages dropped without a traceback (issue 31)
@@ -84,6 +100,8 @@ def serve(
         # WebGL (a classroom laptop without a GPU, Chromium's SwiftShader) each frame otherwise draws the arm again
         # into every shadow cascade
         server.scene.configure_default_lights(True, cast_shadow=False)
+        if plain_light:
+            light_plainly(server)
         server.on_client_disconnect(lambda client: upload_spool.drop_client(client.client_id))  # half-sent uploads
         app: RunningApp | PerClientApp
         if per_client:

@@ -3,14 +3,19 @@
 Chromium draws with software WebGL here, and a drag redraws the whole cell: tests that are not about the arm start
 the app with `serve(simple_arm=True)` (the arm as links and joints, `rrbc view --simple-arm`), which the UR5's meshes
 otherwise dominate; the arm's own test, the VEC tab's and the lesson's (whose points must not be hidden behind the
-arm) draw the meshes.
+arm) draw the meshes. Every test but the arm's, the VEC tab's and the smoke tests' also starts it with
+`plain_light=True` (`rrbc view --plain-light`): the environment map's image-based lighting made each page load cost
+about 10 more CPU-seconds of Chromium's GPU process and each frame about 2.5x the work, which starved the other
+pytest worker; the arm's test holds that the default lighting has the map. Contexts come from
+`helpers.new_context` (the render heartbeat at 5 s, helpers.QUIET_HEARTBEAT_SCRIPT).
 
 Chromium comes from `bash scripts/setup.sh --browser` (never `playwright install`). Every test here is marked
 ``browser``; deselect them with ``-m "not browser"``.
 
     chromium_path   session   "/usr/bin/chromium"; FAILS (does not skip) if it is missing
     browser         session   playwright Browser (headless, flags from helpers.CHROMIUM_ARGS)
-    browser_context function  fresh BrowserContext, 1280x800 viewport; closed (tabs disconnect) at teardown
+    browser_context function  fresh BrowserContext (helpers.new_context: 1280x800, the render heartbeat at 5 s);
+                              closed (tabs disconnect) at teardown
     viser_app       function  viser_app(factory) -> app: calls factory() (zero-arg, returns an object with .port
                               and .stop(), e.g. helpers.start_demo_app or lambda: rrbc_viz.serve.serve()), waits for
                               its port, stops it at teardown
@@ -82,7 +87,7 @@ def browser(chromium_path: str):
 
 @pytest.fixture
 def browser_context(browser):
-    ctx = browser.new_context(viewport=dict(helpers.VIEWPORT))
+    ctx = helpers.new_context(browser)
     ctx.set_default_timeout(30_000)
     yield ctx
     ctx.close()

@@ -47,6 +47,28 @@ UNDRAWN_TAB_SCRIPT = """(() => {
 })();"""
 
 
+# Init script for every test context: viser's client renders on demand and, as a safety net, once a second (its render
+# heartbeat, `setInterval(..., 1000)` in App.tsx). Under software WebGL each frame of the demo cell costs about a
+# core-second in Chromium's GPU process (measured: about 0.9 cores on an idle page, 0.15 with the heartbeat at 5 s), so
+# idle pages ate the core the other pytest worker needed. The script stretches that one interval to 5 s; every
+# render a message or an interaction requests is unchanged, and so is the websocket's once-a-second retry (the other
+# 1000 ms interval, told apart by its "retry" message).
+QUIET_HEARTBEAT_SCRIPT = """(() => {
+  const setIntervalOriginal = window.setInterval;
+  window.setInterval = function (callback, ms, ...rest) {
+    const isHeartbeat = ms === 1000 && typeof callback === "function" && !String(callback).includes("retry");
+    return setIntervalOriginal.call(this, callback, isHeartbeat ? 5000 : ms, ...rest);
+  };
+})();"""
+
+
+def new_context(browser: Any, viewport: dict[str, int] | None = None) -> Any:
+    """A browser context for a test: the given viewport (default VIEWPORT) and QUIET_HEARTBEAT_SCRIPT in every page."""
+    context = browser.new_context(viewport=dict(viewport or VIEWPORT))
+    context.add_init_script(QUIET_HEARTBEAT_SCRIPT)
+    return context
+
+
 # --------------------------------------------------------------------------------------------------------------
 # Generic waiting and launching
 # --------------------------------------------------------------------------------------------------------------
@@ -266,6 +288,17 @@ def node_screen_position(
 
 _JS_FRAMES = """(n) => new Promise((done) => {
   const next = (k) => (k > 0 ? requestAnimationFrame(() => next(k - 1)) : done(true)); next(n); })"""
+
+
+_JS_LIGHTING = """() => { const s = window.__viserMutable.scene; let hemisphere = 0;
+  s.traverse((o) => { if (o.isHemisphereLight) hemisphere += 1; });
+  return [!!s.environment, hemisphere]; }"""
+
+
+def lighting(page: Any) -> tuple[bool, int]:
+    """(whether the page's scene has an environment map, how many hemisphere lights it holds)."""
+    env, hemisphere = page.evaluate(_JS_LIGHTING)
+    return bool(env), int(hemisphere)
 
 
 def next_frames(page: Any, n: int = 2) -> None:

@@ -27,6 +27,7 @@ from .helpers import (
     drag,
     image_stats,
     is_local_url,
+    lighting,
     mesh_node_names,
     node_exists,
     node_screen_position,
@@ -151,7 +152,7 @@ def settled_shot(page, clip: dict, timeout_s: float = 20.0) -> bytes:
 
 
 def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for):
-    app = viser_app(lambda: serve(simple_arm=True))
+    app = viser_app(lambda: serve(simple_arm=True, plain_light=True))
     page, requests = page_for(app.url)
 
     # 1) the default scene, drawn: settled and not blank (central half of the view), the mesh mounted with triangles
@@ -161,6 +162,8 @@ def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for
     assert node_exists(page, H1_GIZMO) and node_exists(page, "/targets/H1/gizmo/sphere")
     page.get_by_text("Demo work cell", exact=False).first.wait_for(state="visible")
     assert target_row(page, "H1") == expected_row(app, "H1")  # the panel shows the server's numbers
+    # --plain-light: no environment map, one hemisphere light (serve.PLAIN_LIGHT)
+    wait_for(lambda: lighting(page) == (False, 1), 15, message="plain lighting", page=page)
 
     # 2) heat map: View -> tick "Heat map of predicted error". The regions are mm-sized in a metre-sized cell; the
     # 3-D view must change where the targets are, in the legend's colours (regression: it used to be identical).
@@ -212,7 +215,7 @@ def test_loads_offline_draws_the_cell_and_shows_the_heat_map(viser_app, page_for
 
 
 def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(viser_app, page_for, tmp_path):
-    app = viser_app(lambda: serve(data_dirs=[tmp_path], simple_arm=True))
+    app = viser_app(lambda: serve(data_dirs=[tmp_path], simple_arm=True, plain_light=True))
     page, requests = page_for(app.url)
     wait_until_rendered(page, H1_GIZMO, timeout_s=60)
     scale = app.nodes.gizmo_scale()
@@ -288,7 +291,7 @@ def test_drag_changes_the_page_then_bad_files_fail_visibly_and_dragging_goes_on(
 
 
 def test_five_tabs_share_one_state(viser_app, page_for):
-    app = viser_app(lambda: serve(simple_arm=True))
+    app = viser_app(lambda: serve(simple_arm=True, plain_light=True))
     # Five tabs connect concurrently. The first draws; the other four are connected clients that receive every
     # scene and GUI message but draw nothing (helpers.UNDRAWN_TAB_SCRIPT): five software-WebGL renders of the
     # cell would take most of a minute.

@@ -9,7 +9,7 @@ import pytest
 
 from rrbc_viz.serve import serve
 
-from .helpers import wait_for
+from .helpers import lighting, wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -31,6 +31,8 @@ def test_the_ur5_is_drawn_from_its_urdf_meshes_and_posed_on_the_target(viser_app
     assert arm is not None and arm.urdf is not None
     mesh_names = {h.name for h in arm.urdf._meshes}
     wait_for(lambda: mesh_names <= set(page.evaluate(_JS_URDF_MESHES)), 60, message="the arm's meshes", page=page)
+    # `rrbc view` without --plain-light lights the meshes with the environment map and adds no hemisphere light
+    wait_for(lambda: lighting(page) == (True, 0), 30, message="the environment map", page=page)
     flange = next(f.name for f in arm.urdf._joint_frames if f.name.endswith("/tool0"))
     tool_mm = app.session.scene.tool_mm
     t = app.session.last.targets

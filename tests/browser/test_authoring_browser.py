@@ -43,7 +43,7 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     slab.apply_translation((450, 0, 40))  # over the fixture plate: its top is at z = 50
     mesh_file = tmp_path / "slab.stl"
     slab.export(mesh_file)
-    app = viser_app(lambda: serve(data_dirs=[tmp_path], simple_arm=True))
+    app = viser_app(lambda: serve(data_dirs=[tmp_path], simple_arm=True, plain_light=True))
     page, _ = page_for(app.url)
     page.get_by_role("tab", name="File").click()
     with page.expect_file_chooser() as chooser:

@@ -12,7 +12,14 @@ import pytest
 from rrbc_viz.camera import PRESENTATION_PANEL_WIDTH_PX
 from rrbc_viz.serve import serve
 
-from .helpers import UNDRAWN_TAB_SCRIPT, dismiss_software_webgl_notification, next_frames, wait_camera, wait_for
+from .helpers import (
+    UNDRAWN_TAB_SCRIPT,
+    dismiss_software_webgl_notification,
+    new_context,
+    next_frames,
+    wait_camera,
+    wait_for,
+)
 
 #: a watcher in tab 2's page: window.__sawGp turns true the moment its text shows "Interpolation gp"
 _JS_WATCH_GP = """() => { window.__sawGp = false;
@@ -48,7 +55,7 @@ _JS_PROJECT = """(pts) => { const m = window.__viserMutable; const obj = m.nodeR
 
 
 def test_per_client_mode_gives_each_tab_its_own_session(viser_app, page_for):
-    app = viser_app(lambda: serve(per_client=True, simple_arm=True))
+    app = viser_app(lambda: serve(per_client=True, simple_arm=True, plain_light=True))
     first, _ = page_for(app.url)
     second, _ = page_for(app.url, init_script=UNDRAWN_TAB_SCRIPT)
     wait_for(lambda: len(app.apps) == 2, 30, message="two tabs, two apps", page=first)
@@ -76,8 +83,8 @@ def test_per_client_mode_gives_each_tab_its_own_session(viser_app, page_for):
 
 
 def test_presentation_mode_is_legible_on_a_1280x720_projector(viser_app, browser):
-    app = viser_app(lambda: serve(present=True, simple_arm=True))
-    context = browser.new_context(viewport={"width": 1280, "height": 720})
+    app = viser_app(lambda: serve(present=True, simple_arm=True, plain_light=True))
+    context = new_context(browser, {"width": 1280, "height": 720})
     try:
         page = context.new_page()
         page.goto(app.url)
@@ -123,8 +130,8 @@ def test_every_tab_of_the_panel_can_be_scrolled_to_its_last_control(
     """Issue 30: at 1440x900 (an integrator's laptop) and on a 1280x720 projector, every tab's last control can be
     scrolled into the window (the File tab's *New cell from this mesh* among them), no panel text is smaller than
     the mode's size, and the lesson's Next is in view without scrolling at every step."""
-    app = viser_app(lambda: serve(present=present, simple_arm=True))
-    context = browser.new_context(viewport={"width": width, "height": height})
+    app = viser_app(lambda: serve(present=present, simple_arm=True, plain_light=True))
+    context = new_context(browser, {"width": width, "height": height})
     try:
         page = context.new_page()
         page.add_init_script(UNDRAWN_TAB_SCRIPT)  # the panel's layout is what is tested: the 3-D view draws nothing

@@ -27,7 +27,7 @@ def test_the_model_tab_checks_names_draws_and_extends(viser_app, page_for, tmp_p
     planted = scene.error_model.extended(robot=[SmoothField(rms_mm=0.4, length_mm=250.0, seed=2)])
     cell = work_cell_from_scene(dataclasses.replace(scene, error_model=planted), seed=0)
     write_measurements(tmp_path / "measured.csv", measured_data(cell, 5))
-    app = viser_app(lambda: serve(DEMO, simple_arm=True, data_dirs=[tmp_path]))
+    app = viser_app(lambda: serve(DEMO, simple_arm=True, plain_light=True, data_dirs=[tmp_path]))
     page, _ = page_for(app.url)
     wait_until_rendered(page, "/targets/H1/gizmo", timeout_s=60)
 

@@ -34,7 +34,7 @@ def server_rmst(app) -> tuple[float, ...]:
 
 
 def test_plan_tab_suggest_shows_ghosts_and_accept_lowers_the_predicted_rmst(viser_app, page_for):
-    app = viser_app(lambda: serve(simple_arm=True))
+    app = viser_app(lambda: serve(simple_arm=True, plain_light=True))
     page, requests = page_for(app.url)
     wait_until_rendered(page, "/targets/H1/gizmo", timeout_s=60)
 

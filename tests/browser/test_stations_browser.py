@@ -17,7 +17,7 @@ pytestmark = pytest.mark.browser
 def test_the_station_menu_opens_another_station(viser_app, page_for, tmp_path):
     path = tmp_path / "stations.csv"
     write_measurements(path, station_measurements(51, stations=3, eval_fiducials=0.5))
-    app = viser_app(lambda: serve(path, port=0))
+    app = viser_app(lambda: serve(path, port=0, plain_light=True))
     page, _ = page_for(app.url)
     text = page.get_by_text("Station station1 of 3", exact=False).first  # the Explore summary
     text.wait_for(state="visible", timeout=30_000)

@@ -122,7 +122,7 @@ def _project_past_software_notice(page, pts: np.ndarray) -> dict:
 @pytest.mark.parametrize("projector", [False, True], ids=["1280x800", "presentation-1280x720"])
 def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_app, page_for, projector):
     """Also as a teacher runs it: presentation mode on a 1280x720 projector, nobody touching the camera."""
-    app = viser_app(lambda: serve(present=projector))
+    app = viser_app(lambda: serve(present=projector, plain_light=True))
     page, _ = page_for(app.url, dismiss_notification=False)
     if projector:
         page.set_viewport_size({"width": 1280, "height": 720})
@@ -163,7 +163,7 @@ _JS_GIZMO_VISIBLE = """(name) => { const m = window.__viserMutable.nodeRefFromNa
 
 
 def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser_app, page_for):
-    app = viser_app(lambda: serve(simple_arm=True))
+    app = viser_app(lambda: serve(simple_arm=True, plain_light=True))
     page, _ = page_for(app.url)
     app.views.show_camera("close-up")
     wait_camera(page, app)
@@ -210,7 +210,7 @@ def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser
 
 
 def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_app, page_for):
-    app = viser_app(lambda: serve(simple_arm=True))
+    app = viser_app(lambda: serve(simple_arm=True, plain_light=True))
     page, _ = page_for(app.url)
     app.evaluate.set_layer("slice", True)
     app.views.show_camera("close-up")
@@ -280,7 +280,7 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
 def test_a_target_dragged_out_of_the_frame_comes_back_into_view(viser_app, page_for):
     """Issue 39: a target dragged beyond what the camera shows is brought back into the view (beside the panel) at
     the drag's end; the camera keeps its viewing direction."""
-    app = viser_app(lambda: serve(simple_arm=True))
+    app = viser_app(lambda: serve(simple_arm=True, plain_light=True))
     page, _ = page_for(app.url)
     app.views.select("targets", "H1")
     app.views.show_camera("selected point")  # a tight view of H1 and its bullseye
@@ -315,7 +315,7 @@ def test_the_opening_view_frames_the_work_with_the_arm_behind_it(viser_app, page
     selected target's bullseye (its centre and both landings) are on the canvas beside the panel, none hidden by the
     cell; and the camera looks at the work from its far side: the robot's base is farther from the camera than the
     work's centre (the arm stands behind the work as context, not in front of it)."""
-    app = viser_app(lambda: serve())
+    app = viser_app(lambda: serve(plain_light=True))
     page, _ = page_for(app.url, dismiss_notification=False)
     page.set_viewport_size({"width": size[0], "height": size[1]})
     dismiss_software_webgl_notification(page, timeout_s=10.0)
