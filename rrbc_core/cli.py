@@ -417,8 +417,8 @@ def _cmd_view(args) -> str:
     mode = "one session per browser tab" if args.per_client else "one session shared by every tab"
     try:  # from the line that gives the URL on: Ctrl+C at once (a reader may act on the line) stops cleanly
         print(f"rrbc view: serving {app.loaded.label} at {app.url} ({mode}; Ctrl+C to stop)", flush=True)
-        while True:
-            time.sleep(3600)
+        while True:  # short sleeps: a SIGINT the kernel hands to another thread is then acted on within one
+            time.sleep(0.25)  # (one long sleep left Ctrl+C unanswered for as long under load: tests/viz/test_viz.py)
     except KeyboardInterrupt:
         pass
     finally:

@@ -3,7 +3,7 @@
 Chromium draws with software WebGL here, and a drag redraws the whole cell: tests that are not about the arm start
 the app with `serve(simple_arm=True)` (the arm as links and joints, `rrbc view --simple-arm`), which the UR5's meshes
 otherwise dominate; the arm's own test, the VEC tab's and the lesson's (whose points must not be hidden behind the
-arm) draw the meshes. Every test but the arm's, the VEC tab's and the smoke tests' also starts it with
+arm) draw the meshes. Every test of the app but the arm's also starts it with
 `plain_light=True` (`rrbc view --plain-light`): the environment map's image-based lighting made each page load cost
 about 10 more CPU-seconds of Chromium's GPU process and each frame about 2.5x the work, which starved the other
 pytest worker; the arm's test holds that the default lighting has the map. Contexts come from

@@ -29,7 +29,7 @@ def page_row(page, pid: str) -> tuple[str, float, float, float] | None:
 
 
 def test_vec_tab_compares_and_a_leaned_tool_shows_what_rrbc_cannot_follow(viser_app, page_for):
-    app = viser_app(lambda: serve())
+    app = viser_app(lambda: serve(plain_light=True))
     page, _ = page_for(app.url)
     wait_until_rendered(page, "/targets/H1/gizmo", timeout_s=60)
     page.get_by_role("tab", name="Arm (VEC)", exact=True).click()

@@ -553,6 +553,31 @@ def test_cli_view_starts_and_prints_the_url(flags, mode):
     assert proc.returncode == 0
 
 
+def test_ctrl_c_handed_to_another_thread_still_stops_the_server():
+    """The kernel may hand a process's SIGINT to any of its threads. Python then runs its handler in the main thread
+    only once that thread wakes: `rrbc view` sleeps in short steps, so it stops within seconds (it used to sleep an
+    hour at a time and, under load, ignored Ctrl+C; measured: 2 of 16 stops beside five busy cores). The signal is
+    sent here to one of the server's other threads (tgkill), which is what made it hang."""
+    import ctypes
+    import os
+    import signal
+
+    proc = subprocess.Popen(RRBC + ["view", "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert "http://127.0.0.1:" in proc.stdout.readline()
+        others = [int(t) for t in os.listdir(f"/proc/{proc.pid}/task") if int(t) != proc.pid]
+        assert others, "the server runs other threads"
+        libc = ctypes.CDLL(None, use_errno=True)
+        assert libc.tgkill(proc.pid, others[0], int(signal.SIGINT)) == 0, os.strerror(ctypes.get_errno())
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+            pytest.fail("a SIGINT handed to another thread did not stop the server within 10 s")
+    assert proc.returncode == 0
+
+
 def test_a_quiet_server_prints_nothing_on_stdout_from_start_to_stop(capfd):
     """`serve(quiet=True)` (what the benchmarks and tests use) hides viser's banner and its "Server stopped" line,
     so a caller's stdout (a --json stream) carries only what the caller prints."""
