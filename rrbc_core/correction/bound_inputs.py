@@ -11,10 +11,8 @@ import functools
 from dataclasses import replace
 
 import numpy as np
-from scipy.optimize import nnls
 from scipy.spatial import cKDTree
-from scipy.stats import chi2
-from scipy.stats import f as f_dist
+from scipy.special import chdtri, fdtri  # the quantiles scipy.stats.chi2 / f give, without its import
 
 from rrbc_core.interpolation.auto import folds_of
 from rrbc_core.models.instrument import Instrument
@@ -28,6 +26,8 @@ TESTED_PERCENTILE = 90
 def fit_quadratic(d2: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """Non-negative (a, b) of y ≈ a + b·d2, least squares weighted by 1/d2² (y's spread grows as d2: the closest
     pairs say most about a), i.e. y/d2 ≈ a/d2 + b. d2 > 0."""
+    from scipy.optimize import nnls  # here, not at import: scipy.optimize is most of a command's start-up
+
     d2 = np.maximum(d2, 1e-12)
     scale = float(np.median(d2))
     (a, b), _ = nnls(np.column_stack([scale / d2, np.ones_like(d2)]), y / d2 * scale)
@@ -179,4 +179,4 @@ def predictive_factor(dof: int, level: float = 0.95) -> float:
     degrees of freedom rather than known: sqrt(3 F_level(3, dof) / chi²_level(3)) (the new error's squared length
     over the estimate is 3 F(3, dof) for a normal error; docs/uncertainty.md). 1 as dof grows. Cached: a drag's
     bounds ask for it with the same few dof again and again."""
-    return float(np.sqrt(3.0 * f_dist.ppf(level, 3, max(int(dof), 1)) / chi2.ppf(level, 3)))
+    return float(np.sqrt(3.0 * fdtri(3.0, float(max(int(dof), 1)), level) / chdtri(3.0, 1.0 - level)))

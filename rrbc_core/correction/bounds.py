@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.stats import chi2
+from scipy.special import chdtri  # χ² quantiles as scipy.stats.chi2.ppf computes them, without its import
 
 from rrbc_core.correction.bound_inputs import (
     MIN_FIDUCIALS,
@@ -83,7 +83,7 @@ def _quantile_curve(level: float):
     from scipy.interpolate import CubicSpline
 
     nu = np.linspace(1.0, 3.0, 401)
-    return CubicSpline(nu, chi2.ppf(level, nu))
+    return CubicSpline(nu, chdtri(nu, 1.0 - level))
 
 
 def chi2_quantile(dof: np.ndarray, level: float = LEVEL) -> np.ndarray:
@@ -106,7 +106,7 @@ def bound_ellipsoids(cov: np.ndarray, level: float = LEVEL) -> tuple[np.ndarray,
         w, v = np.linalg.eigh(c[ok])
         v[np.linalg.det(v) < 0, :, 2] *= -1  # a proper rotation
         lam[ok], rot[ok] = np.clip(w, 0.0, None), v
-    return rot, np.sqrt(lam * chi2.ppf(level, 3))
+    return rot, np.sqrt(lam * chdtri(3.0, 1.0 - level))
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
