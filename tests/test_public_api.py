@@ -88,7 +88,14 @@ def test_a_type_checker_sees_the_signatures_of_thread_limited_entry_points(tmp_p
         "bad = correct_measurements(1, 2, 3, 4, 5, 6, wrong=True)\n"
     )
     out = subprocess.run(
-        [sys.executable, "-m", "mypy", "--no-incremental", "--config-file", str(ROOT / "pyproject.toml"), str(snippet)],
+        [
+            sys.executable,
+            "-m",
+            "mypy",
+            "--config-file",
+            str(ROOT / "pyproject.toml"),
+            str(snippet),
+        ],  # the project cache
         capture_output=True,
         text=True,
         cwd=ROOT,

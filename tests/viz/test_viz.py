@@ -513,7 +513,10 @@ def test_cli_view_help_and_bad_scene(tmp_path):
 
 @pytest.mark.parametrize(
     "flags, mode",
-    [([], "one session shared by every tab"), (["--per-client", "--present"], "one session per browser tab")],
+    [
+        ([], "one session shared by every tab"),
+        (["--per-client", "--present", "--plain-light"], "one session per browser tab"),
+    ],
 )
 def test_cli_view_starts_and_prints_the_url(flags, mode):
     """The URL printed, the page served, and Ctrl+C with three tabs still connected stops the server within 10 s
