@@ -32,9 +32,8 @@ def _check_host(host: str) -> None:
 
 
 #: `rrbc view --plain-light`: the hemisphere light (sky, ground RGB, intensity) that stands in for the environment map.
-#: Under software WebGL (Chromium's SwiftShader) the map's image-based lighting made every frame of the demo cell cost
-#: about 2.5x the work, and preparing the map about 10 more CPU-seconds per page load (measured with the browser
-#: tests' Chromium; docs/cli.md). The intensity keeps the cell's colours near the environment map's look.
+#: Under software WebGL (Chromium's SwiftShader) the map's image-based lighting is most of each frame's work and of
+#: each page load's (docs/cli.md). The intensity keeps the cell's colours near the environment map's look.
 PLAIN_LIGHT = ((255, 255, 255), (150, 150, 150), 2.5)
 
 

@@ -4,9 +4,9 @@ Chromium draws with software WebGL here, and a drag redraws the whole cell: test
 the app with `serve(simple_arm=True)` (the arm as links and joints, `rrbc view --simple-arm`), which the UR5's meshes
 otherwise dominate; the arm's own test, the VEC tab's and the lesson's (whose points must not be hidden behind the
 arm) draw the meshes. Every test of the app but the arm's also starts it with
-`plain_light=True` (`rrbc view --plain-light`): the environment map's image-based lighting made each page load cost
-about 10 more CPU-seconds of Chromium's GPU process and each frame about 2.5x the work, which starved the other
-pytest worker; the arm's test holds that the default lighting has the map. Contexts come from
+`plain_light=True` (`rrbc view --plain-light`): the environment map's image-based lighting was most of the work of
+Chromium's GPU process at each page load and each frame (measured once by hand), which starved the other pytest
+worker; the arm's test holds that the default lighting has the map. Contexts come from
 `helpers.new_context` (the render heartbeat at 5 s, helpers.QUIET_HEARTBEAT_SCRIPT).
 
 Chromium comes from `bash scripts/setup.sh --browser` (never `playwright install`). Every test here is marked

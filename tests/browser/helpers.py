@@ -48,9 +48,9 @@ UNDRAWN_TAB_SCRIPT = """(() => {
 
 
 # Init script for every test context: viser's client renders on demand and, as a safety net, once a second (its render
-# heartbeat, `setInterval(..., 1000)` in App.tsx). Under software WebGL each frame of the demo cell costs about a
-# core-second in Chromium's GPU process (measured: about 0.9 cores on an idle page, 0.15 with the heartbeat at 5 s), so
-# idle pages ate the core the other pytest worker needed. The script stretches that one interval to 5 s; every
+# heartbeat, `setInterval(..., 1000)` in App.tsx). Under software WebGL each frame of the demo cell is costly in
+# Chromium's GPU process (measured once by hand: an idle page kept it at most of a core), so idle pages ate the core
+# the other pytest worker needed. The script stretches that one interval to 5 s; every
 # render a message or an interaction requests is unchanged, and so is the websocket's once-a-second retry (the other
 # 1000 ms interval, told apart by its "retry" message).
 QUIET_HEARTBEAT_SCRIPT = """(() => {
