@@ -100,4 +100,12 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     )
     assert len(app.session.last.fiducial_ids) == n + 1
     page.get_by_role("tab", name="Explore").click()
-    wait_for(lambda: _rows(page) == before, 60, message="the same numbers after reloading", page=page)
+    with app.ctx.lock:  # the load's install holds it from setting the label until the table is sent
+        after = _server_rows(app)
+    # first the page catches up with the table the server sent after the load, then that table is the one from
+    # before the save (two steps, so a failure says whether the page lagged or the numbers changed)
+    assert after == before, (after, before)
+    try:
+        wait_for(lambda: _rows(page) == after, 60, message="the reloaded table", page=page)
+    except TimeoutError as exc:
+        raise AssertionError(f"page {_rows(page)} / server {after}") from exc
