@@ -8,6 +8,7 @@ printed, so a failure never leaves partial output.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import json
 import os
@@ -447,6 +448,7 @@ def main(argv=None) -> int:
             file=sys.stderr,
         )
         return 1
+    start = _file_offset(sys.stdout)
     try:
         if isinstance(out, str):
             sys.stdout.write(printable(out))
@@ -463,12 +465,50 @@ def main(argv=None) -> int:
         sys.stdout.flush()
     except BrokenPipeError:
         return 0
-    except Exception as exc:  # made while written: the same one line as above
+    except KeyboardInterrupt:  # Ctrl+C while written: no part of the output left either
+        _cut_back(sys.stdout, start)
+        return 130
+    except Exception as exc:  # made while written: the same one line as above, and no part of the output left
+        _cut_back(sys.stdout, start)
         if os.environ.get("RRBC_DEBUG"):
             raise
         print(f"rrbc: internal error: {type(exc).__name__}: {one_line(str(exc))}", file=sys.stderr)
         return 1
     return 0
+
+
+def _file_offset(stream) -> int | None:
+    """Where a command's output starts when stdout is a regular file (`> out.json`), else None (a pipe, a terminal,
+    a stream without a file descriptor)."""
+    import stat
+
+    try:
+        fd = stream.fileno()
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        stream.flush()
+        return os.lseek(fd, 0, os.SEEK_CUR)
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _cut_back(stream, start: int | None) -> None:
+    """Output that failed while written: a regular file is cut back to where the command's output began, so no part
+    of it is left; a pipe keeps what was sent (a strict prefix of a JSON object, which no parser accepts) and the
+    exit code says it failed."""
+    if start is None:
+        return
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        buffer = getattr(stream, "buffer", None)
+        with contextlib.suppress(Exception):  # drop what is still buffered: it is part of the failed output
+            stream.flush()
+            if buffer is not None:
+                buffer.flush()
+        fd = stream.fileno()
+        os.ftruncate(fd, start)
+        os.lseek(fd, start, os.SEEK_SET)
+        with contextlib.suppress(Exception):
+            stream.seek(start)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import viser
@@ -45,7 +45,7 @@ from rrbc_core.session.arm import arm_description
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
-from . import colors, lesson_labels
+from . import colors
 from .bound_nodes import BoundNodes
 from .check_error_nodes import CheckErrorNodes
 from .frame_nodes import FrameNodes
@@ -65,6 +65,7 @@ from .node_values import (
     unit_sphere,
 )
 from .picture import ScenePicture
+from .point_labels import PointLabels
 from .reading_nodes import ReadingNodes
 from .region_nodes import RegionNodes
 from .robot_nodes import ArmNodes, ArmPoser, SensorNodes
@@ -94,21 +95,17 @@ class SceneNodes:
         # what this view last drew, set only through its verbs (`build`, `show`, `set_*`); never read by a controller
         self._selected: tuple[str, str] | None = None  # the point carrying the drag gizmo
         self._see_through = False  # the work cell drawn see-through (ghost) instead of solid
-        self._label_scale = 1.0  # labels' screen size factor (presentation mode)
-        self._reanchored: str | None = None  # the label drawn with its own anchor to stay in view (a lesson's)
         self._arm: ArmNodes | None = None  # scenes with an arm (a DH arm or a URDF)
         self._arm_marks_allowed = True  # the arm's model-error mark, unless a lesson hides it (`set_arm_marks_visible`)
         self._scene_model: Any = None
         self._session: ExplorerSession | None = None  # the session built (build)
-        self._lesson_labels: tuple[str, ...] = ()  # kinds of point whose labels a lesson step shows
-        self._lesson_hidden: frozenset[str] = frozenset()  # ... less those that would overlap
         self._dragging: set[tuple[str, str]] = set()  # handles the user is dragging (the app leaves them be)
         self._poser: ArmPoser | None = None  # poses the arm (None without one)
         self._sphere_v, self._sphere_f = unit_sphere()
         self._groups: dict[str, viser.SceneNodeHandle] = {}
         self._gizmos: dict[tuple[str, str], viser.TransformControlsHandle] = {}
         self._spheres: dict[tuple[str, str], viser.IcosphereHandle] = {}
-        self._labels: dict[str, viser.LabelHandle] = {}  # node name of the label -> handle
+        self._labels = PointLabels(self._scene, self._assign)  # the points' and registration points' labels
         self._sent: dict = {}  # (id(handle), attribute) -> the value last assigned by show()
         self._nodes: dict[str, Any] = {}  # other nodes by name (their handle types vary)
         self._layers: dict[str, bool] = {name: True for name in LAYERS}
@@ -147,11 +144,11 @@ class SceneNodes:
 
     def label_names(self) -> list[str]:
         """The names of every point and frame label, in the order they were made."""
-        return list(self._labels)
+        return self._labels.names()
 
     def label_anchor(self, name: str) -> np.ndarray:
         """Where label `name` is drawn (robot frame, mm): its position, under its point's handle if it has one."""
-        p = np.asarray(self._labels[name].position, float)
+        p = self._labels.position(name)
         parent = name.rsplit("/", 1)[0]
         if parent.endswith("/gizmo"):
             kind, pid = parent.strip("/").split("/")[:2]
@@ -234,8 +231,8 @@ class SceneNodes:
             self._sensor.build(scene.sensor_kind, T.rotation, T.translation, look)
 
         # frames ---------------------------------------------------------------------------------------
-        self._frames.build(self._extent_mm, session.sensor_to_robot, ev.registration.mapping, self._label)
-        self._frames.set_compact(self._label_scale > 1.0, self._label_scale, self._assign)
+        self._frames.build(self._extent_mm, session.sensor_to_robot, ev.registration.mapping, self._add_label)
+        self._frames.set_compact(self._labels.compact, self._labels.scale, self._assign)
 
         # registration points --------------------------------------------------------------------------
         n = len(ev.registration_ids)
@@ -252,7 +249,7 @@ class SceneNodes:
                 receive_shadow=False,
             )
             for pid, p in zip(ev.registration_ids, ev.registration_positions):
-                self._label(f"/registration/labels/{node_key(pid)}", str(pid), np.asarray(p) + (0.0, 0.0, 1.6 * r))
+                self._add_label(f"/registration/labels/{node_key(pid)}", str(pid), np.asarray(p) + (0.0, 0.0, 1.6 * r))
 
         # fiducials and targets (draggable) -------------------------------------------------------------
         for i, pid in enumerate(ev.fiducial_ids):
@@ -314,16 +311,8 @@ class SceneNodes:
             self.set_selected(self._selected)
         return new
 
-    def _label(self, name: str, text: str, position) -> None:
-        self._labels[name] = self._scene.add_label(
-            name,
-            text,
-            position=np.asarray(position, float),
-            font_size_mode="screen",
-            font_screen_scale=0.75 * self._label_scale,
-            anchor="bottom-left",
-            visible=self._layers.get("labels", True),
-        )
+    def _add_label(self, name: str, text: str, position) -> None:
+        self._labels.add(name, text, position, self._layers.get("labels", True))
 
     def _point(self, kind: str, pid: str, position, color, label: str) -> None:
         r = self._display.marker_mm
@@ -362,7 +351,7 @@ class SceneNodes:
         sphere.on_click(on_click)
         self._gizmos[(kind, pid)] = tc
         self._spheres[(kind, pid)] = sphere
-        self._label(f"{name}/label", label, (0.0, 0.0, 1.6 * r))
+        self._add_label(f"{name}/label", label, (0.0, 0.0, 1.6 * r))
 
     def _arrow_sizes(self) -> dict:
         r = self._display.marker_mm
@@ -383,8 +372,10 @@ class SceneNodes:
         if reg is not None:  # registration points only move when moved from Python (no gizmo)
             reg.batched_positions = ev.registration_positions.astype(np.float32)
             for pid, p in zip(ev.registration_ids, ev.registration_positions):
-                label = self._labels[f"/registration/labels/{node_key(pid)}"]
-                label.position = np.asarray(p, float) + (0.0, 0.0, 1.6 * self._display.marker_mm)
+                self._labels.move(
+                    f"/registration/labels/{node_key(pid)}",
+                    np.asarray(p, float) + (0.0, 0.0, 1.6 * self._display.marker_mm),
+                )
 
         # fiducials (only what changed is assigned: viser's property setters cost ~40 µs each)
         texts = fiducial_labels(ev)
@@ -395,7 +386,7 @@ class SceneNodes:
             )
             if ("fiducials", pid) not in self._dragging:
                 self._assign(self._gizmos[("fiducials", pid)], "position", tuple(ev.fiducial_positions[i]))
-            self._assign(self._labels[f"{gizmo_name('fiducials', pid)}/label"], "text", texts[i])
+            self._labels.set_text(f"{gizmo_name('fiducials', pid)}/label", texts[i])
         inc_idx = np.flatnonzero(ev.included)
         arrows = self._nodes["/corrections/fiducials"]
         if len(inc_idx):
@@ -411,7 +402,7 @@ class SceneNodes:
 
         # targets
         t = ev.targets
-        compact = self._label_scale > 1.0
+        compact = self._labels.compact
         texts = target_labels(ev, compact=compact)
         if compact:  # presentation mode: the selected target's numbers, the others (a lesson's) by name only
             texts = [
@@ -432,7 +423,7 @@ class SceneNodes:
             )
             if ("targets", pid) not in self._dragging:
                 self._assign(self._gizmos[("targets", pid)], "position", tuple(t.positions[i]))
-            self._assign(self._labels[f"{gizmo_name('targets', pid)}/label"], "text", texts[i])
+            self._labels.set_text(f"{gizmo_name('targets', pid)}/label", texts[i])
             self._regions.move(pid, t.positions[i], self._assign)
         self._bounds.show(t.ids, t.positions, picture.bound_rotations, picture.bound_axes, self._assign)
         self._check_errors.show(picture.check_errors, self._display.marker_mm)
@@ -492,23 +483,19 @@ class SceneNodes:
 
     def set_label_scale(self, factor: float) -> None:
         """Labels' screen size × factor (presentation mode)."""
-        self._label_scale = float(factor)
-        # large labels centred over their point (short texts): they stay in the view's free part
-        anchor: Literal["bottom-center", "bottom-left"] = "bottom-center" if self._label_scale > 1.0 else "bottom-left"
-        for h in self._labels.values():
-            h.font_screen_scale = 0.75 * self._label_scale
-            h.anchor = anchor
+        self._labels.set_scale(factor)
         self._show_labels()
-        self._frames.set_compact(self._label_scale > 1.0, self._label_scale, self._assign)
+        scale, compact = self._labels.scale, self._labels.compact
+        self._frames.set_compact(compact, scale, self._assign)
         if "/landing/scale" in self._nodes:
-            self._nodes["/landing/scale"].font_screen_scale = 0.8 * self._label_scale
-            self._nodes["/landing/scale"].anchor = "top-center" if self._label_scale > 1.0 else "bottom-left"
+            self._nodes["/landing/scale"].font_screen_scale = 0.8 * scale
+            self._nodes["/landing/scale"].anchor = "top-center" if compact else "bottom-left"
         if self._arm is not None:
-            self._arm.marks["label"].font_screen_scale = 0.75 * self._label_scale
-            self._arm.marks["label"].anchor = "top-center" if self._label_scale > 1.0 else "bottom-left"
-            self._arm.compact = self._label_scale > 1.0
+            self._arm.marks["label"].font_screen_scale = 0.75 * scale
+            self._arm.marks["label"].anchor = "top-center" if compact else "bottom-left"
+            self._arm.compact = compact
             self._arm.refresh_label()
-        self._bullseye.set_label_scale(self._label_scale)
+        self._bullseye.set_label_scale(scale)
 
     def set_see_through(self, on: bool) -> None:
         """Draw the work cell solid or see-through (what lies under its surfaces shows)."""
@@ -557,36 +544,16 @@ class SceneNodes:
 
     def set_lesson_labels(self, kinds: tuple[str, ...]) -> None:
         """Show the labels of these kinds of point (a lesson step's, teaching.Step.labels) besides the others."""
-        self._lesson_labels = tuple(kinds)
-        self._lesson_hidden = frozenset()
+        self._labels.set_lesson(kinds)
         self._show_labels()
 
     def declutter_lesson_labels(self, pose, image_px, panel_px: float) -> frozenset[str]:
         """Hide the lesson step's labels that would overlap another or run under the panel when seen by `pose` (a
         `CameraPose`) in an image of `image_px` (width, height) CSS px (`lesson_labels.declutter`: the selected
         point's label first, then in the file's order). Returns the names hidden."""
-        lesson = tuple(f"/{k}/" for k in self._lesson_labels)
-        names = [n for n in self._labels if n.startswith(lesson)]
-        mine = None if self._selected is None else f"{gizmo_name(*self._selected)}/label"
-        anchor: Any = "bottom-center" if self._label_scale > 1.0 else "bottom-left"
-        labels = {n: (self.label_anchor(n), str(self._labels[n].text)) for n in names}
-        scale = 0.75 * self._label_scale
-        first_anchor: Any = None
-        moved, self._reanchored = self._reanchored, None
-        if moved in self._labels and moved != mine:  # an earlier selection's label back to the common anchor
-            self._labels[moved].anchor = anchor
-        if mine is not None and mine in self._labels:  # the selected point's label kept inside the view
-            text = str(self._labels[mine].text)
-            first_anchor = lesson_labels.inside_anchor(
-                self.label_anchor(mine), text, pose, image_px, panel_px, scale, anchor
-            )
-            self._labels[mine].anchor = first_anchor
-            self._reanchored = mine
-        self._lesson_hidden = lesson_labels.declutter(
-            labels, mine, pose, image_px, panel_px, scale, anchor, first_anchor
-        )
+        hidden = self._labels.declutter(self._selected_label(), self.label_anchor, pose, image_px, panel_px)
         self._show_labels()
-        return self._lesson_hidden
+        return hidden
 
     def drag_ended(self, kind: str, pid: str) -> None:
         """The user let go of a point's handle: the app places it again from now on."""
@@ -616,14 +583,12 @@ class SceneNodes:
         if (old.marker_mm, old.region_zoom) != (display.marker_mm, display.region_zoom):
             self._apply_sizes()
 
+    def _selected_label(self) -> str | None:
+        return None if self._selected is None else f"{gizmo_name(*self._selected)}/label"
+
     def _show_labels(self) -> None:
         # presentation mode: only the selected point's label and a lesson step's (large labels would overlap)
-        on = bool(self._layers.get("labels")) and self._label_scale <= 1.0
-        lesson = tuple(f"/{k}/" for k in self._lesson_labels)
-        mine = None if self._selected is None else f"{gizmo_name(*self._selected)}/label"
-        hidden = self._lesson_hidden
-        for name, h in self._labels.items():
-            self._assign(h, "visible", on or name == mine or (name.startswith(lesson) and name not in hidden))
+        self._labels.show(bool(self._layers.get("labels")), self._selected_label())
 
     def _apply_sizes(self) -> None:
         """Marker size and region zoom changed: resize spheres, gizmos, arrows, regions."""
@@ -632,9 +597,7 @@ class SceneNodes:
             s.radius = r if kind == "fiducials" else 0.8 * r
         for tc in self._gizmos.values():
             tc.scale = self.gizmo_scale()
-        for name, h in self._labels.items():
-            if name.endswith("/gizmo/label"):
-                h.position = np.array([0.0, 0.0, 1.6 * r])
+        self._labels.lift_point_labels(1.6 * r)
         for key in ("/corrections/fiducials", "/corrections/targets"):
             for k, v in self._arrow_sizes().items():
                 setattr(self._nodes[key], k, v)

@@ -15,7 +15,9 @@ docs/check_model.md).
   already has a term for (anisotropic noise, outliers) is not repeated. The noise is compared too: when the
   remainder's noise variance (diagnose's estimate) exceeds the model's (the mean predicted residual variance per
   axis) by more than an F/χ² test at alpha allows, `isotropic_noise` is named with the missing part.
-- **extend** (`scene_extension`): the named effects written as robot-side error terms.
+- **extend** (`scene_extension`): the named effects written as robot-side error terms; then the extended model is
+  simulated at the rows, and the scatter they still show about it beyond its predicted covariance (a χ² test at
+  alpha) is written as `isotropic_noise` (`scene_extension.spread_effect`), in the file's extension and in each fold's.
 - **score**: K folds (the stations when the file has at least two, else the paired ids shuffled by `seed`); for
   each fold the naming and extending are repeated on the other folds' rows alone, and the extended model predicts
   the held-out rows: the RMS over held-out rows of |measured − predicted mean residual| and the share of held-out
@@ -31,7 +33,7 @@ from scipy import stats
 
 from rrbc_core.analysis.diagnosis import Diagnosis, Effect, diagnose
 from rrbc_core.analysis.diagnosis_stats import TIME_FOLLOWS_POSITION
-from rrbc_core.analysis.scene_extension import AddedTerm, extension_terms
+from rrbc_core.analysis.scene_extension import AddedTerm, extension_terms, spread_effect, with_spread
 from rrbc_core.analysis.scene_prediction import (
     Figures,
     Interval,
@@ -422,6 +424,20 @@ def check_scene_model(
 
     effects, rem, _ = _name(mset, meas, mean, cov, paired, model, alpha, seed, arm)
     added, not_written = extension_terms(effects, rem, None if q is None else (spec, q[paired]))
+    if added:
+        added, _, spread = _spread(mset, stations, meas, model, added, paired, trials, seed + 999, alpha)
+        if spread is not None:  # one isotropic_noise, sized as the term written (`with_spread`: in quadrature)
+            before = [e for e in effects if e.name == "isotropic_noise"]
+            if before:
+                sigma = float(np.hypot(before[0].parameters["sigma_mm"], spread.parameters["sigma_mm"]))
+                spread = Effect(
+                    "isotropic_noise",
+                    {"sigma_mm": sigma},
+                    min(before[0].p_value, spread.p_value),
+                    f"{before[0].evidence} Beside the extension: {spread.evidence} In all {sigma:.3g} mm per axis.",
+                    magnitude_mm=sigma * np.sqrt(3.0),
+                )
+            effects = [e for e in effects if e.name != "isotropic_noise"] + [spread]
     extended = model.extended(robot=[t.term for t in added])
     follows = list(dict.fromkeys(FOLLOWS[e.name] for e in effects if e.name in FOLLOWS))
     if stations_off:
@@ -468,6 +484,18 @@ def check_scene_model(
     )
 
 
+def _spread(mset, stations, meas, model, terms, rows, trials, seed, alpha):
+    """`terms` with the missing spread of rows `rows` about the extended model (`scene_extension.with_spread`);
+    the moments of the model the terms make, and the spread effect or None."""
+    moments = _moments(predict(mset, stations, model.extended(robot=[t.term for t in terms]), trials, seed))
+    effect = spread_effect(meas.residual[0][rows] - moments[0][rows], moments[1][rows], alpha)
+    if effect is None:
+        return terms, moments, None
+    terms = with_spread(terms, effect)
+    moments = _moments(predict(mset, stations, model.extended(robot=[t.term for t in terms]), trials, seed))
+    return terms, moments, effect
+
+
 def _score(mset, stations, meas, model, mean, cov, z, paired, trials, folds, seed, alpha, arm, joints, extend) -> dict:
     """The out-of-sample score (module docstring)."""
     held, by = _folds(mset, paired, folds, seed)
@@ -485,8 +513,7 @@ def _score(mset, stations, meas, model, mean, cov, z, paired, trials, folds, see
             after_err.append(miss[test])
             after_in.append(z[test] <= Z95)
             continue
-        ext = model.extended(robot=[t.term for t in terms])
-        m2, c2 = _moments(predict(mset, stations, ext, trials, seed + 1000 + k))
+        terms, (m2, c2), _ = _spread(mset, stations, meas, model, terms, train, trials, seed + 1000 + k, alpha)
         after_err.append(np.linalg.norm(meas.residual[0][test] - m2[test], axis=1))
         after_in.append(_z(meas.residual[0], m2, c2)[test] <= Z95)
     cat = np.concatenate

@@ -136,6 +136,10 @@ def _flagged_and_gain(r):
     g = r.gain
     assert g["prediction_error_after_mm"] < g["prediction_error_before_mm"], g
     assert g["coverage_after"] > g["coverage_before"], g
+    # one isotropic_noise: the named size is the size written (the spread step's in quadrature with diagnose's)
+    named = [e.parameters["sigma_mm"] for e in r.unexplained if e.name == "isotropic_noise"]
+    written = [t.table["sigma_mm"] for t in r.added if t.table["type"] == "isotropic_noise"]
+    assert len(named) == len(written) <= 1 and np.allclose(named, written, atol=1e-6), (named, written)
 
 
 @pytest.mark.parametrize("seed", range(3))

@@ -72,3 +72,52 @@ def test_a_writer_killed_mid_run_leaves_no_partial_file(tmp_path):
         assert visible == [], (fraction, visible)  # nothing half-written under a name a user would open
         for q in tmp_path.iterdir():  # a hidden temporary copy the kill left behind
             q.unlink()
+
+
+def _fails_after_the_first_piece(real):
+    def broken(obj):
+        pieces = real(obj)
+        yield next(pieces)
+        raise RuntimeError("a planted failure while the JSON is written")
+
+    return broken
+
+
+@pytest.mark.parametrize("before", ["", "a line the shell wrote first\n"])
+def test_a_json_that_fails_while_written_to_a_file_leaves_none_of_it(tmp_path, monkeypatch, capsys, before):
+    """`rrbc correct --json > out.json` that fails midway (issue 42): one line on stderr, exit 1, and the file cut back
+    to where the command's output began (what was there before is kept)."""
+    import sys
+
+    from rrbc_core.io import json_stream
+
+    monkeypatch.setattr(json_stream, "CHUNK_CHARS", 64)  # many pieces even for the example file
+    monkeypatch.setattr(json_stream, "json_bytes", _fails_after_the_first_piece(json_stream.json_bytes))
+    out = tmp_path / "out.json"
+    with open(out, "w", encoding="utf-8") as f:
+        f.write(before)
+        monkeypatch.setattr(sys, "stdout", f)
+        rc = main(["correct", str(EXAMPLE_CSV), "--json"])
+        monkeypatch.undo()
+    assert rc == 1
+    assert out.read_text(encoding="utf-8") == before
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a planted failure" in err, err
+
+
+def test_a_json_that_fails_while_written_to_a_pipe_is_never_valid_json(tmp_path):
+    """Through a pipe what was sent stays sent; the exit code says it failed, and the text is a strict prefix of one
+    JSON object, which no parser accepts."""
+    import json
+    import sys
+
+    code = (
+        "import sys; from rrbc_core.io import json_stream as js; from rrbc_core.cli import main; real = js.json_bytes\n"
+        "def broken(obj):\n    p = real(obj); yield next(p); raise RuntimeError('planted')\n"
+        f"js.CHUNK_CHARS = 64; js.json_bytes = broken; sys.exit(main(['correct', {str(EXAMPLE_CSV)!r}, '--json']))\n"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 1 and p.stdout.startswith("{") and len(p.stdout) >= 64, (p.returncode, p.stdout[:80])
+    with pytest.raises(json.JSONDecodeError):
+        json.loads(p.stdout)
+    assert p.stderr.count("\n") == 1 and "planted" in p.stderr, p.stderr

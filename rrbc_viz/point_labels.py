@@ -1,0 +1,129 @@
+"""The scene's text labels of points and frames: made, sized, shown and decluttered behind verbs.
+
+Every label is a viser label node named by where it hangs (`/<kind>/<id>/gizmo/label` under a point's drag handle,
+`/registration/labels/<id>`); `SceneNodes` makes them through `add` and asks for what it shows. Which labels show:
+all of them when the labels layer is on (not in presentation mode, whose large labels would overlap), the selected
+point's always, and a lesson step's kinds less those that would overlap another or run under the panel
+(`lesson_labels.declutter`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Literal
+
+import numpy as np
+import viser
+
+from . import lesson_labels
+
+#: (handle, attribute, value): set unless it is what was last set there (`SceneNodes._assign`)
+Assign = Callable[[Any, str, Any], None]
+
+
+class PointLabels:
+    """The labels of one build; `scale` > 1 is presentation mode (larger, centred over their point)."""
+
+    def __init__(self, scene: viser.SceneApi, assign: Assign) -> None:
+        self._scene = scene
+        self._assign = assign
+        self._handles: dict[str, viser.LabelHandle] = {}  # node name of the label -> handle
+        self._scale = 1.0  # labels' screen size factor (presentation mode)
+        self._reanchored: str | None = None  # the label drawn with its own anchor to stay in view (a lesson's)
+        self._lesson_kinds: tuple[str, ...] = ()  # kinds of point whose labels a lesson step shows
+        self._lesson_hidden: frozenset[str] = frozenset()  # ... less those that would overlap
+
+    @property
+    def scale(self) -> float:
+        return self._scale
+
+    @property
+    def compact(self) -> bool:
+        """Presentation mode: short texts, large labels."""
+        return self._scale > 1.0
+
+    def _anchor(self) -> Literal["bottom-center", "bottom-left"]:
+        # large labels centred over their point (short texts): they stay in the view's free part
+        return "bottom-center" if self.compact else "bottom-left"
+
+    def names(self) -> list[str]:
+        """The names of every label, in the order they were made."""
+        return list(self._handles)
+
+    def position(self, name: str) -> np.ndarray:
+        """Label `name`'s position relative to its parent node (mm)."""
+        return np.asarray(self._handles[name].position, float)
+
+    def clear(self) -> None:
+        self._handles.clear()
+
+    def add(self, name: str, text: str, position, visible: bool) -> None:
+        """A new label `name` reading `text` at `position` (its parent's frame, mm)."""
+        self._handles[name] = self._scene.add_label(
+            name,
+            text,
+            position=np.asarray(position, float),
+            font_size_mode="screen",
+            font_screen_scale=0.75 * self._scale,
+            anchor="bottom-left",  # as before presentation mode re-anchors them (`set_scale`)
+            visible=visible,
+        )
+
+    def set_text(self, name: str, text: str) -> None:
+        self._assign(self._handles[name], "text", text)
+
+    def move(self, name: str, position) -> None:
+        self._handles[name].position = np.asarray(position, float)
+
+    def lift_point_labels(self, height_mm: float) -> None:
+        """Every point label (under a drag handle) drawn `height_mm` above its point."""
+        for name, h in self._handles.items():
+            if name.endswith("/gizmo/label"):
+                h.position = np.array([0.0, 0.0, height_mm])
+
+    def set_scale(self, factor: float) -> None:
+        """Labels' screen size × factor (presentation mode when > 1)."""
+        self._scale = float(factor)
+        for h in self._handles.values():
+            h.font_screen_scale = 0.75 * self._scale
+            h.anchor = self._anchor()
+
+    def set_lesson(self, kinds: tuple[str, ...]) -> None:
+        """Show the labels of these kinds of point (a lesson step's) besides the others (after `show`)."""
+        self._lesson_kinds = tuple(kinds)
+        self._lesson_hidden = frozenset()
+
+    def declutter(
+        self, mine: str | None, anchor_of: Callable[[str], np.ndarray], pose, image_px, panel_px: float
+    ) -> frozenset[str]:
+        """Hide the lesson step's labels that would overlap another or run under the panel when seen by `pose` (a
+        `CameraPose`) in an image of `image_px` (width, height) CSS px, the selected point's label `mine` first and
+        kept inside the view; `anchor_of(name)` is where a label is drawn (robot frame, mm). Returns the names
+        hidden (shown after `show`)."""
+        lesson = tuple(f"/{k}/" for k in self._lesson_kinds)
+        names = [n for n in self._handles if n.startswith(lesson)]
+        anchor: Any = self._anchor()
+        labels = {n: (anchor_of(n), str(self._handles[n].text)) for n in names}
+        scale = 0.75 * self._scale
+        first_anchor: Any = None
+        moved, self._reanchored = self._reanchored, None
+        if moved in self._handles and moved != mine:  # an earlier selection's label back to the common anchor
+            self._handles[moved].anchor = anchor
+        if mine is not None and mine in self._handles:  # the selected point's label kept inside the view
+            text = str(self._handles[mine].text)
+            first_anchor = lesson_labels.inside_anchor(anchor_of(mine), text, pose, image_px, panel_px, scale, anchor)
+            self._handles[mine].anchor = first_anchor
+            self._reanchored = mine
+        self._lesson_hidden = lesson_labels.declutter(
+            labels, mine, pose, image_px, panel_px, scale, anchor, first_anchor
+        )
+        return self._lesson_hidden
+
+    def show(self, layer_on: bool, mine: str | None) -> None:
+        """Make visible what should show (module docstring): `layer_on` the labels layer, `mine` the selected
+        point's label name (None without a selection)."""
+        on = layer_on and not self.compact
+        lesson = tuple(f"/{k}/" for k in self._lesson_kinds)
+        hidden = self._lesson_hidden
+        for name, h in self._handles.items():
+            self._assign(h, "visible", on or name == mine or (name.startswith(lesson) and name not in hidden))
