@@ -149,6 +149,22 @@ class CameraDirector:
         poses sent."""
         p = np.asarray(point, float).reshape(1, 3)
         out = {}
+        for client, now in self._reported(clients).items():
+            width = float(client.camera.image_width)
+            panel = float(np.clip(self.panel_px / width, 0.0, 0.6))
+            if bool(in_view(p, now, panel, margin=0.02)[0]):
+                continue
+            view = View(np.vstack([np.asarray(context, float).reshape(-1, 3), p]), now.look_at - now.position)
+            out.update(self.show(view, [client]))
+        return out
+
+    def current(self, clients=None) -> dict[int, CameraPose]:
+        """client id -> the pose its camera reports now, for each of `clients` (default: every connected tab) that
+        has reported a usable one."""
+        return {client.client_id: pose for client, pose in self._reported(clients).items()}
+
+    def _reported(self, clients=None) -> dict:
+        out = {}
         targets = list(self.server.get_clients().values()) if clients is None else list(clients)
         for client in targets:
             cam = client.camera
@@ -159,12 +175,7 @@ class CameraDirector:
                 continue
             if not (aspect > 0 and width > 0) or np.allclose(position, look_at):
                 continue
-            now = CameraPose(position, look_at, np.array([0.0, 0.0, 1.0]), fov, aspect)
-            panel = float(np.clip(self.panel_px / width, 0.0, 0.6))
-            if bool(in_view(p, now, panel, margin=0.02)[0]):
-                continue
-            view = View(np.vstack([np.asarray(context, float).reshape(-1, 3), p]), look_at - position)
-            out.update(self.show(view, [client]))
+            out[client] = CameraPose(position, look_at, np.array([0.0, 0.0, 1.0]), fov, aspect)
         return out
 
 

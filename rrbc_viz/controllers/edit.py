@@ -106,6 +106,8 @@ class AuthoringController:
             where = ", ".join(f"{v + 0.0:.1f}" for v in np.round(hit, 1))  # no "-0.0"
             self.ctx.message(f"Added {word} {new[0]} at ({where}) mm", client, title="Added", error=False)
             if kind in ("targets", "fiducials"):  # the new point is selected: its card shows it, its handle moves it
+                # in the view of the tab that added it, beside the panel (the camera keeps its direction)
+                self.ctx.camera.keep_in_view(hit, self.ctx.views.work_points(), None if client is None else [client])
                 self.ctx.views.select(kind, new[0], client=client)
             return ev
 

@@ -259,6 +259,8 @@ class ViewController:
                 self.ctx.nodes.set_selected(sel)
                 self.ctx.present.draw_scene(ev)  # the landing bullseye follows the selected target
                 self.show_selection(ev)
+                if self.ctx.state.lesson_index is None:  # (a lesson keeps its own labels in view: `_declutter`)
+                    self.keep_label_in_view(client)
 
     def set_point_sort(self, sort: str) -> None:
         """Order the point list (the "Selected point" dropdown) by `sort` (selection_card.SORTS)."""
@@ -330,6 +332,12 @@ class ViewController:
                 self.show_selection(self.ctx.session.last)
                 self._declutter(self.ctx.camera.show(self.current_view()))
             return text
+
+    def keep_label_in_view(self, client=None) -> None:
+        """The selected point's label drawn with the anchor that keeps it left of the panel in the view of `client`
+        (default: the first tab with a camera): its text runs left from a point near the panel
+        (`lesson_labels.inside_anchor`)."""
+        self._declutter(self.ctx.camera.current(None if client is None else [client]))
 
     def _declutter(self, poses: dict) -> None:
         """The lesson's labels that would overlap, or run under the panel, in the first tab's view (or the initial

@@ -503,3 +503,44 @@ def test_the_step_that_maps_a_fiducial_back_draws_its_two_readings(app):
     app.views.lesson_go(k)
     app.views.lesson_stop()
     assert app.nodes.handle("/readings/robot") is None
+
+
+def test_a_target_added_near_the_panel_keeps_its_label_beside_it(app):
+    """Issue 39: a target added by a click near the panel's edge is selected, and its label (the card's numbers, a
+    long text) is drawn with an anchor that keeps it left of the panel in the view (here the app's own camera: no
+    tab); so is every point's label when it is selected where its point is in view."""
+    from rrbc_core.geometry.framing import camera_basis, in_view
+    from rrbc_core.geometry.label_layout import label_boxes
+    from rrbc_viz.camera import DEFAULT_IMAGE
+
+    nodes, pose = app.nodes, app.ctx.camera.initial
+    w, h = DEFAULT_IMAGE
+    free = w - app.ctx.camera.panel_px
+
+    def box_of(kind, pid):
+        name = f"/{kind}/{pid}/gizmo/label"
+        return label_boxes(
+            np.array([nodes.label_anchor(name)]), [nodes.handle(name).text], pose, DEFAULT_IMAGE, 0.75,
+            nodes.handle(name).anchor,
+        )[0]  # fmt: skip
+
+    # a ray from the app's camera through a pixel 30 px left of the panel, half-way down: onto the cell's slab
+    f, r, u = camera_basis(pose.forward, pose.up)
+    ty = np.tan(pose.fov_y / 2.0)
+    ndc = np.array([(free - 30.0) / w * 2.0 - 1.0, 0.1])
+    direction = f + ndc[0] * pose.aspect * ty * r + ndc[1] * ty * u
+    before = set(app.session.last.targets.ids)
+    assert app.authoring.add_at_ray(pose.position, direction, kind="targets") is not None, app.last_message
+    (new,) = set(app.session.last.targets.ids) - before
+    assert app.state.selected == ("targets", new)
+    box = box_of("targets", new)
+    assert box[0] >= 0 and box[2] <= free, (nodes.handle(f"/targets/{new}/gizmo/label").anchor, box)
+    ev = app.session.last
+    for kind, ids, pts in (("targets", ev.targets.ids, ev.targets.positions), ("fiducials", ev.fiducial_ids,
+                                                                              ev.fiducial_positions)):  # fmt: skip
+        seen = in_view(pts, pose, app.ctx.camera.panel_px / w, margin=0.02)
+        for pid, ok in zip(ids, seen):
+            if ok:
+                app.views.select(kind, pid)
+                b = box_of(kind, pid)
+                assert b[0] >= 0 and b[2] <= free, (kind, pid, b)
