@@ -311,4 +311,4 @@ class RunningApp:
         self.ctx.state.initial_camera = self.ctx.camera.set_initial(
             view, near=max(radius * 3e-4, 0.05), far=radius * 30.0
         )
-        self.ctx.camera.show(view)
+        self.views.place_labels(self.ctx.camera.show(view))

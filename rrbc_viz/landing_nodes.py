@@ -89,6 +89,24 @@ class LandingNodes:
             if node is not None:
                 node.radius = f * marker_mm
 
+    def label(self) -> tuple[np.ndarray, str, str] | None:
+        """The ring label: (where, robot frame mm; its text; its anchor), None before `build`."""
+        node = self.handles.get("/landing/scale")
+        if node is None:
+            return None
+        return np.asarray(node.position, float), str(node.text), str(node.anchor)
+
+    def set_label_anchor(self, anchor) -> None:
+        """Draw the ring label with `anchor` (viser's label anchors: "bottom-left", "top-left", ...), or hide it
+        (None: no side of its point is clear)."""
+        node = self.handles.get("/landing/scale")
+        if node is None:
+            return
+        if node.visible != (anchor is not None):
+            node.visible = anchor is not None
+        if anchor is not None and node.anchor != anchor:
+            node.anchor = anchor
+
     def set_label_scale(self, factor: float) -> None:
         node = self.handles.get("/landing/scale")
         if node is not None:

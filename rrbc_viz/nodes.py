@@ -51,6 +51,7 @@ from .check_error_nodes import CheckErrorNodes
 from .frame_nodes import FrameNodes
 from .heatmap_nodes import HeatMapNodes
 from .landing_nodes import LandingNodes
+from .lesson_labels import side_anchor
 from .node_values import (
     LAYERS,
     Display,
@@ -487,9 +488,6 @@ class SceneNodes:
         self._show_labels()
         scale, compact = self._labels.scale, self._labels.compact
         self._frames.set_compact(compact, scale, self._assign)
-        if "/landing/scale" in self._nodes:
-            self._nodes["/landing/scale"].font_screen_scale = 0.8 * scale
-            self._nodes["/landing/scale"].anchor = "top-center" if compact else "bottom-left"
         if self._arm is not None:
             self._arm.marks["label"].font_screen_scale = 0.75 * scale
             self._arm.marks["label"].anchor = "top-center" if compact else "bottom-left"
@@ -551,9 +549,21 @@ class SceneNodes:
         """Hide the lesson step's labels that would overlap another or run under the panel when seen by `pose` (a
         `CameraPose`) in an image of `image_px` (width, height) CSS px (`lesson_labels.declutter`: the selected
         point's label first, then in the file's order). Returns the names hidden."""
-        hidden = self._labels.declutter(self._selected_label(), self.label_anchor, pose, image_px, panel_px)
+        mine = self._selected_label()
+        hidden = self._labels.declutter(mine, self.label_anchor, pose, image_px, panel_px)
+        self._place_ring_label(mine, pose, image_px, panel_px)
         self._show_labels()
         return hidden
+
+    def _place_ring_label(self, mine: str | None, pose, image_px, panel_px: float) -> None:
+        """The bullseye's ring label on the side of its point where it meets neither the selected point's label nor
+        the panel, seen by `pose` (`lesson_labels.side_anchor`); hidden where no side is clear."""
+        ring = self._bullseye.label()
+        if ring is not None:
+            box = None if mine is None else self._labels.box(mine, self.label_anchor(mine), pose, image_px)
+            own = "top-center" if self._labels.compact else "bottom-left"
+            scale = 0.8 * self._labels.scale
+            self._bullseye.set_label_anchor(side_anchor(ring[0], ring[1], box, pose, image_px, panel_px, scale, own))
 
     def drag_ended(self, kind: str, pid: str) -> None:
         """The user let go of a point's handle: the app places it again from now on."""

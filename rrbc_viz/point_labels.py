@@ -15,6 +15,8 @@ from typing import Any, Literal
 import numpy as np
 import viser
 
+from rrbc_core.geometry.label_layout import label_boxes
+
 from . import lesson_labels
 
 #: (handle, attribute, value): set unless it is what was last set there (`SceneNodes._assign`)
@@ -53,6 +55,12 @@ class PointLabels:
     def position(self, name: str) -> np.ndarray:
         """Label `name`'s position relative to its parent node (mm)."""
         return np.asarray(self._handles[name].position, float)
+
+    def box(self, name: str, where: np.ndarray, pose, image_px) -> np.ndarray:
+        """Label `name`'s screen box [left, top, right, bottom] (CSS px) as drawn at `where` (robot frame, mm) with
+        its anchor, seen by `pose` in an image of `image_px`; NaN behind the camera."""
+        h = self._handles[name]
+        return label_boxes(np.reshape(where, (1, 3)), [str(h.text)], pose, image_px, 0.75 * self._scale, h.anchor)[0]
 
     def clear(self) -> None:
         self._handles.clear()

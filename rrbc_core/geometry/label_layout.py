@@ -28,7 +28,7 @@ def label_boxes(anchors, texts, pose: CameraPose, image_px, font_scale: float, a
     """Screen boxes (N, 4) [left, top, right, bottom] (CSS px) of labels `texts` (N,) at `anchors` (N, 3) seen by
     `pose` in an image of `image_px` (width, height); rows of labels behind the camera are NaN. `anchor`:
     "bottom-left" (the text starts at the point), "bottom-center" (centred over it) or "bottom-right" (it ends
-    there)."""
+    there), above the point; "top-left", "top-center" or "top-right" the same below it."""
     a = np.asarray(anchors, float).reshape(-1, 3)
     w_img, h_img = (float(v) for v in image_px)
     ndc, depth = project(a, pose)
@@ -37,10 +37,20 @@ def label_boxes(anchors, texts, pose: CameraPose, image_px, font_scale: float, a
     em = LABEL_EM_PX * float(font_scale)
     width = np.array([CHAR_EM * em * max(len(str(t)), 1) for t in texts], float)
     height = LINE_EM * em
-    left = {"bottom-center": x - width / 2.0, "bottom-right": x - width}.get(anchor, x)
-    boxes = np.stack([left, y - height, left + width, y], axis=1)
+    side = anchor.split("-")[-1]
+    left = {"center": x - width / 2.0, "right": x - width}.get(side, x)
+    top = y if anchor.startswith("top") else y - height
+    boxes = np.stack([left, top, left + width, top + height], axis=1)
     boxes[~(depth > 0)] = np.nan
     return boxes
+
+
+def overlap(a, b, gap_px: float = GAP_PX) -> bool:
+    """Whether two boxes [left, top, right, bottom] (CSS px) come closer than `gap_px` (False when one is NaN)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return False
+    return not (a[2] + gap_px <= b[0] or b[2] + gap_px <= a[0] or a[3] + gap_px <= b[1] or b[3] + gap_px <= a[1])
 
 
 def uncluttered(boxes, image_px, panel_px: float = 0.0, gap_px: float = GAP_PX) -> np.ndarray:

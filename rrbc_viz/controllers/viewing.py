@@ -138,7 +138,9 @@ class ViewController:
             raise InputError(f"unknown camera preset '{preset}': {', '.join(PRESETS)}")
         with self.ctx.lock:
             self.ctx.state.camera_preset = preset
-            return self.ctx.camera.show(self.preset_view(preset), None if client is None else [client])
+            poses = self.ctx.camera.show(self.preset_view(preset), None if client is None else [client])
+            self.place_labels(poses)  # the selected label and the ring label apart in the new view
+            return poses
 
     def frame_new_client(self, client) -> None:
         """A tab connected: once it reports its camera (window size), frame the current view for it."""
@@ -153,7 +155,7 @@ class ViewController:
             done["flag"] = True
             try:
                 with self.ctx.lock:
-                    self.ctx.camera.show(self.current_view(), [client])
+                    self.place_labels(self.ctx.camera.show(self.current_view(), [client]))
             except Exception:  # noqa: BLE001 - a closing tab must not break the app
                 pass
 
@@ -176,7 +178,7 @@ class ViewController:
                 marker = self.ctx.state.display.marker_mm * (PRESENTATION_MARKERS if on else 1 / PRESENTATION_MARKERS)
                 self.ctx.evaluate.set_display(marker_mm=float(marker))
                 self.ctx.state.initial_camera = self.ctx.camera.reframe_initial(self.current_view())
-                self.ctx.camera.show(self.current_view())
+                self.place_labels(self.ctx.camera.show(self.current_view()))
 
     def _legend(self) -> bool | None:
         """The colour legend: open while exploring, closed to its title during a lesson (it needs the room), not
@@ -259,7 +261,7 @@ class ViewController:
                 self.ctx.nodes.set_selected(sel)
                 self.ctx.present.draw_scene(ev)  # the landing bullseye follows the selected target
                 self.show_selection(ev)
-                if self.ctx.state.lesson_index is None:  # (a lesson keeps its own labels in view: `_declutter`)
+                if self.ctx.state.lesson_index is None:  # (a lesson keeps its own labels in view: `place_labels`)
                     self.keep_label_in_view(client)
 
     def set_point_sort(self, sort: str) -> None:
@@ -330,18 +332,19 @@ class ViewController:
                 self.ctx.controls.learn.show_text(text)
                 self.ctx.controls.learn.show_step(index, len(teaching.STEPS))
                 self.show_selection(self.ctx.session.last)
-                self._declutter(self.ctx.camera.show(self.current_view()))
+                self.place_labels(self.ctx.camera.show(self.current_view()))
             return text
 
     def keep_label_in_view(self, client=None) -> None:
         """The selected point's label drawn with the anchor that keeps it left of the panel in the view of `client`
         (default: the first tab with a camera): its text runs left from a point near the panel
         (`lesson_labels.inside_anchor`)."""
-        self._declutter(self.ctx.camera.current(None if client is None else [client]))
+        self.place_labels(self.ctx.camera.current(None if client is None else [client]))
 
-    def _declutter(self, poses: dict) -> None:
-        """The lesson's labels that would overlap, or run under the panel, in the first tab's view (or the initial
-        camera's) are hidden (lesson_labels.declutter)."""
+    def place_labels(self, poses: dict) -> None:
+        """Labels placed for the first tab's view in `poses` (client id -> pose), or the initial camera's: the selected
+        point's kept left of the panel, the bullseye's ring label clear of it, and a lesson's labels that would
+        overlap or run under the panel hidden (`nodes.SceneNodes.declutter_lesson_labels`)."""
         clients = self.ctx.server.get_clients()
         for cid, pose in poses.items():
             cam = clients[cid].camera if cid in clients else None
@@ -379,4 +382,4 @@ class ViewController:
                 self.ctx.controls.learn.show_text("Lesson ended. Press **Next** to start again.")
                 self.ctx.controls.learn.show_step(None, len(teaching.STEPS))
                 self.show_selection(self.ctx.session.last)
-                self.ctx.camera.show(self.current_view())
+                self.place_labels(self.ctx.camera.show(self.current_view()))
