@@ -19,6 +19,7 @@ from __future__ import annotations
 import gc
 import threading
 import time
+from collections import Counter
 
 import numpy as np
 
@@ -28,6 +29,8 @@ RATE_HZ = 20.0
 GAP_GOAL_S = 0.5
 CLICK_GOAL_S = 1.0
 RSS_GOAL = 1.2
+#: the shared app's own worker threads: one each, started when first needed, kept for the app's life
+SHARED_APP_WORKERS = frozenset({"rrbc-drags", "rrbc-monte-carlo", "rrbc-planning"})
 
 
 def rss_mb() -> float:
@@ -91,6 +94,7 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
         release_memory()
         rss_warm = rss_mb()
         threads_started = threads_when_idle()  # after one tab: what a served tab starts for good
+        names_started = Counter(t.name for t in threading.enumerate() if t.name.startswith("rrbc-"))
         pool = ClientPool(app.url, clients)
         try:
             t_open = time.monotonic()
@@ -128,6 +132,13 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
         rss_after = rss_mb()
         threads_after = threads_when_idle()
         names_after = sorted(t.name for t in threading.enumerate() if t.name.startswith("rrbc-"))
+        # what the class left: threads beyond those after one tab, less the shared app's own workers (one each,
+        # started the first time they are needed and the app's for good: the Plan tab's background planner
+        # starts only when a planning update is slow, as on a loaded machine)
+        extra = Counter(names_after) - names_started
+        left = sorted(
+            n for n, k in extra.items() for _ in range(k) if per_client or n not in SHARED_APP_WORKERS or k > 1
+        )
     finally:
         app.stop()
     return {
@@ -143,6 +154,7 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
         "threads_started": threads_started,
         "threads_after": threads_after,
         "thread_names_after": names_after,
+        "threads_left": left,
     }
 
 

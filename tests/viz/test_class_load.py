@@ -26,5 +26,6 @@ def test_every_dragging_client_keeps_moving_and_a_click_after_is_answered(per_cl
     # memory: the class's sessions and buffers are given back (against the process after one tab, module docstring
     # of benchmarks/class_load.py); a generous bound here, the benchmark holds the 20 % goal
     assert res["rss_after_mb"] <= 1.5 * res["rss_before_mb"], res
-    # the threads the class started are gone again (issue 42, item 5; rrbc_viz.worker_pool)
-    assert res["threads_after"] <= res["threads_started"], res["thread_names_after"]
+    # the threads the class started are gone again (issue 42, item 5; rrbc_viz.worker_pool), less the shared app's
+    # own workers started when first needed (on a loaded machine a slow planning update starts the Plan tab's)
+    assert not res["threads_left"], res["thread_names_after"]
