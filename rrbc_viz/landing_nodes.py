@@ -89,12 +89,12 @@ class LandingNodes:
             if node is not None:
                 node.radius = f * marker_mm
 
-    def label(self) -> tuple[np.ndarray, str, str] | None:
-        """The ring label: (where, robot frame mm; its text; its anchor), None before `build`."""
+    def label(self) -> tuple[np.ndarray, str] | None:
+        """The ring label: (where, robot frame mm; its text), None before `build`."""
         node = self.handles.get("/landing/scale")
         if node is None:
             return None
-        return np.asarray(node.position, float), str(node.text), str(node.anchor)
+        return np.asarray(node.position, float), str(node.text)
 
     def set_label_anchor(self, anchor) -> None:
         """Draw the ring label with `anchor` (viser's label anchors: "bottom-left", "top-left", ...), or hide it

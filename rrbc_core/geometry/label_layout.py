@@ -65,10 +65,7 @@ def uncluttered(boxes, image_px, panel_px: float = 0.0, gap_px: float = GAP_PX) 
             continue
         if box[0] < 0 or box[1] < 0 or box[2] > w_img - panel_px or box[3] > h_img:
             continue
-        if any(
-            box[0] < k[2] + gap_px and k[0] < box[2] + gap_px and box[1] < k[3] + gap_px and k[1] < box[3] + gap_px
-            for k in kept
-        ):
+        if any(overlap(box, k, gap_px) for k in kept):
             continue
         keep[i] = True
         kept.append(box)
