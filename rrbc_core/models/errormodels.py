@@ -145,9 +145,13 @@ class PointSet:
 
     def subset(self, i: int) -> PointSet:
         """The one point `i` as a PointSet of length 1."""
-        rot = None if self.tool_rotation is None else self.tool_rotation[i : i + 1]
-        q = None if self.joints is None else self.joints[i : i + 1]
-        return PointSet(self.robot[i : i + 1], self.sensor[i : i + 1], self.time[i : i + 1], rot, self.joint_seed, q)
+        return self.take(np.arange(i, i + 1))
+
+    def take(self, idx) -> PointSet:
+        """The points `idx` (an index array) as a PointSet, in that order."""
+        rot = None if self.tool_rotation is None else self.tool_rotation[idx]
+        q = None if self.joints is None else self.joints[idx]
+        return PointSet(self.robot[idx], self.sensor[idx], self.time[idx], rot, self.joint_seed, q)
 
 
 # --- the protocol ------------------------------------------------------------------------------------------

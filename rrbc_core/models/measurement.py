@@ -127,7 +127,7 @@ class MeasurementModel:
         noise_s, noise_r = noise
         return Readings(sensor[None] + n * noise_s, truth[None] + n * noise_r, truth)
 
-    def read_each(self, pts: PointSet, ids: Sequence[str], seed: int) -> Readings:
+    def read_each(self, pts: PointSet, ids: Sequence[str], seed: int, bias=None) -> Readings:
         """One reading of each point (T = 1), its noise drawn from its own generator seeded by `point_seed(seed,
         id)` (sensor side first, then robot side): the readings of a measured data set, the same for a point
         whatever else is in the set (`rrbc simulate --out`, the app's session and its download).
@@ -140,6 +140,8 @@ class MeasurementModel:
             (P,) the points' ids.
         seed : int
             The data set's seed.
+        bias : tuple of ndarray, optional
+            (β_s, β_r) as `bias(pts)` returns them, when already known (the explorer keeps them across seeds).
 
         Returns
         -------
@@ -156,4 +158,4 @@ class MeasurementModel:
                 rng = np.random.default_rng(point_seed(seed, pid))
                 e_s, e_r = self.noise(pts.subset(i), rng, 1)
                 noise_s[0, i], noise_r[0, i] = e_s[0, 0], e_r[0, 0]
-        return self.read(pts, noise=(noise_s, noise_r))
+        return self.read(pts, bias=bias, noise=(noise_s, noise_r))

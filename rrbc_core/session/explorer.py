@@ -41,6 +41,9 @@ from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.session.evaluation import Evaluation, Group, Readings, Settings, evaluate
 from rrbc_core.session.tools import VARIED_TILT_DEG, tool_rotation
 
+#: points whose bias an explorer session keeps (`ExplorerSession._bias_of`); past it the store starts again
+BIAS_KEPT = 20_000
+
 
 @dataclass
 class History:
@@ -87,6 +90,7 @@ class ExplorerSession:
         self._last: Evaluation | None = None
         self._heat_cache: dict = {}
         self._cache: dict = {}
+        self._bias: dict = {}  # (pose, position, tool, time) -> a point's unscaled bias (β_s, β_r): seed-free
         self.suggestion = None  # the last planning.PlanResult from suggest_fiducials (None: none pending)
         self._suggestion_key = None  # planning key of the layout the suggestion was made for
         self.accepted: tuple = ()  # ids of fiducials added by accept_suggestions, in order
@@ -216,11 +220,29 @@ class ExplorerSession:
         model = self.measurement_model()
         positions = np.asarray(positions, float).reshape(-1, 3)
         pts = model.points(positions, self.tool_rotations(kind, ids), self.row_times(kind, ids))
-        if not noise:
-            r = model.read(pts)
-        else:
-            r = model.read_each(pts, list(ids), self.settings.seed)
+        bias = self._bias_of(model, pts)
+        r = model.read(pts, bias=bias) if not noise else model.read_each(pts, list(ids), self.settings.seed, bias)
         return Readings(r.sensor[0], r.robot[0], r.truth)
+
+    def _bias_of(self, model: MeasurementModel, pts) -> tuple[np.ndarray, np.ndarray]:
+        """(β_s, β_r) (P, 3) of the points, unscaled: a point's bias does not depend on the seed or on the other
+        points (each is solved from the same joint seed), so it is kept and reused when only the seed or the noise
+        changes (a new seed in the app, the tolerance planner's fresh draws). At most `BIAS_KEPT` points are kept."""
+        pose = (self.sensor_to_robot.rotation.tobytes(), self.sensor_to_robot.translation.tobytes())
+        rot = np.broadcast_to(np.eye(3) if pts.tool_rotation is None else pts.tool_rotation, (len(pts.robot), 3, 3))
+        keys = [(pose, pts.robot[i].tobytes(), rot[i].tobytes(), float(pts.time[i])) for i in range(len(pts.robot))]
+        missing = [i for i, k in enumerate(keys) if k not in self._bias]
+        if missing:
+            bs, br = model.bias(pts.take(np.array(missing)))
+            if len(self._bias) + len(missing) > BIAS_KEPT:
+                self._bias.clear()
+            for j, i in enumerate(missing):
+                self._bias[keys[i]] = (bs[j], br[j])
+        n = len(keys)
+        return (
+            np.array([self._bias[k][0] for k in keys], float).reshape(n, 3),
+            np.array([self._bias[k][1] for k in keys], float).reshape(n, 3),
+        )
 
     def row_times(self, kind: str, ids) -> np.ndarray:
         """(P,) s: when each point is measured in the session's data set — the rows in the order `rrbc simulate`
