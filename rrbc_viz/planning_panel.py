@@ -478,7 +478,9 @@ def tolerance_markdown(plan) -> str:
     )
     return (
         f"**{lines[0]}**{why}\n\n| fiducial | x, y, z (mm) |\n|---|---|\n{fids}\n\n"
-        f"| target | 95 % bound (mm) | |\n|---|---|---|\n{tgts}\n\n**Use these fiducials** replaces the cell's."
+        f"| target | 95 % bound (mm) | |\n|---|---|---|\n{tgts}\n\nEach bound is the median over {plan.draws} noise "
+        "draws of this layout: one measurement's bound may come out a little above or below it.\n\n"
+        "**Use these fiducials** replaces the cell's."
     )
 
 
