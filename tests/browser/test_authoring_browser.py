@@ -39,6 +39,8 @@ def _server_rows(app):
 def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_app, page_for, tmp_path):
     import trimesh
 
+    from rrbc_viz.tables import target_table
+
     slab = trimesh.creation.box(extents=(700, 700, 20))
     slab.apply_translation((450, 0, 40))  # over the fixture plate: its top is at z = 50
     mesh_file = tmp_path / "slab.stl"
@@ -71,9 +73,16 @@ def test_upload_a_mesh_click_to_place_save_and_reload_to_the_same_numbers(viser_
     added = app.session.last.fiducial_positions[-1]
     assert abs(added[2] - 50.0) < 1e-3 and np.linalg.norm(added[:2] - spot[:2]) < 5.0  # on the slab, where clicked
     page.get_by_role("tab", name="Explore").click()
-    # the page shows the table the server sent after the click (on a loaded machine it arrives later than the
-    # session's numbers: reading it at once could take the table from before the fiducial)
-    wait_for(lambda: len(_rows(page)) == 1 and _rows(page) == _server_rows(app), 30, message="the table", page=page)
+    # the page shows the table the server sent after the click: the click's evaluation is in the session before its
+    # table is sent (on a loaded machine, seconds before), so wait for the table of that evaluation, then the page
+    wait_for(
+        lambda: app.controls.explore.table.content == target_table(app.session.last)
+        and len(_rows(page)) == 1
+        and _rows(page) == _server_rows(app),
+        30,
+        message="the table",
+        page=page,
+    )
     before = _rows(page)
     # save: a real download, kept beside the mesh under the name the scene refers to
     page.get_by_role("tab", name="File").click()
