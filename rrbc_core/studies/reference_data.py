@@ -12,12 +12,13 @@ Units: errors in mm, variances in mm², r dimensionless, p-values and PS probabi
 from __future__ import annotations
 
 import csv
+import functools
 import io
 from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import special, stats
 
 CITATION = (
     'K. Van Wyk, J. A. Marvel, "Strategies for Improving and Evaluating Robot Registration Performance", '
@@ -123,14 +124,24 @@ def samples_per_method(rows=None) -> tuple[int, dict]:
 
 
 def ps_bound(successes: int, tries: int = PEG_TRIES, confidence: float = PEG_CONFIDENCE) -> float:
-    """The paper's PS: the p solving F(m − 1; n, p) = CL (F the binomial CDF, m successes of n tries)."""
-    if successes <= 0:
-        return 0.0
-    return float(optimize.brentq(lambda q: stats.binom.cdf(successes - 1, tries, q) - confidence, 1e-12, 1 - 1e-15))
+    """The paper's PS: the p solving F(m − 1; n, p) = CL (F the binomial CDF, m successes of n tries). In closed
+    form: F(m − 1; n, p) = I_{1−p}(n − m + 1, m) (the regularised incomplete beta), so p = 1 − I⁻¹_CL(n − m + 1, m);
+    m = n gives F(n − 1; n, p) = 1 − pⁿ, so p = (1 − CL)^(1/n)."""
+    return float(_ps_bounds(tries, confidence)[int(successes)]) if successes > 0 else 0.0
+
+
+@functools.lru_cache(maxsize=8)
+def _ps_bounds(tries: int, confidence: float) -> np.ndarray:
+    """ps_bound for every success count 0..tries (read-only)."""
+    m = np.arange(1, tries + 1)
+    out = np.zeros(tries + 1)
+    out[1:] = 1.0 - special.betaincinv(tries - m + 1, m, confidence)
+    out.setflags(write=False)
+    return out
 
 
 def successes_from_ps(ps: float, tries: int = PEG_TRIES, confidence: float = PEG_CONFIDENCE) -> tuple[int, float]:
     """The success count m whose PS bound is nearest the published PS, and |bound − PS|."""
-    bounds = np.array([ps_bound(m, tries, confidence) for m in range(tries + 1)])
+    bounds = _ps_bounds(tries, confidence)
     m = int(np.argmin(np.abs(bounds - ps)))
     return m, float(abs(bounds[m] - ps))
