@@ -71,3 +71,8 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$hash" ]; then
   rm -f "$log"
   echo "$hash" > "$stamp"
 fi
+# The project's own packages are installed editable, so pip compiles none of their bytecode; where
+# PYTHONDONTWRITEBYTECODE is set, every `rrbc` process would compile what it imports (about 0.35 s of CPU for a
+# small `rrbc correct` on this machine). Compile them here (only files changed since are recompiled; Python ignores
+# a .pyc whose source has changed).
+.venv/bin/python -m compileall -q rrbc_core rrbc_viz >/dev/null
