@@ -52,6 +52,7 @@ from .frame_nodes import FrameNodes
 from .heatmap_nodes import HeatMapNodes
 from .landing_nodes import LandingNodes
 from .lesson_labels import side_anchor
+from .mesh_nodes import add_cell_mesh
 from .node_values import (
     LAYERS,
     Display,
@@ -193,20 +194,7 @@ class SceneNodes:
         r = display.marker_mm
 
         if mesh is not None:
-            self._nodes["/mesh/cell"] = sc.add_mesh_trimesh(
-                "/mesh/cell", mesh, cast_shadow=False, receive_shadow=False, visible=not self._see_through
-            )
-            self._nodes["/mesh/ghost"] = sc.add_mesh_simple(  # the see-through cell: shows what lies under surfaces
-                "/mesh/ghost",
-                np.asarray(mesh.vertices, np.float32),
-                np.asarray(mesh.faces, np.uint32),
-                color=(170, 170, 175),
-                opacity=0.18,
-                side="double",
-                cast_shadow=False,
-                receive_shadow=False,
-                visible=self._see_through,
-            )
+            self._nodes.update(add_cell_mesh(sc, mesh, self._see_through))
 
         # the arm and the sensor, as what they are (robot_nodes) ----------------------------------------------
         scene = getattr(session, "scene", None) if session.kind == "scene" else None
