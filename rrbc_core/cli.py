@@ -371,11 +371,17 @@ def _cmd_plan(args) -> str:
 
     scene = load_scene(args.scene)
     if args.tolerance is not None:
-        from rrbc_core.session.tolerance_plan import plan_to_tolerance, tolerance_text
+        from rrbc_core.session.tolerance_plan import MAX_FIDUCIALS, plan_to_tolerance, tolerance_text
 
         if args.add:
             raise InputError("--tolerance finds how many fiducials are needed: drop --add")
-        tres = plan_to_tolerance(scene, args.tolerance)
+        from rrbc_core.correction.bounds import MIN_FIDUCIALS
+
+        bar = progress_bar(MAX_FIDUCIALS - MIN_FIDUCIALS + 1, "planning")
+        try:
+            tres = plan_to_tolerance(scene, args.tolerance, progress=lambda n, label: advance(bar, n, label))
+        finally:
+            bar.close()
         return json.dumps(tres.to_json(), allow_nan=False) + "\n" if args.json else tolerance_text(tres)
     bar = progress_bar(2 * args.add + 2, "planning")
     try:

@@ -39,6 +39,8 @@ from rrbc_core.errors import InputError
 
 #: candidates considered: this many nearest any target
 NEAR = 60
+#: the most fiducials a plan takes
+MAX_FIDUCIALS = 40
 #: steps without a lower largest bound before the search stops
 PATIENCE = 3
 #: a tolerance below this (mm) is refused: no instrument here reads that finely
@@ -144,12 +146,13 @@ def drawn_bounds(session, seeds) -> DrawnBounds:
     return DrawnBounds(bound, budget)
 
 
-def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40, start=None) -> TolerancePlan:
+def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40, start=None, progress=None) -> TolerancePlan:
     """The fewest candidates bringing every target's 95 % bound under `tolerance_mm` (module docstring).
 
     `start`: an `ExplorerSession` of the scene as the user has it now (the app: targets and registration points
     moved, candidates added); its registration points, targets and candidates are used (it is not changed).
-    Without it, the scene as written.
+    Without it, the scene as written. `progress`: called `(1, label)` after the start and after each greedy step (at
+    most `max_fiducials - MIN_FIDUCIALS + 1` calls), the label saying how many fiducials and the largest bound.
 
     Raises
     ------
@@ -202,8 +205,14 @@ def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40, start
     while len(chosen) < min(MIN_FIDUCIALS, len(pool)):
         d = np.min(np.linalg.norm(pool[:, None, :] - pool[chosen][None], axis=2), axis=1)
         chosen.append(int(np.argmax(d)))
+
+    def report(value: float) -> None:
+        if progress is not None:
+            progress(1, f"planning: {len(chosen)} fiducials, largest bound {value:.3g} mm")
+
     searched = _largest(evaluate(chosen))
     conf = confirm(chosen) if searched < tol else None
+    report(searched if conf is None else conf.largest)
     best = {"search": searched, "fresh": conf.largest if conf is not None else np.inf}
     stale = 0
     # 2. greedy: the candidate lowering the largest bound most (on the search's draw; on the fresh draws once the
@@ -229,6 +238,7 @@ def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40, start
         chosen.append(k)
         stale = stale + 1 if value >= best[currency] else 0
         best[currency] = min(best[currency], value)
+        report(value)
     if conf is None:
         conf = confirm(chosen)
     place(chosen)
