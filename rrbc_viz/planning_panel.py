@@ -403,6 +403,10 @@ class PlanningPanel:
         if busy:
             self.tolerance_md.content = f"Planning: the fewest fiducials for {tolerance_mm:g} mm…"
 
+    def show_tolerance_progress(self, tolerance_mm: float, label: str) -> None:
+        """How far the plan to a tolerance being computed has come (`plan_to_tolerance`'s progress label)."""
+        self.tolerance_md.content = f"Planning the fewest fiducials for {tolerance_mm:g} mm… {label}"
+
     def show_tolerance_plan(self, plan, marker_mm: float) -> None:
         """A plan to a tolerance: its fiducials as ghost spheres, its text (`rrbc plan --tolerance`'s), and Use."""
         self._add_ghosts(plan.fiducial_ids, plan.fiducial_positions, marker_mm, added=False)

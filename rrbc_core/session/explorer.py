@@ -231,17 +231,21 @@ class ExplorerSession:
         pose = (self.sensor_to_robot.rotation.tobytes(), self.sensor_to_robot.translation.tobytes())
         rot = np.broadcast_to(np.eye(3) if pts.tool_rotation is None else pts.tool_rotation, (len(pts.robot), 3, 3))
         keys = [(pose, pts.robot[i].tobytes(), rot[i].tobytes(), float(pts.time[i])) for i in range(len(pts.robot))]
-        missing = [i for i, k in enumerate(keys) if k not in self._bias]
+        # read into a dict of this call's own (a planner's copy of the session shares the store, and may start it
+        # again meanwhile)
+        got = {k: self._bias.get(k) for k in keys}
+        missing = [i for i, k in enumerate(keys) if got[k] is None]
         if missing:
             bs, br = model.bias(pts.take(np.array(missing)))
             if len(self._bias) + len(missing) > BIAS_KEPT:
                 self._bias.clear()
             for j, i in enumerate(missing):
-                self._bias[keys[i]] = (bs[j], br[j])
+                got[keys[i]] = self._bias[keys[i]] = (bs[j], br[j])
+        pairs = [got[k] for k in keys]
         n = len(keys)
         return (
-            np.array([self._bias[k][0] for k in keys], float).reshape(n, 3),
-            np.array([self._bias[k][1] for k in keys], float).reshape(n, 3),
+            np.array([p[0] for p in pairs if p is not None], dtype=np.float64).reshape(n, 3),
+            np.array([p[1] for p in pairs if p is not None], dtype=np.float64).reshape(n, 3),
         )
 
     def row_times(self, kind: str, ids) -> np.ndarray:

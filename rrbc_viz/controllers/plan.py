@@ -347,7 +347,15 @@ class PlanController:
                 return None
             snapshot = copy.copy(session)
             marker = float(self.ctx.state.display.marker_mm)
-        result, error = _outside_the_lock(lambda: plan_to_tolerance(None, tolerance_mm, start=snapshot))
+
+        def progress(_n: int, label: str) -> None:  # each step (seconds apart): the tab says how far it has come
+            with self.ctx.lock:
+                if self.ctx.session is session:
+                    panel.show_tolerance_progress(float(tolerance_mm), label.removeprefix("planning: "))
+
+        result, error = _outside_the_lock(
+            lambda: plan_to_tolerance(None, tolerance_mm, start=snapshot, progress=progress)
+        )
         with self.ctx.lock:
             self._end_tolerance()
             if self.ctx.session is not session:  # another source was loaded meanwhile

@@ -263,7 +263,7 @@ def test_a_layout_the_planner_refuses_gives_a_message_not_a_crash(app):
     assert len(shown_coverage(app)) == 8
 
 
-def test_the_plan_tab_plans_to_a_tolerance_as_rrbc_plan_does_and_its_fiducials_can_be_used(app):
+def test_the_plan_tab_plans_to_a_tolerance_as_rrbc_plan_does_and_its_fiducials_can_be_used(app, monkeypatch):
     """One answer: the tab's plan to a tolerance is `rrbc plan --tolerance`'s (the same function on the scene as the
     app has it: unedited, the scene as written), its text is the command's; Use puts its fiducials in the cell, whose
     targets' bounds over the plan's fresh draws are then the plan's (all under the tolerance), and Undo brings the
@@ -279,8 +279,11 @@ def test_the_plan_tab_plans_to_a_tolerance_as_rrbc_plan_does_and_its_fiducials_c
     panel = app.planning
     before = tuple(app.session.layout["fiducials"].ids)
     panel.tolerance.value = 0.5
+    shown = []  # the tab says how far the plan has come at each of its steps
+    monkeypatch.setattr(panel, "show_tolerance_progress", lambda tol, label: shown.append((tol, label)))
     _press(panel.tolerance_button)
     plan = app.state.tolerance_plan
+    assert shown and shown[0][0] == 0.5 and shown[-1][1].startswith(f"{len(plan.fiducial_ids)} fiducials"), shown
     assert plan is not None and plan.met, panel.tolerance_md.content
     cli = subprocess.run(
         [*RRBC, "plan", str(default_scene_path()), "--tolerance", "0.5", "--json"],
