@@ -20,6 +20,7 @@ import numpy as np
 
 from rrbc_core.errors import InputError
 from rrbc_core.models.visibility import cast_from
+from rrbc_core.runtime.memory import release_memory
 from rrbc_core.session import edits, figures
 
 from .. import sources
@@ -197,6 +198,7 @@ class AuthoringController:
                 mesh = load_cell_mesh(path)
             except InputError as exc:
                 shutil.rmtree(d, ignore_errors=True)
+                release_memory()  # what reading it took before the refusal
                 self.ctx.message(str(exc).replace(str(path), str(name)), client, title="Upload refused")
                 return False
             self.ctx.loaded = sources.Loaded(self.ctx.loaded.session, mesh, self.ctx.loaded.label)
@@ -206,6 +208,7 @@ class AuthoringController:
             if self.ctx.session.kind == "scene":  # the cell is now this mesh's: it carries its name
                 self.ctx.session.name = path.stem
             self.redraw(self.ctx.session.last)
+        release_memory()  # the mesh it replaced and the reading's buffers: back to the OS (issue 42)
         self.ctx.message(f"{name}: the cell's mesh now ({len(mesh.faces)} triangles)", client, error=False)
         return True
 
