@@ -69,15 +69,22 @@ class View:
     position: np.ndarray | None = None
 
 
+#: Room kept above the framed points for a label drawn over its point (the selected point's: one line of text lifted
+#: above the sphere), CSS px, besides the margin: a point at the top of the view keeps its label in it.
+LABEL_ROOM_PX = 32.0
+
+
 def _pose_from(
     view: View, fov_y: float, aspect: float, width_px: float, panel_px: float = PANEL_PX, margin: float = DEFAULT_MARGIN
 ) -> CameraPose:
     panel = float(np.clip(panel_px / max(width_px, 1.0), 0.0, 0.6))
+    half_height_px = 0.5 * max(width_px, 1.0) / aspect
+    top = min(margin + LABEL_ROOM_PX / half_height_px, 0.5)
     if view.position is not None:  # from a fixed place: look at the points' centre, framed by the fov alone
         centre = 0.5 * (view.points.min(0) + view.points.max(0))
         up = np.array([0.0, 0.0, 1.0])
         return CameraPose(np.asarray(view.position, float), centre, up, fov_y, aspect)
-    return frame_points(view.points, view.direction, fov_y, aspect, panel_fraction=panel, margin=margin)
+    return frame_points(view.points, view.direction, fov_y, aspect, panel_fraction=panel, margin=margin, top_margin=top)
 
 
 class CameraDirector:

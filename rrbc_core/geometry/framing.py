@@ -135,6 +135,7 @@ def frame_points(
     margin: float = DEFAULT_MARGIN,
     up=(0.0, 0.0, 1.0),
     min_distance: float = 1.0,
+    top_margin: float | None = None,
 ) -> CameraPose:
     """The closest camera looking along `direction` that shows every point inside the part of the image not
     covered by a panel over the right-hand `panel_fraction` of its width.
@@ -157,6 +158,8 @@ def frame_points(
         World up hint.
     min_distance : float
         Least distance (mm) between the camera and the nearest point, along the axis.
+    top_margin : float, optional
+        The free border at the top instead of `margin` (room for labels drawn above their points), in [0, 1).
 
     Returns
     -------
@@ -169,6 +172,9 @@ def frame_points(
     p = as_points(points, "points to frame", empty=False)
     if not (0.0 < fov_y < np.pi) or not (aspect > 0) or not (0.0 <= panel_fraction <= 0.8) or not (0 <= margin < 0.5):
         raise InputError("camera framing needs 0 < fov_y < π, aspect > 0, 0 ≤ panel_fraction ≤ 0.8, 0 ≤ margin < 0.5")
+    top = margin if top_margin is None else float(top_margin)
+    if not 0.0 <= top < 1.0:
+        raise InputError("camera framing needs 0 ≤ top_margin < 1")
     f, r, u = camera_basis(direction, up)
     ty = np.tan(fov_y / 2.0)
     tx = aspect * ty
@@ -176,7 +182,7 @@ def frame_points(
     x_lo, x_hi = -1.0, 1.0 - 2.0 * panel_fraction
     half_x, half_y = 0.5 * (x_hi - x_lo), 1.0
     x_lo, x_hi = x_lo + margin * half_x, x_hi - margin * half_x
-    y_lo, y_hi = -1.0 + margin * half_y, 1.0 - margin * half_y
+    y_lo, y_hi = -1.0 + margin * half_y, 1.0 - top * half_y
     # unknown P; with d = p - P, depth = d·f > 0: a·d ≤ 0 for a in (r - x_hi tx f, -r + x_lo tx f, u - y_hi ty f,
     # -u + y_lo ty f); a·p - a·P ≤ 0  <=>  -a·P ≤ -a·p
     rows = np.stack([r - x_hi * tx * f, -r + x_lo * tx * f, u - y_hi * ty * f, -u + y_lo * ty * f])

@@ -55,6 +55,27 @@ def test_framed_points_lie_inside_the_free_window_and_the_framing_is_tight(seed)
     np.testing.assert_allclose(d / np.linalg.norm(d), camera_basis(direction)[0], atol=1e-12)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_a_top_margin_keeps_room_above_the_points_and_the_framing_tight(seed):
+    """`top_margin`: no point above 1 - top_margin (room for labels over the top points), the bottom keeps
+    `margin`, and the points are still as close as the window allows (some point on an edge, vertically centred in
+    the narrower window)."""
+    rng = np.random.default_rng(100 + seed)
+    pts = rng.normal(0, rng.uniform(10, 500), (int(rng.integers(2, 30)), 3))
+    direction, fov, aspect = rng.normal(size=3), rng.uniform(0.4, 1.2), rng.uniform(0.8, 2.0)
+    margin, top = 0.08, rng.uniform(0.1, 0.4)
+    ndc, _ = project(pts, frame_points(pts, direction, fov, aspect, margin=margin, top_margin=top))
+    tol = 1e-6
+    assert np.all(ndc[:, 1] <= 1 - top + tol) and np.all(ndc[:, 1] >= -1 + margin - tol)
+    assert abs(0.5 * (ndc[:, 1].min() + ndc[:, 1].max()) - 0.5 * (margin - top)) < 0.05
+    on_edge = np.concatenate(
+        [np.abs(ndc[:, 1] - (1 - top)), np.abs(ndc[:, 1] + 1 - margin), np.abs(np.abs(ndc[:, 0]) - (1 - margin))]
+    )
+    assert on_edge.min() < 1e-5
+    with pytest.raises(InputError):
+        frame_points(pts, direction, fov, aspect, top_margin=1.0)
+
+
 def test_a_panel_shifts_the_points_left():
     pts = np.array([[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [0.0, 100.0, 50.0]])
     free = project(pts, frame_points(pts, [0, 1, -0.5], 0.9, 1.6, panel_fraction=0.0))[0]

@@ -584,3 +584,21 @@ def test_the_ring_label_keeps_clear_of_the_selected_label_in_every_preset(app, p
         met += overlap(own[0], b[0])
     if preset == "whole cell":  # from afar the ring is small: the case this is for (labels met without it)
         assert met > 0
+
+
+@pytest.mark.parametrize("image", [(1280, 720), (1280, 800), (1600, 900)])
+def test_a_framed_view_keeps_a_labels_room_above_its_top_point(image):
+    """The label drawn over a point at the top of a framed view stays in it: every point lies at least the margin
+    and `LABEL_ROOM_PX` below the image's top edge (the lift arm's measured file opened with its top check's label
+    cut off)."""
+    from rrbc_core.geometry.framing import DEFAULT_MARGIN, project
+    from rrbc_viz.camera import FOV_Y, LABEL_ROOM_PX, View, _pose_from
+
+    rng = np.random.default_rng(7)
+    w, h = image
+    pts = rng.normal(0, 300, (40, 3)) + [0, 0, 1500]
+    pose = _pose_from(View(pts, np.array([-0.25, 1.0, -0.75])), FOV_Y, w / h, w)
+    ndc, _ = project(pts, pose)
+    below_top_px = (1 - ndc[:, 1]) * h / 2
+    assert below_top_px.min() >= DEFAULT_MARGIN * h / 2 + LABEL_ROOM_PX - 1e-6
+    assert below_top_px.min() < DEFAULT_MARGIN * h / 2 + LABEL_ROOM_PX + 0.25 * h  # not pushed far down
