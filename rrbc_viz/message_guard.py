@@ -112,7 +112,9 @@ def check_gui_update(state, updates: dict) -> str:
         if name != "value" or not hasattr(state, "value"):
             return f"GUI update of a property a client may not set ({str(name)[:40]!r})"
         current = state.value
-        if isinstance(current, bool) or getattr(state, "is_button", False):
+        # a button's value is true/false; a button group's (also a "button" to viser) is the text of one of its
+        # options, checked below with the other texts
+        if isinstance(current, bool) or (getattr(state, "is_button", False) and not isinstance(current, str)):
             if not isinstance(value, bool):
                 return "GUI update: not a true/false value"
         elif isinstance(current, (int, float)):

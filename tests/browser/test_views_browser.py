@@ -165,7 +165,20 @@ _JS_GIZMO_VISIBLE = """(name) => { const m = window.__viserMutable.nodeRefFromNa
 def test_only_the_selected_point_has_a_gizmo_and_a_refused_drag_returns_it(viser_app, page_for):
     app = viser_app(lambda: serve(simple_arm=True, plain_light=True))
     page, _ = page_for(app.url)
-    app.views.show_camera("close-up")
+    # the View tab's camera presets, clicked as a user does (a button group's click carries the option's text: the
+    # message guard once dropped it as "not a true/false value", and the camera never moved)
+    cid = next(iter(app.server.get_clients()))
+    wait_for(lambda: cid in app.ctx.camera.last, 30.0, message="the opening camera sent", page=page)
+    opening = np.array(app.ctx.camera.last[cid].position)
+    page.get_by_role("tab", name="View").click()
+    page.get_by_role("button", name="close-up", exact=True).click()
+    wait_for(
+        lambda: np.linalg.norm(np.array(app.ctx.camera.last[cid].position) - opening) > 1.0,
+        15.0,
+        message="the close-up preset moved the camera",
+        page=page,
+    )
+    assert not app.messages, app.messages
     wait_camera(page, app)
     wait_for(lambda: page.evaluate(_JS_GIZMO_VISIBLE, "/targets/H1/gizmo"), 10.0, message="H1's gizmo")
     page_caught_up(page, app.server)

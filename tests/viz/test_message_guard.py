@@ -125,3 +125,23 @@ def test_the_gui_check_names_what_is_wrong():
     assert "property" in message_guard.check_gui_update(Slider, {"visible": False})
     assert message_guard.check_gui_update(Menu, {"value": "tps"}) == ""
     assert "options" in message_guard.check_gui_update(Menu, {"value": "gp"})
+
+
+def test_the_widgets_the_app_uses_accept_what_a_browser_sends_for_them():
+    """Real viser widgets: a button group's click sends the option's text (the View tab's camera presets were dropped
+    as 'not a true/false value': viser marks a button group as a button), a button's and a checkbox's a boolean,
+    a dropdown's one of its options."""
+    import viser
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        gui = server.gui
+        group = gui.add_button_group("Camera", ("whole cell", "close-up"))
+        button, box = gui.add_button("Go"), gui.add_checkbox("On", False)
+        menu = gui.add_dropdown("Interpolation", ("idw", "tps"))
+        ok = [(group, "close-up"), (button, True), (box, True), (menu, "tps")]
+        assert all(message_guard.check_gui_update(h._impl, {"value": v}) == "" for h, v in ok)
+        bad = [(group, "nope"), (group, True), (button, "close-up"), (box, "yes"), (menu, "gp")]
+        assert all(message_guard.check_gui_update(h._impl, {"value": v}) for h, v in bad)
+    finally:
+        server.stop()
