@@ -146,7 +146,9 @@ def drawn_bounds(session, seeds) -> DrawnBounds:
     return DrawnBounds(bound, budget)
 
 
-def plan_to_tolerance(scene, tolerance_mm: float, max_fiducials: int = 40, start=None, progress=None) -> TolerancePlan:
+def plan_to_tolerance(
+    scene, tolerance_mm: float, max_fiducials: int = MAX_FIDUCIALS, start=None, progress=None
+) -> TolerancePlan:
     """The fewest candidates bringing every target's 95 % bound under `tolerance_mm` (module docstring).
 
     `start`: an `ExplorerSession` of the scene as the user has it now (the app: targets and registration points
