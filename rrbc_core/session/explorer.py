@@ -220,8 +220,10 @@ class ExplorerSession:
         model = self.measurement_model()
         positions = np.asarray(positions, float).reshape(-1, 3)
         pts = model.points(positions, self.tool_rotations(kind, ids), self.row_times(kind, ids))
-        bias = self._bias_of(model, pts)
-        r = model.read(pts, bias=bias) if not noise else model.read_each(pts, list(ids), self.settings.seed, bias)
+        if not noise:  # heat-map and slice samples (thousands, their own cache): computed, not kept point by point
+            r = model.read(pts)
+        else:
+            r = model.read_each(pts, list(ids), self.settings.seed, self._bias_of(model, pts))
         return Readings(r.sensor[0], r.robot[0], r.truth)
 
     def _bias_of(self, model: MeasurementModel, pts) -> tuple[np.ndarray, np.ndarray]:
@@ -233,19 +235,18 @@ class ExplorerSession:
         keys = [(pose, pts.robot[i].tobytes(), rot[i].tobytes(), float(pts.time[i])) for i in range(len(pts.robot))]
         # read into a dict of this call's own (a planner's copy of the session shares the store, and may start it
         # again meanwhile)
-        got = {k: self._bias.get(k) for k in keys}
-        missing = [i for i, k in enumerate(keys) if got[k] is None]
+        got = {k: v for k in keys if (v := self._bias.get(k)) is not None}
+        missing = [i for i, k in enumerate(keys) if k not in got]
         if missing:
             bs, br = model.bias(pts.take(np.array(missing)))
             if len(self._bias) + len(missing) > BIAS_KEPT:
                 self._bias.clear()
             for j, i in enumerate(missing):
                 got[keys[i]] = self._bias[keys[i]] = (bs[j], br[j])
-        pairs = [got[k] for k in keys]
         n = len(keys)
         return (
-            np.array([p[0] for p in pairs if p is not None], dtype=np.float64).reshape(n, 3),
-            np.array([p[1] for p in pairs if p is not None], dtype=np.float64).reshape(n, 3),
+            np.array([got[k][0] for k in keys], dtype=np.float64).reshape(n, 3),
+            np.array([got[k][1] for k in keys], dtype=np.float64).reshape(n, 3),
         )
 
     def row_times(self, kind: str, ids) -> np.ndarray:
