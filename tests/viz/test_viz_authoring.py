@@ -188,8 +188,8 @@ def test_uploaded_meshes_leave_no_temporary_files(tmp_path):
 
 
 def test_a_replaced_mesh_gives_its_memory_back(tmp_path):
-    """Issue 42: an accepted mesh's memory is returned when another replaces it (without, each big upload left
-    26-60 MB behind here: glibc keeps freed pages). The resident set after a big mesh and then a small one again is
+    """Issue 42: an accepted mesh's memory is returned when another replaces it (without `release_memory` the big
+    upload's pages stay: glibc keeps freed pages, and this test fails). The resident set after a big mesh and then a small one again is
     within half the big file's size of where the small one left it."""
     import re
 
