@@ -97,8 +97,9 @@ class AppState:
         VEC compared (the box ticked and the source has an arm); the target whose tool the Arm tab shows; the VecView
         last shown (None: off, no arm, or refused).
     vec_tool_asked
-        (target, tilt, azimuth) the user last chose on the tool sliders while it is not yet applied (None: none
-        waiting): the sliders show it, not the applied tool, so a slider moved with the keys does not jump back.
+        (target, tilt, azimuth) the user last chose on the tool sliders (None: none since a refusal, another target
+        or another cell). While set, the server sends the sliders no value: any it sent (even the user's own from a
+        moment ago) could set a slider back under keys still pressed.
     mc_trials, mc_plots, mc_draw, mc_seed
         The trials a Monte Carlo run takes (the tab's slider); the Monte Carlo plots last shown; Run-again presses so
         far; the noise seed of the last run requested (None: the session's).

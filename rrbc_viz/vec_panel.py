@@ -111,13 +111,14 @@ class VecPanel:
         """VEC's table beside rigid and RRBC (`render`), or why there is none."""
         self.vec_table.content = markdown
 
-    def sync(self, targets: tuple, target: str, tool: tuple, on: bool, varied: bool, has_arm: bool) -> None:
+    def sync(self, targets: tuple, target: str, tool: tuple | None, on: bool, varied: bool, has_arm: bool) -> None:
         """Show the state the app holds (under the syncing flag: the callbacks do nothing)."""
         with self.syncing.quiet():
             self.show.value, self.varied.value = bool(on), bool(varied)
             self.target.options = tuple(targets) or ("",)
             self.target.value = target if target in targets else (targets[0] if targets else "")
-            self.tilt.value, self.azimuth.value = float(tool[0]), float(tool[1])
+            if tool is not None:  # None: the user moves the sliders; a value sent now could set them back
+                self.tilt.value, self.azimuth.value = float(tool[0]), float(tool[1])
             for h in (self.show, self.varied, self.target, self.tilt, self.azimuth):
                 h.disabled = not has_arm
             for h in (self.varied, self.target, self.tilt, self.azimuth):

@@ -74,6 +74,7 @@ class Presenter:
         ctx.state.extent_mm = scene_extent(ev)
         ctx.state.error_slice = None
         ctx.state.drag_baseline = None  # another cell: the last drag's changes say nothing here
+        ctx.state.vec_tool_asked = None  # its tool sliders show its tools
         picture = scene_picture(ctx.session, ctx.state, ev)
         ctx.state.landing = picture.landing
         ctx.nodes.build(ctx.session, picture, ctx.loaded.mesh, ctx.state.layers)

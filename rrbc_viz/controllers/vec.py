@@ -41,9 +41,10 @@ class VecController:
 
     def ask_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0) -> None:
         """The user chose this tool on the sliders; `set_target_tool` applies it when the running computation ends.
-        Until then the sliders are shown this value, not the applied one: a slider moved with the arrow keys while
-        an earlier value is computed would otherwise be set back under the user's keys. Takes no lock (one
-        assignment): it is called while the previous value's computation holds it."""
+        From now on the sliders are the user's: the server sends them no value (one it sent, even the value the user
+        chose a moment ago, would set a slider back under keys still pressed) until a value is refused, another
+        target is chosen or another cell is built. Takes no lock (one assignment): it is called while the previous
+        value's computation holds it."""
         self.ctx.state.vec_tool_asked = (str(pid), float(tilt_deg), float(azimuth_deg))
 
     def set_target_tool(self, pid: str, tilt_deg: float, azimuth_deg: float = 0.0, client=None):
@@ -57,14 +58,12 @@ class VecController:
                 float(azimuth_deg),
             ):
                 self.ctx.state.vec_target = pid
-                if self.ctx.state.vec_tool_asked == (pid, float(tilt_deg), float(azimuth_deg)):
-                    self.ctx.state.vec_tool_asked = None
                 return session.last
             self.ctx.state.vec_target = pid
             out = self.ctx.evaluate.apply(lambda s: vec_view.set_target_tool(s, pid, tilt_deg, azimuth_deg), client)
-            if self.ctx.state.vec_tool_asked == (pid, float(tilt_deg), float(azimuth_deg)):
-                self.ctx.state.vec_tool_asked = None  # applied (or refused): the sliders show the session's tool
-            if out is None:
+            if out is None:  # refused: the sliders show the tool the session holds (unless a newer value waits)
+                if self.ctx.state.vec_tool_asked == (pid, float(tilt_deg), float(azimuth_deg)):
+                    self.ctx.state.vec_tool_asked = None
                 with self.ctx.server.atomic():
                     self._sync_panel()
             return out
@@ -73,6 +72,7 @@ class VecController:
         """The tab's target choice changed: show that target's tool on the sliders."""
         with self.ctx.lock:
             self.ctx.state.vec_target = pid
+            self.ctx.state.vec_tool_asked = None
             with self.ctx.server.atomic():
                 self._sync_panel()
 
@@ -81,10 +81,11 @@ class VecController:
         targets = tuple(s.layout["targets"].ids)
         if self.ctx.state.vec_target not in targets:
             self.ctx.state.vec_target = targets[0] if targets else ""
+        tool: tuple[float, float] | None
         tool = s.tool_of("targets", self.ctx.state.vec_target) if self.ctx.state.vec_target else (0.0, 0.0)
         asked = self.ctx.state.vec_tool_asked
         if asked is not None and asked[0] == self.ctx.state.vec_target:
-            tool = (asked[1], asked[2])  # chosen on the sliders, not yet applied: do not set them back
+            tool = None  # the user moves the sliders: send them nothing
         state = (
             targets,
             self.ctx.state.vec_target,
