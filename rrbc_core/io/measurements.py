@@ -153,6 +153,20 @@ class MeasurementSet:
             object.__setattr__(self, "_codes", codes)
         return codes
 
+    def _known(self, role_codes: np.ndarray, ids_distinct: bool) -> None:
+        """What a reader already computed about the rows: each row's role code (`_role_codes`) and whether no id is
+        on two rows (`_ids_distinct`); a million-row file is not walked again for them."""
+        object.__setattr__(self, "_codes", np.asarray(role_codes, dtype=int))
+        object.__setattr__(self, "_distinct", bool(ids_distinct))
+
+    def _ids_distinct(self) -> bool:
+        """Whether no id is on two rows, computed once."""
+        distinct = self.__dict__.get("_distinct")
+        if distinct is None:
+            distinct = len(set(self.ids)) == len(self.ids)
+            object.__setattr__(self, "_distinct", distinct)
+        return distinct
+
     def rows(self, role: str) -> np.ndarray:
         """Indices of the rows selected by `role` (registration: registration or both; fiducial: fiducial or both)."""
         wanted = [ROLES.index(r) for r in _selected_roles(role)]
@@ -167,7 +181,7 @@ class MeasurementSet:
         rows = self.rows(role)
         at = rows.tolist()
         ids = tuple(self.ids) if len(at) == len(self.ids) else tuple(map(self.ids.__getitem__, at))
-        if len(set(ids)) == len(ids):  # every id once (most files): no averaging to do
+        if self._ids_distinct() or len(set(ids)) == len(ids):  # every id once (most files): no averaging to do
             n_lines = len(self.lines)
             if n_lines == len(self.ids):
                 lines = tuple(self.lines) if len(at) == n_lines else tuple(map(self.lines.__getitem__, at))
@@ -281,6 +295,7 @@ def _read_columnar(data: str | bytes, source: str) -> MeasurementSet | None:
     if read is None:
         return None
     mset = MeasurementSet(read.ids, read.roles, read.sensor, read.robot, read.time, read.lines, source, read.extra)
+    mset._known(read.role_codes, read.ids_distinct)
     _validate(mset, header_line=read.header_line, rows_checked=True)
     return mset
 
@@ -579,7 +594,10 @@ def _validate(mset: MeasurementSet, header_line: int, rows_checked: bool = False
 
     reg_rows = mset.rows("registration")
     reg = mset.points("registration")
-    last_line = max(map(mset.lines.__getitem__, reg_rows.tolist()), default=0) or header_line
+    if len(reg_rows) == len(mset.lines):
+        last_line = max(mset.lines, default=0) or header_line
+    else:
+        last_line = max(map(mset.lines.__getitem__, reg_rows.tolist()), default=0) or header_line
     if len(reg) < 3:
         listed = f" ({_listed(reg.ids)})" if len(reg) else ""
         raise _error(

@@ -64,6 +64,8 @@ class ColumnarRows:
     time: np.ndarray
     lines: tuple[int, ...]
     extra: dict[str, tuple[str, ...]]
+    role_codes: np.ndarray  # (R,) each row's role as its index in ROLES
+    ids_distinct: bool  # no id on two rows
 
 
 def parse_columnar(
@@ -270,7 +272,8 @@ def _parse(body: bytes, start: int, header_line: int, header: list[str]) -> Colu
         robot[:, k] = numbers(cells[name], needs_robot & present, COORDINATE_LIMIT_MM)
     time = numbers(cells["time"], given(cells["time"]), TIME_LIMIT_S) if "time" in cells else np.full(n, np.nan)
     id_list = ids.to_pylist()
-    if len(set(id_list)) < n:  # repeated ids: one role each
+    distinct = len(set(id_list)) == n  # (a Python set: faster here than pyarrow's count_distinct)
+    if not distinct:  # repeated ids: one role each
         id_code = np.asarray(pc.dictionary_encode(ids).indices, dtype=int)
         lo = np.full(int(id_code.max()) + 1, len(ROLES))
         hi = np.full(len(lo), -1)
@@ -288,4 +291,6 @@ def _parse(body: bytes, start: int, header_line: int, header: list[str]) -> Colu
         time,
         tuple(lines.tolist()),
         extra,
+        role_code,
+        distinct,
     )

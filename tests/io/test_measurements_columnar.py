@@ -33,6 +33,19 @@ def _same(a, b) -> bool:
         and a.extra == b.extra
         and a.source == b.source
         and all(np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True) for f in ("sensor", "robot", "time"))
+        # what the columnar reader hands the set ready-made (role codes, whether an id repeats) is what it computes
+        and np.array_equal(a._role_codes(), b._role_codes())
+        and a._ids_distinct() == b._ids_distinct() == (len(set(a.ids)) == len(a.ids))
+        and all(_same_points(a.points(role), b.points(role)) for role in ("registration", "fiducial", "check"))
+    )
+
+
+def _same_points(p, q) -> bool:
+    return (
+        p.ids == q.ids
+        and p.first_line == q.first_line
+        and np.array_equal(p.count, q.count)
+        and all(np.array_equal(getattr(p, f), getattr(q, f), equal_nan=True) for f in ("sensor", "robot"))
     )
 
 
