@@ -230,7 +230,7 @@ STEPS: tuple[Step, ...] = (
         "Register the sensor to the robot",
         ("mesh", "frames", "registration"),
         _step2,
-        focus=("sensor",),  # the two sensor frames, close up
+        focus=("sensor", "registration"),  # the two sensor frames and the points the fit rests on
         direction=(0.7, -0.55, 0.15),  # from the work's side, level with the head: its mast is behind it
         see_through=True,  # the frames' origins lie inside the sensor's casing
         labels=("registration",),

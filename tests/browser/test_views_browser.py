@@ -60,12 +60,13 @@ _JS_SOLID_CELL = (
 
 
 def _step_objects(app, step) -> dict[str, np.ndarray]:
-    """Robot-frame points of what a step talks about, by name (the visible part of each marker: its top)."""
+    """Robot-frame points of what a step talks about, by name (the visible part of each marker: its top): what it
+    frames and the points whose labels it shows (its text names them)."""
     ev = app.session.last
     r = app.state.display.marker_mm
     up = np.array([0.0, 0.0, 0.9 * r])
     out = {}
-    for name in step.focus:
+    for name in dict.fromkeys(step.focus + step.labels):
         if name == "registration":
             out[name] = ev.registration_positions + up
         elif name == "fiducials":
