@@ -86,6 +86,8 @@ class VecController:
         asked = self.ctx.state.vec_tool_asked
         if asked is not None and asked[0] == self.ctx.state.vec_target:
             tool = None  # the user moves the sliders: send them nothing
+        elif asked is not None:  # the sliders now show another target: its tool, and that target's when it is back
+            self.ctx.state.vec_tool_asked = None
         state = (
             targets,
             self.ctx.state.vec_target,
