@@ -594,10 +594,7 @@ def _validate(mset: MeasurementSet, header_line: int, rows_checked: bool = False
 
     reg_rows = mset.rows("registration")
     reg = mset.points("registration")
-    if len(reg_rows) == len(mset.lines):
-        last_line = max(mset.lines, default=0) or header_line
-    else:
-        last_line = max(map(mset.lines.__getitem__, reg_rows.tolist()), default=0) or header_line
+    last_line = max(map(mset.lines.__getitem__, reg_rows.tolist()), default=0) or header_line
     if len(reg) < 3:
         listed = f" ({_listed(reg.ids)})" if len(reg) else ""
         raise _error(
