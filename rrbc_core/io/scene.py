@@ -353,17 +353,23 @@ def _load_mesh_file(path: Path):
             single = trimesh.Trimesh(stl[0], stl[1], process=False)
             single.metadata["parts"] = [(Path(path).name, 0, len(stl[1]))]
             return single
-    loaded: Any = trimesh.load(str(path), force="scene")  # a trimesh.Scene (force="scene")
+    # process=False: the file's own vertices, not merged or checked by trimesh (whose processing held several
+    # copies of the mesh and its derived arrays at once: a 3MF peaked at 18x its size, issue 42)
+    loaded: Any = trimesh.load(str(path), force="scene", process=False)  # a trimesh.Scene (force="scene")
     parts, meshes = [], []
     start = 0
     graph = loaded.graph
-    for node in graph.nodes_geometry:
+    nodes = list(graph.nodes_geometry)
+    for node in nodes:
         transform, geom_name = graph[node]
         geom = loaded.geometry.get(geom_name)
         if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
             continue
-        m = geom.copy()
-        m.apply_transform(transform)
+        identity = np.allclose(transform, np.eye(4), rtol=0.0, atol=0.0)
+        m = geom if (len(nodes) == 1 and identity) else geom.copy()  # the one instance as it is: no copy
+        if not identity:
+            m.apply_transform(transform)
+        m._cache.clear()  # normals and the like computed while reading: recomputed when asked for
         meshes.append(m)
         parts.append((str(node), start, start + len(m.faces)))
         start += len(m.faces)
