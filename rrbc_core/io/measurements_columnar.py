@@ -25,6 +25,8 @@ bad (tests/io/test_measurements_columnar.py).
 
 from __future__ import annotations
 
+import contextlib
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -99,9 +101,40 @@ def parse_columnar(
     header_line, header, start = found
     check_header(header, header_line, source)
     try:
-        return _parse(body, start, header_line, header)
+        with system_memory_pool():
+            return _parse(body, start, header_line, header)
     except _NotDecided:
         return None
+
+
+_POOL_LOCK = threading.Lock()
+_POOL_USERS = 0  # readers inside `system_memory_pool`
+_POOL_BEFORE: list = []  # the default pool they replaced (while there are any)
+
+
+@contextlib.contextmanager
+def system_memory_pool():
+    """pyarrow's default memory pool set to the C library's allocator while a file is read, and set back after.
+
+    pyarrow's own default (mimalloc) gives memory back to the system eagerly and takes fresh pages again for every
+    large column; on a virtual machine those page faults cost most of a million-row file's system time
+    (benchmarks/big_inputs.py's `read_1000000_rows`). Buffers keep the pool they came from, so arrays read here are
+    freed correctly after the switch back; concurrent readers (two tabs uploading) share one switch."""
+    import pyarrow as pa
+
+    global _POOL_USERS
+    with _POOL_LOCK:
+        if _POOL_USERS == 0:
+            _POOL_BEFORE.append(pa.default_memory_pool())
+            pa.set_memory_pool(pa.system_memory_pool())
+        _POOL_USERS += 1
+    try:
+        yield
+    finally:
+        with _POOL_LOCK:
+            _POOL_USERS -= 1
+            if _POOL_USERS == 0:
+                pa.set_memory_pool(_POOL_BEFORE.pop())
 
 
 def _header(body: bytes) -> tuple[int, list[str], int] | None:

@@ -232,3 +232,41 @@ def test_a_number_column_read_as_numbers_takes_the_same_cells_as_the_cast():
         except pa.ArrowInvalid:
             typed = None
         assert typed == cast, (s, typed, cast)
+
+
+def test_a_read_sets_pyarrows_default_pool_back_also_when_readers_overlap_or_fail(tmp_path):
+    """The columnar reader reads with the C allocator as pyarrow's default pool (`system_memory_pool`) and sets the
+    caller's pool back: after one read, after reads in threads that overlap, and after a file it leaves undecided.
+    What was read stays valid after the switch back."""
+    import threading
+
+    import pyarrow as pa
+
+    from rrbc_core.io.measurements_columnar import system_memory_pool
+
+    before = pa.default_memory_pool().backend_name
+    path = tmp_path / "m.csv"
+    write_measurements(path, field_measurements(5, n_fiducials=20, n_checks=3000))
+    text = path.read_text()
+    got = parse_columnar(text, "f.csv", _check_header)
+    assert got is not None and pa.default_memory_pool().backend_name == before
+    inside = []
+    gate = threading.Barrier(4)
+
+    def overlap():
+        with system_memory_pool():
+            gate.wait(timeout=30)  # all four inside at once
+            inside.append(pa.default_memory_pool().backend_name)
+            gate.wait(timeout=30)
+        parse_columnar(text, "f.csv", _check_header)
+
+    threads = [threading.Thread(target=overlap) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert inside == ["system"] * 4
+    assert pa.default_memory_pool().backend_name == before
+    assert parse_columnar(text.replace("\n", "\n1,5\n", 1), "f.csv", _check_header) is None  # undecided
+    assert pa.default_memory_pool().backend_name == before
+    np.testing.assert_array_equal(got.sensor, parse_columnar(text, "f.csv", _check_header).sensor)
