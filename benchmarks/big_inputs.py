@@ -81,6 +81,20 @@ def big_inputs(quick: bool) -> list[dict]:
                     note=note,
                 )
             )
+        # every row `both` (each fiducial also a registration point): the bounds once matched the two id lists with
+        # numpy's pairwise comparison of objects, 219 s on 100,000 rows (rrbc_core/io/id_sets.py)
+        small = sizes[0]
+        t, mb = run_command([RRBC, "correct", files[small], "--json"], 1, keep_output=False)[:2]
+        rows.append(
+            row(
+                f"correct_{small}_both_rows",
+                t,
+                "s",
+                goal="< 300 s and < 4096 MB",
+                met=bool(t < 300 and mb < 4096),
+                note=f"`rrbc correct FILE --json` as a fresh process on {small:,} rows all `both`: peak {mb:.0f} MB",
+            )
+        )
         rows += _reading(files, sizes)
     return rows
 

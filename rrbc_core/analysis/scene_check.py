@@ -43,6 +43,7 @@ from rrbc_core.analysis.scene_prediction import (
     predict,
 )
 from rrbc_core.errors import InputError
+from rrbc_core.io.id_sets import member_of
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.errormodels import ErrorModel
 from rrbc_core.runtime.threads import thread_limited
@@ -319,12 +320,12 @@ def _folds(mset: MeasurementSet, paired: np.ndarray, k: int, seed: int) -> tuple
         names = list(dict.fromkeys(g[paired].tolist()))
         if len(names) >= 2:
             k = min(k, len(names))
-            return [paired[np.isin(g[paired], names[j::k])] for j in range(k)], "station"
+            return [paired[member_of(g[paired], names[j::k])] for j in range(k)], "station"
     ids = np.asarray(mset.ids, dtype=object)
     uniq = np.array(list(dict.fromkeys(ids[paired].tolist())), dtype=object)
     np.random.default_rng(seed).shuffle(uniq)
     k = min(k, len(uniq))
-    return [paired[np.isin(ids[paired], uniq[j::k])] for j in range(k)], "point"
+    return [paired[member_of(ids[paired], uniq[j::k])] for j in range(k)], "point"
 
 
 @thread_limited

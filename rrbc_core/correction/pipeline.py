@@ -22,6 +22,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.geometry.transforms import RigidTransform
 from rrbc_core.interpolation.auto import AutoChoice
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
+from rrbc_core.io.id_sets import member_of
 from rrbc_core.io.json_rows import Field, rows_text
 from rrbc_core.io.json_stream import LazyRows
 from rrbc_core.io.measurements import MeasurementSet, PointGroup
@@ -89,9 +90,7 @@ class CorrectionResult:
             points,
             self.instrument,
             np.asarray(self.registration.residuals, float).reshape(-1, 3),
-            np.isin(
-                np.asarray(self.fiducials.ids, dtype=object), np.asarray(reg_pts.ids if reg_pts else (), dtype=object)
-            ),
+            member_of(self.fiducials.ids, reg_pts.ids if reg_pts else ()),
         )
 
     def interpolation_json(self) -> dict:

@@ -20,6 +20,7 @@ from rrbc_core.correction.warnings import Corrected, correction_warnings
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.auto import AutoChoice
 from rrbc_core.interpolation.hull import Coverage, assess_coverage
+from rrbc_core.io.id_sets import member_of
 from rrbc_core.methods import MethodOptions, method_flags
 
 #: Bounds of the noise and bias sizes a user controls (issue 16: a value sent by a client cannot push the session
@@ -310,7 +311,7 @@ def _target_bounds(
             s.interpolation != "none",
             instrument,
             np.asarray(reg.residuals, float).reshape(-1, 3),
-            np.isin(np.asarray(fid_in, dtype=object), np.asarray(reg_ids, dtype=object)),
+            member_of(fid_in, reg_ids),
             profile,
         )
 

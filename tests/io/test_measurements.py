@@ -677,3 +677,15 @@ def test_the_bounds_themselves_are_accepted():
     ]
     m = meas.parse_measurements(_HEAD + "\n".join(rows) + "\n", "f.csv")
     assert m.sensor[3, 0] == 1e9 and m.sensor[3, 1] == -1e9 and m.time[0] == 1e12
+
+
+def test_member_of_is_numpys_isin_for_ids():
+    """`io.id_sets.member_of` answers as `np.isin` does, for ids of any length, repeats and empty sets."""
+    from rrbc_core.io.id_sets import member_of
+
+    rng = np.random.default_rng(3)
+    ids = np.array([f"P{k}" * (1 + k % 3) for k in rng.integers(0, 50, 200)], dtype=object)
+    members = np.array([f"P{k}" * (1 + k % 3) for k in rng.integers(0, 80, 40)], dtype=object)
+    np.testing.assert_array_equal(member_of(ids, members), np.isin(ids, members))
+    np.testing.assert_array_equal(member_of(tuple(ids), list(members)), np.isin(ids, members))
+    assert member_of((), ("a",)).shape == (0,) and not member_of(("a", "b"), ()).any()
