@@ -71,13 +71,14 @@ def big_inputs(quick: bool) -> list[dict]:
                     )
                 )
                 continue
+            # diagnose: issue 41's goal on a million rows (issue 16's, < 300 s and < 4096 MB, is the looser one)
             rows.append(
                 row(
                     f"{name}_{big}_rows",
                     t,
                     "s",
-                    goal="< 300 s and < 4096 MB",
-                    met=bool(t < 300 and mb < 4096),
+                    goal="< 60 s and < 1536 MB" if big >= 1_000_000 else "< 300 s and < 4096 MB",
+                    met=bool(t < 60 and mb < 1536) if big >= 1_000_000 else bool(t < 300 and mb < 4096),
                     note=note,
                 )
             )

@@ -1,8 +1,9 @@
-"""The cell's mesh in the 3-D scene: one solid and one see-through node, one of them shown.
+"""The cell's mesh in the 3-D scene: a solid node or a see-through one, only the one shown.
 
-The mesh is sent twice (the solid with trimesh's own material, the see-through one as float32 vertices and uint32
-triangles), so an accepted upload costs its reading plus these two messages: tests/io/test_mesh_file.py holds the
-whole under 3x the file's size (issue 42). Robot frame, mm.
+The solid node carries trimesh's own material (sent as a binary glTF), the see-through one float32 vertices and
+uint32 triangles with one colour. Only the node shown exists: switching sends the mesh again as the other (issue 42:
+the server kept both messages, each about the mesh's size, for every cell it showed). An accepted upload costs its
+reading plus one message: tests/io/test_mesh_file.py holds the whole. Robot frame, mm.
 """
 
 from __future__ import annotations
@@ -14,16 +15,22 @@ import viser
 GHOST_COLOR = (170, 170, 175)
 GHOST_OPACITY = 0.18
 
+#: the scene node of each look
+SOLID_NODE, GHOST_NODE = "/mesh/cell", "/mesh/ghost"
+
 
 def add_cell_mesh(scene: viser.SceneApi, mesh, see_through: bool) -> dict[str, object]:
-    """Add the cell's `mesh` (a trimesh.Trimesh) as /mesh/cell (solid) and /mesh/ghost (see-through), the one
-    `see_through` asks for visible. Returns the two handles by node name."""
+    """Add the cell's `mesh` (a trimesh.Trimesh) as the solid node (`SOLID_NODE`) or the see-through one
+    (`GHOST_NODE`), as `see_through` asks. Returns {node name: handle}."""
+    if not see_through:
+        from trimesh.exchange.gltf import export_glb
+
+        # (trimesh's glTF bytes, without viser's copy of them through a BytesIO: `add_mesh_trimesh` less a copy)
+        glb = export_glb(mesh)
+        return {SOLID_NODE: scene.add_glb(SOLID_NODE, glb_data=glb, cast_shadow=False, receive_shadow=False)}
     return {
-        "/mesh/cell": scene.add_mesh_trimesh(
-            "/mesh/cell", mesh, cast_shadow=False, receive_shadow=False, visible=not see_through
-        ),
-        "/mesh/ghost": scene.add_mesh_simple(
-            "/mesh/ghost",
+        GHOST_NODE: scene.add_mesh_simple(
+            GHOST_NODE,
             np.asarray(mesh.vertices, np.float32),
             np.asarray(mesh.faces, np.uint32),
             color=GHOST_COLOR,
@@ -31,6 +38,5 @@ def add_cell_mesh(scene: viser.SceneApi, mesh, see_through: bool) -> dict[str, o
             side="double",
             cast_shadow=False,
             receive_shadow=False,
-            visible=see_through,
-        ),
+        )
     }

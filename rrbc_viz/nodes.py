@@ -7,7 +7,7 @@ times larger about their target. Both are display-only transforms.
 
 Node tree (one group per layer of `LAYERS`; a layer's visibility is its group's):
 
-    /mesh/cell, /mesh/ghost            the work-cell mesh, solid / see-through (one of them shown)
+    /mesh/cell, /mesh/ghost            the work-cell mesh, solid / see-through (only the one shown exists)
     /arm/...                           the UR5 reaching the selected target, and where its real tool lands
     /sensor/camera<i>/body, …/frustum  the sensor's cameras and their viewing frusta (robot_nodes)
     /frames/robot, /frames/sensor_true, /frames/sensor_registered   (+ …/label)
@@ -52,7 +52,7 @@ from .frame_nodes import FrameNodes
 from .heatmap_nodes import HeatMapNodes
 from .landing_nodes import LandingNodes
 from .lesson_labels import side_anchor
-from .mesh_nodes import add_cell_mesh
+from .mesh_nodes import GHOST_NODE, SOLID_NODE, add_cell_mesh
 from .node_values import (
     LAYERS,
     Display,
@@ -97,6 +97,7 @@ class SceneNodes:
         # what this view last drew, set only through its verbs (`build`, `show`, `set_*`); never read by a controller
         self._selected: tuple[str, str] | None = None  # the point carrying the drag gizmo
         self._see_through = False  # the work cell drawn see-through (ghost) instead of solid
+        self._cell_mesh: Any = None  # the work cell's mesh (a trimesh.Trimesh), None without one
         self._arm: ArmNodes | None = None  # scenes with an arm (a DH arm or a URDF)
         self._arm_marks_allowed = True  # the arm's model-error mark, unless a lesson hides it (`set_arm_marks_visible`)
         self._scene_model: Any = None
@@ -171,6 +172,7 @@ class SceneNodes:
         self._regions.clear()
         self._bounds.clear()
         self._nodes.clear()
+        self._cell_mesh = None
         self._heat.clear()
         self._bullseye.clear()
         self._readings.clear()
@@ -193,6 +195,7 @@ class SceneNodes:
                 self._groups[name] = sc.add_frame(f"/{name}", show_axes=False, visible=self._layers[name])
         r = display.marker_mm
 
+        self._cell_mesh = mesh
         if mesh is not None:
             self._nodes.update(add_cell_mesh(sc, mesh, self._see_through))
 
@@ -486,9 +489,14 @@ class SceneNodes:
     def set_see_through(self, on: bool) -> None:
         """Draw the work cell solid or see-through (what lies under its surfaces shows)."""
         self._see_through = bool(on)
-        if "/mesh/cell" in self._nodes:
-            self._nodes["/mesh/cell"].visible = not self._see_through
-            self._nodes["/mesh/ghost"].visible = self._see_through
+        shown, gone = (GHOST_NODE, SOLID_NODE) if self._see_through else (SOLID_NODE, GHOST_NODE)
+        if self._cell_mesh is None or shown in self._nodes:
+            return
+        old = self._nodes.pop(gone, None)
+        if old is not None:
+            with contextlib.suppress(Exception):  # already gone
+                old.remove()
+        self._nodes.update(add_cell_mesh(self._scene, self._cell_mesh, self._see_through))
 
     def set_layer(self, layer: str, visible: bool) -> None:
         self._layers[layer] = bool(visible)
@@ -514,7 +522,7 @@ class SceneNodes:
     def applicable_layers(self) -> tuple[str, ...]:
         """The layers this build has something in (the View tab lists only these)."""
         missing = set()
-        if "/mesh/cell" not in self._nodes:
+        if self._cell_mesh is None:
             missing.add("mesh")
         if self._arm is None:
             missing.add("arm")

@@ -61,7 +61,7 @@ def test_a_binary_stl_is_read_in_a_few_times_its_size(surface_stl):
 
 
 def test_an_accepted_mesh_read_and_sent_to_the_page_peaks_under_3x_its_size(surface_stl):
-    """What the app does with an accepted upload: `load_cell_mesh`, then the two mesh nodes of a real viser server."""
+    """What the app does with an accepted upload: `load_cell_mesh`, then the mesh node shown on a real viser server."""
     import viser
 
     from rrbc_core.authoring.cell_geometry import load_cell_mesh
@@ -73,6 +73,42 @@ def test_an_accepted_mesh_read_and_sent_to_the_page_peaks_under_3x_its_size(surf
     finally:
         server.stop()
     assert peak <= PEAK_PER_BYTE * surface_stl.stat().st_size, peak / surface_stl.stat().st_size
+
+
+#: formats whose reading (trimesh's text and XML parsers) still peaks above the bound below (issue 42, open)
+_OVER = {"obj", "off", "3mf"}
+
+
+@pytest.mark.parametrize(
+    "fmt",
+    [
+        pytest.param(f, marks=pytest.mark.xfail(strict=True, reason="trimesh's parser: issue 42 open"))
+        if f in _OVER
+        else f
+        for f in ("ply", "glb", "obj", "off", "3mf")
+    ],
+)
+def test_an_accepted_mesh_of_another_format_peaks_under_3x_the_larger_of_its_size_and_an_stls(surface_stl, fmt):
+    """The same surface in a format that shares corners or compresses is smaller than its binary STL, smaller than
+    the mesh's own arrays (float64 corners, int64 triangles) with one message to the page: 3x of such a file cannot
+    hold. The bound is 3x the larger of the file's size and the same triangles' binary STL (84 + 50 bytes a
+    triangle): a peak per triangle."""
+    import viser
+
+    from rrbc_core.authoring.cell_geometry import load_cell_mesh
+    from rrbc_viz.mesh_nodes import add_cell_mesh
+
+    path = surface_stl.with_name(f"surface.{fmt}")
+    if not path.exists():
+        trimesh.load(str(surface_stl), force="mesh").export(path)
+    n_faces = 178_802
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        peak = _traced_peak(lambda: add_cell_mesh(server.scene, load_cell_mesh(path), see_through=False))
+    finally:
+        server.stop()
+    allowed = PEAK_PER_BYTE * max(path.stat().st_size, 84 + 50 * n_faces)
+    assert peak <= allowed, (fmt, peak / allowed)
 
 
 def test_the_reader_gives_np_uniques_vertices_in_its_order(surface_stl):
