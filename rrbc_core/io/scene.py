@@ -355,6 +355,17 @@ def _load_mesh_file(path: Path):
             return single
     # process=False: the file's own vertices, not merged or checked by trimesh (whose processing held several
     # copies of the mesh and its derived arrays at once: a 3MF peaked at 18x its size, issue 42)
+    suffix = Path(path).suffix.lower()
+    if suffix in (".obj", ".off"):  # text meshes: read in bounded memory where the reader takes the file (issue 42)
+        from rrbc_core.io.mesh_text import read_obj, read_off
+
+        text = read_obj(path) if suffix == ".obj" else read_off(path)
+        if text is not None:
+            if not len(text[1]):
+                raise ValueError("the file holds no triangles")
+            single = trimesh.Trimesh(text[0], text[1], process=False)
+            single.metadata["parts"] = text[2] if len(text) == 3 else [(Path(path).name, 0, len(text[1]))]
+            return single
     loaded: Any = trimesh.load(str(path), force="scene", process=False)  # a trimesh.Scene (force="scene")
     parts, meshes = [], []
     start = 0
