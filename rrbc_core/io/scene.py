@@ -356,10 +356,11 @@ def _load_mesh_file(path: Path):
     # process=False: the file's own vertices, not merged or checked by trimesh (whose processing held several
     # copies of the mesh and its derived arrays at once: a 3MF peaked at 18x its size, issue 42)
     suffix = Path(path).suffix.lower()
-    if suffix in (".obj", ".off"):  # text meshes: read in bounded memory where the reader takes the file (issue 42)
+    if suffix in (".obj", ".off", ".3mf"):  # read in bounded memory where our reader takes the file (issue 42)
+        from rrbc_core.io.mesh_3mf import read_3mf
         from rrbc_core.io.mesh_text import read_obj, read_off
 
-        text = read_obj(path) if suffix == ".obj" else read_off(path)
+        text = {".obj": read_obj, ".off": read_off, ".3mf": read_3mf}[suffix](path)
         if text is not None:
             if not len(text[1]):
                 raise ValueError("the file holds no triangles")

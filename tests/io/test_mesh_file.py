@@ -75,19 +75,7 @@ def test_an_accepted_mesh_read_and_sent_to_the_page_peaks_under_3x_its_size(surf
     assert peak <= PEAK_PER_BYTE * surface_stl.stat().st_size, peak / surface_stl.stat().st_size
 
 
-#: formats whose reading (trimesh's XML parser) still peaks above the bound below (issue 42, open)
-_OVER = {"3mf"}
-
-
-@pytest.mark.parametrize(
-    "fmt",
-    [
-        pytest.param(f, marks=pytest.mark.xfail(strict=True, reason="trimesh's 3MF parser: issue 42 open"))
-        if f in _OVER
-        else f
-        for f in ("ply", "glb", "obj", "off", "3mf")
-    ],
-)
+@pytest.mark.parametrize("fmt", ["ply", "glb", "obj", "off", "3mf"])
 def test_an_accepted_mesh_of_another_format_peaks_under_3x_the_larger_of_its_size_and_an_stls(surface_stl, fmt):
     """The same surface in a format that shares corners or compresses is smaller than its binary STL, smaller than
     the mesh's own arrays (float64 corners, int64 triangles) with one message to the page: 3x of such a file cannot
@@ -131,6 +119,42 @@ def test_non_finite_coordinates_are_refused_and_other_stls_go_to_trimesh(tmp_pat
     trimesh.creation.box(extents=(10, 20, 30)).export(ascii_stl, file_type="stl_ascii")
     assert read_binary_stl(ascii_stl) is None  # not binary: trimesh's reader
     assert len(_load_mesh_file(ascii_stl).faces) == 12
+
+
+def test_a_3mf_is_read_as_trimesh_reads_it_with_a_part_per_build_item(tmp_path):
+    """`io.mesh_3mf` (issue 42: the model's XML parsed as a stream) gives trimesh's triangles for one object and for
+    two placed by their build items' transforms, one part each; a model with components is left to trimesh."""
+    from rrbc_core.io.mesh_3mf import read_3mf
+
+    box = trimesh.creation.box(extents=(100, 200, 300))
+    box.apply_translation((10, 20, 30))
+    cyl = trimesh.creation.cylinder(radius=50, height=80, sections=24)
+    cyl.apply_translation((300, 0, 0))
+    scene = trimesh.Scene()
+    scene.add_geometry(box, node_name="box", geom_name="box")
+    scene.add_geometry(
+        cyl, node_name="cyl", geom_name="cyl", transform=trimesh.transformations.rotation_matrix(0.3, [0, 0, 1])
+    )
+    for name, obj in (("box", box), ("two", scene)):
+        path = tmp_path / f"{name}.3mf"
+        obj.export(path)
+        assert read_3mf(path) is not None
+        ours = _load_mesh_file(path)
+        assert _triangles(ours) == _triangles(trimesh.load(str(path), force="mesh", process=False)), name
+    assert [(n, e - s) for n, s, e in _load_mesh_file(tmp_path / "two.3mf").metadata["parts"]] == [
+        ("box", 12),
+        ("cyl", 96),
+    ]
+    import zipfile
+
+    with zipfile.ZipFile(tmp_path / "two.3mf") as z:
+        files = {n: z.read(n) for n in z.namelist()}
+    model = next(n for n in files if n.endswith("3dmodel.model"))
+    files[model] = files[model].replace(b"</resources>", b'<object id="99"><components/></object></resources>')
+    with zipfile.ZipFile(tmp_path / "comp.3mf", "w") as z:
+        for n, data in files.items():
+            z.writestr(n, data)
+    assert read_3mf(tmp_path / "comp.3mf") is None
 
 
 def _triangles(mesh) -> list:
