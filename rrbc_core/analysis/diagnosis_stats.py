@@ -50,13 +50,11 @@ class Data:
 def paired(mset) -> Data:
     robot = np.asarray(mset.robot, float)
     sensor = np.asarray(mset.sensor, float)
-    rows = [
-        i
-        for i, role in enumerate(mset.roles)
-        if role != "target" and np.all(np.isfinite(robot[i])) and np.all(np.isfinite(sensor[i]))
-    ]
+    known = np.asarray(mset.roles, dtype=object) != "target"
+    rows = np.flatnonzero(known & np.isfinite(robot).all(axis=1) & np.isfinite(sensor).all(axis=1)).tolist()
     order: dict[str, int] = {}
-    row_point = np.asarray([order.setdefault(mset.ids[i], len(order)) for i in rows], int)
+    ids = mset.ids
+    row_point = np.asarray([order.setdefault(ids[i], len(order)) for i in rows], int)
     n = len(order)
     if n > MAX_POINTS:
         raise InputError(
