@@ -337,7 +337,9 @@ def sensor_pose(position, look_at, up=(0.0, 0.0, 1.0)) -> RigidTransform:
 # Mesh loading
 # ------------------------------------------------------------------------------------------------------
 def _load_mesh_file(path: Path):
-    """Load any file trimesh reads and concatenate it into one Trimesh (scene graph transforms applied).
+    """Load any file trimesh reads and concatenate it into one Trimesh (scene graph transforms applied). A binary
+    STL, an OBJ, an OFF and a 3MF are read by rrbc's own readers where they take the file (`io.mesh_file`,
+    `io.mesh_text`, `io.mesh_3mf`: bounded memory), the rest by trimesh without its processing.
 
     Raises ValueError/OSError-derived exceptions from trimesh; the loader wraps them."""
     import trimesh
@@ -353,20 +355,20 @@ def _load_mesh_file(path: Path):
             single = trimesh.Trimesh(stl[0], stl[1], process=False)
             single.metadata["parts"] = [(Path(path).name, 0, len(stl[1]))]
             return single
-    # process=False: the file's own vertices, not merged or checked by trimesh (whose processing held several
-    # copies of the mesh and its derived arrays at once: a 3MF peaked at 18x its size, issue 42)
     suffix = Path(path).suffix.lower()
     if suffix in (".obj", ".off", ".3mf"):  # read in bounded memory where our reader takes the file (issue 42)
         from rrbc_core.io.mesh_3mf import read_3mf
         from rrbc_core.io.mesh_text import read_obj, read_off
 
-        text = {".obj": read_obj, ".off": read_off, ".3mf": read_3mf}[suffix](path)
-        if text is not None:
-            if not len(text[1]):
+        read = {".obj": read_obj, ".off": read_off, ".3mf": read_3mf}[suffix](path)
+        if read is not None:
+            if not len(read[1]):
                 raise ValueError("the file holds no triangles")
-            single = trimesh.Trimesh(text[0], text[1], process=False)
-            single.metadata["parts"] = text[2] if len(text) == 3 else [(Path(path).name, 0, len(text[1]))]
+            single = trimesh.Trimesh(read[0], read[1], process=False)
+            single.metadata["parts"] = read[2] if len(read) == 3 else [(Path(path).name, 0, len(read[1]))]
             return single
+    # process=False: the file's own vertices, not merged or checked by trimesh (whose processing held several
+    # copies of the mesh and its derived arrays at once: a GLB peaked at 8x its size, issue 42)
     loaded: Any = trimesh.load(str(path), force="scene", process=False)  # a trimesh.Scene (force="scene")
     parts, meshes = [], []
     start = 0
