@@ -26,6 +26,7 @@ as tasks finish.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import os
@@ -41,6 +42,8 @@ SCHEDULER_ENV = "RRBC_SCHEDULER"
 IN_PROCESS = ("", "in-process")
 RETRIES = 3
 CONNECT_TIMEOUT_S = 10
+#: seconds a new local cluster waits for all its workers to register before its first task
+LOCAL_WORKERS_TIMEOUT_S = 60
 AUTO = "auto"
 _quiet = False  # set by quiet_dask_logs()
 #: Under "auto", work measured at this many seconds of one core or more gets a local cluster (below it, a cluster's
@@ -212,7 +215,12 @@ def _connect(where: str):
             cluster = LocalCluster(
                 n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50
             )
-        return Client(cluster), cluster
+        client = Client(cluster)
+        # the cluster's workers register with its scheduler on their own; on a loaded machine one can come after the
+        # first tasks (then only the others work, and `workers` says so): wait for all of them, within a bound
+        with contextlib.suppress(TimeoutError, OSError):
+            client.wait_for_workers(workers, timeout=LOCAL_WORKERS_TIMEOUT_S)
+        return client, cluster
     if "://" not in where and ":" not in where:
         raise InputError(
             f"--scheduler {where[:60]!r}: give 'local' or a scheduler address such as tcp://127.0.0.1:8786"
