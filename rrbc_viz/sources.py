@@ -101,13 +101,16 @@ class Library:
 
 
 def load_mesh(path) -> trimesh.Trimesh:
-    """A mesh file (any format trimesh reads) as one trimesh.Trimesh, robot frame, mm."""
+    """A mesh file (any format trimesh reads) as one trimesh.Trimesh, robot frame, mm: read as a scene's mesh is
+    (`io.scene._load_mesh_file`: rrbc's bounded-memory readers where they take the file)."""
     import trimesh
+
+    from rrbc_core.io.scene import _load_mesh_file
 
     p = Path(path)
     check_mesh_file(p)  # missing, too large, or declaring too many triangles: refused before it is parsed
     try:
-        mesh = trimesh.load(str(p), force="mesh")
+        mesh = _load_mesh_file(p)
     except Exception as exc:  # noqa: BLE001 - trimesh raises many types for unreadable files
         raise InputError(
             f"{path}: cannot load as a mesh: {exc.__class__.__name__}: {' '.join(str(exc).split())}"
