@@ -115,10 +115,7 @@ def read_obj(path) -> tuple[np.ndarray, np.ndarray, list[tuple[str, int, int]]] 
                 text, tail = text[:cut], text[cut:]
             else:
                 tail = b""
-            for line in _split_parts(text):  # (kind, name) marks where an object or group starts
-                kind, name, before = line
-                marks[kind].append((name, nf + before))
-            vs, fs = _block_lines(text)
+            vs, fs, starts = _block_lines(text)
             if vs:
                 v = _numbers(b"\n".join(vs))
                 if v is None or len(v) != 3 * len(vs):  # a w or colour after x y z: the first three of each
@@ -130,8 +127,12 @@ def read_obj(path) -> tuple[np.ndarray, np.ndarray, list[tuple[str, int, int]]] 
                         return None
                 vertices.append(v.reshape(-1, 3))
                 nv += len(vs)
+            counts = np.fromiter((len(line.split()) for line in fs), dtype=np.int64, count=len(fs))
+            # triangles before each face line of the block (a polygon of k corners makes k - 2)
+            before = np.concatenate([[0], np.cumsum(np.maximum(counts - 2, 0))])
+            for kind, name, lines_before in starts:  # where an object or group starts
+                marks[kind].append((name, nf + int(before[lines_before])))
             if fs:
-                counts = np.fromiter((len(line.split()) for line in fs), dtype=np.int64, count=len(fs))
                 idx = _numbers(_SLASHES.sub(b"", b"\n".join(fs)), np.int64)
                 if idx is None or len(idx) != int(counts.sum()) or (len(idx) and idx.min() < 1):
                     return None  # unreadable, or a relative (negative) index
@@ -147,27 +148,21 @@ def read_obj(path) -> tuple[np.ndarray, np.ndarray, list[tuple[str, int, int]]] 
     return v_all, tri, _parts(marks[b"o"] or marks[b"g"], len(tri), p.name)
 
 
-def _block_lines(text: bytes) -> tuple[list[bytes], list[bytes]]:
-    """A block's vertex lines' and face lines' values (after ``v``/``f``)."""
-    lines = text.split(b"\n")
-    vs = [line[2:] for line in lines if line[:2] in (b"v ", b"v\t")]
-    fs = [line[2:] for line in lines if line[:2] in (b"f ", b"f\t")]
-    return vs, fs
-
-
-def _split_parts(text: bytes):
-    """(kind b"o" or b"g", name, faces before it in the block) for each object or group line of a block (faces
-    counted as triangles, as the block's polygons become)."""
-    if b"\no " not in text and b"\ng " not in text and not text.startswith((b"o ", b"g ")):
-        return []
-    out, tris = [], 0
+def _block_lines(text: bytes) -> tuple[list[bytes], list[bytes], list[tuple[bytes, str, int]]]:
+    """A block's vertex lines' and face lines' values (after ``v``/``f``), and its object and group lines: (kind
+    b"o" or b"g", name, face lines before it in the block)."""
+    vs: list[bytes] = []
+    fs: list[bytes] = []
+    starts: list[tuple[bytes, str, int]] = []
     for line in text.split(b"\n"):
         head = line[:2]
-        if head in (b"f ", b"f\t"):
-            tris += max(len(line.split()) - 3, 0)
+        if head in (b"v ", b"v\t"):
+            vs.append(line[2:])
+        elif head in (b"f ", b"f\t"):
+            fs.append(line[2:])
         elif head in (b"o ", b"g "):
-            out.append((head[:1], line[2:].strip().decode("utf-8", "replace") or "part", tris))
-    return out
+            starts.append((head[:1], line[2:].strip().decode("utf-8", "replace") or "part", len(fs)))
+    return vs, fs, starts
 
 
 def _parts(marks: list[tuple[str, int]], n_faces: int, fallback: str) -> list[tuple[str, int, int]]:

@@ -379,7 +379,7 @@ def _load_mesh_file(path: Path):
         geom = loaded.geometry.get(geom_name)
         if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
             continue
-        identity = np.allclose(transform, np.eye(4), rtol=0.0, atol=0.0)
+        identity = np.array_equal(transform, np.eye(4))
         m = geom if (len(nodes) == 1 and identity) else geom.copy()  # the one instance as it is: no copy
         if not identity:
             m.apply_transform(transform)
