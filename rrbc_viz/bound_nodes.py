@@ -1,6 +1,6 @@
 """Each target's 95 % bound in the scene (/bounds/<id>: a translucent ellipsoid about the target, magnified as the
 arrows are or at true size (`picture.BOUND_SCALES`, the semi-axes it is handed), the
-95 % region of its corrected position's error covariance, `rrbc_core.correction.bounds.bound_ellipsoids`; hidden
+95 % region of its corrected position's error covariance, `rrbc_core.correction.bound_radius.bound_ellipsoids`; hidden
 where the data back no bound). Robot frame, mm. The class keeps its handles and is handed values (`build`, `show`)."""
 
 from __future__ import annotations

@@ -41,7 +41,6 @@ from typing import Any
 import numpy as np
 import viser
 
-from rrbc_core.session.arm import arm_description
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
@@ -70,7 +69,7 @@ from .picture import ScenePicture
 from .point_labels import PointLabels
 from .reading_nodes import ReadingNodes
 from .region_nodes import RegionNodes
-from .robot_nodes import ArmNodes, ArmPoser, SensorNodes
+from .robot_nodes import ArmNodes, ArmPoser, SensorNodes, build_robot_nodes
 from .stage import Stage
 
 #: (kind, id, robot-frame position mm, phase, client=...) -> anything
@@ -201,26 +200,12 @@ class SceneNodes:
 
         # the arm and the sensor, as what they are (robot_nodes) ----------------------------------------------
         scene = getattr(session, "scene", None) if session.kind == "scene" else None
-        self._arm = None
         self._scene_model = scene
-        self._poser = None
-        has_arm = scene is not None and (scene.robot_model in ("ur5", "ur10") or scene.robot_urdf is not None)
         self._session = session
-        if has_arm and len(ev.targets.ids):
-            self._arm = ArmNodes(sc, arm_description(scene), self._server, self._arm_meshes)
-            self._arm.build()
-            self._poser = ArmPoser(self._arm, self._show_arm)
-        elif session.kind == "measurements" and session.arm is not None:  # rrbc view data.csv --urdf
-            self._arm = ArmNodes(sc, session.arm, self._server)
-            self._arm.build()
-            self._poser = ArmPoser(self._arm, self._show_arm)
+        self._arm, self._poser, self._sensor = build_robot_nodes(
+            sc, self._server, session, ev, self._arm_meshes, self._show_arm
+        )
         self._show_arm_marks()  # its model-error mark as its layer says
-        self._sensor = None
-        if scene is not None and scene.sensor_kind != "ground_truth":
-            T = scene.sensor_to_robot
-            look = scene.sensor_look_at if scene.sensor_look_at is not None else ev.targets.positions.mean(0)
-            self._sensor = SensorNodes(sc)
-            self._sensor.build(scene.sensor_kind, T.rotation, T.translation, look)
 
         # frames ---------------------------------------------------------------------------------------
         self._frames.build(self._extent_mm, session.sensor_to_robot, ev.registration.mapping, self._add_label)

@@ -25,6 +25,8 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
+from rrbc_core.session.arm import arm_description
+
 LINK_RGB = (150, 160, 175)
 JOINT_RGB = (70, 110, 160)
 TOOL_RGB = (60, 60, 60)
@@ -395,3 +397,28 @@ class ArmPoser:
             return
         self._set_visible(True)
         self.arm.show(pose, magnification)
+
+
+def build_robot_nodes(
+    scene_api, server, session, ev, arm_meshes: bool, show_arm: Callable[[bool], None]
+) -> tuple[ArmNodes | None, ArmPoser | None, SensorNodes | None]:
+    """Create the arm and the sensor of a session as what they are: a scene's UR arm or URDF reaching its targets
+    (or a measurement file's `--urdf` arm) and its sensor's cameras unless it is ground truth. Returns the arm's
+    nodes and its poser (None without an arm) and the sensor's nodes (None without one); `show_arm(on)` is called
+    when the poser shows or hides the arm."""
+    scene = getattr(session, "scene", None) if session.kind == "scene" else None
+    arm = poser = sensor = None
+    has_arm = scene is not None and (scene.robot_model in ("ur5", "ur10") or scene.robot_urdf is not None)
+    if has_arm and len(ev.targets.ids):
+        arm = ArmNodes(scene_api, arm_description(scene), server, arm_meshes)
+    elif session.kind == "measurements" and session.arm is not None:  # rrbc view data.csv --urdf
+        arm = ArmNodes(scene_api, session.arm, server)
+    if arm is not None:
+        arm.build()
+        poser = ArmPoser(arm, show_arm)
+    if scene is not None and scene.sensor_kind != "ground_truth":
+        t = scene.sensor_to_robot
+        look = scene.sensor_look_at if scene.sensor_look_at is not None else ev.targets.positions.mean(0)
+        sensor = SensorNodes(scene_api)
+        sensor.build(scene.sensor_kind, t.rotation, t.translation, look)
+    return arm, poser, sensor

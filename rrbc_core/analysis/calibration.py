@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from rrbc_core.errors import InputError
-from rrbc_core.geometry.transforms import map_points
+from rrbc_core.geometry.transforms import map_points, skew
 from rrbc_core.models.chain import Chain, rotation
 from rrbc_core.models.loads import GRAVITY, Loads, LoadTerm, deflections, factor_scale, gravity_loads, term_jacobian
 
@@ -41,13 +41,6 @@ def angle_scale(chain: Chain) -> float:
     """mm per rad used to compare angles with lengths: half the chain's reach (an angle error of 1 rad moves a point
     about that far)."""
     return 0.5 * chain.reach_mm()
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
 
 
 def _exp(w: np.ndarray) -> np.ndarray:
@@ -177,7 +170,7 @@ def _system(
     rows = np.arange(n)
     k0 = n_p + n_t
     for a in range(3):
-        j[rows, :, k0 + 6 * groups + a] = -_skew(rs)[:, :, a]
+        j[rows, :, k0 + 6 * groups + a] = -skew(rs)[:, :, a]
         j[rows, :, k0 + 6 * groups + 3 + a] = np.eye(3)[:, a]
     return res.reshape(-1), j.reshape(3 * n, -1)
 

@@ -24,13 +24,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rrbc_core.correction.bound_inputs import MIN_FIDUCIALS, estimate_noise, tested_from
-from rrbc_core.correction.bounds import (
-    assemble_bounds,
-    no_bounds,
-    point_registration_cov,
-    profile_from_squares,
-    registration_theta_cov,
-)
+from rrbc_core.correction.bound_registration import point_registration_cov, registration_theta_cov
+from rrbc_core.correction.bounds import assemble_bounds, no_bounds, profile_from_squares
 
 METHODS = ("rigid", "rrbc", "vec", "vec_rrbc")
 

@@ -36,12 +36,10 @@ Units mm; frames as in the measurement file.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.special import chdtri  # χ² quantiles as scipy.stats.chi2.ppf computes them, without its import
 
 from rrbc_core.correction.bound_inputs import (
     MIN_FIDUCIALS,
@@ -53,73 +51,14 @@ from rrbc_core.correction.bound_inputs import (
     predictive_factor,
     tested_distance,
 )
+from rrbc_core.correction.bound_radius import LEVEL, bound95, bound_ellipsoids
+from rrbc_core.correction.bound_registration import own_cov, point_registration_cov, registration_theta_cov
 from rrbc_core.errors import InputError
 from rrbc_core.interpolation.auto import folds_of
 from rrbc_core.interpolation.hull import Hull, covered
 from rrbc_core.models.instrument import Instrument
 
-#: the bound's probability
-LEVEL = 0.95
 BUDGET_KEYS = ("instrument", "registration", "interpolation", "arm")
-
-
-def bound95(cov: np.ndarray, level: float = LEVEL) -> np.ndarray:
-    """(M,): the radius r with P(|e| ≤ r) = level for e ~ N(0, cov), cov (M, 3, 3) mm² (module docstring). The
-    eigenvalues' sum and sum of squares are the trace and the squared Frobenius norm of the (symmetric) covariance;
-    the χ² quantile at the matched degrees of freedom (between 1 and 3) is `chi2_quantile`'s."""
-    c = np.asarray(cov, float).reshape(-1, 3, 3)
-    s1 = np.trace(c, axis1=1, axis2=2)
-    s2 = np.einsum("mij,mij->m", c, c)
-    ok = (s1 > 0) & (s2 > 0)
-    out = np.zeros(len(c))
-    scale = s2[ok] / s1[ok]
-    dof = s1[ok] ** 2 / s2[ok]
-    out[ok] = np.sqrt(scale * chi2_quantile(dof, level))
-    return out
-
-
-@functools.cache
-def _quantile_curve(level: float):
-    from scipy.interpolate import CubicSpline
-
-    nu = np.linspace(1.0, 3.0, 401)
-    return CubicSpline(nu, chdtri(nu, 1.0 - level))
-
-
-def chi2_quantile(dof: np.ndarray, level: float = LEVEL) -> np.ndarray:
-    """χ²'s `level` quantile at degrees of freedom dof (M,) in [1, 3] (clipped there): a cubic spline through 401
-    of scipy's quantiles, within 1e-10 of them relatively (tests/correction/test_bounds.py), at a thousandth of
-    their cost for many points."""
-    return np.asarray(_quantile_curve(float(level))(np.clip(np.asarray(dof, float), 1.0, 3.0)), float)
-
-
-def bound_ellipsoids(cov: np.ndarray, level: float = LEVEL) -> tuple[np.ndarray, np.ndarray]:
-    """The `level` region of a normal error with covariance cov (M, 3, 3) mm², as ellipsoids: their axes' rotation
-    (M, 3, 3; columns the axes, a proper rotation) and semi-axes (M, 3) mm, sqrt(λ χ²₃(level)) along eigenvector
-    λ. For an isotropic error it is the sphere of radius `bound95` (level 0.95). Rows with a NaN covariance give
-    NaN semi-axes (no bound: nothing to draw)."""
-    c = np.asarray(cov, float).reshape(-1, 3, 3)
-    ok = np.all(np.isfinite(c), axis=(1, 2))
-    lam = np.full((len(c), 3), np.nan)
-    rot = np.broadcast_to(np.eye(3), (len(c), 3, 3)).copy()
-    if np.any(ok):
-        w, v = np.linalg.eigh(c[ok])
-        v[np.linalg.det(v) < 0, :, 2] *= -1  # a proper rotation
-        lam[ok], rot[ok] = np.clip(w, 0.0, None), v
-    return rot, np.sqrt(lam * chdtri(3.0, 1.0 - level))
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    """(N, 3, 3): [v]× for v (N, 3)."""
-    z = np.zeros(len(v))
-    return np.stack(
-        [
-            np.stack([z, -v[:, 2], v[:, 1]], axis=1),
-            np.stack([v[:, 2], z, -v[:, 0]], axis=1),
-            np.stack([-v[:, 1], v[:, 0], z], axis=1),
-        ],
-        axis=1,
-    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,41 +204,6 @@ def tail_factor(sq: np.ndarray, model: np.ndarray, shape: np.ndarray, fitted: in
     z = np.sqrt(sq[ok] / model[ok])
     empirical = max(float(np.percentile(z, 100 * LEVEL)) / float(bound95(shape[None])[0]), 1.0)
     return empirical * predictive_factor(3 * n - fitted)
-
-
-def own_cov(inst: Instrument, rotation: np.ndarray, p_sensor: np.ndarray, count) -> np.ndarray:
-    """(M, 3, 3): the covariance of a point's own readings in the robot frame, mm² (module docstring)."""
-    r = np.asarray(rotation, float)
-    sensor, robot = inst.sensor_and_robot_cov(p_sensor)
-    c = np.einsum("ij,njk,lk->nil", r, sensor, r) + robot
-    return c / np.asarray(count, float).reshape(-1, 1, 1)
-
-
-def registration_theta_cov(rotation: np.ndarray, reg_sensor: np.ndarray, row_cov: np.ndarray) -> np.ndarray:
-    """(6, 6): the covariance of the least-squares transform's rotation vector (rad, robot frame, about its origin)
-    and translation (mm), from the registration points' sensor readings (N, 3) and their rows' noise covariances
-    (N, 3, 3) robot frame (sandwich form: H⁻¹ Σ Jᵢᵀ Cᵢ Jᵢ H⁻¹)."""
-    q = np.asarray(reg_sensor, float) @ np.asarray(rotation, float).T
-    jac = np.concatenate([-_skew(q), np.broadcast_to(np.eye(3), (len(q), 3, 3))], axis=2)  # (N, 3, 6)
-    h = np.einsum("nij,nik->jk", jac, jac)
-    m = np.einsum("nij,nik,nkl->jl", jac, row_cov, jac)
-    hinv = np.linalg.pinv(h)
-    return hinv @ m @ hinv
-
-
-def point_registration_cov(
-    rotation: np.ndarray, lever_sensor: np.ndarray, weight: np.ndarray, theta_cov: np.ndarray
-) -> np.ndarray:
-    """(M, 3, 3): G θ Gᵀ with G = [−[R lever]×, weight·I] (lever (M, 3) sensor frame, weight (M,))."""
-    q = np.asarray(lever_sensor, float) @ np.asarray(rotation, float).T
-    g = np.concatenate([-_skew(q), np.asarray(weight, float)[:, None, None] * np.eye(3)], axis=2)
-    m = len(g)
-    a = (g.reshape(-1, 6) @ np.asarray(theta_cov, float)).reshape(m, 3, 6)  # G θ: one product for every point
-    out = np.empty((m, 3, 3))
-    for i in range(3):  # (G θ) Gᵀ: its six distinct entries, symmetric
-        for j in range(i, 3):
-            out[:, i, j] = out[:, j, i] = np.einsum("mk,mk->m", a[:, i], g[:, j])
-    return out
 
 
 def cv_profile(

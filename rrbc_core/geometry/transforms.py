@@ -65,16 +65,20 @@ def chordal_mean(rotations, weights=None) -> np.ndarray:
     return project_to_so3(m)
 
 
-def _skew(v) -> np.ndarray:
-    x, y, z = v
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+def skew(v) -> np.ndarray:
+    """(..., 3, 3): the cross-product matrices [v]× of vectors v (..., 3), [v]× u = v × u."""
+    v = np.asarray(v, float)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
 
 
 def rotation_from_rotvec(rotvec) -> np.ndarray:
     """Rotation matrix from a rotation vector (axis * angle, rad), Rodrigues' formula."""
     v = np.asarray(rotvec, dtype=float)
     theta = float(np.linalg.norm(v))
-    k = _skew(v)
+    k = skew(v)
     if theta < 1e-12:
         return np.eye(3) + k
     return np.eye(3) + np.sin(theta) / theta * k + (1 - np.cos(theta)) / theta**2 * (k @ k)

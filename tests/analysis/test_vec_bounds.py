@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rrbc_core.analysis.vec_compare import compare
-from rrbc_core.correction.bounds import bound95
+from rrbc_core.correction.bound_radius import bound95
 from rrbc_core.models.urdf import load_urdf
 from rrbc_core.simulation.arm_data import chain_measurements
 

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from rrbc_core.correction.bounds import bound95
+from rrbc_core.correction.bound_radius import bound95
 from rrbc_core.io.measurements_write import write_measurements
 from rrbc_core.simulation.field_data import field_measurements
 from rrbc_core.simulation.station_data import station_measurements

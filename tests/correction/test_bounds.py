@@ -9,7 +9,8 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
-from rrbc_core.correction.bounds import bound95, point_registration_cov, registration_theta_cov
+from rrbc_core.correction.bound_radius import bound95
+from rrbc_core.correction.bound_registration import point_registration_cov, registration_theta_cov
 from rrbc_core.correction.pipeline import correct_measurements
 from rrbc_core.correction.stations import correct_stations
 from rrbc_core.errors import InputError
@@ -221,7 +222,7 @@ def test_given_figures_override_a_preset_and_say_so():
 
 
 def test_the_drawn_ellipsoid_is_the_covariances_95_percent_region_and_the_bound_when_isotropic():
-    from rrbc_core.correction.bounds import bound_ellipsoids
+    from rrbc_core.correction.bound_radius import bound_ellipsoids
 
     rng = np.random.default_rng(11)
     q = np.linalg.qr(rng.normal(size=(3, 3)))[0]
@@ -298,7 +299,7 @@ def test_the_chi2_quantile_curve_is_scipys_to_1e_10():
     """`chi2_quantile` (a spline through scipy's quantiles) against scipy's own at 20 000 seeded degrees of freedom
     in [1, 3] and at both ends, at 95 % and 99 %; and the bound from the trace and Frobenius norm against the
     eigenvalues' on random covariances."""
-    from rrbc_core.correction.bounds import chi2_quantile
+    from rrbc_core.correction.bound_radius import chi2_quantile
 
     nu = np.concatenate([[1.0, 3.0], np.random.default_rng(11).uniform(1.0, 3.0, 20_000)])
     for level in (0.95, 0.99):

@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from rrbc_core.correction.bounds import bound_ellipsoids
+from rrbc_core.correction.bound_radius import bound_ellipsoids
 from rrbc_viz.selection_card import BAR_CELLS
 
 
