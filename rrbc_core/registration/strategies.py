@@ -473,10 +473,21 @@ def clustering(p_sensor, b_robot, clusters: int = 2, seed: int = 0, average: str
     The paper's text gives steps 1 and 4; steps 2–3 are the project's stated assumptions.
     """
     s, b = _check_pair(p_sensor, b_robot)
+    kernels, labels, members = clustering_sets(s, clusters, seed)
+    pieces = []
+    for j, chosen in enumerate(members):
+        _, mats, _ = _subset_registrations(s[chosen], b[chosen], geometry.SUBSET_DEGENERACY_RATIO, "clustering")
+        pieces.append(_average_rooted(mats, average, kernels[j]))
+    T_robot_sensor = PiecewiseMap(kernels, tuple(pieces))
+    return _finish("clustering", T_robot_sensor, s, b, clusters=clusters, members=members, labels=labels.tolist())
+
+
+def clustering_sets(s: np.ndarray, clusters: int, seed: int) -> tuple[np.ndarray, np.ndarray, list[list[int]]]:
+    """`clustering`'s steps 1 and 2, which depend on the sensor points s (N, 3) alone: the kernels (K, 3) sensor
+    frame, each point's k-means label (N,) and each cluster's point set (indices, sorted)."""
     if not 1 <= clusters <= len(s):
         raise InputError(f"clustering needs 1 <= clusters <= number of registration points ({len(s)})")
     kernels, labels = kmeans(s, clusters, seed)
-    pieces = []
     members = []
     for j in range(clusters):
         order = np.argsort(np.linalg.norm(s - kernels[j], axis=1), kind="stable")
@@ -486,12 +497,8 @@ def clustering(p_sensor, b_robot, clusters: int = 2, seed: int = 0, average: str
                 break
             if i not in chosen:
                 chosen.append(int(i))
-        chosen = sorted(chosen)
-        _, mats, _ = _subset_registrations(s[chosen], b[chosen], geometry.SUBSET_DEGENERACY_RATIO, "clustering")
-        pieces.append(_average_rooted(mats, average, kernels[j]))
-        members.append([int(i) for i in chosen])
-    T_robot_sensor = PiecewiseMap(kernels, tuple(pieces))
-    return _finish("clustering", T_robot_sensor, s, b, clusters=clusters, members=members, labels=labels.tolist())
+        members.append(sorted(chosen))
+    return kernels, labels, members
 
 
 def _average_rooted(mats, average, kernel):

@@ -27,6 +27,7 @@ N, the 5th point and the robot placement are only in the paper's Fig. 1.
 from __future__ import annotations
 
 import functools
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,8 +35,9 @@ from scipy import stats
 
 from rrbc_core import registration
 from rrbc_core.errors import InputError
+from rrbc_core.geometry import points as geometry
 from rrbc_core.models.kinematics import UR5, UR5_TOOL_DOWN_SEED, forward, inverse_path, tool_down
-from rrbc_core.registration.strategies import PiecewiseMap
+from rrbc_core.registration.strategies import LinearMap, PiecewiseMap, clustering_sets, three_point_matrices
 from rrbc_core.simulation import batch
 from rrbc_core.studies.vanwyk2018_layouts import (  # noqa: F401 - the layouts are part of this module's API
     REPETITIONS,
@@ -238,16 +240,44 @@ def component_fields(geo: Geometry, name: str, replicates: int, seed: int) -> np
 # ------------------------------------------------------------------------------------------------------
 def _clustering_inverse(sensor, readings, queries_robot, query_sites_n, check_reg, seed):
     """Per experiment and registration: the published clustering registration; each query is mapped back to N
-    by its registration's kernel nearest its site. readings (R, G, n, 3), queries (R, 80, 3)."""
+    by its registration's kernel nearest its site. readings (R, G, n, 3), queries (R, 80, 3).
+
+    The kernels and each cluster's points depend on the sensor points alone (`registration.clustering_sets`), so
+    every registration's 3-point frames are computed in one batch per cluster and averaged as `clustering` does
+    (the same operations, so the same numbers); a registration with a nearly collinear robot triple is made by
+    `registration.clustering` itself."""
+    r_count, g_count = readings.shape[:2]
+    sensor = np.asarray(sensor, float)
+    kernels, _, members = clustering_sets(sensor, 2, seed)
+    ratio = geometry.SUBSET_DEGENERACY_RATIO
+    pieces = []  # per cluster: (matrices (R, G, 3, 3), translations (R, G, 3)) of its rooted average
+    regular = np.ones((r_count, g_count), bool)  # every subset of every cluster usable
+    for j, chosen in enumerate(members):
+        combos = np.array(list(itertools.combinations(range(len(chosen)), 3)))
+        st = sensor[chosen][combos]  # (C, 3, 3)
+        bt = readings[:, :, chosen][:, :, combos]  # (R, G, C, 3, 3)
+        ok_s = geometry.collinear_ratio_batch(st) >= ratio
+        ok_b = (geometry.collinear_ratio_batch(bt.reshape(-1, 3, 3)) >= ratio).reshape(bt.shape[:3])
+        regular &= np.all(ok_b[:, :, ok_s], axis=2) if np.any(ok_s) else False
+        st, bt = st[ok_s], bt[:, :, ok_s]
+        c = len(st)
+        mats = three_point_matrices(np.broadcast_to(st, bt.shape).reshape(-1, 3, 3), bt.reshape(-1, 3, 3)).reshape(
+            r_count, g_count, c, 4, 4
+        )
+        m = mats.mean(axis=2)
+        images = np.einsum("rgkij,j->rgki", mats[..., :3, :3], kernels[j]) + mats[..., :3, 3]
+        pieces.append((m[..., :3, :3], images.mean(axis=2) - m[..., :3, :3] @ kernels[j]))
     out = np.empty(queries_robot.shape)
-    for k in range(readings.shape[0]):
-        for g in range(readings.shape[1]):
-            use = check_reg == g
-            reg = registration.clustering(sensor, readings[k, g], clusters=2, seed=seed)
-            mapping = reg.mapping
-            assert isinstance(mapping, PiecewiseMap)
-            pieces = mapping.piece_of(query_sites_n[use])
-            out[k, use] = mapping.apply_inverse(queries_robot[k, use], pieces)
+    for g in range(g_count):
+        use = check_reg == g
+        for k in range(r_count):
+            if regular[k, g]:
+                mapping = PiecewiseMap(kernels, tuple(LinearMap(a[k, g], t[k, g]) for a, t in pieces))
+            else:
+                reg = registration.clustering(sensor, readings[k, g], clusters=2, seed=seed)
+                assert isinstance(reg.mapping, PiecewiseMap)
+                mapping = reg.mapping
+            out[k, use] = mapping.apply_inverse(queries_robot[k, use], mapping.piece_of(query_sites_n[use]))
     return out
 
 

@@ -65,3 +65,30 @@ def test_run_reports_progress_up_to_its_total_and_closes_the_bar():
     assert len(bars) == 1 and bars[0].closed
     assert bars[0].done == bars[0].total == 2 * len(rp.MODELS)  # a simulation and an assessment per model
     assert rep.samples_per_method == 80
+
+
+def test_the_studys_batched_clustering_is_the_registration_applied_one_by_one():
+    """`reproduction._clustering_inverse` computes every registration's pieces in one batch; it must give exactly
+    what `registration.clustering` gives registration by registration, also where a robot triple is collinear
+    (that registration is made by `clustering` itself, without the subset)."""
+    from rrbc_core import registration
+    from rrbc_core.registration.strategies import clustering_sets
+    from rrbc_core.studies import reproduction
+
+    rng = np.random.default_rng(7)
+    sensor = rng.uniform(-300.0, 300.0, (6, 3))
+    r_count, g_count, n_query = 4, 2, 10
+    readings = sensor[None, None] + rng.normal(0.0, 0.2, (r_count, g_count, 6, 3))
+    readings[2, 1, 2] = 0.5 * (readings[2, 1, 1] + readings[2, 1, 3])  # a collinear robot triple here
+    _, _, members = clustering_sets(sensor, 2, 3)
+    assert any({1, 2, 3} <= set(m) for m in members)  # ... in a cluster's point set: that registration drops it
+    sites = rng.uniform(-300.0, 300.0, (n_query, 3))
+    check_reg = np.arange(n_query) % g_count
+    queries = sites[None] + rng.normal(0.0, 0.5, (r_count, n_query, 3))
+    got = reproduction._clustering_inverse(sensor, readings, queries, sites, check_reg, seed=3)
+    for k in range(r_count):
+        for g in range(g_count):
+            use = check_reg == g
+            mapping = registration.clustering(sensor, readings[k, g], clusters=2, seed=3).mapping
+            want = mapping.apply_inverse(queries[k, use], mapping.piece_of(sites[use]))
+            assert np.array_equal(got[k, use], want), (k, g)
