@@ -341,3 +341,10 @@ def check_errors(ev: Evaluation, method: str, magnification: float, extent_mm: f
         method,
         mag,
     )
+
+
+def draws_sensor(session) -> bool:
+    """Whether the app draws the session's sensor (its cameras' bodies and lines of sight): a scene's sensor that is
+    not the ground truth. A measurement file says nothing of where its sensor stood."""
+    scene = getattr(session, "scene", None) if session.kind == "scene" else None
+    return scene is not None and scene.sensor_kind != "ground_truth"

@@ -27,6 +27,8 @@ import viser.transforms as vtf
 
 from rrbc_core.session.arm import arm_description
 
+from .node_values import draws_sensor
+
 LINK_RGB = (150, 160, 175)
 JOINT_RGB = (70, 110, 160)
 TOOL_RGB = (60, 60, 60)
@@ -416,7 +418,8 @@ def build_robot_nodes(
     if arm is not None:
         arm.build()
         poser = ArmPoser(arm, show_arm)
-    if scene is not None and scene.sensor_kind != "ground_truth":
+    if draws_sensor(session):
+        assert scene is not None
         t = scene.sensor_to_robot
         look = scene.sensor_look_at if scene.sensor_look_at is not None else ev.targets.positions.mean(0)
         sensor = SensorNodes(scene_api)

@@ -26,6 +26,7 @@ class LessonContext:
     magnification: float  # arrows and landing offsets are drawn this many times longer
     regions: dict = field(default_factory=dict)  # target id -> rrbc_core.io.scene.Region (scene mode)
     frame_magnification: float = 1.0  # the registered sensor frame's error is drawn this many times larger
+    sensor_drawn: bool = False  # the sensor's body is drawn (a scene's sensor that is not the ground truth)
 
 
 @dataclass(frozen=True)
@@ -96,9 +97,29 @@ def _step2(ev: Evaluation, ctx: LessonContext) -> str:
     return s
 
 
+def _split(ev: Evaluation, ids) -> tuple[list[str], list[str]]:
+    """`ids` split into targets and a measurement file's checks (`Evaluation.check_ids`), in order."""
+    ids = list(ids)
+    return [p for p in ids if p not in ev.check_ids], [p for p in ids if p in ev.check_ids]
+
+
 def _step3(ev: Evaluation, ctx: LessonContext) -> str:
     t = ev.targets
-    s = f"**{len(t.ids)} targets** ({_ids(t.ids)}, dark blue): the places where the robot must act accurately."
+    targets, checks = _split(ev, t.ids)
+    parts = []
+    if targets or not checks:
+        parts.append(
+            f"**{len(targets)} targets** ({_ids(targets)}, dark blue): the places where the robot must act accurately"
+        )
+    if checks:  # the colour the scene gives them (nodes: a check keeps a check's colour)
+        parts.append(
+            f"**{len(checks)} checks** ({_ids(checks)}, dark green): points the robot also measured, so the "
+            "correction can be scored there"
+        )
+    s = "; ".join(parts) + "."
+    if np.any(t.extrapolated):
+        colour = "magenta" if not checks else "olive" if not targets else "magenta (targets) or olive (checks)"
+        s += f" Those outside the fiducials' hull are drawn {colour} (step 4)."
     if ctx.regions and len(t.ids):
         r = ctx.regions.get(t.ids[0])
         if r is not None:
@@ -121,9 +142,11 @@ def _step4(ev: Evaluation, ctx: LessonContext) -> str:
     )
     if out:
         verb, its = ("lies", "its correction") if len(out) == 1 else ("lie", "their corrections")
-        s += f" **{_ids(out)} {verb} outside the hull**: {its} will be extrapolated (magenta)."
+        targets, checks = _split(ev, out)
+        colour = "magenta" if not checks else "olive" if not targets else "magenta targets, olive checks"
+        s += f" **{_ids(out)} {verb} outside the hull**: {its} will be extrapolated ({colour})."
     else:
-        s += " Every target is inside the hull."
+        s += " Every target is inside the hull." if not ev.check_ids else " Every target and check is inside the hull."
     return s
 
 
@@ -178,10 +201,15 @@ def _step7(ev: Evaluation, ctx: LessonContext) -> str:
     t = ev.targets
     if not len(t.ids):
         return "There are no targets."
+    what = "targets" if not ev.check_ids else "targets and checks"
+    sensor = (
+        "The sensor (its lines of sight to them drawn) measures"
+        if ctx.sensor_drawn
+        else "The sensor measured"  # no sensor body to draw: a measurement file, or a scene's ground truth
+    )
     return (
-        f"The sensor (its lines of sight to the targets drawn) measures the {len(t.ids)} targets; "
-        f"**{t.ids[0]}** reads x = {_v(t.sensor[0])} mm (sensor frame). Drag a target's handle to move it: "
-        "everything below follows live."
+        f"{sensor} the {len(t.ids)} {what}; **{t.ids[0]}** reads x = {_v(t.sensor[0])} mm (sensor frame). "
+        "Drag a target's handle to move it: everything below follows live."
     )
 
 

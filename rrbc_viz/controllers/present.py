@@ -15,6 +15,7 @@ from rrbc_core.session.evaluation import Evaluation
 
 from .. import tables, teaching
 from ..colors import legend_markdown
+from ..node_values import draws_sensor
 from ..picture import ScenePicture, scene_extent, scene_picture
 
 if TYPE_CHECKING:
@@ -112,5 +113,9 @@ class Presenter:
     def lesson_context(self) -> teaching.LessonContext:
         ctx = self.ctx
         return teaching.LessonContext(
-            ctx.session.kind, ctx.state.display.magnification, dict(ctx.session.regions), self.picture().frame_mag
+            ctx.session.kind,
+            ctx.state.display.magnification,
+            dict(ctx.session.regions),
+            self.picture().frame_mag,
+            sensor_drawn=draws_sensor(ctx.session),
         )

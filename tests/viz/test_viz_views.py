@@ -11,7 +11,7 @@ from rrbc_core.errors import InputError
 from rrbc_core.session import figures
 from rrbc_viz import colors, selection_card, teaching
 from rrbc_viz.camera import PRESETS, CellGeometry, preset_view
-from rrbc_viz.node_values import KEEP_RINGS, landing_display, nice_up
+from rrbc_viz.node_values import KEEP_RINGS, landing_display, nice_up, node_key
 
 
 def test_delta_e_is_cie76_and_every_data_colour_stands_apart_from_the_gizmo_axes():
@@ -605,3 +605,50 @@ def test_a_framed_view_keeps_a_labels_room_above_its_top_point(image):
     below_top_px = (1 - ndc[:, 1]) * h / 2
     assert below_top_px.min() >= DEFAULT_MARGIN * h / 2 + LABEL_ROOM_PX - 1e-6
     assert below_top_px.min() < DEFAULT_MARGIN * h / 2 + LABEL_ROOM_PX + 0.25 * h  # not pushed far down
+
+
+def _sphere_colour(app, pid: str) -> tuple:
+    return tuple(int(c) for c in app.nodes.handle(f"/targets/{node_key(pid)}/gizmo/sphere").color)
+
+
+def test_the_lessons_colour_words_are_the_colours_its_points_are_drawn_in(tmp_path):
+    """Steps 3 and 4 name the targets' and checks' colours, and step 7 the sensor's lines of sight only where they
+    are drawn: on a measurement file with checks inside and outside the fiducials' hull (a lift arm's, whose sensor
+    is not drawn) and on the default scene (targets only, its sensor drawn)."""
+    from rrbc_core.io.measurements_write import write_measurements
+    from rrbc_core.models.urdf import load_urdf
+    from rrbc_core.simulation.arm_data import chain_measurements
+    from rrbc_viz.serve import serve
+
+    words = {
+        colors.TARGET: "dark blue",
+        colors.CHECK: "dark green",
+        colors.TARGET_EXTRAPOLATED: "magenta",
+        colors.CHECK_EXTRAPOLATED: "olive",
+    }
+    data = tmp_path / "lift.csv"
+    write_measurements(data, chain_measurements(load_urdf("lift_arm"), 2, n_fid=12, n_chk=6, n_tgt=2, noise_mm=0.05))
+    for source, kwargs in ((data, {"urdf": "lift_arm"}), (None, {})):
+        app = serve(source, port=0, **kwargs) if source is not None else serve(port=0)
+        try:
+            ev = app.session.last
+            shown = {pid: words[_sphere_colour(app, pid)] for pid in ev.targets.ids}
+            if source is not None:  # the file: checks inside and outside the hull, targets outside it
+                assert {"dark green", "olive", "magenta"} <= set(shown.values()), shown
+            step3 = app.views.lesson_go(2)
+            for pid, word in shown.items():
+                inside = word in ("dark blue", "dark green")
+                kind_word = word if inside else {"magenta": "dark blue", "olive": "dark green"}[word]
+                assert kind_word in step3, (pid, word, step3)  # its kind's colour is named
+                assert inside or word in step3, (pid, word, step3)  # and the colour it has outside the hull
+            for word in set(words.values()) - set(shown.values()) - {"dark blue", "dark green"}:
+                assert word not in step3, (word, step3)  # no colour nothing is drawn in
+            step4 = app.views.lesson_go(3)
+            for pid, word in shown.items():
+                if word in ("magenta", "olive"):
+                    assert pid in step4 and word in step4, (pid, word, step4)
+            step7 = app.views.lesson_go(6)
+            assert ("lines of sight" in step7) == (app.nodes.handle("/sensor/sight") is not None), step7
+            app.views.lesson_stop()
+        finally:
+            app.stop()
