@@ -85,13 +85,23 @@ def allowed(
     return True, ""
 
 
+#: The page's render scale, given in the URL it opens (viser's client reads ``fixedDpr``): one canvas pixel per CSS
+#: pixel. The server frames views beside the control panel, whose width is in CSS pixels, from the canvas's width in
+#: its own pixels (`ClientHandle.camera.image_width`); viser's adaptive scale (0.75-1 of the screen's pixel ratio,
+#: lowered while frames are slow) and high-density screens (2 canvas pixels per CSS pixel) would make that share
+#: wrong: views squeezed to the left, or points under the panel. Drawing costs less for it; a high-density screen
+#: shows the 3-D view at half its resolution.
+RENDER_SCALE_PARAM = "fixedDpr=1"
+
+
 def page_url(base_url: str, token: str | None) -> str:
-    """The URL to open: `base_url` (http://host:port) with the websocket address carrying the token."""
+    """The URL to open: `base_url` (http://host:port) with the websocket address carrying the token and the render
+    scale (`RENDER_SCALE_PARAM`)."""
     base = base_url.rstrip("/")
     if token is None:
-        return base
+        return f"{base}/?{RENDER_SCALE_PARAM}"
     ws = "ws" + base[len("http") :] + TOKEN_PATH_PREFIX + token
-    return f"{base}/?websocket={quote(ws, safe='')}"
+    return f"{base}/?websocket={quote(ws, safe='')}&{RENDER_SCALE_PARAM}"
 
 
 class AccessGuard:

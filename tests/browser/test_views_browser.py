@@ -149,6 +149,11 @@ def test_every_learn_step_frames_what_it_talks_about_in_view_and_unhidden(viser_
                 continue  # frame origins sit inside the robot's base and the sensor head's casing by design
             hidden = _hidden_by_mesh(mesh, np.array(res["camera"]), pts, slack_mm=0.5 * app.state.display.marker_mm)
             assert not hidden.any(), f"step {i + 1}: {name} {np.flatnonzero(hidden).tolist()} hidden by the mesh"
+    # the views were framed beside the panel from the canvas's width in its own pixels: after every step's frames
+    # (slow under software WebGL, which lowers viser's adaptive render scale) it is still the page's CSS width
+    css_width = page.evaluate("() => window.innerWidth")
+    widths = [c.camera.image_width for c in app.server.get_clients().values()]
+    assert widths and all(w == css_width for w in widths), (widths, css_width)
     app.views.lesson_stop()
 
 

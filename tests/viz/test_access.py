@@ -66,7 +66,7 @@ def test_the_served_page_with_the_token_gets_the_app(tokened):
 def test_no_token_mode_still_refuses_foreign_pages():
     a = serve(port=0, token=None)
     try:
-        assert a.url == f"http://127.0.0.1:{a.port}"
+        assert a.url == f"http://127.0.0.1:{a.port}/?fixedDpr=1"
         assert _try(a.port, "/", "http://evil.example") == ("closed", 1008)
         assert _try(a.port, "/", f"http://127.0.0.1:{a.port}") == ("message", None)
     finally:
@@ -152,11 +152,11 @@ def test_a_handshake_with_a_header_twice_is_refused_without_a_traceback(tokened,
     assert ok == ("message", None)
 
 
-def test_page_url_carries_the_websocket_address_with_the_token():
+def test_page_url_carries_the_websocket_address_with_the_token_and_one_canvas_pixel_per_css_pixel():
     assert page_url("http://127.0.0.1:8080", "tok") == (
-        "http://127.0.0.1:8080/?websocket=ws%3A%2F%2F127.0.0.1%3A8080%2Frrbc-tok"
+        "http://127.0.0.1:8080/?websocket=ws%3A%2F%2F127.0.0.1%3A8080%2Frrbc-tok&fixedDpr=1"
     )
-    assert page_url("http://127.0.0.1:8080", None) == "http://127.0.0.1:8080"
+    assert page_url("http://127.0.0.1:8080", None) == "http://127.0.0.1:8080/?fixedDpr=1"
 
 
 # ------------------------------------------------------------------------- files: no free-text server path
