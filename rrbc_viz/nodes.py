@@ -521,9 +521,9 @@ class SceneNodes:
             missing.add("bounds")
         return tuple(n for n in LAYERS if n not in missing)
 
-    def set_lesson_labels(self, kinds: tuple[str, ...]) -> None:
-        """Show the labels of these kinds of point (a lesson step's, teaching.Step.labels) besides the others."""
-        self._labels.set_lesson(kinds)
+    def set_lesson_labels(self, kinds: tuple[str, ...], named: tuple[tuple[str, str], ...] = ()) -> None:
+        """Show these kinds of point's labels (teaching.Step.labels), those `named` ((kind, id)) kept first."""
+        self._labels.set_lesson(kinds, tuple(gizmo_name(k, pid) + "/label" for k, pid in named))
         self._show_labels()
 
     def declutter_lesson_labels(self, pose, image_px, panel_px: float) -> frozenset[str]:

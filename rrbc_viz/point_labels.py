@@ -33,6 +33,7 @@ class PointLabels:
         self._scale = 1.0  # labels' screen size factor (presentation mode)
         self._reanchored: str | None = None  # the label drawn with its own anchor to stay in view (a lesson's)
         self._lesson_kinds: tuple[str, ...] = ()  # kinds of point whose labels a lesson step shows
+        self._lesson_named: tuple[str, ...] = ()  # of those, the labels of the points its text names (placed first)
         self._lesson_hidden: frozenset[str] = frozenset()  # ... less those that would overlap
 
     @property
@@ -96,9 +97,11 @@ class PointLabels:
             h.font_screen_scale = 0.75 * self._scale
             h.anchor = self._anchor()
 
-    def set_lesson(self, kinds: tuple[str, ...]) -> None:
-        """Show the labels of these kinds of point (a lesson step's) besides the others (after `show`)."""
+    def set_lesson(self, kinds: tuple[str, ...], named: tuple[str, ...] = ()) -> None:
+        """Show the labels of these kinds of point (a lesson step's) besides the others (after `show`); `named`: the
+        labels of the points its text names, kept before the others when labels would overlap."""
         self._lesson_kinds = tuple(kinds)
+        self._lesson_named = tuple(named)
         self._lesson_hidden = frozenset()
 
     def declutter(
@@ -110,6 +113,8 @@ class PointLabels:
         hidden (shown after `show`)."""
         lesson = tuple(f"/{k}/" for k in self._lesson_kinds)
         names = [n for n in self._handles if n.startswith(lesson)]
+        named = [n for n in self._lesson_named if n in names]
+        names = named + [n for n in names if n not in named]  # what the text names is placed first
         anchor: Any = self._anchor()
         labels = {n: (anchor_of(n), str(self._handles[n].text)) for n in names}
         scale = 0.75 * self._scale

@@ -45,6 +45,8 @@ class Step:
     #: the targets' regions drawn this many times larger at this step (None: as the View tab has them)
     region_zoom: float | None = None
     sight_lines: bool = False  # the sensor's lines of sight to the targets (the step where it measures them)
+    #: the points (kind, id) its text names by id: their labels are kept first where labels would overlap
+    named: Callable[[Evaluation], tuple[tuple[str, str], ...]] | None = None
     readings: bool = False  # the first included fiducial's two readings, drawn beside it (`fiducial_readings`)
 
 
@@ -184,12 +186,30 @@ def _step5(ev: Evaluation, ctx: LessonContext) -> str:
     )
 
 
-def _step6(ev: Evaluation, ctx: LessonContext) -> str:
+def _extreme_corrections(ev: Evaluation) -> tuple[int, int] | None:
+    """(smallest, largest): the included fiducials with the smallest and the largest correction (None: none)."""
     inc = np.flatnonzero(ev.included)
     if not len(inc):
-        return "Every fiducial is excluded: there are no corrections."
+        return None
     n = _norms(ev.corrections[inc])
-    hi, lo = int(inc[int(np.argmax(n))]), int(inc[int(np.argmin(n))])
+    return int(inc[int(np.argmin(n))]), int(inc[int(np.argmax(n))])
+
+
+def _step6_named(ev: Evaluation) -> tuple[tuple[str, str], ...]:
+    ends = _extreme_corrections(ev)
+    return () if ends is None else tuple(("fiducials", ev.fiducial_ids[i]) for i in ends[::-1])
+
+
+def _first_target(ev: Evaluation) -> tuple[tuple[str, str], ...]:
+    return (("targets", ev.targets.ids[0]),) if len(ev.targets.ids) else ()
+
+
+def _step6(ev: Evaluation, ctx: LessonContext) -> str:
+    ends = _extreme_corrections(ev)
+    if ends is None:
+        return "Every fiducial is excluded: there are no corrections."
+    lo, hi = ends
+    n = _norms(ev.corrections[np.flatnonzero(ev.included)])
     return (
         f"The corrections e_i = Rᵀ(b_i − t) − s_i (orange arrows, ×{ctx.magnification:g}) range from "
         f"**{n.min():.3f} mm** ({ev.fiducial_ids[lo]}) to **{n.max():.3f} mm** ({ev.fiducial_ids[hi]}). "
@@ -287,6 +307,8 @@ STEPS: tuple[Step, ...] = (
         target_arrows=False,
         focus=("fiducials", "corrections"),
         see_through=True,
+        labels=("fiducials",),  # its text names the largest and the smallest correction's fiducials
+        named=_step6_named,
     ),
     Step(
         "Measure the targets",
@@ -294,6 +316,7 @@ STEPS: tuple[Step, ...] = (
         _step7,
         focus=("targets", "sensor"),  # the sensor that measures them, in view
         labels=("targets",),
+        named=_first_target,
         sight_lines=True,
         see_through=True,  # the sensor's mast stands between the camera and the lines
     ),
@@ -303,6 +326,8 @@ STEPS: tuple[Step, ...] = (
         _step8,
         focus=("targets", "fiducials", "corrections"),
         see_through=True,
+        labels=("targets",),  # its text names the first target's correction
+        named=_first_target,
     ),
     Step("Correct and map to the robot", ("mesh", "arm", "targets", "landing"), _step9, focus=("targets", "landing")),
 )

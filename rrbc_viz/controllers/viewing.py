@@ -324,7 +324,8 @@ class ViewController:
                     self.ctx.evaluate.set_layer(name, name in step.layers)
                 self.ctx.state.target_arrows = step.target_arrows
                 self.ctx.state.lesson_labels = tuple(step.labels)
-                self.ctx.nodes.set_lesson_labels(step.labels)
+                named = step.named(self.ctx.session.last) if step.named is not None else ()
+                self.ctx.nodes.set_lesson_labels(step.labels, named)
                 self.ctx.nodes.set_arm_marks_visible(False)
                 self.set_see_through(step.see_through)
                 self.ctx.present.draw_scene(self.ctx.session.last)

@@ -342,6 +342,9 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
             visible = [n for n in names if nodes.handle(n).visible]
             assert names and len(visible) >= min(3, len(names)), (k + 1, kind, len(visible))
             shown += visible
+        for kind, pid in step.named(app.session.last) if step.named is not None else ():
+            label = f"/{kind}/{pid}/gizmo/label"  # a point the text names by id keeps its label (placed first)
+            assert nodes.handle(label).visible and pid in app.views.lesson_go(k), (k + 1, label)
         if not shown:
             continue
         label_scale = PRESENTATION_LABEL_SCALE if present else 1.0
