@@ -221,7 +221,7 @@ def _step7(ev: Evaluation, ctx: LessonContext) -> str:
     t = ev.targets
     if not len(t.ids):
         return "There are no targets."
-    what = "targets" if not ev.check_ids else "targets and checks"
+    what = _kinds_word(ev, t.ids)
     sensor = (
         "The sensor (its lines of sight to them drawn) measures"
         if ctx.sensor_drawn
@@ -233,6 +233,12 @@ def _step7(ev: Evaluation, ctx: LessonContext) -> str:
     )
 
 
+def _kinds_word(ev: Evaluation, ids) -> str:
+    """ "targets", "checks" or "targets and checks": what `ids` are (`_split`)."""
+    targets, checks = _split(ev, ids)
+    return "targets and checks" if targets and checks else "checks" if checks else "targets"
+
+
 def _step8(ev: Evaluation, ctx: LessonContext) -> str:
     t = ev.targets
     if not len(t.ids):
@@ -241,7 +247,7 @@ def _step8(ev: Evaluation, ctx: LessonContext) -> str:
     s = (
         f"Each target's correction ê(x) is interpolated (**{ev.settings.interpolation}**) from the nearby fiducial "
         f"corrections (blue arrows, ×{ctx.magnification:g}): {t.ids[0]} gets ê = {_v(t.correction[0])} "
-        f"(|ê| = {n[0]:.3f} mm); over all targets |ê| is {n.min():.3f}–{n.max():.3f} mm."
+        f"(|ê| = {n[0]:.3f} mm); over all {_kinds_word(ev, t.ids)} |ê| is {n.min():.3f}–{n.max():.3f} mm."
     )
     if t.correction_std is not None:
         s += f" The Gaussian process puts ±{float(np.linalg.norm(t.correction_std[0])):.3f} mm (1σ) on {t.ids[0]}'s."
@@ -258,9 +264,9 @@ def _step9(ev: Evaluation, ctx: LessonContext) -> str:
         )
     return (
         f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (vermillion) versus with RRBC (teal), offsets "
-        f"from the truth (the dark centre) on the bullseye beside the selected target, ring scale written beside it "
-        f"(select another target to move it; the panel's bullseye shows the same at true size). Over "
-        f"{sm['scored']} scored targets the RMS error is "
+        f"from the truth (the dark centre) on the bullseye beside the selected point, ring scale written beside it "
+        f"(select another point to move it; the panel's bullseye shows the same at true size). Over "
+        f"{sm['scored']} scored {'checks' if ev.check_ids else 'targets'} the RMS error is "
         f"**{_mm(sm['rmst_rigid_mm'])} rigid → {_mm(sm['rmst_rrbc_mm'])} with RRBC** "
         f"(max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])})."
     )

@@ -652,6 +652,10 @@ def test_the_lessons_colour_words_are_the_colours_its_points_are_drawn_in(tmp_pa
                     assert pid in step4 and word in step4, (pid, word, step4)
             step7 = app.views.lesson_go(6)
             assert ("lines of sight" in step7) == (app.nodes.handle("/sensor/sight") is not None), step7
+            kinds = "targets and checks" if source is not None else "targets"  # the file has both, the scene targets
+            assert f"the {len(ev.targets.ids)} {kinds}" in step7 and f"over all {kinds}" in app.views.lesson_go(7)
+            scored = "checks" if source is not None else "targets"  # a file's targets carry no truth
+            assert f"scored {scored}" in app.views.lesson_go(8)
             app.views.lesson_stop()
         finally:
             app.stop()
