@@ -48,6 +48,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from rrbc_viz.mesh_nodes import GHOST_NODE  # noqa: E402
+from rrbc_viz.teaching import STEPS  # noqa: E402
+
 # (file name, actions). The labels follow rrbc_viz/controls.py as of writing (tabs "Explore", "View", "Learn";
 # the heat-map layer checkbox "Heat map of predicted error" in "View", folder "Layers"; lesson button "Next");
 # scene nodes follow rrbc_viz/nodes.py (/targets/<id>/gizmo). A label missing from the page skips the shot, so
@@ -226,6 +229,11 @@ SHOT_OPTIONS: dict[str, dict] = {
     "urdf_without_meshes.png": {"make": _lift_arm_file, "mesh_node": "/registration/points"},
     "real_station.png": {"make": _real_station, "mesh_node": "/registration/points"},
 }
+# a lesson step that draws the cell see-through has, after its actions, only the see-through mesh node
+# (rrbc_viz/mesh_nodes.py: only the node shown exists)
+SHOT_OPTIONS.update(
+    {f"learn_step{k + 1}.png": {"mesh_node_after": GHOST_NODE} for k, step in enumerate(STEPS) if step.see_through}
+)
 
 APP_ENTRY = "rrbc_viz.serve:serve"
 DEFAULT_MESH_NODE = "/mesh/cell"  # rrbc_viz/nodes.py
@@ -451,7 +459,7 @@ def take_shot(
                 run_action(page, h, app, action)
             if actions:
                 page.wait_for_timeout(300)  # let the server's reaction arrive before checking for stillness
-                wait_for_scene(page, h, mesh_node or found)
+                wait_for_scene(page, h, opts.get("mesh_node_after", mesh_node or found))
             if not wait_settled(page):
                 print(
                     f"screenshots: {name}: page still changing after {SETTLE_TIMEOUT_S:.0f} s; saving anyway",
