@@ -41,7 +41,9 @@ class RetiringExecutor(Executor):
             if self._shutdown:
                 raise RuntimeError("cannot schedule new futures after shutdown")
             self._tasks.put((future, fn, args, kwargs))
-            if self._idle == 0 and len(self._threads) < self._max:
+            # a thread more while the tasks waiting outnumber the idle workers (an idle worker counted here may
+            # already have taken an earlier task: `_idle == 0` alone left tasks queued below the limit under load)
+            if self._tasks.qsize() > self._idle and len(self._threads) < self._max:
                 self._count += 1
                 t = threading.Thread(target=self._work, name=f"{self._name}-{self._count}", daemon=True)
                 self._threads.add(t)
