@@ -200,6 +200,11 @@ def _step6_named(ev: Evaluation) -> tuple[tuple[str, str], ...]:
     return () if ends is None else tuple(("fiducials", ev.fiducial_ids[i]) for i in ends[::-1])
 
 
+def _outside_hull(ev: Evaluation) -> tuple[tuple[str, str], ...]:
+    """Step 4's named points: the targets and checks outside the fiducials' hull (its text lists them)."""
+    return tuple(("targets", p) for p in ev.summary.get("extrapolated", []))
+
+
 def _first_target(ev: Evaluation) -> tuple[tuple[str, str], ...]:
     return (("targets", ev.targets.ids[0]),) if len(ev.targets.ids) else ()
 
@@ -297,7 +302,13 @@ STEPS: tuple[Step, ...] = (
         labels=("targets",),
         region_zoom=REGION_ZOOM,  # a few-millimetre region is hidden inside its target's marker at true size
     ),
-    Step("Choose fiducials around the targets", ("mesh", "targets", "fiducials", "hull", "regions"), _step4),
+    Step(
+        "Choose fiducials around the targets",
+        ("mesh", "targets", "fiducials", "hull", "regions"),
+        _step4,
+        labels=("targets",),  # its text names the points outside the hull
+        named=_outside_hull,
+    ),
     Step(
         "Map the robot's fiducials back",
         ("mesh", "frames", "fiducials"),

@@ -659,3 +659,20 @@ def test_the_lessons_colour_words_are_the_colours_its_points_are_drawn_in(tmp_pa
             app.views.lesson_stop()
         finally:
             app.stop()
+
+
+def test_step_four_labels_the_points_it_names_outside_the_hull(app):
+    """A target dragged out of the fiducials' hull: step 4's text names it, and its label is shown (issue 39: the
+    step named the points outside the hull but labelled none of them)."""
+    from tests.viz.helpers import _gizmo_drag
+
+    ev = app.session.last
+    pid = ev.targets.ids[1]
+    centre = ev.fiducial_positions.mean(axis=0)
+    _gizmo_drag(app, "targets", pid, [centre + 2.5 * (ev.targets.positions[1] - centre)])
+    ev = app.session.last
+    assert pid in ev.summary["extrapolated"], ev.summary["extrapolated"]
+    text = app.views.lesson_go(3)
+    assert "outside the hull" in text and pid in text
+    assert app.nodes.handle(f"/targets/{pid}/gizmo/label").visible
+    app.views.lesson_stop()
