@@ -5,8 +5,9 @@ Model. A row measured with joint values q has its physical point at FK(δ, q), t
 chain (`models.chain.Chain`: from a URDF or a DH table) with the TRUE parameter errors δ (joint zero offsets, errors
 of the joints' origins, the tool point); the sensor reads it at s = T⁻¹(FK(δ, q)) + noise. Identification minimises
 Σ |T(s_i) − FK(δ, q_i)|² (robot frame, mm) over δ and T (robot = R @ sensor + t), by Gauss–Newton with the chain's
-analytic Jacobians (every pose at once); a step that does not lower the sum is halved (an error the model does not
-hold, a bending arm fitted with geometric terms alone, can make full steps oscillate). With load terms
+exact analytic Jacobians (every pose at once); a step that does not lower the sum is damped (Levenberg: an error the
+model does not hold, a bending arm fitted with geometric terms alone, can make full steps overshoot), so the
+iteration ends at the least-squares fit and not short of it. With load terms
 (`models.loads`: joint compliance under gravity, a column's bending, backlash) FK includes their deflections and
 their coefficients are fitted beside δ.
 
@@ -31,8 +32,13 @@ from rrbc_core.models.loads import GRAVITY, Loads, LoadTerm, deflections, factor
 
 RANK_TOL = 1e-4  # singular values below this fraction of the largest: a combination the data do not determine
 MAX_STEPS = 30  # Gauss–Newton steps at most (it converges in a few on data the model describes)
-MAX_HALVINGS = 12  # a step is halved at most this often before the iteration stops (no lower residuals found)
+MAX_HALVINGS = 12  # a step is damped more at most this often before the iteration stops (no lower residuals found)
 STEP_TOL_MM = 1e-9  # a step that moves no scaled parameter by more than this (mm) ends the iteration
+COST_TOL = 1e-10  # a step that lowers the sum of squares by less than this fraction of it ends the iteration
+# Levenberg's damping λ (a fraction of the largest singular value squared): none while full Gauss–Newton steps lower
+# the residuals; from DAMPING_START, times DAMPING_UP per rejected step, times DAMPING_DOWN per accepted one, and
+# none again below DAMPING_MIN
+DAMPING_START, DAMPING_UP, DAMPING_DOWN, DAMPING_MIN = 1e-6, 10.0, 0.3, 1e-9
 MIN_POSES = 6
 TERM_ALONE_TOL = 1e-2
 
@@ -235,15 +241,17 @@ def calibrate(
     k0 = n_p + n_t
     res, j = _system(chain, qa, s, delta, rot, t, gi, terms, coef, loads)
     cost = float(res @ res)
+    damping = 0.0  # Levenberg's λ, relative to the largest singular value squared; 0: a Gauss–Newton step
     for _ in range(MAX_STEPS):
         js = j / sc
-        _, sv, vt = np.linalg.svd(js, full_matrices=False)
+        u, sv, vt = np.linalg.svd(js, full_matrices=False)
         rank = int(np.sum(sv > RANK_TOL * sv[0]))
         basis = vt[:rank].T
-        z, *_ = np.linalg.lstsq(js @ basis, -res, rcond=None)
-        step_scaled = basis @ z
-        step = step_scaled / sc
-        for _ in range(MAX_HALVINGS):  # a Gauss–Newton step that does not lower the residuals is halved
+        grad = u[:, :rank].T @ res
+        for _ in range(MAX_HALVINGS):  # a step that does not lower the residuals is damped more (Levenberg)
+            z = -sv[:rank] * grad / (sv[:rank] ** 2 + damping * sv[0] ** 2)
+            step_scaled = basis @ z
+            step = step_scaled / sc
             d_new, c_new = delta + step[:n_p], coef + step[n_p:k0]
             r_new, t_new = rot.copy(), t.copy()
             for g in range(n_g):
@@ -252,13 +260,15 @@ def calibrate(
                 t_new[g] = t[g] + step[k + 3 : k + 6]
             res_new, j_new = _system(chain, qa, s, d_new, r_new, t_new, gi, terms, c_new, loads)
             if float(res_new @ res_new) <= cost:
+                damping = 0.0 if damping < DAMPING_MIN else damping * DAMPING_DOWN
                 break
-            step, step_scaled = 0.5 * step, 0.5 * step_scaled
+            damping = DAMPING_START if damping < DAMPING_MIN else damping * DAMPING_UP
         else:
             break
+        gain = cost - float(res_new @ res_new)
         delta, coef, rot, t, res, j = d_new, c_new, r_new, t_new, res_new, j_new
         cost = float(res @ res)
-        if np.max(np.abs(step_scaled)) < STEP_TOL_MM:
+        if np.max(np.abs(step_scaled)) < STEP_TOL_MM or gain <= COST_TOL * cost:
             break
     js = j / sc
     _, sv, vt = np.linalg.svd(js, full_matrices=False)

@@ -28,9 +28,12 @@ Parameters δ (the errors calibration identifies), named `<joint>.<what>`, in mm
 E_k(δ) = [Rot(Σ δr_j d_j) | Σ δp_j d_j] in the joint's frame: a rotation about the axis itself would repeat the
 offset (for a prismatic joint, a shift along the axis), so neither is a parameter.
 
-Jacobians (p − o: from the joint frame's origin o = G_k's translation to the tool point, R = G_k's rotation):
-position error along d → R d; rotation about d → (R d) × (p − o); revolute offset or motion → (R a) × (p − o);
-prismatic → R a. An input's column sums the columns of the joints it drives, times their multipliers.
+Jacobians (p − o: from the joint frame's origin o = G_k's translation to the tool point, R = G_k's rotation, E its
+error rotation Rot(φ), φ = Σ δr_j d_j plus any deflection): position error along d → R Eᵀ d (the position error is
+applied before the error rotation); rotation about d → (R J_r(φ) d) × (p − o), J_r SO(3)'s right Jacobian (both are
+R d at the nominal chain, φ = 0); revolute offset or motion → (R a) × (p − o); prismatic → R a. An input's column sums
+the columns of the joints it drives, times their multipliers. Exact at any δ (calibration's steps need it away from
+the nominal arm).
 """
 
 from __future__ import annotations
@@ -79,6 +82,20 @@ def _rotvecs(v: np.ndarray) -> np.ndarray:
     angle = np.linalg.norm(v, axis=1)
     safe = np.where(angle > 0, angle, 1.0)
     return rotation(v / safe[:, None], angle)
+
+
+def _right_jacobian(v: np.ndarray) -> np.ndarray:
+    """SO(3)'s right Jacobian (3, 3) or (N, 3, 3) of rotation vectors v (3,) or (N, 3) rad: exp(v + ε) =
+    exp(v) exp(J_r(v) ε) to first order in ε. J_r = I − (1 − cos θ)/θ² K + (θ − sin θ)/θ³ K², K = [v]×, θ = |v|."""
+    theta = np.linalg.norm(v, axis=-1)[..., None, None]
+    small = theta < 1e-4  # the series' next terms are below 1e-17 there
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
+    k = np.zeros(np.shape(v)[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return np.eye(3) - a * k + b * (k @ k)
 
 
 def _perpendicular(axis: np.ndarray) -> tuple[tuple[np.ndarray, str], tuple[np.ndarray, str]]:
@@ -262,12 +279,16 @@ class Chain:
             sl = slice(base + 1, base + 6)
             w = d[sl][:, None] * directions[sl]
             rv, e_pos = w[is_rot[sl]].sum(axis=0), w[~is_rot[sl]].sum(axis=0)
-            e_rot = _rotvec(rv) if drot is None or not np.any(drot[:, k]) else _rotvecs(rv + drot[:, k])
+            if drot is None or not np.any(drot[:, k]):
+                e_rot = _rotvec(rv)
+            else:
+                rv = rv + drot[:, k]
+                e_rot = _rotvecs(rv)
             o_rot = j.origin[:3, :3] @ e_rot
             o_pos = j.origin[:3, :3] @ e_pos + j.origin[:3, 3]
             pos = pos + rot @ o_pos
             rot = rot @ o_rot
-            frames.append((rot, pos))
+            frames.append((rot, pos, e_rot, rv))
             value = v[:, k] + d[base]
             if j.prismatic:
                 pos = pos + (rot @ j.axis) * value[:, None]
@@ -278,9 +299,16 @@ class Chain:
         if not jacobians:
             return p, None, None
         d_params = np.empty((n, 3, self.n_params))
-        for k, (r_k, o_k) in enumerate(frames):  # a joint's six columns at once
+        for k, (r_k, o_k, e_rot, rv) in enumerate(frames):  # a joint's six columns at once
             sl = slice(6 * k, 6 * k + 6)
-            world = r_k @ directions[sl].T  # (N, 3, 6)
+            local = directions[sl].T  # (3, 6) in G_k's frame; exact away from the nominal chain (docstring)
+            if np.any(rv):
+                local = np.broadcast_to(local, np.shape(e_rot)[:-2] + (3, 6)).copy()
+                rots, poss = is_rot[sl], ~is_rot[sl]
+                poss[0] = False  # the offset's direction is the axis itself, in G_k's frame
+                local[..., rots] = _right_jacobian(rv) @ local[..., rots]
+                local[..., poss] = np.swapaxes(e_rot, -1, -2) @ local[..., poss]
+            world = r_k @ local  # (N, 3, 6)
             lever = (p - o_k)[:, :, None]
             cols = np.where(arm[sl], _cross(world, lever), world)
             d_params[:, :, sl] = cols

@@ -109,7 +109,11 @@ def test_checks_far_beyond_hundreds_of_poses_get_the_arm_that_extrapolates(tmp_p
 def test_the_recommendation_beyond_the_fiducials_follows_what_the_error_is(seed):
     """Hundreds of poses, the checks the farthest third: with a smooth sensor field alone nothing learnt from the
     fiducials carries there and rigid (or what is within 10 % of the best) is recommended; with kinematic errors
-    alone VEC is; both within 10 % of the best at the checks, chosen without them."""
+    alone VEC is, within 10 % of the best at the checks; both chosen without the checks.
+
+    With the field alone, an arm fitted to it can by chance do better than rigid at the far checks (seed 4: VEC 1.016
+    against rigid 1.154 mm once calibrate reaches the least-squares fit); rigid, which corrects nothing the field
+    made, is the answer that follows the error there."""
     chain = load_urdf("lift_arm")
     for kin, field in ((0.0, 1.0), (1.0, 0.0)):
         full = chain_measurements(
@@ -117,7 +121,16 @@ def test_the_recommendation_beyond_the_fiducials_follows_what_the_error_is(seed)
         )
         res = compare(far_checks(full, 100), urdf="lift_arm")
         assert res["extrapolated_share"] > 0.5 and res["extrapolation_folds"] >= 2
-        assert _within(res), (kin, field, res["recommended"], res["rmst_mm"], res["extrapolation_cv_rmst_mm"])
+        follows = res["recommended"] == "rigid" if kin == 0.0 else res["recommended"] in ("vec", "vec_rrbc")
+        assert follows or _within(res), (
+            kin,
+            field,
+            res["recommended"],
+            res["rmst_mm"],
+            res["extrapolation_cv_rmst_mm"],
+        )
+        if kin:
+            assert _within(res), (res["recommended"], res["rmst_mm"], res["extrapolation_cv_rmst_mm"])
 
 
 def test_checks_off_the_plane_of_coplanar_fiducials_get_no_interpolated_correction(tmp_path):
