@@ -6,7 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from rrbc_core.geometry.label_layout import label_boxes, overlap, uncluttered
+from rrbc_core.geometry.label_layout import label_boxes, overlap, placed
+
+#: Where a lesson label may go besides its own anchor when that would meet another label: below its point, then the
+#: other side (the first that fits; `label_layout.placed`).
+OTHER_ANCHORS = {
+    "bottom-left": ("top-left", "bottom-right", "top-right"),
+    "bottom-center": ("top-center",),
+}
 
 
 def declutter(
@@ -18,24 +25,29 @@ def declutter(
     font_scale: float,
     anchor: str,
     first_anchor: str | None = None,
-) -> frozenset[str]:
+) -> tuple[frozenset[str], dict[str, str]]:
     """The names of `labels` (name -> (where it is drawn (3,) robot frame mm, its text)) to hide so that none
     overlaps another or runs under the panel when seen by `pose` (a `CameraPose`) in an image of `image_px` (width,
-    height) CSS px: `first` (the selected point's label, drawn with `first_anchor` if given) is placed first and
-    never hidden, the others in order."""
+    height) CSS px, and the labels to draw with another anchor than `anchor` (name -> anchor: `OTHER_ANCHORS`, where
+    their own would meet another): `first` (the selected point's label, drawn with `first_anchor` if given) is
+    placed first and never hidden, the others in order."""
     names = list(labels)
     if first in names:
         names.remove(first)
         names.insert(0, first)
     if not names:
-        return frozenset()
+        return frozenset(), {}
     anchors = np.array([labels[n][0] for n in names])
     texts = [labels[n][1] for n in names]
-    boxes = label_boxes(anchors, texts, pose, image_px, font_scale, anchor)
-    if first_anchor is not None and names[0] == first:
-        boxes[0] = label_boxes(anchors[:1], texts[:1], pose, image_px, font_scale, first_anchor)[0]
-    keep = uncluttered(boxes, image_px, panel_px)
-    return frozenset(n for n, k in zip(names, keep) if not k and n != first)
+    options = (anchor, *OTHER_ANCHORS.get(anchor, ()))
+    cand = np.stack([label_boxes(anchors, texts, pose, image_px, font_scale, a) for a in options], axis=1)
+    if names[0] == first:  # the selected label: its own anchor only
+        cand[0, 1:] = np.nan
+        if first_anchor is not None:
+            cand[0, 0] = label_boxes(anchors[:1], texts[:1], pose, image_px, font_scale, first_anchor)[0]
+    choice = placed(cand, image_px, panel_px)
+    hidden = frozenset(n for n, k in zip(names, choice) if k < 0 and n != first)
+    return hidden, {n: options[k] for n, k in zip(names, choice) if k > 0}
 
 
 def inside_anchor(point, text: str, pose, image_px, panel_px: float, font_scale: float, anchor: str) -> str:

@@ -502,6 +502,7 @@ class SceneNodes:
             on = key == selected
             self._assign(tc, "disable_axes", not on)
             self._assign(tc, "disable_sliders", not on)
+        self._labels.raise_label(self._selected_label(), 1.6 * self._display.marker_mm, 1.1 * self.gizmo_scale())
         self._show_labels()
 
     def applicable_layers(self) -> tuple[str, ...]:
@@ -588,7 +589,7 @@ class SceneNodes:
             s.radius = r if kind == "fiducials" else 0.8 * r
         for tc in self._gizmos.values():
             tc.scale = self.gizmo_scale()
-        self._labels.lift_point_labels(1.6 * r)
+        self._labels.lift_point_labels(1.6 * r, 1.1 * self.gizmo_scale())
         for key in ("/corrections/fiducials", "/corrections/targets"):
             for k, v in self._arrow_sizes().items():
                 setattr(self._nodes[key], k, v)

@@ -35,6 +35,9 @@ class PointLabels:
         self._lesson_kinds: tuple[str, ...] = ()  # kinds of point whose labels a lesson step shows
         self._lesson_named: tuple[str, ...] = ()  # of those, the labels of the points its text names (placed first)
         self._lesson_hidden: frozenset[str] = frozenset()  # ... less those that would overlap
+        self._raised: str | None = None  # the selected point's label, drawn above its drag handle
+        self._sided: dict[str, str] = {}  # lesson labels drawn with another anchor (their own would meet a label)
+        self._heights = (0.0, 0.0)  # point labels' heights above their point (mm): the others', the raised one's
 
     @property
     def scale(self) -> float:
@@ -65,6 +68,8 @@ class PointLabels:
 
     def clear(self) -> None:
         self._handles.clear()
+        self._raised = None
+        self._sided = {}
 
     def add(self, name: str, text: str, position, visible: bool) -> None:
         """A new label `name` reading `text` at `position` (its parent's frame, mm)."""
@@ -84,11 +89,26 @@ class PointLabels:
     def move(self, name: str, position) -> None:
         self._handles[name].position = np.asarray(position, float)
 
-    def lift_point_labels(self, height_mm: float) -> None:
-        """Every point label (under a drag handle) drawn `height_mm` above its point."""
+    def lift_point_labels(self, height_mm: float, raised_mm: float) -> None:
+        """Every point label (under a drag handle) drawn `height_mm` above its point, the selected one's (`raise_label`)
+        `raised_mm`."""
+        self._heights = (float(height_mm), float(raised_mm))
         for name, h in self._handles.items():
             if name.endswith("/gizmo/label"):
-                h.position = np.array([0.0, 0.0, height_mm])
+                h.position = np.array([0.0, 0.0, self._heights[name == self._raised]])
+
+    def raise_label(self, mine: str | None, height_mm: float, raised_mm: float) -> None:
+        """The selected point's label `mine` (None: none) drawn `raised_mm` above its point, over its drag handle's up
+        arrow, whose arrows and planes would cover it at the usual `height_mm` (issue 39); the one raised before
+        back down."""
+        self._heights = (float(height_mm), float(raised_mm))
+        if mine == self._raised:
+            return
+        if self._raised in self._handles:
+            self._handles[self._raised].position = np.array([0.0, 0.0, self._heights[0]])
+        if mine in self._handles:
+            self._handles[mine].position = np.array([0.0, 0.0, self._heights[1]])
+        self._raised = mine
 
     def set_scale(self, factor: float) -> None:
         """Labels' screen size × factor (presentation mode when > 1)."""
@@ -103,6 +123,10 @@ class PointLabels:
         self._lesson_kinds = tuple(kinds)
         self._lesson_named = tuple(named)
         self._lesson_hidden = frozenset()
+        for name in self._sided:  # drawn on another side for the step before: back to the common anchor
+            if name in self._handles and name != self._reanchored:
+                self._handles[name].anchor = self._anchor()
+        self._sided = {}
 
     def declutter(
         self, mine: str | None, anchor_of: Callable[[str], np.ndarray], pose, image_px, panel_px: float
@@ -122,14 +146,20 @@ class PointLabels:
         moved, self._reanchored = self._reanchored, None
         if moved in self._handles and moved != mine:  # an earlier selection's label back to the common anchor
             self._handles[moved].anchor = anchor
+        for name in self._sided:  # and an earlier step's labels drawn on another side
+            if name in self._handles and name != mine:
+                self._handles[name].anchor = anchor
+        self._sided = {}
         if mine is not None and mine in self._handles:  # the selected point's label kept inside the view
             text = str(self._handles[mine].text)
             first_anchor = lesson_labels.inside_anchor(anchor_of(mine), text, pose, image_px, panel_px, scale, anchor)
             self._handles[mine].anchor = first_anchor
             self._reanchored = mine
-        self._lesson_hidden = lesson_labels.declutter(
+        self._lesson_hidden, self._sided = lesson_labels.declutter(
             labels, mine, pose, image_px, panel_px, scale, anchor, first_anchor
         )
+        for name, side in self._sided.items():
+            self._handles[name].anchor = side  # type: ignore[assignment]
         return self._lesson_hidden
 
     def show(self, layer_on: bool, mine: str | None) -> None:

@@ -4,7 +4,8 @@ A label is drawn at a fixed size on screen (viser's "screen" labels: an em of `L
 scale) beside its anchor point, which the camera projects as in `framing.project`. Its box is estimated from its
 text: `CHAR_EM` em per character and `LINE_EM` em tall. Labels are taken greedily in the order given (the one a
 lesson's text names first): a label is kept when its anchor is in front of the camera, its box lies in the image
-left of the panel, and it does not meet a box already kept (with `GAP_PX` between them).
+left of the panel, and it does not meet a box already kept (with `GAP_PX` between them); a label that may be drawn
+with other anchors (`placed`) takes the first of them that fits.
 
 Frames and units: anchors (N, 3) robot frame, mm; image and boxes in CSS px, origin at the image's top left.
 """
@@ -56,17 +57,27 @@ def overlap(a, b, gap_px: float = GAP_PX) -> bool:
 def uncluttered(boxes, image_px, panel_px: float = 0.0, gap_px: float = GAP_PX) -> np.ndarray:
     """(N,) bool: the labels to show, taken in the rows' order (module docstring), from their `boxes` (N, 4) as
     `label_boxes` gives them; `panel_px`: the width the panel covers at the image's right."""
-    b = np.asarray(boxes, float).reshape(-1, 4)
+    b = np.asarray(boxes, float).reshape(-1, 1, 4)
+    return placed(b, image_px, panel_px, gap_px) == 0
+
+
+def placed(candidates, image_px, panel_px: float = 0.0, gap_px: float = GAP_PX) -> np.ndarray:
+    """(N,) int: for each label, taken in the rows' order, the first of its candidate boxes (N, A, 4) (one per
+    anchor it may be drawn with, as `label_boxes` gives them; NaN rows: not a candidate) that lies in the image left
+    of the panel (`panel_px` wide at the right) and meets no box already placed; -1 where none does (hidden)."""
+    c = np.asarray(candidates, float).reshape(len(candidates), -1, 4)
     w_img, h_img = (float(v) for v in image_px)
-    keep = np.zeros(len(b), bool)
+    choice = np.full(len(c), -1, int)
     kept: list[np.ndarray] = []
-    for i, box in enumerate(b):
-        if not np.all(np.isfinite(box)):
-            continue
-        if box[0] < 0 or box[1] < 0 or box[2] > w_img - panel_px or box[3] > h_img:
-            continue
-        if any(overlap(box, k, gap_px) for k in kept):
-            continue
-        keep[i] = True
-        kept.append(box)
-    return keep
+    for i, boxes in enumerate(c):
+        for a, box in enumerate(boxes):
+            if not np.all(np.isfinite(box)):
+                continue
+            if box[0] < 0 or box[1] < 0 or box[2] > w_img - panel_px or box[3] > h_img:
+                continue
+            if any(overlap(box, k, gap_px) for k in kept):
+                continue
+            choice[i] = a
+            kept.append(box)
+            break
+    return choice

@@ -63,3 +63,22 @@ def test_the_first_label_wins_far_labels_all_stay_and_none_behind_the_camera():
     behind = pose.position - 100.0 * pose.forward
     boxes = label_boxes(np.vstack([pts, behind]), texts + ["B"], pose, IMAGE, 0.75)
     assert np.isnan(boxes[-1]).all() and not uncluttered(boxes, IMAGE)[-1]
+
+
+def test_a_label_that_would_meet_a_placed_one_takes_its_first_free_other_anchor():
+    """`placed`: each label in order takes its first candidate box that is in the image and meets no box placed
+    before; one whose every candidate is taken is hidden (-1)."""
+    from rrbc_core.geometry.label_layout import placed
+
+    nan = [np.nan] * 4
+    cand = np.array(
+        [
+            [[100, 100, 200, 110], nan, nan],  # placed with its own anchor
+            [[150, 100, 250, 110], [150, 112, 250, 122], nan],  # its own meets the first: the second candidate
+            [[150, 100, 250, 110], [150, 112, 250, 122], [-10, 100, 90, 110]],  # both taken, the third off screen
+            [[300, 300, 400, 310], [0, 0, 10, 10], nan],  # its own is free
+        ],
+        float,
+    )
+    assert placed(cand, IMAGE).tolist() == [0, 1, -1, 0]
+    assert uncluttered(cand[:, 0], IMAGE).tolist() == [True, False, False, True]
