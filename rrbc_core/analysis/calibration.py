@@ -40,6 +40,11 @@ COST_TOL = 1e-10  # a step that lowers the sum of squares by less than this frac
 # none again below DAMPING_MIN
 DAMPING_START, DAMPING_UP, DAMPING_DOWN, DAMPING_MIN = 1e-6, 10.0, 0.3, 1e-9
 MIN_POSES = 6
+#: the warning of an arm fit that stopped after MAX_STEPS steps still lowering its residuals (`Calibration.converged`)
+NOT_CONVERGED = (
+    f"the arm fit stopped after {MAX_STEPS} steps while its residuals were still falling: VEC's figures may be short "
+    "of the model's least-squares fit (an arm model far from the data, or data that barely determine it)"
+)
 TERM_ALONE_TOL = 1e-2
 
 
@@ -90,6 +95,8 @@ class Calibration:
     #: the covariance of every identified parameter (P + T + 6G: the chain's, the load terms', each transform's
     #: rotation vector and translation) in their own units (rad, mm, rad/Nm), on the identified combinations only
     param_cov: np.ndarray | None = None
+    #: False when the iteration stopped after `MAX_STEPS` steps still lowering the residuals (short of the fit)
+    converged: bool = True
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -242,6 +249,7 @@ def calibrate(
     res, j = _system(chain, qa, s, delta, rot, t, gi, terms, coef, loads)
     cost = float(res @ res)
     damping = 0.0  # Levenberg's λ, relative to the largest singular value squared; 0: a Gauss–Newton step
+    converged = False  # stopped by a tolerance, or where no damped step lowers the residuals: not by MAX_STEPS
     for _ in range(MAX_STEPS):
         js = j / sc
         u, sv, vt = np.linalg.svd(js, full_matrices=False)
@@ -264,11 +272,13 @@ def calibrate(
                 break
             damping = DAMPING_START if damping < DAMPING_MIN else damping * DAMPING_UP
         else:
+            converged = True  # not even a short step along the gradient lowers them: a minimum
             break
         gain = cost - float(res_new @ res_new)
         delta, coef, rot, t, res, j = d_new, c_new, r_new, t_new, res_new, j_new
         cost = float(res @ res)
         if np.max(np.abs(step_scaled)) < STEP_TOL_MM or gain <= COST_TOL * cost:
+            converged = True
             break
     js = j / sc
     _, sv, vt = np.linalg.svd(js, full_matrices=False)
@@ -319,6 +329,7 @@ def calibrate(
         coef_identifiable=alone[n_p:k0],
         gravity=tuple(float(v) for v in (GRAVITY if gravity is None else gravity)),
         param_cov=cov,
+        converged=converged,
     )
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from rrbc_core.analysis.arm_verdict import RULE as ARM_RULE
 from rrbc_core.analysis.arm_verdict import arm_verdict
-from rrbc_core.analysis.calibration import Calibration, calibrate, fixed_transforms, vec_commands
+from rrbc_core.analysis.calibration import NOT_CONVERGED, Calibration, calibrate, fixed_transforms, vec_commands
 from rrbc_core.analysis.configuration_rrbc import (
     INTERPOLATED,
     choose_spaces,
@@ -584,5 +584,6 @@ def compare(
             "largest_change_deg": float(np.degrees(config.distance_rad.max())),
             "fiducials_largest_change_deg": float(np.degrees(config.fiducial_rad.max())),
         },
-        "warnings": [w for w in ([config.warning(space=spaces["rrbc"])] if config is not None else []) if w],
+        "warnings": [w for w in ([config.warning(space=spaces["rrbc"])] if config is not None else []) if w]
+        + ([] if cal.converged else [NOT_CONVERGED]),
     }
