@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rrbc_core.errors import InputError
+from rrbc_core.geometry.transforms import skew
 
 KINDS = ("revolute", "continuous", "prismatic")
 _AXIS_NAMES = ("x", "y", "z")
@@ -92,9 +93,7 @@ def _right_jacobian(v: np.ndarray) -> np.ndarray:
     t = np.where(small, 1.0, theta)
     a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
     b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
-    k = np.zeros(np.shape(v)[:-1] + (3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    k = skew(v)
     return np.eye(3) - a * k + b * (k @ k)
 
 
