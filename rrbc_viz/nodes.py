@@ -502,7 +502,7 @@ class SceneNodes:
             on = key == selected
             self._assign(tc, "disable_axes", not on)
             self._assign(tc, "disable_sliders", not on)
-        self._labels.raise_label(self._selected_label(), 1.6 * self._display.marker_mm, 1.1 * self.gizmo_scale())
+        self._labels.raise_label(self._selected_label(), *self._label_heights())
         self._show_labels()
 
     def applicable_layers(self) -> tuple[str, ...]:
@@ -578,6 +578,10 @@ class SceneNodes:
     def _selected_label(self) -> str | None:
         return None if self._selected is None else f"{gizmo_name(*self._selected)}/label"
 
+    def _label_heights(self) -> tuple[float, float]:
+        """A point label's height above its point and the selected one's (over its drag handle), mm."""
+        return 1.6 * self._display.marker_mm, 1.1 * self.gizmo_scale()
+
     def _show_labels(self) -> None:
         # presentation mode: only the selected point's label and a lesson step's (large labels would overlap)
         self._labels.show(bool(self._layers.get("labels")), self._selected_label())
@@ -589,7 +593,7 @@ class SceneNodes:
             s.radius = r if kind == "fiducials" else 0.8 * r
         for tc in self._gizmos.values():
             tc.scale = self.gizmo_scale()
-        self._labels.lift_point_labels(1.6 * r, 1.1 * self.gizmo_scale())
+        self._labels.lift_point_labels(*self._label_heights())
         for key in ("/corrections/fiducials", "/corrections/targets"):
             for k, v in self._arrow_sizes().items():
                 setattr(self._nodes[key], k, v)

@@ -123,8 +123,12 @@ class PointLabels:
         self._lesson_kinds = tuple(kinds)
         self._lesson_named = tuple(named)
         self._lesson_hidden = frozenset()
-        for name in self._sided:  # drawn on another side for the step before: back to the common anchor
-            if name in self._handles and name != self._reanchored:
+        self._unside(keep=self._reanchored)  # drawn on another side for the step before: back to the common anchor
+
+    def _unside(self, keep: str | None) -> None:
+        """Put the labels drawn on another side back to the common anchor, all but `keep`'s."""
+        for name in self._sided:
+            if name in self._handles and name != keep:
                 self._handles[name].anchor = self._anchor()
         self._sided = {}
 
@@ -146,10 +150,7 @@ class PointLabels:
         moved, self._reanchored = self._reanchored, None
         if moved in self._handles and moved != mine:  # an earlier selection's label back to the common anchor
             self._handles[moved].anchor = anchor
-        for name in self._sided:  # and an earlier step's labels drawn on another side
-            if name in self._handles and name != mine:
-                self._handles[name].anchor = anchor
-        self._sided = {}
+        self._unside(keep=mine)  # and an earlier step's labels drawn on another side
         if mine is not None and mine in self._handles:  # the selected point's label kept inside the view
             text = str(self._handles[mine].text)
             first_anchor = lesson_labels.inside_anchor(anchor_of(mine), text, pose, image_px, panel_px, scale, anchor)

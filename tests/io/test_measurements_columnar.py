@@ -9,6 +9,7 @@ import pytest
 
 from rrbc_core.errors import InputError
 from rrbc_core.io import measurements as reader
+from rrbc_core.io import measurements_columnar as columnar
 from rrbc_core.io.measurements import _check_header, parse_measurements
 from rrbc_core.io.measurements_columnar import parse_columnar
 from rrbc_core.io.measurements_write import write_measurements
@@ -101,8 +102,17 @@ def _set(cells: list[str], k, value: str) -> list[str]:
     return out
 
 
-@pytest.mark.parametrize("grouped", [False, True], ids=["one station", "stations"])
-def test_the_columnar_reader_reads_every_file_as_the_row_reader_does(tmp_path, monkeypatch, grouped):
+@pytest.mark.parametrize(
+    ("grouped", "threads"),
+    [(False, False), (True, False), (False, True)],
+    ids=["one station", "stations", "by threads in small blocks"],
+)
+def test_the_columnar_reader_reads_every_file_as_the_row_reader_does(tmp_path, monkeypatch, grouped, threads):
+    """`threads`: every file parsed by pyarrow's threads first, in blocks of 512 bytes (a long file's way: lines
+    they cannot place are read again by one thread)."""
+    if threads:
+        monkeypatch.setattr(columnar, "THREADED_MIN_BYTES", 0)
+        monkeypatch.setattr(columnar, "THREADED_BLOCK_BYTES", 512)
     base = _base_text(tmp_path, grouped)
     lines = base.split("\n")
     header = next(i for i, line in enumerate(lines) if line and not line.startswith("#"))
@@ -270,3 +280,29 @@ def test_a_read_sets_pyarrows_default_pool_back_also_when_readers_overlap_or_fai
     assert parse_columnar(text.replace("\n", "\n1,5\n", 1), "f.csv", _check_header) is None  # undecided
     assert pa.default_memory_pool().backend_name == before
     np.testing.assert_array_equal(got.sensor, parse_columnar(text, "f.csv", _check_header).sensor)
+
+
+def test_a_long_file_with_a_comment_line_is_read_by_threads_then_once_by_one(tmp_path, monkeypatch):
+    """By threads pyarrow gives a refused line no number, so a comment line far down cannot be skipped there: the
+    file is read once more by one thread with its numbers still parsed as numbers (not as text), and the set is the
+    row reader's. (The comment has no space: a space anywhere in the rows has every cell read as text.)"""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    monkeypatch.setattr(columnar, "THREADED_MIN_BYTES", 0)
+    monkeypatch.setattr(columnar, "THREADED_BLOCK_BYTES", 4096)
+    lines = _base_text(tmp_path, False).split("\n")
+    lines.insert(len(lines) // 2, "#a-note-far-down")
+    text = "\n".join(lines)
+    reads = []
+    real = pcsv.read_csv
+
+    def spy(source, read_options=None, parse_options=None, convert_options=None, **kw):
+        typed = any(pa.types.is_floating(t) for t in convert_options.column_types.values())
+        reads.append((read_options.use_threads, typed))
+        return real(source, read_options=read_options, parse_options=parse_options, convert_options=convert_options)
+
+    monkeypatch.setattr(pcsv, "read_csv", spy)
+    by_columns, _ = _read(text, monkeypatch, columnar=True)
+    assert reads == [(True, True), (False, True)]
+    assert _same(by_columns, _read(text, monkeypatch, columnar=False)[0])
