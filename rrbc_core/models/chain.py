@@ -39,6 +39,7 @@ the nominal arm).
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,9 +55,8 @@ def rotation(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Rotations (..., 3, 3) about unit `axes` (..., 3) or one axis (3,) by `angles` (...) rad (Rodrigues)."""
     c, s = np.cos(angles)[..., None, None], np.sin(angles)[..., None, None]
     if np.ndim(axes) == 1:  # one axis: I + sin K + (1 - cos) K², K its cross-product matrix
-        x, y, z = np.asarray(axes, float)
-        k1 = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-        return np.eye(3) + s * k1 + (1.0 - c) * (k1 @ k1)
+        k1, k2 = _axis_matrices(*np.asarray(axes, float).tolist())
+        return _EYE + s * k1 + (1.0 - c) * k2
     a = np.broadcast_to(np.asarray(axes, float), np.shape(angles) + (3,))
     k = np.zeros(a.shape[:-1] + (3, 3))
     k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
@@ -65,17 +65,35 @@ def rotation(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
     return c * np.eye(3) + s * k + (1.0 - c) * outer
 
 
+_EYE = np.eye(3)
+_EYE.setflags(write=False)
+
+
+@functools.lru_cache(maxsize=256)
+def _axis_matrices(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndarray]:
+    """(K, K²) of axis (x, y, z): its cross-product matrix and that squared (a chain's few axes, built once)."""
+    k1 = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    k2 = k1 @ k1
+    for m in (k1, k2):
+        m.setflags(write=False)
+    return k1, k2
+
+
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b over axis 1 of (N, 3, M) arrays (broadcast): np.cross without its per-call overhead."""
-    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
-    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=1)
+    """a × b over axis -2 of (..., 3, M) arrays (broadcast): np.cross without its per-call overhead."""
+    a0, a1, a2 = a[..., 0, :], a[..., 1, :], a[..., 2, :]
+    b0, b1, b2 = b[..., 0, :], b[..., 1, :], b[..., 2, :]
+    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-2)
 
 
 def _rotvec(v: np.ndarray) -> np.ndarray:
-    """Rotation (3, 3) of a rotation vector (3,) rad."""
-    angle = float(np.linalg.norm(v))
-    return np.eye(3) if angle == 0.0 else rotation(v / angle, np.array(angle))
+    """Rotation (3, 3) of a rotation vector (3,) rad: I + sin θ/θ K + (1 − cos θ)/θ² K², K = [v]×."""
+    x, y, z = np.asarray(v, float).tolist()
+    angle = math.sqrt(x * x + y * y + z * z)
+    if angle == 0.0:
+        return np.eye(3)
+    k1 = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + (math.sin(angle) / angle) * k1 + ((1.0 - math.cos(angle)) / angle**2) * (k1 @ k1)
 
 
 def _rotvecs(v: np.ndarray) -> np.ndarray:
@@ -88,6 +106,15 @@ def _rotvecs(v: np.ndarray) -> np.ndarray:
 def _right_jacobian(v: np.ndarray) -> np.ndarray:
     """SO(3)'s right Jacobian (3, 3) or (N, 3, 3) of rotation vectors v (3,) or (N, 3) rad: exp(v + ε) =
     exp(v) exp(J_r(v) ε) to first order in ε. J_r = I − (1 − cos θ)/θ² K + (θ − sin θ)/θ³ K², K = [v]×, θ = |v|."""
+    if np.ndim(v) == 1:  # one vector: scalars, not arrays
+        theta1 = float(np.linalg.norm(v))
+        if theta1 < 1e-4:  # the series' next terms are below 1e-17 there
+            a1, b1 = 0.5 - theta1**2 / 24.0, 1.0 / 6.0 - theta1**2 / 120.0
+        else:
+            a1 = (1.0 - math.cos(theta1)) / theta1**2
+            b1 = (theta1 - math.sin(theta1)) / theta1**3
+        k1 = skew(v)
+        return np.eye(3) - a1 * k1 + b1 * (k1 @ k1)
     theta = np.linalg.norm(v, axis=-1)[..., None, None]
     small = theta < 1e-4  # the series' next terms are below 1e-17 there
     t = np.where(small, 1.0, theta)
@@ -297,20 +324,26 @@ class Chain:
         p = pos + rot @ (self.tail[:3, :3] @ tool + self.tail[:3, 3])
         if not jacobians:
             return p, None, None
+        n_joints = len(frames)
         d_params = np.empty((n, 3, self.n_params))
-        for k, (r_k, o_k, e_rot, rv) in enumerate(frames):  # a joint's six columns at once
-            sl = slice(6 * k, 6 * k + 6)
-            local = directions[sl].T  # (3, 6) in G_k's frame; exact away from the nominal chain (docstring)
-            if np.any(rv):
-                local = np.broadcast_to(local, np.shape(e_rot)[:-2] + (3, 6)).copy()
-                rots, poss = is_rot[sl], ~is_rot[sl]
-                poss[0] = False  # the offset's direction is the axis itself, in G_k's frame
-                local[..., rots] = _right_jacobian(rv) @ local[..., rots]
-                local[..., poss] = np.swapaxes(e_rot, -1, -2) @ local[..., poss]
-            world = r_k @ local  # (N, 3, 6)
-            lever = (p - o_k)[:, :, None]
-            cols = np.where(arm[sl], _cross(world, lever), world)
-            d_params[:, :, sl] = cols
+        if n_joints:  # every joint's six columns at once
+            locals_ = []
+            for k, (_, _, e_rot, rv) in enumerate(frames):
+                sl = slice(6 * k, 6 * k + 6)
+                local = directions[sl].T  # (3, 6) in G_k's frame; exact away from the nominal chain (docstring)
+                if np.any(rv):
+                    local = np.broadcast_to(local, np.shape(e_rot)[:-2] + (3, 6)).copy()
+                    rots, poss = is_rot[sl], ~is_rot[sl]
+                    poss[0] = False  # the offset's direction is the axis itself, in G_k's frame
+                    local[..., rots] = _right_jacobian(rv) @ local[..., rots]
+                    local[..., poss] = np.swapaxes(e_rot, -1, -2) @ local[..., poss]
+                locals_.append(np.broadcast_to(local, (n, 3, 6)) if local.ndim == 3 else local[None])
+            shape = (n_joints, n if any(lo.shape[0] > 1 for lo in locals_) else 1, 3, 6)
+            local_all = np.stack([np.broadcast_to(lo, shape[1:]) for lo in locals_])  # (K, N or 1, 3, 6)
+            world = np.stack([f[0] for f in frames]) @ local_all  # (K, N, 3, 6)
+            lever = (p[None] - np.stack([f[1] for f in frames]))[..., None]  # (K, N, 3, 1)
+            cols = np.where(arm[: 6 * n_joints].reshape(n_joints, 1, 1, 6), _cross(world, lever), world)
+            d_params[:, :, : 6 * n_joints] = cols.transpose(1, 2, 0, 3).reshape(n, 3, 6 * n_joints)
         d_params[:, :, -3:] = rot @ (self.tail[:3, :3] @ directions[-3:].T)
         d_inputs = np.zeros((n, 3, len(self.inputs)))
         for k, j in enumerate(self.joints):
