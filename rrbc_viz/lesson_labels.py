@@ -8,11 +8,12 @@ import numpy as np
 
 from rrbc_core.geometry.label_layout import label_boxes, overlap, placed
 
-#: Where a lesson label may go besides its own anchor when that would meet another label: below its point, then the
-#: other side (the first that fits; `label_layout.placed`).
+#: Where a lesson label may go besides its own anchor when that would meet another label or leave the view's free
+#: part: below its point, then to one side (the first that fits; `label_layout.placed`). A centred label (presentation
+#: mode's) over a point near the view's left edge or the panel runs right or left from it instead.
 OTHER_ANCHORS = {
     "bottom-left": ("top-left", "bottom-right", "top-right"),
-    "bottom-center": ("top-center",),
+    "bottom-center": ("top-center", "bottom-left", "bottom-right", "top-left", "top-right"),
 }
 
 

@@ -54,6 +54,21 @@ LAYER_LABELS = {
 }
 
 
+#: A drag gizmo's size in marker radii.
+GIZMO_MARKERS = 5.0
+
+
+def gizmo_size(marker_mm: float) -> float:
+    """A drag gizmo's size (mm) for spheres of radius `marker_mm`."""
+    return GIZMO_MARKERS * float(marker_mm)
+
+
+def label_heights(marker_mm: float) -> tuple[float, float]:
+    """How far above its point a point's label is drawn, and the selected point's (over its drag gizmo's up arrow,
+    whose arrows and planes would cover it lower), mm, for spheres of radius `marker_mm`."""
+    return 1.6 * float(marker_mm), 1.1 * gizmo_size(marker_mm)
+
+
 def node_key(pid: str) -> str:
     return str(pid).replace("/", "_") or "_"
 

@@ -59,7 +59,9 @@ from .node_values import (
     fiducial_label,
     fiducial_labels,
     gizmo_name,
+    gizmo_size,
     identity_wxyzs,
+    label_heights,
     node_key,
     target_label,
     target_labels,
@@ -142,7 +144,7 @@ class SceneNodes:
 
     def gizmo_scale(self) -> float:
         """The drag gizmos' size (mm): tests and scripts grab a handle's arrow this far out."""
-        return 5.0 * self._display.marker_mm
+        return gizmo_size(self._display.marker_mm)
 
     def label_names(self) -> list[str]:
         """The names of every point and frame label, in the order they were made."""
@@ -502,7 +504,7 @@ class SceneNodes:
             on = key == selected
             self._assign(tc, "disable_axes", not on)
             self._assign(tc, "disable_sliders", not on)
-        self._labels.raise_label(self._selected_label(), *self._label_heights())
+        self._labels.raise_label(self._selected_label(), *label_heights(self._display.marker_mm))
         self._show_labels()
 
     def applicable_layers(self) -> tuple[str, ...]:
@@ -534,6 +536,7 @@ class SceneNodes:
         mine = self._selected_label()
         hidden = self._labels.declutter(mine, self.label_anchor, pose, image_px, panel_px)
         self._place_ring_label(mine, pose, image_px, panel_px)
+        self._readings.keep_inside(pose, image_px, panel_px)
         self._show_labels()
         return hidden
 
@@ -553,7 +556,7 @@ class SceneNodes:
 
     def show_readings(self, readings: FiducialReadings | None) -> None:
         """A fiducial's two readings beside it (`reading_nodes`), or none (None)."""
-        self._readings.show(readings, self._display.marker_mm)
+        self._readings.show(readings, self._display.marker_mm, self._labels.scale)
 
     def show_sight_lines(self, points) -> None:
         """The sensor's lines of sight to `points` (N, 3) robot frame mm, or none (None); scene mode only."""
@@ -578,10 +581,6 @@ class SceneNodes:
     def _selected_label(self) -> str | None:
         return None if self._selected is None else f"{gizmo_name(*self._selected)}/label"
 
-    def _label_heights(self) -> tuple[float, float]:
-        """A point label's height above its point and the selected one's (over its drag handle), mm."""
-        return 1.6 * self._display.marker_mm, 1.1 * self.gizmo_scale()
-
     def _show_labels(self) -> None:
         # presentation mode: only the selected point's label and a lesson step's (large labels would overlap)
         self._labels.show(bool(self._layers.get("labels")), self._selected_label())
@@ -593,7 +592,7 @@ class SceneNodes:
             s.radius = r if kind == "fiducials" else 0.8 * r
         for tc in self._gizmos.values():
             tc.scale = self.gizmo_scale()
-        self._labels.lift_point_labels(*self._label_heights())
+        self._labels.lift_point_labels(*label_heights(self._display.marker_mm))
         for key in ("/corrections/fiducials", "/corrections/targets"):
             for k, v in self._arrow_sizes().items():
                 setattr(self._nodes[key], k, v)

@@ -1,5 +1,5 @@
 """Measurement files read by columns (issue 41, item 3): pyarrow's CSV reader splits the rows, and every check is
-one vectorised test over a column, so a million-row file is read in about a second instead of minutes of Python
+one vectorised test over a column, so a million-row file is read in seconds instead of minutes of Python
 text handling.
 
 `parse_columnar(data, source, check_header)` gives exactly the rows the row-by-row reader

@@ -26,7 +26,7 @@ from ..camera import (
     preset_view,
 )
 from ..colors import legend_markdown
-from ..node_values import LAYERS
+from ..node_values import LAYERS, label_heights
 from ..picture import AXES_SHARE
 from ..slice_nodes import SLICE_CHOICES
 
@@ -106,12 +106,29 @@ class ViewController:
         d = np.vstack([np.eye(3), -np.eye(3)]) * 2.0 * r
         return np.vstack([pts, (pts[:, None, :] + d[None]).reshape(-1, 3)])
 
+    def _selected_label_points(self, step) -> np.ndarray:
+        """(K, 3) robot frame, mm: where the selected point's label is drawn (over its drag gizmo) with a margin of a
+        few marker radii, when the step labels points of its kind (issue 39: at 1280x720 the step framed H1 at the
+        view's left edge and its raised label ran off it); else none."""
+        sel = self.ctx.state.selected
+        if sel is None or sel[0] not in step.labels:
+            return np.zeros((0, 3))
+        kind, pid = sel
+        ev = self.ctx.session.last
+        if kind == "targets":
+            point = ev.targets.positions[ev.targets.ids.index(pid)]
+        else:
+            point = ev.fiducial_positions[ev.fiducial_ids.index(pid)]
+        r = self.ctx.state.display.marker_mm
+        anchor = np.asarray(point, float) + [0.0, 0.0, label_heights(r)[1]]
+        return anchor + np.vstack([np.zeros(3), np.eye(3), -np.eye(3)]) * 2.0 * r
+
     def current_view(self) -> View:
         """What the camera should show now: the lesson step's focus, else the last preset."""
         if self.ctx.state.lesson_index is not None:
             step = teaching.STEPS[self.ctx.state.lesson_index]
             direction = OBLIQUE if step.direction is None else np.asarray(step.direction, float)
-            return View(self.focus_points(step.focus), direction)
+            return View(np.vstack([self.focus_points(step.focus), self._selected_label_points(step)]), direction)
         return self.preset_view(self.ctx.state.camera_preset)
 
     def preset_view(self, name: str) -> View:

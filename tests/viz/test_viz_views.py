@@ -322,20 +322,32 @@ def test_the_bullseye_keeps_its_scale_during_a_drag_and_after_while_the_offsets_
         assert landing_display(t, 0, m, None, held).ring_mm == held  # during a drag: always kept
 
 
-@pytest.mark.parametrize("present", [True, False], ids=["projector", "normal"])
-def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, present):
+@pytest.mark.parametrize(
+    ("present", "image"),
+    [(True, None), (False, None), (True, (1280, 720)), (False, (1280, 720)), (False, (1600, 900))],
+    ids=["projector", "normal", "projector-1280x720", "normal-1280x720", "normal-1600x900"],
+)
+def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, present, image):
     """Each step's labels are shown for the points its text names, less those that would meet another label or
     run under the panel in the view the step frames (issue 30: a class reads them; nothing overlaps) - with the
-    app's own camera (no tab here: the initial camera at the default image) and the core's layout."""
+    app's own camera (no tab here: the initial camera at the default image) or, given `image`, the view the step
+    frames in a tab of that size, decluttered for it as a tab's camera is (issue 39: on a 1280x720 projector F1's
+    centred label ran off the view's left edge and was hidden at step 6, which names it), and the core's layout."""
     from rrbc_core.geometry.label_layout import GAP_PX, label_boxes
     from rrbc_viz import teaching
-    from rrbc_viz.camera import DEFAULT_IMAGE
+    from rrbc_viz.camera import DEFAULT_IMAGE, FOV_Y, _pose_from, frame_margin, panel_px
     from rrbc_viz.controllers.viewing import PRESENTATION_LABEL_SCALE
 
     app.views.set_presentation(present)
     nodes = app.nodes
+    pose, size = app.ctx.camera.initial, DEFAULT_IMAGE
     for k, step in enumerate(teaching.STEPS):
-        app.views.lesson_go(k)
+        text = app.views.lesson_go(k)
+        if image is not None:  # the tab's own view of the step, as `ViewController.place_labels` declutters for it
+            size = image
+            w, h = image
+            pose = _pose_from(app.views.current_view(), FOV_Y, w / h, w, panel_px(present), frame_margin(present))
+            nodes.declutter_lesson_labels(pose, image, panel_px(present))
         shown = []
         for kind in step.labels:
             names = [n for n in nodes.label_names() if n.startswith(f"/{kind}/")]
@@ -344,7 +356,7 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
             shown += visible
         for kind, pid in step.named(app.session.last) if step.named is not None else ():
             label = f"/{kind}/{pid}/gizmo/label"  # a point the text names by id keeps its label (placed first)
-            assert nodes.handle(label).visible and pid in app.views.lesson_go(k), (k + 1, label)
+            assert nodes.handle(label).visible and pid in text, (k + 1, label)
         if not shown:
             continue
         label_scale = PRESENTATION_LABEL_SCALE if present else 1.0
@@ -353,8 +365,8 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
                 label_boxes(  # each with the anchor it is drawn with (the selected one's keeps it in view)
                     np.array([nodes.label_anchor(n)]),
                     [nodes.handle(n).text],
-                    app.ctx.camera.initial,
-                    DEFAULT_IMAGE,
+                    pose,
+                    size,
                     0.75 * label_scale,
                     nodes.handle(n).anchor,
                 )
@@ -364,7 +376,7 @@ def test_lesson_steps_label_what_their_text_names_and_no_two_labels_meet(app, pr
         for i in range(len(shown)):
             a = boxes[i]
             # every label within the view's free part, the selected point's too (issue 39: H1's was cut at the edge)
-            assert a[0] >= 0 and a[2] <= DEFAULT_IMAGE[0] - app.ctx.camera.panel_px, (k + 1, shown[i], a)
+            assert a[0] >= 0 and a[2] <= size[0] - app.ctx.camera.panel_px, (k + 1, shown[i], a)
             for j in range(i + 1, len(shown)):
                 b = boxes[j]
                 apart = a[2] + GAP_PX <= b[0] or b[2] + GAP_PX <= a[0] or a[3] + GAP_PX <= b[1] or b[3] + GAP_PX <= a[1]
@@ -509,6 +521,29 @@ def test_the_step_that_maps_a_fiducial_back_draws_its_two_readings(app):
     app.views.lesson_go(k)
     app.views.lesson_stop()
     assert app.nodes.handle("/readings/robot") is None
+
+
+def test_presentation_mode_draws_the_readings_labels_as_large_as_the_points_and_inside_the_view(app):
+    """Issue 39: on a 1280x720 projector step 5's two reading labels were a third of the point labels' size (about
+    9 px against 24): they are drawn at the point labels' size, short enough to lie left of the panel in the view
+    the step frames there."""
+    from rrbc_core.geometry.label_layout import label_boxes
+    from rrbc_viz.camera import FOV_Y, _pose_from, frame_margin, panel_px
+
+    k = next(i for i, s in enumerate(teaching.STEPS) if s.readings)
+    app.views.set_presentation(True)
+    app.views.lesson_go(k)
+    point_font = app.nodes.handle("/fiducials/F1/gizmo/label").font_screen_scale
+    w, h = 1280, 720
+    pose = _pose_from(app.views.current_view(), FOV_Y, w / h, w, panel_px(True), frame_margin(True))
+    app.nodes.declutter_lesson_labels(pose, (w, h), panel_px(True))  # as for a tab of that size
+    for name in ("/readings/sensor_label", "/readings/robot_label"):
+        label = app.nodes.handle(name)
+        assert label.font_screen_scale == pytest.approx(point_font) and point_font > 0.75, name
+        box = label_boxes(np.array([label.position]), [label.text], pose, (w, h), point_font, label.anchor)[0]
+        assert box[0] >= 0 and box[1] >= 0 and box[2] <= w - panel_px(True) and box[3] <= h, (name, box)
+    app.views.lesson_stop()
+    app.views.set_presentation(False)
 
 
 def test_a_target_added_near_the_panel_keeps_its_label_beside_it(app):
