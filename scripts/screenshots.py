@@ -112,6 +112,14 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ("scene_peg_in_hole.png", []),
     ("measurements.png", []),
     ("presentation_1280x720.png", [("tab", "Learn"), ("button", "Next"), ("wait_text", "Step 1 of 9")]),
+    # and its steps 5 (a fiducial's two readings) and 6 (the fiducials' corrections, the largest named)
+    *(
+        (
+            f"presentation_step{k}_1280x720.png",
+            [("tab", "Learn")] + [("button", "Next")] * k + [("wait_text", f"Step {k} of 9")],
+        )
+        for k in (5, 6)
+    ),
     # The results table with gp (a std column beside the others), the method chosen in the panel.
     ("app_gp_table.png", [("select", ("Interpolation", "gp")), ("wait_text", "std")]),
     # Arm (VEC) tab: VEC compared with rigid and RRBC, the registration points measured in varied orientations and
@@ -224,6 +232,14 @@ SHOT_OPTIONS: dict[str, dict] = {
         "mesh_node": "/registration/points",  # no work-cell mesh with this file: wait for the points instead
     },
     "presentation_1280x720.png": {"serve": {"present": True}, "viewport": {"width": 1280, "height": 720}},
+    **{
+        f"presentation_step{k}_1280x720.png": {
+            "serve": {"present": True},
+            "viewport": {"width": 1280, "height": 720},
+            **({"mesh_node_after": GHOST_NODE} if STEPS[k - 1].see_through else {}),
+        }
+        for k in (5, 6)
+    },
     "file_tab_1440x900.png": {"viewport": {"width": 1440, "height": 900}},
     "app_default_1600x900.png": {"viewport": {"width": 1600, "height": 900}},
     "urdf_without_meshes.png": {"make": _lift_arm_file, "mesh_node": "/registration/points"},
