@@ -89,6 +89,12 @@ class LandingNodes:
             if node is not None:
                 node.radius = f * marker_mm
 
+    def spheres(self) -> tuple[np.ndarray, np.ndarray]:
+        """The shown spheres' centres (K, 3) robot frame mm and radii (K,) mm: the truth's centre and the landings."""
+        shown = [n for k, n in self.handles.items() if k.rsplit("/", 1)[-1] in RADII and n.visible]
+        centres = np.array([n.position for n in shown], float).reshape(-1, 3)
+        return centres, np.array([n.radius for n in shown], float)
+
     def label(self) -> tuple[np.ndarray, str] | None:
         """The ring label: (where, robot frame mm; its text), None before `build`."""
         node = self.handles.get("/landing/scale")

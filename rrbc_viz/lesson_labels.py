@@ -67,12 +67,13 @@ def inside_anchor(point, text: str, pose, image_px, panel_px: float, font_scale:
 
 def side_anchor(point, text: str, avoid, pose, image_px, panel_px: float, font_scale: float, own: str) -> str | None:
     """The anchor of a label (`text` drawn at `point` (3,) robot frame mm) whose box, seen by `pose` in an image of
-    `image_px`, lies left of the panel and clear of the box `avoid` ([left, top, right, bottom] CSS px, or None):
-    `own` when it does, else the first of top-left, bottom-right, top-right that does; None when none does (the
-    label is better hidden)."""
-    for anchor in (own, "top-left", "bottom-right", "top-right"):
+    `image_px`, lies left of the panel and clear of the boxes `avoid` ((K, 4) [left, top, right, bottom] CSS px; NaN
+    rows ignored): `own` when it does, else the first of top-left, bottom-right, top-right, bottom-left that does;
+    None when none does (the label is better hidden)."""
+    boxes = np.asarray(avoid, float).reshape(-1, 4)
+    for anchor in dict.fromkeys((own, "top-left", "bottom-right", "top-right", "bottom-left")):
         box = label_boxes(np.reshape(point, (1, 3)), [text], pose, image_px, font_scale, anchor)[0]
         inside = bool(np.all(np.isfinite(box)) and box[0] >= 0 and box[2] <= float(image_px[0]) - panel_px)
-        if inside and (avoid is None or not overlap(box, avoid)):
+        if inside and not any(overlap(box, b) for b in boxes):
             return anchor
     return None

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from rrbc_core.geometry.label_layout import sphere_boxes
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
@@ -544,11 +545,14 @@ class SceneNodes:
         """The bullseye's ring label on the side of its point where it meets neither the selected point's label nor
         the panel, seen by `pose` (`lesson_labels.side_anchor`); hidden where no side is clear."""
         ring = self._bullseye.label()
-        if ring is not None:
-            box = None if mine is None else self._labels.box(mine, self.label_anchor(mine), pose, image_px)
+        if ring is not None:  # clear of the selected label and of the bullseye's spheres (issue 39: step 9)
+            avoid = [sphere_boxes(*self._bullseye.spheres(), pose, image_px)]
+            if mine is not None:
+                avoid.append(self._labels.box(mine, self.label_anchor(mine), pose, image_px))
             own = "top-center" if self._labels.compact else "bottom-left"
             scale = 0.8 * self._labels.scale
-            self._bullseye.set_label_anchor(side_anchor(ring[0], ring[1], box, pose, image_px, panel_px, scale, own))
+            anchor = side_anchor(ring[0], ring[1], np.vstack(avoid), pose, image_px, panel_px, scale, own)
+            self._bullseye.set_label_anchor(anchor)
 
     def drag_ended(self, kind: str, pid: str) -> None:
         """The user let go of a point's handle: the app places it again from now on."""

@@ -46,6 +46,22 @@ def label_boxes(anchors, texts, pose: CameraPose, image_px, font_scale: float, a
     return boxes
 
 
+def sphere_boxes(centres, radii, pose: CameraPose, image_px) -> np.ndarray:
+    """Screen boxes (N, 4) [left, top, right, bottom] (CSS px) around spheres at `centres` (N, 3) robot frame, mm,
+    of `radii` (N,) mm, seen by `pose` in an image of `image_px` (width, height): the square that holds each one's
+    disc; NaN rows behind the camera."""
+    c = np.asarray(centres, float).reshape(-1, 3)
+    h_img = float(image_px[1])
+    ndc, depth = project(c, pose)
+    x = (ndc[:, 0] + 1.0) / 2.0 * float(image_px[0])
+    y = (1.0 - ndc[:, 1]) / 2.0 * h_img
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r_px = np.asarray(radii, float) * (h_img / 2.0) / (np.tan(pose.fov_y / 2.0) * depth)
+    boxes = np.stack([x - r_px, y - r_px, x + r_px, y + r_px], axis=1)
+    boxes[~(depth > 0)] = np.nan
+    return boxes
+
+
 def overlap(a, b, gap_px: float = GAP_PX) -> bool:
     """Whether two boxes [left, top, right, bottom] (CSS px) come closer than `gap_px` (False when one is NaN)."""
     a, b = np.asarray(a, float), np.asarray(b, float)

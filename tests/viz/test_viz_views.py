@@ -597,6 +597,38 @@ def test_a_target_added_near_the_panel_keeps_its_label_beside_it(app):
                 assert not overlap(r, b), (kind, pid, ring.anchor, r, b)
 
 
+def _ring_label_meets_a_sphere(app, pose, image, font_scale) -> bool:
+    """Whether the bullseye's ring label, as drawn, covers one of its spheres (the truth's centre, the landings)."""
+    from rrbc_core.geometry.label_layout import label_boxes, overlap, sphere_boxes
+
+    ring = app.nodes.handle("/landing/scale")
+    r = label_boxes(np.array([ring.position]), [ring.text], pose, image, font_scale, ring.anchor)[0]
+    spheres = [app.nodes.handle(f"/landing/{k}") for k in ("anchor", "rigid", "rrbc", "vec")]
+    shown = [h for h in spheres if h is not None and h.visible]
+    boxes = sphere_boxes([h.position for h in shown], [h.radius for h in shown], pose, image)
+    return any(overlap(r, b) for b in boxes)
+
+
+def test_the_last_steps_ring_label_keeps_clear_of_the_bullseyes_spheres_on_a_projector(app):
+    """Issue 39: at step 9 on a 1280x720 projector the ring label ("H1: ring 1 mm") covered the vermillion landing;
+    it takes a side of its point clear of the bullseye's spheres (and of the selected label), in the view the step
+    frames for a tab of that size."""
+    from rrbc_viz.camera import FOV_Y, _pose_from, frame_margin, panel_px
+    from rrbc_viz.controllers.viewing import PRESENTATION_LABEL_SCALE
+
+    app.views.set_presentation(True)
+    k = len(teaching.STEPS) - 1
+    app.views.lesson_go(k)
+    w, h = 1280, 720
+    pose = _pose_from(app.views.current_view(), FOV_Y, w / h, w, panel_px(True), frame_margin(True))
+    app.nodes.declutter_lesson_labels(pose, (w, h), panel_px(True))
+    ring = app.nodes.handle("/landing/scale")
+    assert ring.visible
+    assert not _ring_label_meets_a_sphere(app, pose, (w, h), 0.8 * PRESENTATION_LABEL_SCALE), ring.anchor
+    app.views.lesson_stop()
+    app.views.set_presentation(False)
+
+
 @pytest.mark.parametrize("preset", ["whole cell", "work area", "close-up", "sensor's view"])
 def test_the_ring_label_keeps_clear_of_the_selected_label_in_every_preset(app, preset):
     """Issue 39 (the first picture): the bullseye's "T1: ring 0.5 mm" and the selected target's own label were drawn
@@ -621,6 +653,7 @@ def test_the_ring_label_keeps_clear_of_the_selected_label_in_every_preset(app, p
         ring = app.nodes.handle("/landing/scale")
         r = label_boxes(np.array([ring.position]), [ring.text], pose, DEFAULT_IMAGE, 0.8, ring.anchor)
         assert not ring.visible or not overlap(r[0], b[0]), (pid, ring.anchor, r, b)
+        assert not ring.visible or not _ring_label_meets_a_sphere(app, pose, DEFAULT_IMAGE, 0.8), (pid, ring.anchor)
         own = label_boxes(np.array([ring.position]), [ring.text], pose, DEFAULT_IMAGE, 0.8, "bottom-left")
         met += overlap(own[0], b[0])
     if preset == "whole cell":  # from afar the ring is small: the case this is for (labels met without it)
