@@ -201,9 +201,9 @@ def _parse(body: bytes, start: int, header_line: int, header: list[str]) -> Colu
     def read(typed: bool, threads: bool = False):
         skipped.clear()
         unplaced.clear()
-        # by threads: blocks parsed in pyarrow's own pool (on a million rows about half the
-        # time of one block on one thread); else one block, whose rows carry their line numbers (the file is at
-        # most `FILE_LIMIT_BYTES`, far below a block's limit)
+        # by threads: blocks parsed in pyarrow's own pool (on a million rows about half the time of one block on
+        # one thread); else one block, whose rows carry their line numbers (the file is at most `FILE_LIMIT_BYTES`,
+        # far below a block's limit)
         block = THREADED_BLOCK_BYTES if threads else len(body) - start + 1
         return pcsv.read_csv(
             pa.BufferReader(pa.py_buffer(body)[start:]),  # no copy

@@ -82,3 +82,23 @@ def test_a_label_that_would_meet_a_placed_one_takes_its_first_free_other_anchor(
     )
     assert placed(cand, IMAGE).tolist() == [0, 1, -1, 0]
     assert uncluttered(cand[:, 0], IMAGE).tolist() == [True, False, False, True]
+
+
+def test_a_spheres_box_holds_its_disc_as_a_pinhole_camera_draws_it():
+    """A sphere of radius r straight ahead at distance d spans 2 r f / d px (f = h / 2 / tan(fov / 2)) about the
+    image's centre; one off-axis is centred where its centre projects; one behind the camera has no box."""
+    from rrbc_core.geometry.label_layout import sphere_boxes
+
+    fov, image = np.deg2rad(50.0), (1280, 720)
+    pose = CameraPose(np.zeros(3), np.array([0.0, 1000.0, 0.0]), np.array([0.0, 0.0, 1.0]), fov, 1280 / 720)
+    boxes = sphere_boxes(
+        [[0.0, 1000.0, 0.0], [100.0, 2000.0, 50.0], [0.0, -500.0, 0.0]], [10.0, 20.0, 5.0], pose, image
+    )
+    f = 360.0 / np.tan(fov / 2.0)
+    np.testing.assert_allclose(
+        boxes[0], [640 - 10 * f / 1000, 360 - 10 * f / 1000, 640 + 10 * f / 1000, 360 + 10 * f / 1000]
+    )
+    centre = label_boxes([[100.0, 2000.0, 50.0]], [""], pose, image, 1.0)[0]  # (its left and bottom: the point)
+    np.testing.assert_allclose(0.5 * (boxes[1, 0] + boxes[1, 2]), centre[0])
+    np.testing.assert_allclose(boxes[1, 2] - boxes[1, 0], 2 * 20 * f / 2000)
+    assert np.all(np.isnan(boxes[2]))
