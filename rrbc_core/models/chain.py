@@ -337,9 +337,8 @@ class Chain:
                     poss[0] = False  # the offset's direction is the axis itself, in G_k's frame
                     local[..., rots] = _right_jacobian(rv) @ local[..., rots]
                     local[..., poss] = np.swapaxes(e_rot, -1, -2) @ local[..., poss]
-                locals_.append(np.broadcast_to(local, (n, 3, 6)) if local.ndim == 3 else local[None])
-            shape = (n_joints, n if any(lo.shape[0] > 1 for lo in locals_) else 1, 3, 6)
-            local_all = np.stack([np.broadcast_to(lo, shape[1:]) for lo in locals_])  # (K, N or 1, 3, 6)
+                locals_.append(local if local.ndim == 3 else local[None])
+            local_all = np.stack(np.broadcast_arrays(*locals_))  # (K, N or 1, 3, 6)
             world = np.stack([f[0] for f in frames]) @ local_all  # (K, N, 3, 6)
             lever = (p[None] - np.stack([f[1] for f in frames]))[..., None]  # (K, N, 3, 1)
             cols = np.where(arm[: 6 * n_joints].reshape(n_joints, 1, 1, 6), _cross(world, lever), world)

@@ -113,15 +113,18 @@ class ViewController:
         sel = self.ctx.state.selected
         if sel is None or sel[0] not in step.labels:
             return np.zeros((0, 3))
-        kind, pid = sel
+        r = self.ctx.state.display.marker_mm
+        anchor = self._selected_position() + [0.0, 0.0, label_heights(r)[1]]
+        return anchor + np.vstack([np.zeros(3), np.eye(3), -np.eye(3)]) * 2.0 * r
+
+    def _selected_position(self) -> np.ndarray:
+        """(3,) robot frame, mm: the selected point (there is one)."""
+        assert self.ctx.state.selected is not None
+        kind, pid = self.ctx.state.selected
         ev = self.ctx.session.last
         if kind == "targets":
-            point = ev.targets.positions[ev.targets.ids.index(pid)]
-        else:
-            point = ev.fiducial_positions[ev.fiducial_ids.index(pid)]
-        r = self.ctx.state.display.marker_mm
-        anchor = np.asarray(point, float) + [0.0, 0.0, label_heights(r)[1]]
-        return anchor + np.vstack([np.zeros(3), np.eye(3), -np.eye(3)]) * 2.0 * r
+            return np.asarray(ev.targets.positions[ev.targets.ids.index(pid)], float)
+        return np.asarray(ev.fiducial_positions[ev.fiducial_ids.index(pid)], float)
 
     def current_view(self) -> View:
         """What the camera should show now: the lesson step's focus, else the last preset."""
@@ -135,17 +138,13 @@ class ViewController:
         selected = None
         if self.ctx.state.selected is not None:
             kind, pid = self.ctx.state.selected
-            ev = self.ctx.session.last
+            selected = [self._selected_position()]
             if kind == "targets":
-                i = ev.targets.ids.index(pid)
-                selected = [ev.targets.positions[i]]
                 land = self.ctx.state.landing
                 if land is not None and self.ctx.state.layers.get("landing") and land.target == pid:
                     ring = land.ring_mm * land.scale
                     selected += [land.anchor, land.rigid, land.rrbc]
                     selected += [land.anchor + d for d in ([ring, 0, 0], [-ring, 0, 0], [0, ring, 0], [0, -ring, 0])]
-            else:
-                selected = [ev.fiducial_positions[ev.fiducial_ids.index(pid)]]
         return preset_view(name, self.cell_geometry(), selected=selected, marker_mm=self.ctx.state.display.marker_mm)
 
     def show_camera(self, preset: str, client=None) -> dict:
