@@ -190,9 +190,49 @@ def ftest(y, x0, x1):
     return float(stats.f.sf(f, q, nu)), q, nu, float(f), rss0, rss1, coef1
 
 
+RANK_RTOL = 1e-8  # a direction of a design's span counts if its singular value exceeds this fraction of the largest
+_GRAM_SPLIT = 1e-10  # eigenvalues of xᵀx above this fraction of the largest (singular values 1e-5): taken from xᵀx
+
+
+def orth_basis(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An orthonormal basis q (m, r) of the span of x's (m, k) columns along its singular directions above RANK_RTOL
+    of the largest singular value (the rank rule of an SVD), and to_q (k, r) with q = x @ to_q.
+
+    Made without an SVD of the tall x (its cost dominated `rrbc diagnose` on many points): the directions whose
+    singular values exceed 1e-5 of the largest come from the eigenvectors of xᵀx (one pass, then a second on the
+    result to restore orthogonality, as Cholesky QR2 does); the rest of x, beside them, gets an SVD of its few
+    columns, whose singular values decide the rank as the SVD of x would (both to rounding of order 1e-16 of the
+    largest, far below the rule's 1e-8). The span and its projection equal the SVD's to rounding (a test holds it)."""
+    m, k = x.shape
+    lam, v = np.linalg.eigh(x.T @ x) if k else (np.zeros(0), np.zeros((0, 0)))
+    if k == 0 or not lam[-1] > 0:
+        return np.zeros((m, 0)), np.zeros((k, 0))
+    big = lam > _GRAM_SPLIT * lam[-1]
+    to_q = v[:, big] / np.sqrt(lam[big])
+    q = x @ to_q
+    lam2, v2 = np.linalg.eigh(q.T @ q)  # ≈ I; its inverse square root makes q orthonormal to rounding
+    fix = v2 / np.sqrt(lam2)
+    to_q, q = to_q @ fix, q @ fix
+    if big.all():
+        return q, to_q
+    small = v[:, ~big]
+    rest = x @ small
+    c = q.T @ rest
+    rest -= q @ c  # x's small directions beside q; twice, so rounding leaves nothing of q in them
+    c2 = q.T @ rest
+    rest -= q @ c2
+    c += c2
+    u, sv, wt = np.linalg.svd(rest, full_matrices=False)
+    keep = sv > RANK_RTOL * np.sqrt(lam[-1])
+    if not keep.any():
+        return q, to_q
+    to_rest = (small - to_q @ c) @ (wt[keep].T / sv[keep])
+    return np.hstack([q, u[:, keep]]), np.hstack([to_q, to_rest])
+
+
 def orth(x: np.ndarray) -> np.ndarray:
-    u, sv, _ = np.linalg.svd(x, full_matrices=False)
-    return u[:, sv > 1e-8 * (sv[0] if len(sv) else 1.0)]
+    """An orthonormal basis (m, r) of the span of x's columns (`orth_basis`)."""
+    return orth_basis(x)[0]
 
 
 def usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1):
@@ -202,9 +242,7 @@ def usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1):
     kept per direction of cols' span, m (k, j))."""
     if cols.shape[1] == 0:
         return cols, np.zeros(0), np.zeros((0, 0))
-    u, sv, vt = np.linalg.svd(cols, full_matrices=False)
-    keep = sv > 1e-8 * sv[0]
-    qc, to_q = u[:, keep], vt[keep].T / sv[keep]  # qc = cols @ to_q, orthonormal
+    qc, to_q = orth_basis(cols)  # qc = cols @ to_q, orthonormal
     qb = orth(base)
     beside = qc - qb @ (qb.T @ qc)
     frac, vec = np.linalg.eigh(beside.T @ beside)

@@ -94,7 +94,8 @@ def _scale_rate(g: Geometry, y: np.ndarray, blocks: dict, found: dict, tests: di
     coef = fit(y, np.hstack([x_acc, raw]))[0][-1]
     unit = 1e6 / (g.scale * g.tscale)  # a coefficient (mm) in ppm/s
     rate = float(coef) * unit
-    beside = raw[:, 0] - orth(x_acc) @ (orth(x_acc).T @ raw[:, 0])  # the column's part no accepted term holds
+    q_acc = orth(x_acc)
+    beside = raw[:, 0] - q_acc @ (q_acc.T @ raw[:, 0])  # the column's part no accepted term holds
     se = float(np.sqrt(rss_sr / max(nu_sr, 1) / max(float(beside @ beside), 1e-300))) * unit
     old = found.get("scale")
     params = {"ppm": 0.0, **(old.parameters if old is not None else {})}

@@ -370,3 +370,31 @@ def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
         / np.einsum("bi,bi->b", eps, eps)
     )
     assert np.allclose(moran_bootstrap(np.random.default_rng(3), qa, nb, replicates=250), want, rtol=1e-10)
+
+
+@pytest.mark.parametrize("kind", ["independent", "exactly dependent", "near the rank rule", "a zero column"])
+def test_orth_basis_spans_what_an_svd_keeps_and_maps_the_columns_onto_it(kind):
+    """The projection onto `orth_basis`'s q equals the one onto the SVD's left singular vectors above 1e-8 of the
+    largest (the rank rule diagnose uses), q is orthonormal and q = x @ to_q, for designs whose columns differ in
+    scale by up to 1e3 either way and are independent, exactly dependent (the rigid rotations inside the linear
+    map), dependent up to 1e-6 (kept) or 1e-10 (dropped) of the largest singular value, or zero."""
+    from rrbc_core.analysis.diagnosis_stats import orth_basis
+
+    rng = np.random.default_rng(["independent", "exactly dependent", "near the rank rule", "a zero column"].index(kind))
+    for _ in range(40):
+        m, k = int(rng.integers(30, 300)), int(rng.integers(3, 12))
+        x = rng.standard_normal((m, k)) * 10.0 ** rng.uniform(-3, 3, k)
+        noise = {"exactly dependent": 0.0, "near the rank rule": float(rng.choice([1e-6, 1e-10]))}.get(kind)
+        if noise is not None:
+            x[:, -1] = x[:, :-1] @ rng.standard_normal(k - 1)
+            x[:, -1] += noise * np.linalg.norm(x, 2) * rng.standard_normal(m) / np.sqrt(m)
+        if kind == "a zero column":
+            x[:, 0] = 0.0
+        u, sv, _ = np.linalg.svd(x, full_matrices=False)
+        want = u[:, sv > 1e-8 * sv[0]]
+        q, to_q = orth_basis(x)
+        assert q.shape[1] == want.shape[1]
+        # both are rounding away from the exact projection by about 1e-16 x the condition number (up to ~1e7 here)
+        assert np.abs(q @ q.T - want @ want.T).max() < 1e-8
+        assert np.abs(q.T @ q - np.eye(q.shape[1])).max() < 1e-13
+        assert np.abs(x @ to_q - q).max() < 1e-8
