@@ -114,11 +114,13 @@ class Geometry:
         a = (np.asarray(fields) @ self.white.T).reshape(len(fields), -1).T
         return a * self.sw[:, None]
 
+    def translations(self):
+        e = np.eye(3)
+        return self._cols([np.tile(e[k], (self.n, 1)) for k in range(3)])
+
     def rigid(self):
         e = np.eye(3)
-        trans = [np.tile(e[k], (self.n, 1)) for k in range(3)]
-        rot = [np.cross(e[k], self.u) for k in range(3)]
-        return self._cols(trans + rot)
+        return np.hstack([self.translations(), self._cols([np.cross(e[k], self.u) for k in range(3)])])
 
     def scale_col(self):
         return self._cols([self.u])
@@ -235,15 +237,15 @@ def orth(x: np.ndarray) -> np.ndarray:
     return orth_basis(x)[0]
 
 
-def usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1):
+def usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1, base_basis: np.ndarray | None = None):
     """The directions of the span of `cols` that keep at least `kept` of their energy beside the span of `base`.
     A direction almost inside the base is, beside it, mostly the data's own noise carried by the columns (they are
     built from measured positions): fitting it fits that noise. Returns (columns (3N, j) = cols @ m, fraction
-    kept per direction of cols' span, m (k, j))."""
+    kept per direction of cols' span, m (k, j)). `base_basis`: orth(base) when the caller has it."""
     if cols.shape[1] == 0:
         return cols, np.zeros(0), np.zeros((0, 0))
     qc, to_q = orth_basis(cols)  # qc = cols @ to_q, orthonormal
-    qb = orth(base)
+    qb = orth(base) if base_basis is None else base_basis
     beside = qc - qb @ (qb.T @ qc)
     frac, vec = np.linalg.eigh(beside.T @ beside)
     m = to_q @ vec[:, frac >= kept]
@@ -278,12 +280,18 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
         reg = least_squares(d.sensor[idx], d.robot[idx], weights=d.count[idx])
         p = reg.mapping.apply(d.sensor[idx])
         g = Geometry(p, d.time[idx] if use_time and d.time is not None else None, d.count[idx], white)
-        x = np.hstack([g.rigid(), g.linear()])
-        if use_time:
-            x = np.hstack([x, usable_drift(x, g.drift())[0]])
-        if extra is not None:
-            x = np.hstack([x, g._cols(extra[:, idx])])
+        # the rigid rotations lie in the linear map's span (a rotation's small-angle map is linear): translations
+        # and the linear map span the same, without the exactly dependent columns
+        x = np.hstack([g.translations(), g.linear()])
         q = orth(x)
+        more = []
+        if use_time:
+            more.append(usable(x, g.drift(), DRIFT_KEPT, base_basis=q)[0])
+        if extra is not None:
+            more.append(g._cols(extra[:, idx]))
+        if sum(c.shape[1] for c in more):
+            x = np.hstack([x, *more])
+            q = orth(x)
         y = g.vec(d.robot[idx] - p)
         res = y - q @ (q.T @ y)
         rss = float(res @ res)
