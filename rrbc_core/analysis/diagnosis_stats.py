@@ -333,15 +333,17 @@ def moran_weights(p: np.ndarray):
     return nb[:, 1:]
 
 
-def moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
-    """Vector Moran's I with k-NN weights: res (..., N, 3) -> (...).
-
-    I = (1/k) Σ_i Σ_{j ∈ nb(i)} r_i·r_j / Σ_i |r_i|², the neighbour sums taken with a sparse (N, N) weight
-    matrix (k non-zeros per row), so memory is O(N·k) per residual field, not a gathered (..., N, k, 3) array."""
+def _weights(nb: np.ndarray):
+    """The k-NN weights as a sparse (N, N) matrix, k ones per row."""
     from scipy.sparse import csr_matrix
 
     n, k = nb.shape
-    w = csr_matrix((np.ones(n * k), nb.reshape(-1), np.arange(0, n * k + 1, k)), shape=(n, n))
+    return csr_matrix((np.ones(n * k), nb.reshape(-1), np.arange(0, n * k + 1, k)), shape=(n, n))
+
+
+def _moran_sparse(res: np.ndarray, w, k: int) -> np.ndarray:
+    """Moran's I of res (..., N, 3) with the sparse weights w (k per row)."""
+    n = w.shape[0]
     lead = res.shape[:-2]
     r = res.reshape(-1, n, 3)
     x = np.moveaxis(r, 1, 0).reshape(n, -1)  # (N, B*3)
@@ -350,18 +352,44 @@ def moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
     return (num / (k * den)).reshape(lead)
 
 
+def moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
+    """Vector Moran's I with k-NN weights: res (..., N, 3) -> (...).
+
+    I = (1/k) Σ_i Σ_{j ∈ nb(i)} r_i·r_j / Σ_i |r_i|², the neighbour sums taken with a sparse (N, N) weight
+    matrix (k non-zeros per row), so memory is O(N·k) per residual field, not a gathered (..., N, k, 3) array."""
+    return _moran_sparse(res, _weights(nb), nb.shape[1])
+
+
+def locality_order(nb: np.ndarray) -> np.ndarray:
+    """An order (N,) of the points that keeps neighbours near each other in memory (reverse Cuthill-McKee on the
+    k-NN graph): the neighbour sums then read nearby memory instead of jumping across the whole array."""
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    return np.asarray(reverse_cuthill_mckee(_weights(nb), symmetric_mode=False), dtype=np.intp)
+
+
 def moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = BOOTSTRAP) -> np.ndarray:
     """Moran's I of `replicates` white-noise residual fields with the accepted model's columns (orthonormal qa,
     (3N, q)) projected out. Drawn and evaluated in chunks of BOOTSTRAP_CHUNK_ELEMENTS: memory is linear in N and
-    the draws are those of one rng.standard_normal((replicates, 3N)) call (a Generator fills rows in order)."""
+    the draws are those of one rng.standard_normal((replicates, 3N)) call (a Generator fills rows in order).
+
+    Above BOOTSTRAP_EXACT_POINTS points the draws are laid out in `locality_order` (point j of a draw is point
+    order[j]; the points, qa's rows and the weights permuted alike): white noise is exchangeable, so the replicates'
+    distribution is the same, and the neighbour sums, most of the cost on many points, read nearby memory."""
     n3 = qa.shape[0]
+    n, k = nb.shape
+    w = _weights(nb)
+    if n > BOOTSTRAP_EXACT_POINTS:
+        order = locality_order(nb)
+        w = w[order][:, order]
+        qa = qa.reshape(n, 3, -1)[order].reshape(n3, -1)
     out = np.empty(replicates)
     step = max(1, BOOTSTRAP_CHUNK_ELEMENTS // n3)
     for start in range(0, replicates, step):
         b = min(step, replicates - start)
         eps = rng.standard_normal((b, n3))
         eps -= (eps @ qa) @ qa.T
-        out[start : start + b] = moran(eps.reshape(b, n3 // 3, 3), nb)
+        out[start : start + b] = _moran_sparse(eps.reshape(b, n, 3), w, k)
     return out
 
 

@@ -398,3 +398,32 @@ def test_orth_basis_spans_what_an_svd_keeps_and_maps_the_columns_onto_it(kind):
         assert np.abs(q @ q.T - want @ want.T).max() < 1e-8
         assert np.abs(q.T @ q - np.eye(q.shape[1])).max() < 1e-13
         assert np.abs(x @ to_q - q).max() < 1e-8
+
+
+def test_on_many_points_the_bootstrap_lays_its_draws_out_in_locality_order_with_the_same_formula(monkeypatch):
+    """Above BOOTSTRAP_EXACT_POINTS the k-th draw's j-th point is point order[j] (white noise is exchangeable: the
+    replicates' distribution is unchanged); each replicate is still the dense Moran's I of a projected white field."""
+    from rrbc_core.analysis import diagnosis_stats as diagnosis
+    from rrbc_core.analysis.diagnosis_stats import locality_order, moran_bootstrap, moran_weights, orth
+
+    monkeypatch.setattr(diagnosis, "BOOTSTRAP_EXACT_POINTS", 100)
+    monkeypatch.setattr(diagnosis, "BOOTSTRAP_CHUNK_ELEMENTS", 900 * 30)  # chunks of 30 replicates
+    rng = np.random.default_rng(12)
+    n = 300
+    p = rng.uniform(0, 500, (n, 3))
+    nb = moran_weights(p)
+    order = locality_order(nb)
+    assert sorted(order.tolist()) == list(range(n))
+    qa = orth(rng.normal(size=(3 * n, 5)))
+    drawn = np.random.default_rng(4).standard_normal((90, n, 3))
+    eps = np.empty_like(drawn)
+    eps[:, order] = drawn  # draw j's point j is the field's point order[j]
+    eps = eps.reshape(90, 3 * n)
+    eps -= (eps @ qa) @ qa.T
+    field = eps.reshape(90, n, 3)
+    want = np.einsum("bic,bikc->b", field, field[:, nb, :]) / nb.shape[1] / np.einsum("bic,bic->b", field, field)
+    assert np.allclose(moran_bootstrap(np.random.default_rng(4), qa, nb, replicates=90), want, rtol=1e-10)
+    # and the order keeps neighbours near: the mean index distance to a neighbour falls well below a random order's
+    where = np.empty(n, np.intp)
+    where[order] = np.arange(n)
+    assert np.mean(np.abs(where[nb] - where[:, None])) < 0.5 * np.mean(np.abs(nb - np.arange(n)[:, None]))
