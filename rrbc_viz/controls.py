@@ -347,29 +347,33 @@ class ViewPanel:
                     box.value = bool(layers[name])
 
 
+#: The lesson's row of buttons: one viser button group, Previous and Next side by side above the step's text. The
+#: row never changes (a button moving under a quick second click would press its neighbour); Next at the last step
+#: stays there, as Previous at the first does.
+LESSON_PREVIOUS, LESSON_NEXT = "← Previous", "Next →"
+
+
 class LearnPanel:
     """Learn tab: the nine-step lesson's text and its buttons."""
 
     def __init__(self, gui, app: Actions):
-        # Next first, then the text: on a projector (1280x720, large text) both start in view without scrolling
-        self.lesson_next = gui.add_button("Next", icon=viser.Icon.ARROW_RIGHT)
+        # Previous and Next on one row, then the text: on a projector (1280x720, large text) both buttons and the
+        # text's start are in view without scrolling at every step
+        self.lesson_nav = gui.add_button_group("Lesson", (LESSON_PREVIOUS, LESSON_NEXT))
         self.lesson = gui.add_markdown(
             "The nine steps of RRBC, one at a time, each shown in the scene with live numbers. Press **Next** to start."
         )
-        self.lesson_prev = gui.add_button("Previous", icon=viser.Icon.ARROW_LEFT)
         self.lesson_end = gui.add_button("End lesson (restore layers)")
-        self.lesson_next.on_click(lambda event: app.views.lesson_step(+1))
-        self.lesson_prev.on_click(lambda event: app.views.lesson_step(-1))
+        steps = {LESSON_NEXT: +1, LESSON_PREVIOUS: -1}
+        self.lesson_nav.on_click(
+            lambda event: app.views.lesson_step(steps[event.target.value]) if event.target.value in steps else None
+        )
         self.lesson_end.on_click(lambda event: app.views.lesson_stop())
         self.bullseye = Bullseye(gui)
 
     def show_text(self, markdown: str) -> None:
         """The lesson step's text (or the prompt to start)."""
         self.lesson.content = markdown
-
-    def show_step(self, index: int | None, steps: int) -> None:
-        """Step `index` (0-based; None: no lesson) of `steps` is shown: Next is off at the last step."""
-        self.lesson_next.disabled = index is not None and index >= steps - 1
 
 
 class MonteCarloPanel:

@@ -13,7 +13,7 @@ Extend SHOTS below. Each entry is (file name, actions); an action is one of
     ("click", "Label")      click the visible GUI element whose text is "Label" (page.get_by_text; exact match
                             first, then substring) - checkbox labels, folder titles, dropdowns then their options
     ("tab", "Learn")        click the panel tab named "Learn" (get_by_role("tab"))
-    ("button", "Next")      click the button named "Next" (get_by_role("button"); "Next" also appears in text)
+    ("button", "Next →")    click the button named "Next →" (get_by_role("button"), exact; "Next" also appears in text)
     ("select", ("Label", "option"))   open the dropdown labelled "Label" and choose "option"
     ("drag", (node, a, b))  real mouse drag of gizmo `node`'s X arrow from local x = a to x = b, in gizmo scales
                             (the app's ``nodes.gizmo_scale()``); waits until the server has the drag's end
@@ -48,6 +48,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from rrbc_viz.controls import LESSON_NEXT  # noqa: E402
 from rrbc_viz.mesh_nodes import GHOST_NODE  # noqa: E402
 from rrbc_viz.teaching import STEPS  # noqa: E402
 
@@ -60,7 +61,7 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ("app_default.png", []),
     # The nine Learn steps, each as the app frames it (the camera moves itself; no zoom here).
     *[
-        (f"learn_step{k}.png", [("tab", "Learn")] + [("button", "Next")] * k + [("wait_text", f"Step {k} of 9")])
+        (f"learn_step{k}.png", [("tab", "Learn")] + [("button", LESSON_NEXT)] * k + [("wait_text", f"Step {k} of 9")])
         for k in range(1, 10)
     ],
     # Heat map on, coloured by the rigid-only error; "Layers" folded so the legend (mm) shows; the close-up preset.
@@ -111,12 +112,12 @@ SHOTS: list[tuple[str, list[tuple[str, Any]]]] = [
     ("scene_breadboard.png", []),
     ("scene_peg_in_hole.png", []),
     ("measurements.png", []),
-    ("presentation_1280x720.png", [("tab", "Learn"), ("button", "Next"), ("wait_text", "Step 1 of 9")]),
+    ("presentation_1280x720.png", [("tab", "Learn"), ("button", LESSON_NEXT), ("wait_text", "Step 1 of 9")]),
     # and its steps 5 (a fiducial's two readings) and 6 (the fiducials' corrections, the largest named)
     *(
         (
             f"presentation_step{k}_1280x720.png",
-            [("tab", "Learn")] + [("button", "Next")] * k + [("wait_text", f"Step {k} of 9")],
+            [("tab", "Learn")] + [("button", LESSON_NEXT)] * k + [("wait_text", f"Step {k} of 9")],
         )
         for k in (5, 6)
     ),

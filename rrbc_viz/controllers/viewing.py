@@ -347,7 +347,6 @@ class ViewController:
                 self.ctx.present.draw_scene(self.ctx.session.last)
                 text = teaching.render(index, self.ctx.session.last, self.ctx.present.lesson_context())
                 self.ctx.controls.learn.show_text(text)
-                self.ctx.controls.learn.show_step(index, len(teaching.STEPS))
                 self.show_selection(self.ctx.session.last)
                 self.place_labels(self.ctx.camera.show(self.current_view()))
             return text
@@ -397,6 +396,5 @@ class ViewController:
                 self.set_see_through(False)
                 self.ctx.present.draw_scene(self.ctx.session.last)
                 self.ctx.controls.learn.show_text("Lesson ended. Press **Next** to start again.")
-                self.ctx.controls.learn.show_step(None, len(teaching.STEPS))
                 self.show_selection(self.ctx.session.last)
                 self.place_labels(self.ctx.camera.show(self.current_view()))

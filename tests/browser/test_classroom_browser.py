@@ -129,7 +129,7 @@ def test_every_tab_of_the_panel_can_be_scrolled_to_its_last_control(
 ):
     """Issue 30: at 1440x900 (an integrator's laptop) and on a 1280x720 projector, every tab's last control can be
     scrolled into the window (the File tab's *New cell from this mesh* among them), no panel text is smaller than
-    the mode's size, and the lesson's Next is in view without scrolling at every step."""
+    the mode's size, and the lesson's Next and Previous are in view without scrolling at every step."""
     app = viser_app(lambda: serve(present=present, simple_arm=True, plain_light=True))
     context = new_context(browser, {"width": width, "height": height})
     try:
@@ -164,6 +164,9 @@ def test_every_tab_of_the_panel_can_be_scrolled_to_its_last_control(
             nxt = page.get_by_role("button", name="Next")
             b = nxt.bounding_box()
             assert b is not None and 0 <= b["y"] and b["y"] + b["height"] <= height, (k, b)
+            if k > 0:  # issue 39: Previous beside Next, in view without scrolling too
+                p = page.get_by_role("button", name="Previous").bounding_box()
+                assert p is not None and abs(p["y"] - b["y"]) < 2, (k, p, b)
             assert page.evaluate(_JS_SCROLLED) < 1.0, k
             if present and k > 0:  # issue 39: a step's text starts in the window's upper half on the projector
                 top = page.evaluate(_JS_TEXT_TOP, f"Step {k} of 9")

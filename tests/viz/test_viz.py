@@ -24,6 +24,7 @@ from rrbc_core.io.measurements import parse_measurements
 from rrbc_core.session import figures
 from rrbc_viz import colors
 from rrbc_viz.app import RunningApp
+from rrbc_viz.controls import LESSON_NEXT, LESSON_PREVIOUS
 from rrbc_viz.serve import serve
 from tests.paths import EXAMPLE_CSV
 from tests.viz.helpers import _gizmo_drag, _press
@@ -276,27 +277,31 @@ def test_layers_lesson_and_heat_map(app):
     c.view.heat_value.value = "rigid error"
     assert "rigid only" in c.view.legend.content
     # lesson: Next starts at step 1 with its layers; numbers are live
-    c.learn.lesson_next.value = True
+    c.learn.lesson_nav.value = LESSON_NEXT
     assert app.state.lesson_index == 0 and "Step 1 of 9" in c.learn.lesson.content
     assert c.view.layers["registration"].value and not c.view.layers["targets"].value
     assert app.nodes.handle("/targets").visible is False
     for _ in range(5):
-        c.learn.lesson_next.value = True
+        c.learn.lesson_nav.value = LESSON_NEXT
     assert "Step 6 of 9" in c.learn.lesson.content  # fiducial corrections only
     assert app.nodes.handle("/corrections").visible and not app.nodes.handle("/corrections/targets").visible
     ev = app.session.last
     n = np.linalg.norm(ev.corrections[ev.included], axis=1)
     assert f"{n.max():.3f} mm" in c.learn.lesson.content and f"{n.min():.3f} mm" in c.learn.lesson.content
-    c.learn.lesson_prev.value = True
+    c.learn.lesson_nav.value = LESSON_PREVIOUS
     assert "Step 5 of 9" in c.learn.lesson.content
     for _ in range(4):
-        c.learn.lesson_next.value = True
+        c.learn.lesson_nav.value = LESSON_NEXT
     sm = app.session.last.summary
     assert (
         "Step 9 of 9" in c.learn.lesson.content and f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
     )
     assert c.view.layers["landing"].value
-    assert c.learn.lesson_next.disabled  # the last step: Next is off (it would do nothing)
+    c.learn.lesson_nav.value = LESSON_NEXT  # the last step: Next stays there (the row never changes under a click)
+    assert "Step 9 of 9" in c.learn.lesson.content and tuple(c.learn.lesson_nav.options) == (
+        LESSON_PREVIOUS,
+        LESSON_NEXT,
+    )
     app.evaluate.handle_drag("targets", "H3", [410.0, 40.0, 15.0], "end")
     sm = app.session.last.summary
     assert f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
