@@ -350,7 +350,7 @@ class ViewPanel:
 #: The lesson's row of buttons: one viser button group, Previous and Next side by side above the step's text. The
 #: row never changes (a button moving under a quick second click would press its neighbour); Next at the last step
 #: stays there, as Previous at the first does.
-LESSON_PREVIOUS, LESSON_NEXT = "← Previous", "Next →"
+LESSON_PREVIOUS, LESSON_NEXT = "Previous", "Next"
 
 
 class LearnPanel:

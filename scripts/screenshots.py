@@ -13,7 +13,7 @@ Extend SHOTS below. Each entry is (file name, actions); an action is one of
     ("click", "Label")      click the visible GUI element whose text is "Label" (page.get_by_text; exact match
                             first, then substring) - checkbox labels, folder titles, dropdowns then their options
     ("tab", "Learn")        click the panel tab named "Learn" (get_by_role("tab"))
-    ("button", "Next →")    click the button named "Next →" (get_by_role("button"), exact; "Next" also appears in text)
+    ("button", "Next")      click the button named "Next" (get_by_role("button"), exact; "Next" also appears in text)
     ("select", ("Label", "option"))   open the dropdown labelled "Label" and choose "option"
     ("drag", (node, a, b))  real mouse drag of gizmo `node`'s X arrow from local x = a to x = b, in gizmo scales
                             (the app's ``nodes.gizmo_scale()``); waits until the server has the drag's end
