@@ -360,12 +360,14 @@ def moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
     return _moran_sparse(res, _weights(nb), nb.shape[1])
 
 
-def locality_order(nb: np.ndarray) -> np.ndarray:
+def locality_order(nb: np.ndarray, weights=None) -> np.ndarray:
     """An order (N,) of the points that keeps neighbours near each other in memory (reverse Cuthill-McKee on the
-    k-NN graph): the neighbour sums then read nearby memory instead of jumping across the whole array."""
+    k-NN graph): the neighbour sums then read nearby memory instead of jumping across the whole array.
+    `weights`: `_weights(nb)` when the caller has it."""
     from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-    return np.asarray(reverse_cuthill_mckee(_weights(nb), symmetric_mode=False), dtype=np.intp)
+    w = _weights(nb) if weights is None else weights
+    return np.asarray(reverse_cuthill_mckee(w, symmetric_mode=False), dtype=np.intp)
 
 
 def moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = BOOTSTRAP) -> np.ndarray:
@@ -380,7 +382,7 @@ def moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = BOOTS
     n, k = nb.shape
     w = _weights(nb)
     if n > BOOTSTRAP_EXACT_POINTS:
-        order = locality_order(nb)
+        order = locality_order(nb, w)
         w = w[order][:, order]
         qa = qa.reshape(n, 3, -1)[order].reshape(n3, -1)
     out = np.empty(replicates)
