@@ -131,14 +131,23 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
         time.sleep(3.0)  # and the server has given their memory back
         rss_after = rss_mb()
         threads_after = threads_when_idle()
+
+        def left_now() -> list[str]:
+            """What the class left: threads beyond those after one tab, less the shared app's own workers (one
+            each, started the first time they are needed and the app's for good: the Plan tab's background planner
+            starts only when a planning update is slow, as on a loaded machine)."""
+            names = Counter(t.name for t in threading.enumerate() if t.name.startswith("rrbc-"))
+            extra = names - names_started
+            return sorted(
+                n for n, k in extra.items() for _ in range(k) if per_client or n not in SHARED_APP_WORKERS or k > 1
+            )
+
+        # a stopped tab's workers end once the job they are running returns (on a loaded machine a planning or a
+        # drag update can take seconds): wait for them, bounded as the callback threads are
+        deadline = time.monotonic() + worker_pool.IDLE_S + 15
+        while (left := left_now()) and time.monotonic() < deadline:
+            time.sleep(0.1)
         names_after = sorted(t.name for t in threading.enumerate() if t.name.startswith("rrbc-"))
-        # what the class left: threads beyond those after one tab, less the shared app's own workers (one each,
-        # started the first time they are needed and the app's for good: the Plan tab's background planner
-        # starts only when a planning update is slow, as on a loaded machine)
-        extra = Counter(names_after) - names_started
-        left = sorted(
-            n for n, k in extra.items() for _ in range(k) if per_client or n not in SHARED_APP_WORKERS or k > 1
-        )
     finally:
         app.stop()
     return {
