@@ -270,51 +270,33 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
     """Generalised ESD on deleted (mean-shift) studentised residuals of a rigid + linear (+ drift) (+ `extra`:
     fields (k, N, 3) per point, e.g. the arm's kinematic columns) model.
 
-    Returns (outlier indices in order found, Bonferroni-adjusted p of the last accepted, statistics)."""
+    Each step refits the model without the points removed so far. The model is built once, on every point: the
+    registration's change when points are removed is an affine map of the points, which lies in the model's
+    translations and linear map, so the residuals beside the model do not depend on it; and the fit on the points
+    left is a downdate of the full one (`_esd_steps`): no design is rebuilt per step.
+
+    Returns (outlier indices in order found, Bonferroni-adjusted p of the last accepted)."""
     n = len(d.ids)
-    active = np.ones(n, bool)
     kmax = max(0, min(n // 5, n - 8, 10))
-    steps = []
-    for _ in range(kmax):
-        idx = np.flatnonzero(active)
-        reg = least_squares(d.sensor[idx], d.robot[idx], weights=d.count[idx])
-        p = reg.mapping.apply(d.sensor[idx])
-        g = Geometry(p, d.time[idx] if use_time and d.time is not None else None, d.count[idx], white)
-        # the rigid rotations lie in the linear map's span (a rotation's small-angle map is linear): translations
-        # and the linear map span the same, without the exactly dependent columns
-        x = np.hstack([g.translations(), g.linear()])
+    if kmax == 0:
+        return [], 1.0
+    reg = least_squares(d.sensor, d.robot, weights=d.count)
+    p = reg.mapping.apply(d.sensor)
+    g = Geometry(p, d.time if use_time and d.time is not None else None, d.count, white)
+    # the rigid rotations lie in the linear map's span (a rotation's small-angle map is linear): translations
+    # and the linear map span the same, without the exactly dependent columns
+    x = np.hstack([g.translations(), g.linear()])
+    q = orth(x)
+    more = []
+    if use_time:
+        more.append(usable(x, g.drift(), DRIFT_KEPT, base_basis=q)[0])
+    if extra is not None:
+        more.append(g._cols(extra))
+    if sum(c.shape[1] for c in more):
+        x = np.hstack([x, *more])
         q = orth(x)
-        more = []
-        if use_time:
-            more.append(usable(x, g.drift(), DRIFT_KEPT, base_basis=q)[0])
-        if extra is not None:
-            more.append(g._cols(extra[:, idx]))
-        if sum(c.shape[1] for c in more):
-            x = np.hstack([x, *more])
-            q = orth(x)
-        y = g.vec(d.robot[idx] - p)
-        res = y - q @ (q.T @ y)
-        rss = float(res @ res)
-        k = q.shape[1]
-        nu = len(y) - k - 3
-        if nu < 3:
-            break
-        qb = q.reshape(len(idx), 3, k)
-        m = np.eye(3)[None] - np.einsum("nak,nbk->nab", qb, qb)
-        rb = res.reshape(len(idx), 3)
-        try:
-            dss = np.einsum("na,na->n", rb, np.linalg.solve(m, rb[..., None])[..., 0])
-        except np.linalg.LinAlgError:
-            break
-        s2 = (rss - dss) / nu
-        fj = np.where(s2 > 0, (dss / 3) / np.where(s2 > 0, s2, 1.0), np.inf)
-        best_i = int(np.argmax(fj))
-        best = float(fj[best_i])
-        if best_i < 0:
-            break
-        padj = min(1.0, float(stats.f.sf(best, 3, nu)) * len(idx))
-        steps.append((int(idx[best_i]), padj))
-        active[idx[best_i]] = False
+    del x
+    steps = _esd_steps(q, g.vec(d.robot - p), kmax)
     found = 0
     for i, (_, padj) in enumerate(steps):
         if padj < alpha:
@@ -323,6 +305,58 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
     # the ESD's decision rests on the last significant step (earlier steps may lie above alpha: masking)
     p_value = float(steps[found - 1][1]) if found else (float(steps[0][1]) if steps else 1.0)
     return out, p_value
+
+
+def _esd_steps(q: np.ndarray, y: np.ndarray, kmax: int) -> list[tuple[int, float]]:
+    """The ESD's steps: per step the point (index of the N points) with the largest deleted F statistic among the
+    points left, and its Bonferroni-adjusted p; the point is then removed. q (3N, k): an orthonormal basis of the
+    model over all points; y (3N,): the whitened residuals.
+
+    Without the removed rows S the model's Gram matrix is M = I - Σ_S q_Sᵀ q_S, so q @ M^(-1/2) (its directions
+    kept by the rank rule of `orth_basis`) is an orthonormal basis on the rows left: the fit, the residuals and each
+    point's 3x3 leverage follow from it without rebuilding the design (a test holds them equal to a refit)."""
+    n = len(y) // 3
+    k = q.shape[1]
+    qb = q.reshape(n, 3, k)
+    yb = y.reshape(n, 3)
+    active = np.ones(n, bool)
+    gram_out = np.zeros((k, k))
+    qty = q.T @ y
+    steps: list[tuple[int, float]] = []
+    for _ in range(kmax):
+        left = int(active.sum())
+        if k:
+            lam, v = np.linalg.eigh(np.eye(k) - gram_out)
+            keep = lam > RANK_RTOL**2 * lam[-1] if lam[-1] > 0 else np.zeros(k, bool)
+            w = v[:, keep] / np.sqrt(lam[keep])
+        else:
+            w = np.zeros((0, 0))
+        r = w.shape[1]
+        nu = 3 * left - r - 3
+        if nu < 3:
+            break
+        z = q @ w  # orthonormal on the rows left
+        res = y - z @ (w.T @ qty)
+        zb = z.reshape(n, 3, r)
+        m = np.eye(3)[None] - np.einsum("nak,nbk->nab", zb, zb)
+        rb = res.reshape(n, 3)
+        rb[~active] = 0.0
+        m[~active] = np.eye(3)
+        rss = float(np.einsum("na,na->", rb, rb))
+        try:
+            dss = np.einsum("na,na->n", rb, np.linalg.solve(m, rb[..., None])[..., 0])
+        except np.linalg.LinAlgError:
+            break
+        s2 = (rss - dss) / nu
+        fj = np.where(s2 > 0, (dss / 3) / np.where(s2 > 0, s2, 1.0), np.inf)
+        fj[~active] = -np.inf
+        best_i = int(np.argmax(fj))
+        padj = min(1.0, float(stats.f.sf(float(fj[best_i]), 3, nu)) * left)
+        steps.append((best_i, padj))
+        active[best_i] = False
+        gram_out += qb[best_i].T @ qb[best_i]
+        qty -= qb[best_i].T @ yb[best_i]
+    return steps
 
 
 # ---------------------------------------------------------------------------------------------- Moran's I

@@ -427,3 +427,55 @@ def test_on_many_points_the_bootstrap_lays_its_draws_out_in_locality_order_with_
     where = np.empty(n, np.intp)
     where[order] = np.arange(n)
     assert np.mean(np.abs(where[nb] - where[:, None])) < 0.5 * np.mean(np.abs(nb - np.arange(n)[:, None]))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_outlier_search_equals_refitting_the_model_without_the_points_removed(seed):
+    """The ESD's downdated steps (diagnosis_stats._esd_steps: the model built once, on every point) give the points
+    and p-values of refitting everything on the points left at each step: the registration, the design (rigid +
+    linear, drift on times, the arm's extra columns) and an SVD basis; on volumes and planes, weighted points,
+    planted outliers."""
+    from rrbc_core.analysis.diagnosis_stats import DRIFT_KEPT, Geometry, outliers, paired, usable
+
+    rng = np.random.default_rng(700 + seed)
+    m, info = synth(700 + seed, n=int(rng.integers(30, 150)), planar=seed % 3 == 0, repeats=1 + seed % 2)
+    n = info["n"]
+    robot = np.array(m.robot, float)
+    bad = rng.choice(n, 3, replace=False)
+    for rep in range(1 + seed % 2):
+        robot[bad + rep * n] += rng.normal(0.0, 30 * info["sigma"], (3, 3))
+    m = MeasurementSet(m.ids, m.roles, m.sensor, robot, m.time, [0] * len(m.ids))
+    d = paired(m)
+    use_time = seed % 2 == 0
+    white = np.linalg.cholesky(np.linalg.inv(np.diag(rng.uniform(0.5, 2.0, 3)))).T
+    extra = rng.normal(0.0, 1.0, (2, n, 3)) if seed >= 3 else None
+
+    def svd_basis(x):
+        u, sv, _ = np.linalg.svd(x, full_matrices=False)
+        return u[:, sv > 1e-8 * sv[0]]
+
+    active = np.ones(n, bool)
+    steps = []
+    for _ in range(min(n // 5, n - 8, 10)):
+        idx = np.flatnonzero(active)
+        p = least_squares(d.sensor[idx], d.robot[idx], weights=d.count[idx]).mapping.apply(d.sensor[idx])
+        g = Geometry(p, d.time[idx] if use_time else None, d.count[idx], white)
+        x = np.hstack([g.translations(), g.linear()])
+        if use_time:
+            x = np.hstack([x, usable(x, g.drift(), DRIFT_KEPT)[0]])
+        if extra is not None:
+            x = np.hstack([x, g._cols(extra[:, idx])])
+        q = svd_basis(x)
+        y = g.vec(d.robot[idx] - p)
+        res = (y - q @ (q.T @ y)).reshape(-1, 3)
+        nu = 3 * len(idx) - q.shape[1] - 3
+        qb = q.reshape(len(idx), 3, -1)
+        lev = np.eye(3) - np.einsum("nak,nbk->nab", qb, qb)
+        dss = np.einsum("na,na->n", res, np.linalg.solve(lev, res[..., None])[..., 0])
+        f = (dss / 3) / ((np.sum(res**2) - dss) / nu)
+        i = int(np.argmax(f))
+        steps.append((int(idx[i]), min(1.0, float(stats.f.sf(f[i], 3, nu)) * len(idx))))
+        active[idx[i]] = False
+    got, p_last = outliers(d, use_time, 1.01, white, extra)  # alpha above 1: every step is accepted
+    assert got == [s[0] for s in steps]
+    assert p_last == pytest.approx(steps[-1][1], rel=1e-7, abs=1e-300)
