@@ -310,7 +310,7 @@ def diagnose(
             {"rms_mm": rms, "length_scale_mm": ps.field.length_mm},
             tests["smooth_field"],
             f"neighbouring residuals point the same way (Moran's I = {i_obs:.3g} with {k_nb} nearest "
-            f"neighbours; white-noise bootstrap mean {i_mean:.3g}, p {fmt_p(tests['smooth_field'])}) after removing "
+            f"neighbours; mean under white noise {i_mean:.3g}, p {fmt_p(tests['smooth_field'])}) after removing "
             f"the accepted lower-order terms; rms_mm is the RMS of the whole non-rigid bias at the points (its linear "
             f"part included, drift and the arm excluded; never more than the rigid bias leaves beside the arm's own size), "
             "the length is the maximum-likelihood correlation length"

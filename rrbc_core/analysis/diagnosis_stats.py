@@ -18,10 +18,9 @@ PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points 
 
 BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
 # Above this many points the bootstrap's cost (replicates x N) would dominate: Moran's I is then a sum of N*k
-# locally dependent terms, close to normal, so 199 replicates give its null mean and spread and the p-value is the
-# normal tail (docs/theory.md §6.1). Below it the empirical tail of 1999 replicates is used.
+# locally dependent terms, close to normal, so the p-value is the normal tail with its exact null mean and spread
+# (`moran_null`, docs/theory.md §6.1). Below it the empirical tail of 1999 replicates is used.
 BOOTSTRAP_EXACT_POINTS = 20_000
-BOOTSTRAP_LARGE = 199
 
 MAX_POINTS = 1_000_000  # distinct paired points diagnose accepts (issue 16: a stated limit, not minutes or gigabytes)
 
@@ -394,37 +393,50 @@ def moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
     return _moran_sparse(res, _weights(nb), nb.shape[1])
 
 
-def locality_order(nb: np.ndarray, weights=None) -> np.ndarray:
-    """An order (N,) of the points that keeps neighbours near each other in memory (reverse Cuthill-McKee on the
-    k-NN graph): the neighbour sums then read nearby memory instead of jumping across the whole array.
-    `weights`: `_weights(nb)` when the caller has it."""
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
+def moran_null(qa: np.ndarray, nb: np.ndarray) -> tuple[float, float]:
+    """The exact mean and standard deviation of Moran's I (`moran`, weights nb (N, k)) of white-noise residual fields
+    with the model's columns (orthonormal qa, (3N, q)) projected out: what `moran_bootstrap` estimates by drawing.
 
-    w = _weights(nb) if weights is None else weights
-    return np.asarray(reverse_cuthill_mckee(w, symmetric_mode=False), dtype=np.intp)
+    With M = I - qa qaᵀ (rank m = 3N - q) and S the symmetric part of the weights acting on each coordinate, kI =
+    εᵀMSMε / εᵀMε for white ε; the ratio is independent of its denominator (ε's direction in M's span is uniform
+    whatever its length), so E[kI] = tr(MS)/m and E[(kI)²] = (tr(MS)² + 2 tr(MSMS)) / (m(m + 2)), with
+    tr(MS) = tr(S) - tr(qaᵀSqa) and tr(MSMS) = |S|² - 2|S qa|² + |qaᵀSqa|² (Frobenius norms). Cost O(N·k·q),
+    memory one column of qa at a time."""
+    n, k = nb.shape
+    w = _weights(nb)
+    ws = ((w + w.T) * 0.5).tocsr()
+    q = qa.shape[1]
+    qb = qa.reshape(n, 3, q)
+    m = 3 * n - q
+    tr_s = 3.0 * float(ws.diagonal().sum())
+    s_f2 = 3.0 * float(ws.multiply(ws).sum())
+    qsq = np.empty((q, q))
+    sq_f2 = 0.0
+    for j in range(q):
+        sqj = np.asarray(ws @ qb[:, :, j])  # (N, 3): S applied to column j
+        sq_f2 += float(np.einsum("nc,nc->", sqj, sqj))
+        qsq[:, j] = np.einsum("ncq,nc->q", qb, sqj)
+    tr_ms = tr_s - float(np.trace(qsq))
+    tr_msms = s_f2 - 2.0 * sq_f2 + float(np.sum(qsq * qsq))
+    mean = tr_ms / m
+    second = (tr_ms**2 + 2.0 * tr_msms) / (m * (m + 2.0))
+    return mean / k, float(np.sqrt(max(second - mean**2, 0.0))) / k
 
 
 def moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = BOOTSTRAP) -> np.ndarray:
     """Moran's I of `replicates` white-noise residual fields with the accepted model's columns (orthonormal qa,
     (3N, q)) projected out. Drawn and evaluated in chunks of BOOTSTRAP_CHUNK_ELEMENTS: memory is linear in N and
-    the draws are those of one rng.standard_normal((replicates, 3N)) call (a Generator fills rows in order).
-
-    Above BOOTSTRAP_EXACT_POINTS points the draws are laid out in `locality_order` (point j of a draw is point
-    order[j]; the points, qa's rows and the weights permuted alike): white noise is exchangeable, so the replicates'
-    distribution is the same, and the neighbour sums, most of the cost on many points, read nearby memory."""
+    the draws are those of one rng.standard_normal((replicates, 3N)) call (a Generator fills rows in order)."""
     n3 = qa.shape[0]
     n, k = nb.shape
     w = _weights(nb)
-    if n > BOOTSTRAP_EXACT_POINTS:
-        order = locality_order(nb, w)
-        w = w[order][:, order]
-        qa = qa.reshape(n, 3, -1)[order].reshape(n3, -1)
+    qt = np.ascontiguousarray(qa.T)  # (q, 3N): the projection reads it row by row
     out = np.empty(replicates)
     step = max(1, BOOTSTRAP_CHUNK_ELEMENTS // n3)
     for start in range(0, replicates, step):
         b = min(step, replicates - start)
         eps = rng.standard_normal((b, n3))
-        eps -= (eps @ qa) @ qa.T
+        eps -= (eps @ qt.T) @ qt
         out[start : start + b] = _moran_sparse(eps.reshape(b, n, 3), w, k)
     return out
 

@@ -16,7 +16,6 @@ from rrbc_core.analysis.diagnosis_field import FieldModel, fit_field, gls_whiten
 from rrbc_core.analysis.diagnosis_stats import (
     BOOTSTRAP,
     BOOTSTRAP_EXACT_POINTS,
-    BOOTSTRAP_LARGE,
     DRIFT_KEPT,
     TIME_FOLLOWS_POSITION,
     Geometry,
@@ -24,6 +23,7 @@ from rrbc_core.analysis.diagnosis_stats import (
     ftest,
     moran,
     moran_bootstrap,
+    moran_null,
     moran_weights,
     orth,
     time_on_position,
@@ -71,7 +71,7 @@ class Pass:
     t_mean: float
     delta: np.ndarray | None  # the arm's scaled parameter errors when kinematic is accepted
     field: FieldModel | None = None  # once a smooth field is found
-    moran: tuple = ()  # (I, bootstrap mean, k)
+    moran: tuple = ()  # (I, its mean under white noise, k)
     rejudged: tuple = ()  # names dropped beside the field or the arm, with their p-values
     c_delta: np.ndarray | None = None  # the load terms' scaled coefficients when compliance is accepted
 
@@ -327,20 +327,21 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
     res_acc = y - qa @ (qa.T @ y)
     nb = moran_weights(p)
     i_obs = float(moran(res_acc.reshape(n, 3), nb))
-    large = n > BOOTSTRAP_EXACT_POINTS
-    i_boot = moran_bootstrap(rng, qa, nb, BOOTSTRAP_LARGE if large else BOOTSTRAP)
-    exceed = int(np.sum(i_boot >= i_obs))
-    if large:  # Moran's I of many points is close to normal: its null moments from the bootstrap, the tail from z
-        z = (i_obs - i_boot.mean()) / max(float(i_boot.std(ddof=1)), 1e-300)
-        p_sm = float(stats.norm.sf(z))
-    elif exceed:
-        p_sm = (1 + exceed) / (BOOTSTRAP + 1)
+    if n > BOOTSTRAP_EXACT_POINTS:  # Moran's I of many points is close to normal: its exact null moments
+        i_mean, i_sd = moran_null(qa, nb)
+        p_sm = float(stats.norm.sf((i_obs - i_mean) / max(i_sd, 1e-300)))
     else:
-        z = (i_obs - i_boot.mean()) / max(float(i_boot.std()), 1e-300)
-        p_sm = float(min(1.0 / (BOOTSTRAP + 1), stats.norm.sf(z)))
+        i_boot = moran_bootstrap(rng, qa, nb, BOOTSTRAP)
+        exceed = int(np.sum(i_boot >= i_obs))
+        if exceed:
+            p_sm = (1 + exceed) / (BOOTSTRAP + 1)
+        else:
+            z = (i_obs - i_boot.mean()) / max(float(i_boot.std()), 1e-300)
+            p_sm = float(min(1.0 / (BOOTSTRAP + 1), stats.norm.sf(z)))
+        i_mean = float(i_boot.mean())
+        del i_boot
     tests["smooth_field"] = p_sm
-    boot_mean = float(i_boot.mean())
-    del qa, res_acc, i_boot, x_acc
+    del qa, res_acc, x_acc
     field = None
     if p_sm < a_each:
         # the field's model from the residuals beside everything but scale and affine (a field has a linear part);
@@ -422,7 +423,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         t_mean,
         delta,
         field,
-        (i_obs, boot_mean, nb.shape[1]),
+        (i_obs, i_mean, nb.shape[1]),
         tuple(rejudged),
         c_delta,
     )
