@@ -160,16 +160,16 @@ def fit(y: np.ndarray, x: np.ndarray):
     values above 1e-8 of the largest): the fit and the F-tests' degrees of freedom agree even for nearly dependent
     columns (the arm's Jacobian beside the rigid terms). Returns (coef, residual, RSS, rank).
 
-    One Householder QR of [x y] (R only: memory one copy of x, however many rows), then the truncated SVD of the
-    small triangle: x = Q R_x, so x's singular values (and the truncated solution) are R_x's, and
-    RSS = |R_x c − Qᵀy|² + ρ² with ρ the part of y outside x's span."""
+    The triangle R of [x y]'s Householder QR (`_triangle`: row blocks at a time, memory one block however many
+    rows), then the truncated SVD of the small triangle: x = Q R_x, so x's singular values (and the truncated
+    solution) are R_x's, and RSS = |R_x c − Qᵀy|² + ρ² with ρ the part of y outside x's span."""
     k = x.shape[1]
     coef = np.zeros(k)
     norms = np.linalg.norm(x, axis=0)
     ok = norms > 0
     rank = 0
     if ok.any():
-        r = linalg.qr(np.hstack([x[:, ok], y[:, None]]), mode="r", overwrite_a=True, check_finite=False)[0]
+        r = _triangle(x, y, ok)
         m = int(ok.sum())
         r_x, r_y = r[:m, :m], r[:m, m]
         u, sv, vt = np.linalg.svd(r_x / norms[ok], full_matrices=False)
@@ -178,6 +178,24 @@ def fit(y: np.ndarray, x: np.ndarray):
         coef[ok] = (vt[keep].T @ ((u[:, keep].T @ r_y) / sv[keep])) / norms[ok]
     res = y - x @ coef
     return coef, res, float(res @ res), rank
+
+
+QR_BLOCK_ROWS = 1 << 15  # rows of [x y] factored at a time by `_triangle`
+
+
+def _triangle(x: np.ndarray, y: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """R (c+1, c+1) of the QR of [x[:, cols] y] (m rows), block by block: the R of each block of rows stacked under
+    the R so far and factored again (a tall-skinny QR: the same R up to the signs of its rows, which the SVD and the
+    RSS in `fit` do not see), so no copy of the whole of x is made."""
+    c = int(cols.sum())
+    r = np.zeros((0, c + 1))
+    for start in range(0, len(y), QR_BLOCK_ROWS):
+        block = np.empty((min(QR_BLOCK_ROWS, len(y) - start) + len(r), c + 1))
+        block[: len(r)] = r
+        block[len(r) :, :c] = x[start : start + QR_BLOCK_ROWS][:, cols]
+        block[len(r) :, c] = y[start : start + QR_BLOCK_ROWS]
+        r = linalg.qr(block, mode="r", overwrite_a=True, check_finite=False)[0][: c + 1]
+    return r
 
 
 def ftest(y, x0, x1):
@@ -362,7 +380,7 @@ def _esd_steps(q: np.ndarray, y: np.ndarray, kmax: int) -> list[tuple[int, float
 def moran_weights(p: np.ndarray):
     """Indices (N, k) of each point's k nearest other points (k = min(KNN, N - 1))."""
     k = min(KNN, len(p) - 1)
-    _, nb = cKDTree(p).query(p, k=k + 1)
+    _, nb = cKDTree(p).query(p, k=k + 1, workers=-1 if len(p) > 5000 else 1)  # many points: all cores
     return nb[:, 1:]
 
 
@@ -412,10 +430,12 @@ def moran_null(qa: np.ndarray, nb: np.ndarray) -> tuple[float, float]:
     s_f2 = 3.0 * float(ws.multiply(ws).sum())
     qsq = np.empty((q, q))
     sq_f2 = 0.0
-    for j in range(q):
-        sqj = np.asarray(ws @ qb[:, :, j])  # (N, 3): S applied to column j
-        sq_f2 += float(np.einsum("nc,nc->", sqj, sqj))
-        qsq[:, j] = np.einsum("ncq,nc->q", qb, sqj)
+    for j in range(0, q, 4):  # four columns at a time: S applied to them, (N, 3, g)
+        cols = np.ascontiguousarray(qb[:, :, j : j + 4])
+        g = cols.shape[2]
+        sq = np.asarray(ws @ cols.reshape(n, 3 * g)).reshape(3 * n, g)
+        sq_f2 += float(np.einsum("ng,ng->", sq, sq))
+        qsq[:, j : j + g] = qa.T @ sq
     tr_ms = tr_s - float(np.trace(qsq))
     tr_msms = s_f2 - 2.0 * sq_f2 + float(np.sum(qsq * qsq))
     mean = tr_ms / m

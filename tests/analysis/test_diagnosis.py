@@ -476,3 +476,24 @@ def test_the_outlier_search_equals_refitting_the_model_without_the_points_remove
     got, p_last = outliers(d, use_time, 1.01, white, extra)  # alpha above 1: every step is accepted
     assert got == [s[0] for s in steps]
     assert p_last == pytest.approx(steps[-1][1], rel=1e-7, abs=1e-300)
+
+
+@pytest.mark.parametrize("block", [3, 7, 1 << 15])
+def test_fit_by_blocks_of_rows_equals_one_least_squares_fit(block, monkeypatch):
+    """`fit` factors [x y] a block of rows at a time (so no copy of a tall design is made): its coefficients, RSS and
+    rank equal an SVD least-squares fit's, with an exactly dependent and a zero column, whatever the block (fewer rows
+    than columns included)."""
+    from rrbc_core.analysis import diagnosis_stats
+
+    monkeypatch.setattr(diagnosis_stats, "QR_BLOCK_ROWS", block)
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(200, 6)) * [1.0, 10.0, 0.1, 1.0, 1.0, 1.0]
+    x[:, 3] = x[:, 0] - 2 * x[:, 1]
+    x[:, 5] = 0.0
+    y = x[:, :3] @ [1.0, -2.0, 0.5] + rng.normal(0, 0.1, 200)
+    coef, res, rss, rank = diagnosis_stats.fit(y, x)
+    want, _, want_rank, _ = np.linalg.lstsq(x, y, rcond=None)
+    assert rank == want_rank == 4
+    assert np.allclose(x @ coef, x @ want, rtol=0, atol=1e-10)
+    assert rss == pytest.approx(float(np.sum((y - x @ want) ** 2)), rel=1e-10)
+    assert np.allclose(res, y - x @ coef)
