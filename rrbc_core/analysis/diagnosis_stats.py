@@ -4,6 +4,7 @@ covariance, and leave-one-out RRBC. Memory is linear in the number of points."""
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,35 +110,39 @@ class Geometry:
         """(N, 3) robot-frame vectors -> whitened, weighted (3N,)."""
         return (arr @ self.white.T).reshape(-1) * self.sw
 
-    def _cols(self, fields) -> np.ndarray:  # fields (k, N, 3) -> whitened, weighted (3N, k)
-        a = (np.asarray(fields) @ self.white.T).reshape(len(fields), -1).T
-        return a * self.sw[:, None]
+    def _cols(self, fields, count: int | None = None) -> np.ndarray:
+        """fields (k, N, 3), or an iterable of `count` (N, 3) fields -> whitened, weighted (3N, k), column-major
+        (each column written in place: no (k, N, 3) copies of many points)."""
+        if count is None:
+            fields = list(fields) if not isinstance(fields, np.ndarray) else fields
+            count = len(fields)
+        out = np.empty((count, 3 * self.n)).T
+        for j, f in enumerate(fields):
+            np.multiply((np.asarray(f) @ self.white.T).reshape(-1), self.sw, out=out[:, j])
+        return out
 
     def translations(self):
         e = np.eye(3)
-        return self._cols([np.tile(e[k], (self.n, 1)) for k in range(3)])
+        return self._cols((np.broadcast_to(e[k], (self.n, 3)) for k in range(3)), 3)
 
     def rigid(self):
         e = np.eye(3)
-        return np.hstack([self.translations(), self._cols([np.cross(e[k], self.u) for k in range(3)])])
+        moves = (np.broadcast_to(e[k], (self.n, 3)) for k in range(3))
+        turns = (np.cross(e[k], self.u) for k in range(3))
+        return self._cols(itertools.chain(moves, turns), 6)
 
     def scale_col(self):
         return self._cols([self.u])
 
     def linear(self):  # full 3x3 linear map: E_ab u
-        out = []
-        for a in range(3):
-            for b in range(3):
-                f = np.zeros((self.n, 3))
-                f[:, a] = self.u[:, b]
-                out.append(f)
-        return self._cols(out)
+        e = np.eye(3)
+        return self._cols((np.outer(self.u[:, b], e[a]) for a in range(3) for b in range(3)), 9)
 
     def drift(self):
         assert self.time is not None, "the drift column needs the rows' times"
         tt = (self.time - self.time.mean()) / self.tscale
         e = np.eye(3)
-        return self._cols([np.outer(tt, e[k]) for k in range(3)])
+        return self._cols((np.outer(tt, e[k]) for k in range(3)), 3)
 
 
 TIME_FOLLOWS_POSITION = 0.5  # R² of the rows' times on their positions beyond which time and position are confounded
@@ -165,7 +170,7 @@ def fit(y: np.ndarray, x: np.ndarray):
     solution) are R_x's, and RSS = |R_x c − Qᵀy|² + ρ² with ρ the part of y outside x's span."""
     k = x.shape[1]
     coef = np.zeros(k)
-    norms = np.linalg.norm(x, axis=0)
+    norms = np.sqrt(np.einsum("ij,ij->j", x, x))  # no squared copy of a tall x
     ok = norms > 0
     rank = 0
     if ok.any():
@@ -324,6 +329,22 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
     return out, p_value
 
 
+def _deleted_ss(zb: np.ndarray, rb: np.ndarray) -> np.ndarray:
+    """Each point's deleted sum of squares rᵢᵀ (I - zᵢzᵢᵀ)⁻¹ rᵢ (N,), zb (N, 3, r) its rows of an orthonormal basis
+    of the model, rb (N, 3) its residuals: the 3x3 blocks' six entries and the adjugate, no batched solve (a
+    singular block gives inf or nan)."""
+    h = {(a, b): np.einsum("nk,nk->n", zb[:, a], zb[:, b]) for a in range(3) for b in range(a, 3)}
+    m00, m11, m22 = 1.0 - h[0, 0], 1.0 - h[1, 1], 1.0 - h[2, 2]
+    m01, m02, m12 = -h[0, 1], -h[0, 2], -h[1, 2]
+    c00, c11, c22 = m11 * m22 - m12 * m12, m00 * m22 - m02 * m02, m00 * m11 - m01 * m01
+    c01, c02, c12 = m02 * m12 - m01 * m22, m01 * m12 - m02 * m11, m01 * m02 - m00 * m12
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    x, y, z = rb[:, 0], rb[:, 1], rb[:, 2]
+    quad = c00 * x * x + c11 * y * y + c22 * z * z + 2.0 * (c01 * x * y + c02 * x * z + c12 * y * z)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(det > 0, quad / np.where(det > 0, det, 1.0), np.inf)
+
+
 def _esd_steps(q: np.ndarray, y: np.ndarray, kmax: int) -> list[tuple[int, float]]:
     """The ESD's steps: per step the point (index of the N points) with the largest deleted F statistic among the
     points left, and its Bonferroni-adjusted p; the point is then removed. q (3N, k): an orthonormal basis of the
@@ -354,16 +375,12 @@ def _esd_steps(q: np.ndarray, y: np.ndarray, kmax: int) -> list[tuple[int, float
             break
         z = q @ w  # orthonormal on the rows left
         res = y - z @ (w.T @ qty)
-        zb = z.reshape(n, 3, r)
-        m = np.eye(3)[None] - np.einsum("nak,nbk->nab", zb, zb)
         rb = res.reshape(n, 3)
         rb[~active] = 0.0
-        m[~active] = np.eye(3)
         rss = float(np.einsum("na,na->", rb, rb))
-        try:
-            dss = np.einsum("na,na->n", rb, np.linalg.solve(m, rb[..., None])[..., 0])
-        except np.linalg.LinAlgError:
-            break
+        dss = _deleted_ss(z.reshape(n, 3, r), rb)
+        if not np.all(np.isfinite(dss[active])):
+            break  # a point that alone carries a direction of the model: its deleted residual is not defined
         s2 = (rss - dss) / nu
         fj = np.where(s2 > 0, (dss / 3) / np.where(s2 > 0, s2, 1.0), np.inf)
         fj[~active] = -np.inf
