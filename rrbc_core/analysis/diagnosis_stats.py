@@ -236,7 +236,9 @@ def orth_basis(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     q = x @ to_q
     lam2, v2 = np.linalg.eigh(q.T @ q)  # ≈ I; its inverse square root makes q orthonormal to rounding
     fix = v2 / np.sqrt(lam2)
-    to_q, q = to_q @ fix, q @ fix
+    to_q = to_q @ fix
+    for start in range(0, m, QR_BLOCK_ROWS):  # q @ fix in place, a block of rows at a time: no second tall copy
+        q[start : start + QR_BLOCK_ROWS] = q[start : start + QR_BLOCK_ROWS] @ fix
     if big.all():
         return q, to_q
     small = v[:, ~big]
@@ -555,7 +557,7 @@ def loo_errors(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=
     n = len(sensor)
     ev = np.ones(n, bool) if evaluate is None else np.asarray(evaluate, bool)
     kk = min(k, n - 1)
-    dist, nb = cKDTree(sensor).query(sensor, k=kk + 1)
+    dist, nb = cKDTree(sensor).query(sensor, k=kk + 1, workers=-1 if n > 5000 else 1)  # many points: all cores
     dist, nb = dist.reshape(n, -1), nb.reshape(n, -1)
     # drop each point itself (it is its own nearest unless another point coincides with it)
     self_col = nb == np.arange(n)[:, None]
@@ -565,7 +567,7 @@ def loo_errors(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=
     nb, dj = nb[keep].reshape(n, kk), dist[keep].reshape(n, kk)
     rot, t = loo_rotations(sensor, robot, weights)
     e_rigid = robot - (np.einsum("nij,nj->ni", rot, sensor) + t)
-    corr = robot[nb] - (np.einsum("nij,nkj->nki", rot, sensor[nb]) + t[:, None, :])  # (N, k, 3)
+    corr = robot[nb] - (np.matmul(sensor[nb], np.swapaxes(rot, 1, 2)) + t[:, None, :])  # (N, k, 3)
     on = dj <= 1e-12
     with np.errstate(divide="ignore"):
         w = np.where(on.any(axis=1, keepdims=True), on.astype(float), 1.0 / dj**power)
