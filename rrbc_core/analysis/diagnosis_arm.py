@@ -137,7 +137,7 @@ def judge_compliance(y, x_acc, kfull, load_cols, a_each: float, tests: dict, bes
     cols, _, c_map = usable(x0, load_cols, kept=1e-4)
     if cols.shape[1] == 0:
         return None
-    p_c, q_c, nu_c, f_c, rss_a, rss_c, _ = ftest(y, x0, np.hstack([x0, cols]))
+    p_c, q_c, nu_c, f_c, rss_a, rss_c, _ = ftest(y, x0, (x0, cols))
     tests["compliance"] = p_c
     p_cf = 1.0
     if p_c < a_each:

@@ -160,51 +160,69 @@ def time_on_position(points: np.ndarray, time: np.ndarray) -> float:
     return float(1.0 - np.sum((t - x @ coef) ** 2) / np.sum((t - t.mean()) ** 2))
 
 
-def fit(y: np.ndarray, x: np.ndarray):
+Columns = np.ndarray | tuple | list  # a design (M, k), or its column blocks side by side (no copy made of them)
+
+
+def _column_blocks(x: Columns) -> list[np.ndarray]:
+    return [b for b in (x if isinstance(x, (tuple, list)) else (x,)) if b.shape[1]]
+
+
+def fit(y: np.ndarray, x: Columns):
     """Least squares of y on the columns x along the directions its rank counts (normalised columns, singular
     values above 1e-8 of the largest): the fit and the F-tests' degrees of freedom agree even for nearly dependent
-    columns (the arm's Jacobian beside the rigid terms). Returns (coef, residual, RSS, rank).
+    columns (the arm's Jacobian beside the rigid terms). x: a design (M, k), or a tuple of column blocks taken side
+    by side (as np.hstack would, without its copy). Returns (coef, residual, RSS, rank).
 
     The triangle R of [x y]'s Householder QR (`_triangle`: row blocks at a time, memory one block however many
     rows), then the truncated SVD of the small triangle: x = Q R_x, so x's singular values (and the truncated
     solution) are R_x's, and RSS = |R_x c − Qᵀy|² + ρ² with ρ the part of y outside x's span."""
-    k = x.shape[1]
-    coef = np.zeros(k)
-    norms = np.sqrt(np.einsum("ij,ij->j", x, x))  # no squared copy of a tall x
+    blocks = _column_blocks(x)
+    norms = np.concatenate([np.sqrt(np.einsum("ij,ij->j", b, b)) for b in blocks]) if blocks else np.zeros(0)
+    coef = np.zeros(len(norms))
     ok = norms > 0
     rank = 0
     if ok.any():
-        r = _triangle(x, y, ok)
+        r = _triangle(blocks, y, ok)
         m = int(ok.sum())
         r_x, r_y = r[:m, :m], r[:m, m]
         u, sv, vt = np.linalg.svd(r_x / norms[ok], full_matrices=False)
         keep = sv > 1e-8 * sv[0]
         rank = int(keep.sum())
         coef[ok] = (vt[keep].T @ ((u[:, keep].T @ r_y) / sv[keep])) / norms[ok]
-    res = y - x @ coef
+    res = y.copy()
+    at = 0
+    for b in blocks:
+        res -= b @ coef[at : at + b.shape[1]]
+        at += b.shape[1]
     return coef, res, float(res @ res), rank
 
 
 QR_BLOCK_ROWS = 1 << 15  # rows of [x y] factored at a time by `_triangle`
 
 
-def _triangle(x: np.ndarray, y: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """R (c+1, c+1) of the QR of [x[:, cols] y] (m rows), block by block: the R of each block of rows stacked under
-    the R so far and factored again (a tall-skinny QR: the same R up to the signs of its rows, which the SVD and the
-    RSS in `fit` do not see), so no copy of the whole of x is made."""
+def _triangle(blocks: list[np.ndarray], y: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """R (c+1, c+1) of the QR of [x[:, cols] y] (x: the column blocks side by side; m rows), block by block: the R
+    of each block of rows stacked under the R so far and factored again (a tall-skinny QR: the same R up to the
+    signs of its rows, which the SVD and the RSS in `fit` do not see), so no copy of the whole of x is made."""
     c = int(cols.sum())
     r = np.zeros((0, c + 1))
     for start in range(0, len(y), QR_BLOCK_ROWS):
-        block = np.empty((min(QR_BLOCK_ROWS, len(y) - start) + len(r), c + 1))
+        stop = min(start + QR_BLOCK_ROWS, len(y))
+        block = np.empty((stop - start + len(r), c + 1))
         block[: len(r)] = r
-        block[len(r) :, :c] = x[start : start + QR_BLOCK_ROWS][:, cols]
-        block[len(r) :, c] = y[start : start + QR_BLOCK_ROWS]
+        at, to = 0, 0
+        for b in blocks:
+            keep = cols[at : at + b.shape[1]]
+            block[len(r) :, to : to + int(keep.sum())] = b[start:stop][:, keep]
+            at, to = at + b.shape[1], to + int(keep.sum())
+        block[len(r) :, c] = y[start:stop]
         r = linalg.qr(block, mode="r", overwrite_a=True, check_finite=False)[0][: c + 1]
     return r
 
 
-def ftest(y, x0, x1):
-    """Nested F-test of x1 ⊃ x0 on y. Returns (p, q, nu, F, rss0, rss1, coef1)."""
+def ftest(y, x0: Columns, x1: Columns):
+    """Nested F-test of x1 ⊃ x0 on y (each a design or a tuple of column blocks, as `fit` takes). Returns (p, q,
+    nu, F, rss0, rss1, coef1)."""
     _, _, rss0, k0 = fit(y, x0)
     coef1, _, rss1, k1 = fit(y, x1)
     q, nu = k1 - k0, len(y) - k1

@@ -87,11 +87,11 @@ def _scale_rate(g: Geometry, y: np.ndarray, blocks: dict, found: dict, tests: di
     col = usable(x_acc, raw)[0]
     if not col.shape[1]:
         return
-    p_sr, _, nu_sr, f_sr, rss_a, rss_sr, _ = ftest(y, x_acc, np.hstack([x_acc, col]))
+    p_sr, _, nu_sr, f_sr, rss_a, rss_sr, _ = ftest(y, x_acc, (x_acc, col))
     tests["scale_rate"] = p_sr
     if p_sr >= a_each:
         return
-    coef = fit(y, np.hstack([x_acc, raw]))[0][-1]
+    coef = fit(y, (x_acc, raw))[0][-1]
     unit = 1e6 / (g.scale * g.tscale)  # a coefficient (mm) in ppm/s
     rate = float(coef) * unit
     q_acc = orth(x_acc)
@@ -150,13 +150,13 @@ def _honest_arm_sizes(g: Geometry, y: np.ndarray, blocks: dict, found: dict, wsu
     names = [k for k in ("kinematic", "compliance") if k in found and k in blocks]
     if not names:
         return
-    res_all = fit(y, np.hstack(list(blocks.values())))[1]
+    res_all = fit(y, tuple(blocks.values()))[1]
     w = g.sw.reshape(g.n, 3)[:, 0] ** 2
     # what the rigid fit leaves (mm): no effect explains more than that
     rigid_res = mm_cols(g, fit(y, blocks["rigid"])[1][:, None])[:, 0].reshape(g.n, 3)
     most = float(np.sqrt(np.sum(w * np.sum(rigid_res**2, axis=1)) / wsum))
     for name in names:
-        res_without = fit(y, np.hstack([v for k, v in blocks.items() if k != name]))[1]
+        res_without = fit(y, tuple(v for k, v in blocks.items() if k != name))[1]
         part = mm_cols(g, (res_without - res_all)[:, None])[:, 0].reshape(g.n, 3)  # in mm, unwhitened
         size = min(float(np.sqrt(np.sum(w * np.sum(part**2, axis=1)) / wsum)), most)
         e = found[name]
@@ -198,17 +198,17 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             "errors that depend on the distance from the plane are invisible to these points"
         )
     # scale: similarity vs rigid; affine beyond scale
-    x_scale = np.hstack([x_rigid, g.scale_col()])
+    x_scale = (x_rigid, g.scale_col())  # column blocks side by side (`fit`): no copies of the tall columns
     p_sc, _, nu_sc, f_sc, rss0, rss_sc, _ = ftest(y, x_rigid, x_scale)
     tests["scale"] = p_sc
-    x_aff = np.hstack([x_rigid, g.linear()])
-    p_af, q_af, nu_af, f_af, _, rss_af, _ = ftest(y, x_scale, x_aff)
+    lin = g.linear()
+    p_af, q_af, nu_af, f_af, _, rss_af, _ = ftest(y, x_scale, (x_rigid, lin))
     tests["affine"] = p_af
-    del x_scale, x_aff  # (3n, k) each: a million points hold 24 MB a column
+    del x_scale  # (3n, k): a million points hold 24 MB a column
     wsum = float(np.sum(w))
     if p_af < a_each:
         found["affine"] = affine_effect(p, resid, w, g, rss0, rss_sc, rss_af, q_af, nu_af, f_af, p_af, wsum)
-        blocks["affine"] = g.linear()
+        blocks["affine"] = lin
     elif p_sc < a_each:
         sim = least_squares(s, r, weights=w, with_scale=True)
         ppm = (float(sim.details["scale"]) - 1.0) * 1e6
@@ -223,6 +223,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             magnitude_mm=float(np.sqrt(max(0.0, rss0 - rss_sc) / wsum)),
         )
         blocks["scale"] = g.scale_col()
+    del lin  # kept in blocks when accepted
     x_of = lambda names: np.hstack([blocks[k] for k in names])
     # drift
     rate, t_mean = np.zeros(3), float(np.mean(d.time[inl])) if use_time else 0.0
@@ -230,7 +231,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
     if use_time:
         x_acc = x_of(blocks)
         dcol_ok, surviving = usable_drift(x_acc, g.drift())  # fraction of drift energy kept per direction
-        p_dr, q_dr, nu_dr, f_dr, rss_a, rss_d, _ = ftest(y, x_acc, np.hstack([x_acc, dcol_ok]))
+        p_dr, q_dr, nu_dr, f_dr, rss_a, rss_d, _ = ftest(y, x_acc, (x_acc, dcol_ok))
         tests["drift"] = p_dr
         lost = int(np.sum(surviving < DRIFT_KEPT))
         if lost:
@@ -241,7 +242,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             )
         if p_dr < a_each:
             # the rate from the full drift columns (the absorbed directions are poorly determined: see the limit)
-            rate = fit(y, np.hstack([x_acc, g.drift()]))[0][-3:] / g.tscale  # coefficients are in mm
+            rate = fit(y, (x_acc, g.drift()))[0][-3:] / g.tscale  # coefficients are in mm
             found["drift"] = Effect(
                 "drift",
                 {"rate_mm_per_s": rate.tolist()},
@@ -251,6 +252,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
                 magnitude_mm=float(np.sqrt(max(0.0, rss_a - rss_d) / wsum)),
             )
             blocks["drift"] = dcol_ok
+        del x_acc  # (3n, k): _scale_rate builds its own from the blocks accepted now
         r2 = time_on_position(p, g.time) if g.time is not None else 0.0
         if r2 > TIME_FOLLOWS_POSITION:
             limits.append(
@@ -271,7 +273,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         # up to the noise of its rotation columns are left out, 1e-4 of their energy, 1 % of their length)
         kfull, _, k_map = usable(base, g._cols(arm.fields[:, inl]), kept=1e-4)
         ktest = usable(x_acc, kfull)[0]
-        p_k, q_k, nu_k, f_k, rss_a, rss_k, _ = ftest(y, x_acc, np.hstack([x_acc, ktest]))
+        p_k, q_k, nu_k, f_k, rss_a, rss_k, _ = ftest(y, x_acc, (x_acc, ktest))
         tests["kinematic"] = p_k
         if p_k < a_each:
             # a smooth field of position alone could explain what the arm's columns fit: judge the arm beside it
@@ -370,7 +372,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             mm_blocks = {k: v for k, v in mm_blocks.items() if k in wb}
             del wb
             cols = {k: (mm_cols(g, g.drift()) if k == "drift" else v) for k, v in mm_blocks.items()}
-            coef = fit(y_w, np.hstack([gls_whiten(field, c) for c in cols.values()]))[0]
+            coef = fit(y_w, tuple(gls_whiten(field, c) for c in cols.values()))[0]
             contrib, pos = np.zeros_like(y_mm), 0
             for k, c in cols.items():
                 ck = coef[pos : pos + c.shape[1]]
@@ -439,7 +441,7 @@ def _drift_beside_field(g, p, y_mm, res_nl, mm_blocks: dict, dcols, found: dict,
     field = fit_field(p, res_nl.reshape(len(p), 3))
     y_w = gls_whiten(field, y_mm)
     base = np.hstack([gls_whiten(field, v) for v in mm_blocks.values()])
-    p_b, q_b, nu_b, f_b, rss_a, rss_d, coef = ftest(y_w, base, np.hstack([base, gls_whiten(field, dcols)]))
+    p_b, q_b, nu_b, f_b, rss_a, rss_d, coef = ftest(y_w, base, (base, gls_whiten(field, dcols)))
     tests["drift_beside_field"] = p_b
     if p_b >= a_each / 2:
         return res_nl, field
@@ -464,7 +466,7 @@ def rejudge(y, blocks: dict, found: dict, a_each: float, beside: str, tests: dic
         if name not in blocks:
             continue
         others = np.hstack([v for k, v in blocks.items() if k != name])
-        p_b = ftest(y, others, np.hstack([others, usable(others, blocks[name])[0]]))[0]
+        p_b = ftest(y, others, (others, usable(others, blocks[name])[0]))[0]
         tests[f"{name}_beside_{beside.split()[-1]}"] = p_b
         if p_b >= a_each:
             del blocks[name]
@@ -551,12 +553,12 @@ def _compliance(g, p, y, blocks, found, tests, limits, arm, inl, kfull, base, a_
     blocks["compliance"] = cols
     if "kinematic" in blocks:  # the geometric terms judged again beside the load: a bending arm is not a bent one
         others = x_of([k for k in blocks if k != "kinematic"])
-        p_kc = ftest(y, others, np.hstack([others, usable(others, blocks["kinematic"])[0]]))[0]
+        p_kc = ftest(y, others, (others, usable(others, blocks["kinematic"])[0]))[0]
         tests["kinematic_beside_compliance"] = p_kc
         if p_kc >= a_each:
             del blocks["kinematic"]
             found.pop("kinematic", None)
-    coef = fit(y, np.hstack([x_of([k for k in blocks if k != "compliance"]), kfull, cols]))[0][-cols.shape[1] :]
+    coef = fit(y, (x_of([k for k in blocks if k != "compliance"]), kfull, cols))[0][-cols.shape[1] :]
     c_delta = c_map @ coef
     contrib = np.einsum("knc,k->nc", arm.load_fields[:, inl], c_delta)
     rms_c = float(np.sqrt(np.mean(np.sum(contrib**2, axis=1))))

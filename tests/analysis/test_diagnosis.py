@@ -497,3 +497,7 @@ def test_fit_by_blocks_of_rows_equals_one_least_squares_fit(block, monkeypatch):
     assert np.allclose(x @ coef, x @ want, rtol=0, atol=1e-10)
     assert rss == pytest.approx(float(np.sum((y - x @ want) ** 2)), rel=1e-10)
     assert np.allclose(res, y - x @ coef)
+    # the same columns given as blocks side by side (no hstack copy): the same fit
+    by_blocks = diagnosis_stats.fit(y, (x[:, :2], x[:, 2:2], x[:, 2:]))
+    assert by_blocks[3] == rank and np.allclose(by_blocks[0], coef, rtol=0, atol=1e-12)
+    assert by_blocks[2] == pytest.approx(rss, rel=1e-12)
