@@ -55,9 +55,12 @@ from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import MeasurementSet
 from rrbc_core.models.instrument import INSTRUMENTS
 from rrbc_core.registration.strategies import least_squares
+from rrbc_core.runtime.memory import release_memory
 from rrbc_core.runtime.threads import thread_limited
 
 __all__ = ["Effect", "Diagnosis", "diagnose"]
+
+MANY_POINTS = 100_000  # above this many paired points the phases' freed designs are given back to the OS between them
 
 
 @dataclass(frozen=True)
@@ -233,6 +236,8 @@ def diagnose(
 
     white = np.eye(3)
     out_idx, p_out = outliers(d, use_time, a_each, white, extra)
+    if n_all > MANY_POINTS:
+        release_memory()  # the outlier search's designs, freed, given back before the systematic pass builds its own
     cleared: list[str] = []
     for attempt in range(4):
         inl = np.setdiff1d(all_idx, out_idx)

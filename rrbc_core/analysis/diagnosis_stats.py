@@ -393,12 +393,15 @@ def _esd_steps(q: np.ndarray, y: np.ndarray, kmax: int) -> list[tuple[int, float
         nu = 3 * left - r - 3
         if nu < 3:
             break
-        z = q @ w  # orthonormal on the rows left
-        res = y - z @ (w.T @ qty)
-        rb = res.reshape(n, 3)
-        rb[~active] = 0.0
-        rss = float(np.einsum("na,na->", rb, rb))
-        dss = _deleted_ss(z.reshape(n, 3, r), rb)
+        c = w.T @ qty
+        rss, dss = 0.0, np.empty(n)
+        for start in range(0, n, QR_BLOCK_ROWS):  # a block of points at a time: q @ w (orthonormal on the rows
+            stop = min(start + QR_BLOCK_ROWS, n)  # left) is never held whole
+            z = q[3 * start : 3 * stop] @ w
+            rb = (y[3 * start : 3 * stop] - z @ c).reshape(-1, 3)
+            rb[~active[start:stop]] = 0.0
+            rss += float(np.einsum("na,na->", rb, rb))
+            dss[start:stop] = _deleted_ss(z.reshape(-1, 3, r), rb)
         if not np.all(np.isfinite(dss[active])):
             break  # a point that alone carries a direction of the model: its deleted residual is not defined
         s2 = (rss - dss) / nu

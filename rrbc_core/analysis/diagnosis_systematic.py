@@ -324,8 +324,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             if c_delta is not None:
                 rejudged += rejudge(y, blocks, found, a_each, "the load", tests)
     # smooth field: Moran's I of the residuals after the accepted model, parametric bootstrap under white noise
-    x_acc = x_of(blocks)
-    qa = orth(x_acc)
+    qa = orth(x_of(blocks))
     res_acc = y - qa @ (qa.T @ y)
     nb = moran_weights(p)
     i_obs = float(moran(res_acc.reshape(n, 3), nb))
@@ -343,7 +342,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         i_mean = float(i_boot.mean())
         del i_boot
     tests["smooth_field"] = p_sm
-    del qa, res_acc, x_acc
+    del qa, res_acc
     field = None
     if p_sm < a_each:
         # the field's model from the residuals beside everything but scale and affine (a field has a linear part);

@@ -427,13 +427,15 @@ def test_moran_null_moments_equal_the_bootstraps_within_its_standard_error(seed)
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_the_outlier_search_equals_refitting_the_model_without_the_points_removed(seed):
+def test_the_outlier_search_equals_refitting_the_model_without_the_points_removed(seed, monkeypatch):
     """The ESD's downdated steps (diagnosis_stats._esd_steps: the model built once, on every point) give the points
     and p-values of refitting everything on the points left at each step: the registration, the design (rigid +
     linear, drift on times, the arm's extra columns) and an SVD basis; on volumes and planes, weighted points,
-    planted outliers."""
+    planted outliers; in blocks of a few points or all at once."""
+    from rrbc_core.analysis import diagnosis_stats
     from rrbc_core.analysis.diagnosis_stats import DRIFT_KEPT, Geometry, outliers, paired, usable
 
+    monkeypatch.setattr(diagnosis_stats, "QR_BLOCK_ROWS", 7 if seed % 2 else 1 << 15)  # blocks of points, or one
     rng = np.random.default_rng(700 + seed)
     m, info = synth(700 + seed, n=int(rng.integers(30, 150)), planar=seed % 3 == 0, repeats=1 + seed % 2)
     n = info["n"]
