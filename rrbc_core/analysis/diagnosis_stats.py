@@ -1,6 +1,6 @@
 """The statistics behind `rrbc diagnose` (`diagnosis`): paired data per point, the linearised residual model and its
-nested F-tests, outliers by generalised ESD, Moran's I with its bootstrap, the sphericity test of the noise, the noise
-covariance, and leave-one-out RRBC. Memory is linear in the number of points."""
+nested F-tests, outliers by generalised ESD, the sphericity test of the noise, the noise covariance, and
+leave-one-out RRBC (Moran's I: `diagnosis_moran`). Memory is linear in the number of points."""
 
 from __future__ import annotations
 
@@ -17,19 +17,7 @@ from rrbc_core.registration.strategies import least_squares
 PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points are treated as coplanar
 
 
-BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
-# Above this many points the bootstrap's cost (replicates x N) would dominate: Moran's I is then a sum of N*k
-# locally dependent terms, close to normal, so the p-value is the normal tail with its exact null mean and spread
-# (`moran_null`, docs/theory.md §6.1). Below it the empirical tail of 1999 replicates is used.
-BOOTSTRAP_EXACT_POINTS = 20_000
-
 MAX_POINTS = 1_000_000  # distinct paired points diagnose accepts (issue 16: a stated limit, not minutes or gigabytes)
-
-
-KNN = 6  # neighbours in Moran's I weights
-
-
-BOOTSTRAP_CHUNK_ELEMENTS = 1 << 20  # bootstrap draws held at once (8 MiB): memory stays linear in N
 
 
 # ------------------------------------------------------------------------------------------------ data
@@ -414,113 +402,6 @@ def _esd_steps(q: np.ndarray, y: np.ndarray, kmax: int) -> list[tuple[int, float
         gram_out += qb[best_i].T @ qb[best_i]
         qty -= qb[best_i].T @ yb[best_i]
     return steps
-
-
-# ---------------------------------------------------------------------------------------------- Moran's I
-def moran_weights(p: np.ndarray):
-    """Indices (N, k) of each point's k nearest other points (k = min(KNN, N - 1))."""
-    k = min(KNN, len(p) - 1)
-    _, nb = cKDTree(p).query(p, k=k + 1, workers=-1 if len(p) > 5000 else 1)  # many points: all cores
-    return nb[:, 1:]
-
-
-def _weights(nb: np.ndarray):
-    """The k-NN weights as a sparse (N, N) matrix, k ones per row."""
-    from scipy.sparse import csr_matrix
-
-    n, k = nb.shape
-    return csr_matrix((np.ones(n * k), nb.reshape(-1), np.arange(0, n * k + 1, k)), shape=(n, n))
-
-
-def _moran_sparse(res: np.ndarray, w, k: int) -> np.ndarray:
-    """Moran's I of res (..., N, 3) with the sparse weights w (k per row)."""
-    n = w.shape[0]
-    lead = res.shape[:-2]
-    r = res.reshape(-1, n, 3)
-    x = np.moveaxis(r, 1, 0).reshape(n, -1)  # (N, B*3)
-    num = np.einsum("nb,nb->b", x, w @ x).reshape(-1, 3).sum(axis=1)
-    den = np.einsum("bic,bic->b", r, r)
-    return (num / (k * den)).reshape(lead)
-
-
-def moran(res: np.ndarray, nb: np.ndarray) -> np.ndarray:
-    """Vector Moran's I with k-NN weights: res (..., N, 3) -> (...).
-
-    I = (1/k) Σ_i Σ_{j ∈ nb(i)} r_i·r_j / Σ_i |r_i|², the neighbour sums taken with a sparse (N, N) weight
-    matrix (k non-zeros per row), so memory is O(N·k) per residual field, not a gathered (..., N, k, 3) array."""
-    return _moran_sparse(res, _weights(nb), nb.shape[1])
-
-
-def moran_null(qa: np.ndarray, nb: np.ndarray) -> tuple[float, float]:
-    """The exact mean and standard deviation of Moran's I (`moran`, weights nb (N, k)) of white-noise residual fields
-    with the model's columns (orthonormal qa, (3N, q)) projected out: what `moran_bootstrap` estimates by drawing.
-
-    With M = I - qa qaᵀ (rank m = 3N - q) and S the symmetric part of the weights acting on each coordinate, kI =
-    εᵀMSMε / εᵀMε for white ε; the ratio is independent of its denominator (ε's direction in M's span is uniform
-    whatever its length), so E[kI] = tr(MS)/m and E[(kI)²] = (tr(MS)² + 2 tr(MSMS)) / (m(m + 2)), with
-    tr(MS) = tr(S) - tr(qaᵀSqa) and tr(MSMS) = |S|² - 2|S qa|² + |qaᵀSqa|² (Frobenius norms). Cost O(N·k·q),
-    memory one column of qa at a time."""
-    n, k = nb.shape
-    w = _weights(nb)
-    ws = ((w + w.T) * 0.5).tocsr()
-    q = qa.shape[1]
-    qb = qa.reshape(n, 3, q)
-    m = 3 * n - q
-    tr_s = 3.0 * float(ws.diagonal().sum())
-    s_f2 = 3.0 * float(ws.multiply(ws).sum())
-    qsq = np.empty((q, q))
-    sq_f2 = 0.0
-    for j in range(0, q, 4):  # four columns at a time: S applied to them, (N, 3, g)
-        cols = np.ascontiguousarray(qb[:, :, j : j + 4])
-        g = cols.shape[2]
-        sq = np.asarray(ws @ cols.reshape(n, 3 * g)).reshape(3 * n, g)
-        sq_f2 += float(np.einsum("ng,ng->", sq, sq))
-        qsq[:, j : j + g] = qa.T @ sq
-    tr_ms = tr_s - float(np.trace(qsq))
-    tr_msms = s_f2 - 2.0 * sq_f2 + float(np.sum(qsq * qsq))
-    mean = tr_ms / m
-    second = (tr_ms**2 + 2.0 * tr_msms) / (m * (m + 2.0))
-    return mean / k, float(np.sqrt(max(second - mean**2, 0.0))) / k
-
-
-def moran_bootstrap(rng, qa: np.ndarray, nb: np.ndarray, replicates: int = BOOTSTRAP) -> np.ndarray:
-    """Moran's I of `replicates` white-noise residual fields with the accepted model's columns (orthonormal qa,
-    (3N, q)) projected out. Drawn and evaluated in chunks of BOOTSTRAP_CHUNK_ELEMENTS: memory is linear in N and
-    the draws are those of one rng.standard_normal((replicates, 3N)) call (a Generator fills rows in order)."""
-    n3 = qa.shape[0]
-    n, k = nb.shape
-    w = _weights(nb)
-    qt = np.ascontiguousarray(qa.T)  # (q, 3N): the projection reads it row by row
-    out = np.empty(replicates)
-    step = max(1, BOOTSTRAP_CHUNK_ELEMENTS // n3)
-    for start in range(0, replicates, step):
-        b = min(step, replicates - start)
-        eps = rng.standard_normal((b, n3))
-        eps -= (eps @ qt.T) @ qt
-        out[start : start + b] = _moran_sparse(eps.reshape(b, n, 3), w, k)
-    return out
-
-
-def length_scale(p: np.ndarray, r: np.ndarray) -> tuple[float, float]:
-    """Fit r_i·r_j ≈ v exp(−d²/2ℓ²) (i ≠ j) over a grid of ℓ; returns (ℓ, v)."""
-    n = len(p)
-    if n > 400:
-        sel = np.random.default_rng(0).choice(n, 400, replace=False)
-        p, r = p[sel], r[sel]
-    d2 = np.sum((p[:, None] - p[None]) ** 2, axis=-1)
-    prod = r @ r.T
-    iu = np.triu_indices(len(p), 1)
-    d2, prod = d2[iu], prod[iu]
-    dmin = np.sqrt(max(np.min(d2[d2 > 0]) if np.any(d2 > 0) else 1.0, 1e-12))
-    dmax = np.sqrt(np.max(d2)) if len(d2) else 1.0
-    best = (np.inf, dmax, 0.0)
-    for ell in np.geomspace(dmin * 0.5, dmax * 2, 60):
-        k = np.exp(-d2 / (2 * ell**2))
-        v = max(0.0, float(k @ prod) / float(k @ k)) if k @ k > 0 else 0.0
-        sse = float(np.sum((prod - v * k) ** 2))
-        if sse < best[0]:
-            best = (sse, ell, v)
-    return float(best[1]), float(best[2])
 
 
 # ---------------------------------------------------------------------------------------------- anisotropy

@@ -13,18 +13,20 @@ from scipy.spatial import cKDTree
 
 from rrbc_core.analysis.diagnosis_arm import judge_compliance
 from rrbc_core.analysis.diagnosis_field import FieldModel, fit_field, gls_whiten
-from rrbc_core.analysis.diagnosis_stats import (
+from rrbc_core.analysis.diagnosis_moran import (
     BOOTSTRAP,
     BOOTSTRAP_EXACT_POINTS,
+    moran,
+    moran_bootstrap,
+    moran_null,
+    moran_weights,
+)
+from rrbc_core.analysis.diagnosis_stats import (
     DRIFT_KEPT,
     TIME_FOLLOWS_POSITION,
     Geometry,
     fit,
     ftest,
-    moran,
-    moran_bootstrap,
-    moran_null,
-    moran_weights,
     orth,
     time_on_position,
     usable,

@@ -349,8 +349,9 @@ def test_loo_equals_the_per_point_loop(seed):
 
 
 def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
-    from rrbc_core.analysis import diagnosis_stats as diagnosis
-    from rrbc_core.analysis.diagnosis_stats import moran, moran_bootstrap, moran_weights, orth
+    from rrbc_core.analysis import diagnosis_moran as diagnosis
+    from rrbc_core.analysis.diagnosis_moran import moran, moran_bootstrap, moran_weights
+    from rrbc_core.analysis.diagnosis_stats import orth
 
     monkeypatch.setattr(diagnosis, "BOOTSTRAP_CHUNK_ELEMENTS", 900 * 40)  # chunks of 40 replicates
 
@@ -406,7 +407,8 @@ def test_moran_null_moments_equal_the_bootstraps_within_its_standard_error(seed)
     (`moran_null`) instead of a bootstrap's: on a few hundred points (volume, plane, or a line of clusters), 6000
     bootstrap replicates agree with them within 4 of the bootstrap's own standard errors (the mean's sd/sqrt(R), the
     variance's sd²·sqrt((κ - 1)/R) with κ the replicates' kurtosis)."""
-    from rrbc_core.analysis.diagnosis_stats import moran_bootstrap, moran_null, moran_weights, orth
+    from rrbc_core.analysis.diagnosis_moran import moran_bootstrap, moran_null, moran_weights
+    from rrbc_core.analysis.diagnosis_stats import orth
 
     rng = np.random.default_rng(40 + seed)
     n = int(rng.integers(150, 400))
