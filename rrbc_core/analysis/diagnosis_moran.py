@@ -61,7 +61,7 @@ def moran_null(qa: np.ndarray, nb: np.ndarray) -> tuple[float, float]:
     εᵀMSMε / εᵀMε for white ε; the ratio is independent of its denominator (ε's direction in M's span is uniform
     whatever its length), so E[kI] = tr(MS)/m and E[(kI)²] = (tr(MS)² + 2 tr(MSMS)) / (m(m + 2)), with
     tr(MS) = tr(S) - tr(qaᵀSqa) and tr(MSMS) = |S|² - 2|S qa|² + |qaᵀSqa|² (Frobenius norms). Cost O(N·k·q),
-    memory one column of qa at a time."""
+    memory four columns of qa at a time."""
     n, k = nb.shape
     w = _weights(nb)
     ws = ((w + w.T) * 0.5).tocsr()
