@@ -131,7 +131,7 @@ def judge_compliance(y, x_acc, kfull, load_cols, a_each: float, tests: dict, bes
     position (`beside_field(x0, x1)` → p) like the kinematic test. Returns (p, p beside the field, the usable
     columns (3n, j), their map (T, j), the F-test's q, nu, F, RSS before and after) or None when no direction of
     the load columns is left beside the geometric ones."""
-    x0 = np.hstack([x_acc, kfull])
+    x0 = (x_acc, kfull)  # column blocks (`diagnosis_stats.fit`)
     # (built from joint values, not measured positions: like the kinematic columns, only directions inside the base
     # up to 1e-4 of their energy are left out)
     cols, _, c_map = usable(x0, load_cols, kept=1e-4)

@@ -132,12 +132,14 @@ def fit_field(points: np.ndarray, residuals: np.ndarray) -> FieldModel:
     return FieldModel(p, float(ell), lam, float(s2), u, d, z, idx)
 
 
-def gls_whiten(model: FieldModel, cols: np.ndarray) -> np.ndarray:
+def gls_whiten(model: FieldModel, cols: np.ndarray, at_points: bool = False) -> np.ndarray:
     """Whiten (3N, k) point-major columns (or a (3N,) vector) by (v_a K + σ² I)^−½ per axis, on the model's
-    points: returns (3M, k) (or (3M,)), M = len(model.index)."""
+    points: returns (3M, k) (or (3M,)), M = len(model.index). `at_points`: cols hold only the model's points' rows
+    (3M, k), in the order of model.index."""
     vec = cols.ndim == 1
     c = cols.reshape(-1, 3, 1) if vec else cols.reshape(-1, 3, cols.shape[1])
-    c = c[model.index]
+    if not at_points:
+        c = c[model.index]
     out = np.empty_like(c)
     for a in range(3):
         scale = 1.0 / np.sqrt(model.lam[a] * model.d + 1.0)

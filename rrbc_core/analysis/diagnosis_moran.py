@@ -61,23 +61,26 @@ def moran_null(qa: np.ndarray, nb: np.ndarray) -> tuple[float, float]:
     εᵀMSMε / εᵀMε for white ε; the ratio is independent of its denominator (ε's direction in M's span is uniform
     whatever its length), so E[kI] = tr(MS)/m and E[(kI)²] = (tr(MS)² + 2 tr(MSMS)) / (m(m + 2)), with
     tr(MS) = tr(S) - tr(qaᵀSqa) and tr(MSMS) = |S|² - 2|S qa|² + |qaᵀSqa|² (Frobenius norms). Cost O(N·k·q),
-    memory four columns of qa at a time."""
+    memory one column of qa at a time."""
     n, k = nb.shape
     w = _weights(nb)
-    ws = ((w + w.T) * 0.5).tocsr()
+    w.sum_duplicates()
+    wt = w.T  # S = (W + Wᵀ)/2 is applied as two products: no sparse copy of S (a million points: 12e6 entries)
     q = qa.shape[1]
     qb = qa.reshape(n, 3, q)
     m = 3 * n - q
-    tr_s = 3.0 * float(ws.diagonal().sum())
-    s_f2 = 3.0 * float(ws.multiply(ws).sum())
+    tr_s = 3.0 * float(w.diagonal().sum())
+    s_f2 = 3.0 * 0.5 * (float(np.sum(w.data**2)) + float(w.multiply(wt).sum()))  # |S|² = (|W|² + Σ W_ij W_ji)/2
     qsq = np.empty((q, q))
     sq_f2 = 0.0
-    for j in range(0, q, 4):  # four columns at a time: S applied to them, (N, 3, g)
-        cols = np.ascontiguousarray(qb[:, :, j : j + 4])
-        g = cols.shape[2]
-        sq = np.asarray(ws @ cols.reshape(n, 3 * g)).reshape(3 * n, g)
-        sq_f2 += float(np.einsum("ng,ng->", sq, sq))
-        qsq[:, j : j + g] = qa.T @ sq
+    for j in range(q):  # one column at a time, S applied to its (N, 3) field: memory three such fields
+        col = np.ascontiguousarray(qb[:, :, j])
+        sq = np.asarray(w @ col)
+        sq += wt @ col
+        sq *= 0.5
+        sq = sq.reshape(3 * n)
+        sq_f2 += float(sq @ sq)
+        qsq[:, j] = qa.T @ sq
     tr_ms = tr_s - float(np.trace(qsq))
     tr_msms = s_f2 - 2.0 * sq_f2 + float(np.sum(qsq * qsq))
     mean = tr_ms / m

@@ -151,8 +151,49 @@ def time_on_position(points: np.ndarray, time: np.ndarray) -> float:
 Columns = np.ndarray | tuple | list  # a design (M, k), or its column blocks side by side (no copy made of them)
 
 
-def _column_blocks(x: Columns) -> list[np.ndarray]:
-    return [b for b in (x if isinstance(x, (tuple, list)) else (x,)) if b.shape[1]]
+def column_blocks(x: Columns) -> list[np.ndarray]:
+    """x's non-empty column blocks, in order (blocks of blocks flattened)."""
+    if not isinstance(x, (tuple, list)):
+        return [x] if x.shape[1] else []
+    return [b for part in x for b in column_blocks(part)]
+
+
+def as_array(x: Columns) -> np.ndarray:
+    """The design x as one array (M, k): its column blocks side by side (a copy only when there are several)."""
+    blocks = column_blocks(x)
+    return blocks[0] if len(blocks) == 1 else np.hstack(blocks) if blocks else np.zeros((_rows(x), 0))
+
+
+def _rows(x: Columns) -> int:
+    return len(x) if not isinstance(x, (tuple, list)) else _rows(x[0])
+
+
+def _gram(blocks: list[np.ndarray]) -> np.ndarray:
+    """xᵀx (k, k) of the column blocks side by side."""
+    edges = np.cumsum([0] + [b.shape[1] for b in blocks])
+    gram = np.empty((edges[-1], edges[-1]))
+    for i, bi in enumerate(blocks):
+        for j in range(i, len(blocks)):
+            part = bi.T @ blocks[j]
+            gram[edges[i] : edges[i + 1], edges[j] : edges[j + 1]] = part
+            gram[edges[j] : edges[j + 1], edges[i] : edges[i + 1]] = part.T
+    return gram
+
+
+def times(x: Columns, a: np.ndarray) -> np.ndarray:
+    """x @ a (M, j) for a design x (M, k) given as one array or as column blocks, without stacking the blocks: a block
+    of rows at a time."""
+    blocks = column_blocks(x)
+    if len(blocks) == 1:
+        return blocks[0] @ a
+    rows = _rows(x)
+    out = np.zeros((rows, a.shape[1]))
+    edges = np.cumsum([0] + [b.shape[1] for b in blocks])
+    for start in range(0, rows, QR_BLOCK_ROWS):
+        part = out[start : start + QR_BLOCK_ROWS]
+        for b, lo, hi in zip(blocks, edges[:-1], edges[1:]):
+            part += b[start : start + QR_BLOCK_ROWS] @ a[lo:hi]
+    return out
 
 
 def fit(y: np.ndarray, x: Columns):
@@ -164,7 +205,7 @@ def fit(y: np.ndarray, x: Columns):
     The triangle R of [x y]'s Householder QR (`_triangle`: row blocks at a time, memory one block however many
     rows), then the truncated SVD of the small triangle: x = Q R_x, so x's singular values (and the truncated
     solution) are R_x's, and RSS = |R_x c − Qᵀy|² + ρ² with ρ the part of y outside x's span."""
-    blocks = _column_blocks(x)
+    blocks = column_blocks(x)
     norms = np.concatenate([np.sqrt(np.einsum("ij,ij->j", b, b)) for b in blocks]) if blocks else np.zeros(0)
     coef = np.zeros(len(norms))
     ok = norms > 0
@@ -224,7 +265,7 @@ RANK_RTOL = 1e-8  # a direction of a design's span counts if its singular value 
 _GRAM_SPLIT = 1e-10  # eigenvalues of xᵀx above this fraction of the largest (singular values 1e-5): taken from xᵀx
 
 
-def orth_basis(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def orth_basis(x: Columns) -> tuple[np.ndarray, np.ndarray]:
     """An orthonormal basis q (m, r) of the span of x's (m, k) columns along its singular directions above RANK_RTOL
     of the largest singular value (the rank rule of an SVD), and to_q (k, r) with q = x @ to_q.
 
@@ -232,14 +273,16 @@ def orth_basis(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     singular values exceed 1e-5 of the largest come from the eigenvectors of xᵀx (one pass, then a second on the
     result to restore orthogonality, as Cholesky QR2 does); the rest of x, beside them, gets an SVD of its few
     columns, whose singular values decide the rank as the SVD of x would (both to rounding of order 1e-16 of the
-    largest, far below the rule's 1e-8). The span and its projection equal the SVD's to rounding (a test holds it)."""
-    m, k = x.shape
-    lam, v = np.linalg.eigh(x.T @ x) if k else (np.zeros(0), np.zeros((0, 0)))
+    largest, far below the rule's 1e-8). The span and its projection equal the SVD's to rounding (a test holds it).
+    x: a design or its column blocks (`fit`), never stacked."""
+    blocks = column_blocks(x)
+    m, k = _rows(x), sum(b.shape[1] for b in blocks)
+    lam, v = np.linalg.eigh(_gram(blocks)) if k else (np.zeros(0), np.zeros((0, 0)))
     if k == 0 or not lam[-1] > 0:
         return np.zeros((m, 0)), np.zeros((k, 0))
     big = lam > _GRAM_SPLIT * lam[-1]
     to_q = v[:, big] / np.sqrt(lam[big])
-    q = x @ to_q
+    q = times(blocks, to_q)
     lam2, v2 = np.linalg.eigh(q.T @ q)  # ≈ I; its inverse square root makes q orthonormal to rounding
     fix = v2 / np.sqrt(lam2)
     to_q = to_q @ fix
@@ -248,7 +291,7 @@ def orth_basis(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if big.all():
         return q, to_q
     small = v[:, ~big]
-    rest = x @ small
+    rest = times(blocks, small)
     c = q.T @ rest
     rest -= q @ c  # x's small directions beside q; twice, so rounding leaves nothing of q in them
     c2 = q.T @ rest
@@ -262,30 +305,31 @@ def orth_basis(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.hstack([q, u[:, keep]]), np.hstack([to_q, to_rest])
 
 
-def orth(x: np.ndarray) -> np.ndarray:
+def orth(x: Columns) -> np.ndarray:
     """An orthonormal basis (m, r) of the span of x's columns (`orth_basis`)."""
     return orth_basis(x)[0]
 
 
-def usable(base: np.ndarray, cols: np.ndarray, kept: float = 0.1, base_basis: np.ndarray | None = None):
+def usable(base: Columns, cols: Columns, kept: float = 0.1, base_basis: np.ndarray | None = None):
     """The directions of the span of `cols` that keep at least `kept` of their energy beside the span of `base`.
     A direction almost inside the base is, beside it, mostly the data's own noise carried by the columns (they are
     built from measured positions): fitting it fits that noise. Returns (columns (3N, j) = cols @ m, fraction
-    kept per direction of cols' span, m (k, j)). `base_basis`: orth(base) when the caller has it."""
-    if cols.shape[1] == 0:
-        return cols, np.zeros(0), np.zeros((0, 0))
+    kept per direction of cols' span, m (k, j)). `base_basis`: orth(base) when the caller has it. base and cols:
+    designs or column blocks (`fit`)."""
+    if not column_blocks(cols):
+        return np.zeros((_rows(cols), 0)), np.zeros(0), np.zeros((0, 0))
     qc, to_q = orth_basis(cols)  # qc = cols @ to_q, orthonormal
     qb = orth(base) if base_basis is None else base_basis
     beside = qc - qb @ (qb.T @ qc)
     frac, vec = np.linalg.eigh(beside.T @ beside)
     m = to_q @ vec[:, frac >= kept]
-    return cols @ m, frac, m
+    return times(cols, m), frac, m
 
 
 DRIFT_KEPT = 0.1  # drift directions keeping less than this fraction of their energy beside the model: not testable
 
 
-def usable_drift(base: np.ndarray, dcol: np.ndarray):
+def usable_drift(base: Columns, dcol: np.ndarray):
     """Drift columns restricted to the directions not (almost) absorbed by the columns `base`.
 
     In raster order time is (nearly) linear in the coordinates, so some drift directions equal a rotation or linear
@@ -315,7 +359,7 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
     g = Geometry(p, d.time if use_time and d.time is not None else None, d.count, white)
     # the rigid rotations lie in the linear map's span (a rotation's small-angle map is linear): translations
     # and the linear map span the same, without the exactly dependent columns
-    x = np.hstack([g.translations(), g.linear()])
+    x: tuple = (g.translations(), g.linear())  # column blocks (`fit`): no stacked copy
     q = orth(x)
     more = []
     if use_time:
@@ -323,7 +367,7 @@ def outliers(d: Data, use_time: bool, alpha: float, white: np.ndarray, extra: np
     if extra is not None:
         more.append(g._cols(extra))
     if sum(c.shape[1] for c in more):
-        x = np.hstack([x, *more])
+        x = (*x, *more)
         q = orth(x)
     del x
     steps = _esd_steps(q, g.vec(d.robot - p), kmax)
@@ -503,15 +547,15 @@ def noise_cov(
         return e.T @ e / nu, nu, "repeats"
     p = reg.mapping.apply(s)
     g = Geometry(p, d.time[inl] if use_time and d.time is not None else None, w)
-    x = np.hstack([g.rigid(), g.linear()])
+    x: tuple = (g.rigid(), g.linear())  # column blocks (`fit`): no stacked copy
     if use_time:
-        x = np.hstack([x, usable_drift(x, g.drift())[0]])
+        x = (*x, usable_drift(x, g.drift())[0])
     if extra is not None:
         # only the directions of the arm's columns that stand beside the rigid + linear ones: a direction almost
         # inside them is, beside them, the measured positions' own noise, and fitting it fits the noise (the
         # estimate fell to 0.6 of the truth; `usable`)
-        wide = np.hstack([x, usable(x, g._cols(extra[:, inl]), kept=1e-4)[0]])
-        if 3 * len(inl) - np.linalg.matrix_rank(wide) >= max(6, len(inl) // 2):
+        wide = (*x, usable(x, g._cols(extra[:, inl]), kept=1e-4)[0])
+        if 3 * len(inl) - np.linalg.matrix_rank(as_array(wide)) >= max(6, len(inl) // 2):
             x = wide  # else the arm's columns would leave too few degrees of freedom: rigid + linear (+ drift) only
     q = orth(x)
     y = g.vec(r - p)

@@ -24,7 +24,10 @@ from rrbc_core.analysis.diagnosis_moran import (
 from rrbc_core.analysis.diagnosis_stats import (
     DRIFT_KEPT,
     TIME_FOLLOWS_POSITION,
+    Columns,
     Geometry,
+    as_array,
+    column_blocks,
     fit,
     ftest,
     orth,
@@ -86,7 +89,8 @@ def _scale_rate(g: Geometry, y: np.ndarray, blocks: dict, found: dict, tests: di
     tt = (g.time - g.time.mean()) / g.tscale
     raw = g._cols([tt[:, None] * g.u])
     x_acc = x_of(blocks)
-    col = usable(x_acc, raw)[0]
+    q_acc = orth(x_acc)
+    col = usable(x_acc, raw, base_basis=q_acc)[0]
     if not col.shape[1]:
         return
     p_sr, _, nu_sr, f_sr, rss_a, rss_sr, _ = ftest(y, x_acc, (x_acc, col))
@@ -96,7 +100,6 @@ def _scale_rate(g: Geometry, y: np.ndarray, blocks: dict, found: dict, tests: di
     coef = fit(y, (x_acc, raw))[0][-1]
     unit = 1e6 / (g.scale * g.tscale)  # a coefficient (mm) in ppm/s
     rate = float(coef) * unit
-    q_acc = orth(x_acc)
     beside = raw[:, 0] - q_acc @ (q_acc.T @ raw[:, 0])  # the column's part no accepted term holds
     se = float(np.sqrt(rss_sr / max(nu_sr, 1) / max(float(beside @ beside), 1e-300))) * unit
     old = found.get("scale")
@@ -171,11 +174,22 @@ def _honest_arm_sizes(g: Geometry, y: np.ndarray, blocks: dict, found: dict, wsu
         )
 
 
-def mm_cols(g: Geometry, cols: np.ndarray) -> np.ndarray:
-    """Undo the weighting and whitening of point-major columns (3n, k): the fields in mm, robot frame."""
+def mm_cols(g: Geometry, cols: Columns, points: np.ndarray | None = None) -> np.ndarray:
+    """Undo the weighting and whitening of point-major columns (3n, k) (or column blocks, `fit`): the fields in mm,
+    robot frame. `points` (M,): only those points' rows, (3M, k)."""
     inv = np.linalg.inv(g.white)
-    c = cols / g.sw[:, None]
-    return np.einsum("ab,nbk->nak", inv, c.reshape(g.n, 3, -1)).reshape(3 * g.n, -1)
+    if points is None:
+        c = as_array(cols) / g.sw[:, None]
+    else:
+        rows = (3 * np.asarray(points)[:, None] + np.arange(3)).reshape(-1)
+        blocks = column_blocks(cols)
+        c = (np.hstack([b[rows] for b in blocks]) if blocks else np.zeros((len(rows), 0))) / g.sw[rows, None]
+    return np.einsum("ab,nbk->nak", inv, c.reshape(-1, 3, c.shape[1])).reshape(len(c), -1)
+
+
+def _whiten_mm(field: FieldModel, g: Geometry, cols: Columns) -> np.ndarray:
+    """gls_whiten(field, mm_cols(g, cols)) (3M, k), made from the field's M points' rows only."""
+    return gls_whiten(field, mm_cols(g, cols, field.index), at_points=True)
 
 
 def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
@@ -226,7 +240,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         )
         blocks["scale"] = g.scale_col()
     del lin  # kept in blocks when accepted
-    x_of = lambda names: np.hstack([blocks[k] for k in names])
+    x_of = lambda names: tuple(blocks[k] for k in names)  # column blocks (`fit`, `orth`): no stacked copy
     # drift
     rate, t_mean = np.zeros(3), float(np.mean(d.time[inl])) if use_time else 0.0
     dcol_ok = None
@@ -270,7 +284,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         x_acc = x_of(blocks)
         # the arm's directions beside rigid (+ drift) — kfull = (its columns) @ k_map — and, for the test, beside
         # everything accepted
-        base = np.hstack([blocks[k] for k in ("rigid", "drift") if k in blocks])
+        base = tuple(blocks[k] for k in ("rigid", "drift") if k in blocks)
         # (the arm's columns come from joint angles, not from measured positions: only directions inside the base
         # up to the noise of its rotation columns are left out, 1e-4 of their energy, 1 % of their length)
         kfull, _, k_map = usable(base, g._cols(arm.fields[:, inl]), kept=1e-4)
@@ -281,8 +295,8 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
             # a smooth field of position alone could explain what the arm's columns fit: judge the arm beside it
             q_b = orth(base)
             fb = fit_field(p, mm_cols(g, (y - q_b @ (q_b.T @ y))[:, None]).reshape(n, 3))
-            xw0 = gls_whiten(fb, mm_cols(g, x_acc))
-            xw1 = np.hstack([xw0, gls_whiten(fb, mm_cols(g, ktest))])
+            xw0 = _whiten_mm(fb, g, x_acc)
+            xw1 = np.hstack([xw0, _whiten_mm(fb, g, ktest)])
             p_kf = ftest(gls_whiten(fb, mm_cols(g, y[:, None])[:, 0]), xw0, xw1)[0]
             tests["kinematic_beside_field"] = p_kf
         if p_k < a_each and p_kf >= a_each:
@@ -351,30 +365,30 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         # then, twice: the low-order terms judged again and re-estimated by generalised least squares with the field
         # as part of the error (ordinary least squares lets the field leak into the drift and arm estimates, and
         # their error into the noise), and the field refitted beside them
-        q_nl = orth(np.hstack([v for k, v in blocks.items() if k not in ("scale", "affine")]))
+        q_nl = orth(tuple(v for k, v in blocks.items() if k not in ("scale", "affine")))
         y_mm = mm_cols(g, y[:, None])[:, 0]
         res_nl = mm_cols(g, (y - q_nl @ (q_nl.T @ y))[:, None])[:, 0]
         del q_nl
-        mm_blocks = {k: mm_cols(g, v) for k, v in blocks.items()}
+        # the model's blocks (whitened, weighted) go to mm one at a time when used (`mm_cols` is linear: a fitted
+        # contribution is the mm of the block's combination): a million points hold 24 MB a column
+        kept = dict(blocks)
         prefit = None  # a field already fitted to these very residuals (the drift's second look, when it finds none)
         if dcol_ok is not None and dcol_ok.shape[1] and "drift" not in found:
             # drift looked for again beside the field: the field's variance swamps a drift in the OLS test
-            res_nl, prefit = _drift_beside_field(
-                g, p, y_mm, res_nl, mm_blocks, mm_cols(g, dcol_ok), found, tests, a_each
-            )
+            res_nl, prefit = _drift_beside_field(g, p, y_mm, res_nl, kept, dcol_ok, found, tests, a_each)
             if "drift" in found:
                 blocks["drift"] = dcol_ok
         for _ in range(2):
             field = prefit if prefit is not None else fit_field(p, res_nl.reshape(n, 3))
             prefit = None
             y_w = gls_whiten(field, y_mm)
-            wb = {k: gls_whiten(field, v) for k, v in mm_blocks.items()}
+            wb = {k: _whiten_mm(field, g, v) for k, v in kept.items()}
             rejudged += rejudge(y_w, wb, found, a_each, "the field", tests)
-            mm_blocks = {k: v for k, v in mm_blocks.items() if k in wb}
+            kept = {k: v for k, v in kept.items() if k in wb}
             del wb
-            cols = {k: (mm_cols(g, g.drift()) if k == "drift" else v) for k, v in mm_blocks.items()}
-            coef = fit(y_w, tuple(gls_whiten(field, c) for c in cols.values()))[0]
-            contrib, pos = np.zeros_like(y_mm), 0
+            cols = {k: (g.drift() if k == "drift" else v) for k, v in kept.items()}
+            coef = fit(y_w, tuple(_whiten_mm(field, g, c) for c in cols.values()))[0]
+            contrib, pos = np.zeros(3 * n), 0
             for k, c in cols.items():
                 ck = coef[pos : pos + c.shape[1]]
                 pos += c.shape[1]
@@ -386,8 +400,9 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
                     delta = k_map @ ck
                 if k == "compliance":
                     c_delta = c_map @ ck
-            res_nl = y_mm - contrib
-        for k in [k for k in blocks if k not in mm_blocks]:
+            res_nl = y_mm - mm_cols(g, contrib[:, None])[:, 0]
+            del cols
+        for k in [k for k in blocks if k not in kept]:
             del blocks[k]
         if "drift" in found:
             found["drift"] = replace(found["drift"], parameters={"rate_mm_per_s": rate.tolist()})
@@ -432,20 +447,22 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
     )
 
 
-def _drift_beside_field(g, p, y_mm, res_nl, mm_blocks: dict, dcols, found: dict, tests: dict, a_each: float):
+def _drift_beside_field(g, p, y_mm, res_nl, kept: dict, dcols, found: dict, tests: dict, a_each: float):
     """The drift test again, by generalised least squares with the field (fitted to `res_nl`) as part of the error:
     beside a field many times the noise, the ordinary F-test's residual variance is the field's and a drift of a few
     noise levels goes unseen, to be mistaken later for anisotropic noise. At a_each / 2 (a second look at the same
     hypothesis: the drift's false-alarm rate stays within 1.5 × a_each). On acceptance the drift joins `found` and
-    `mm_blocks`, and the residuals the field is refitted to lose it. Returns those residuals and, when no drift was
-    found, the field fitted to them (None otherwise: it must be refitted without the drift)."""
+    `kept` (the model's blocks, whitened and weighted like `dcols`; `mm_cols` turns them to mm), and the residuals
+    (mm) the field is refitted to lose it. Returns those residuals and, when no drift was found, the field fitted to
+    them (None otherwise: it must be refitted without the drift)."""
     field = fit_field(p, res_nl.reshape(len(p), 3))
     y_w = gls_whiten(field, y_mm)
-    base = np.hstack([gls_whiten(field, v) for v in mm_blocks.values()])
-    p_b, q_b, nu_b, f_b, rss_a, rss_d, coef = ftest(y_w, base, (base, gls_whiten(field, dcols)))
+    base = tuple(_whiten_mm(field, g, v) for v in kept.values())
+    p_b, q_b, nu_b, f_b, rss_a, rss_d, coef = ftest(y_w, base, (base, _whiten_mm(field, g, dcols)))
     tests["drift_beside_field"] = p_b
     if p_b >= a_each / 2:
         return res_nl, field
+    drift_mm = mm_cols(g, (dcols @ coef[-dcols.shape[1] :])[:, None])[:, 0]  # the fitted drift, mm (3n,)
     found["drift"] = Effect(
         "drift",
         {"rate_mm_per_s": []},  # estimated with the field below
@@ -453,10 +470,10 @@ def _drift_beside_field(g, p, y_mm, res_nl, mm_blocks: dict, dcols, found: dict,
         f"the residuals change linearly with measurement time (beside the smooth field, by generalised least "
         f"squares: F({q_b}, {nu_b}) = {f_b:.3g}, p {fmt_p(p_b)}); seen only beside the field, whose variance hides "
         "it from the ordinary test.",
-        magnitude_mm=float(np.sqrt(max(0.0, float(np.mean((dcols @ coef[-dcols.shape[1] :]) ** 2)) * 3))),
+        magnitude_mm=float(np.sqrt(max(0.0, float(np.mean(drift_mm**2)) * 3))),
     )
-    mm_blocks["drift"] = dcols
-    return res_nl - dcols @ coef[-dcols.shape[1] :], None
+    kept["drift"] = dcols
+    return res_nl - drift_mm, None
 
 
 def rejudge(y, blocks: dict, found: dict, a_each: float, beside: str, tests: dict) -> list:
@@ -466,7 +483,7 @@ def rejudge(y, blocks: dict, found: dict, a_each: float, beside: str, tests: dic
     for name in ("scale", "affine", "drift"):
         if name not in blocks:
             continue
-        others = np.hstack([v for k, v in blocks.items() if k != name])
+        others = tuple(v for k, v in blocks.items() if k != name)
         p_b = ftest(y, others, (others, usable(others, blocks[name])[0]))[0]
         tests[f"{name}_beside_{beside.split()[-1]}"] = p_b
         if p_b >= a_each:
@@ -479,7 +496,9 @@ def rejudge(y, blocks: dict, found: dict, a_each: float, beside: str, tests: dic
 def affine_effect(p, resid, w, g, rss0, rss_sc, rss_af, q_af, nu_af, f_af, p_af, wsum) -> Effect:
     # the linear map in unwhitened coordinates: residual ≈ L (p − p̄)
     ga = Geometry(p, None, w)
-    coef, *_ = np.linalg.lstsq(np.hstack([ga.rigid(), ga.linear()]), ga.vec(resid), rcond=1e-10)
+    # (rotations lie in the linear map's span: the split of its antisymmetric part is arbitrary, the symmetric part
+    # taken below is not; column blocks, no stacked copy)
+    coef = fit(ga.vec(resid), (ga.rigid(), ga.linear()))[0]
     lin = coef[6:].reshape(3, 3) / ga.scale
     if ga.planar:  # the in-plane part, in-plane coordinates only
         proj = np.eye(3) - np.outer(ga.normal, ga.normal)
@@ -535,8 +554,8 @@ def _compliance(g, p, y, blocks, found, tests, limits, arm, inl, kfull, base, a_
             q_b = orth(base)
             cache["fb"] = fit_field(p, mm_cols(g, (y - q_b @ (q_b.T @ y))[:, None]).reshape(n, 3))
         fb = cache["fb"]
-        xw0 = gls_whiten(fb, mm_cols(g, x0))
-        xw1 = np.hstack([xw0, gls_whiten(fb, mm_cols(g, cols))])
+        xw0 = _whiten_mm(fb, g, x0)
+        xw1 = np.hstack([xw0, _whiten_mm(fb, g, cols)])
         return ftest(gls_whiten(fb, mm_cols(g, y[:, None])[:, 0]), xw0, xw1)[0]
 
     out = judge_compliance(y, x_of(blocks), kfull, g._cols(arm.load_fields[:, inl]), a_each, tests, beside_field)

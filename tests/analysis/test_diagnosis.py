@@ -374,13 +374,16 @@ def test_moran_and_its_bootstrap_equal_the_dense_formulas(monkeypatch):
 
 
 @pytest.mark.parametrize("kind", ["independent", "exactly dependent", "near the rank rule", "a zero column"])
-def test_orth_basis_spans_what_an_svd_keeps_and_maps_the_columns_onto_it(kind):
+def test_orth_basis_spans_what_an_svd_keeps_and_maps_the_columns_onto_it(kind, monkeypatch):
     """The projection onto `orth_basis`'s q equals the one onto the SVD's left singular vectors above 1e-8 of the
     largest (the rank rule diagnose uses), q is orthonormal and q = x @ to_q, for designs whose columns differ in
     scale by up to 1e3 either way and are independent, exactly dependent (the rigid rotations inside the linear
-    map), dependent up to 1e-6 (kept) or 1e-10 (dropped) of the largest singular value, or zero."""
+    map), dependent up to 1e-6 (kept) or 1e-10 (dropped) of the largest singular value, or zero; given as one array
+    or as column blocks side by side (never stacked: products a few rows at a time)."""
+    from rrbc_core.analysis import diagnosis_stats
     from rrbc_core.analysis.diagnosis_stats import orth_basis
 
+    monkeypatch.setattr(diagnosis_stats, "QR_BLOCK_ROWS", 17)
     rng = np.random.default_rng(["independent", "exactly dependent", "near the rank rule", "a zero column"].index(kind))
     for _ in range(40):
         m, k = int(rng.integers(30, 300)), int(rng.integers(3, 12))
@@ -393,12 +396,14 @@ def test_orth_basis_spans_what_an_svd_keeps_and_maps_the_columns_onto_it(kind):
             x[:, 0] = 0.0
         u, sv, _ = np.linalg.svd(x, full_matrices=False)
         want = u[:, sv > 1e-8 * sv[0]]
-        q, to_q = orth_basis(x)
-        assert q.shape[1] == want.shape[1]
-        # both are rounding away from the exact projection by about 1e-16 x the condition number (up to ~1e7 here)
-        assert np.abs(q @ q.T - want @ want.T).max() < 1e-8
-        assert np.abs(q.T @ q - np.eye(q.shape[1])).max() < 1e-13
-        assert np.abs(x @ to_q - q).max() < 1e-8
+        cut = sorted(rng.choice(np.arange(1, k), size=2, replace=False))
+        for given in (x, (x[:, : cut[0]], (x[:, cut[0] : cut[1]], x[:, cut[1] : cut[1]]), x[:, cut[1] :])):
+            q, to_q = orth_basis(given)
+            assert q.shape[1] == want.shape[1]
+            # both are rounding away from the exact projection by about 1e-16 x the condition number (up to ~1e7)
+            assert np.abs(q @ q.T - want @ want.T).max() < 1e-8
+            assert np.abs(q.T @ q - np.eye(q.shape[1])).max() < 1e-13
+            assert np.abs(x @ to_q - q).max() < 1e-8
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -505,3 +510,25 @@ def test_fit_by_blocks_of_rows_equals_one_least_squares_fit(block, monkeypatch):
     by_blocks = diagnosis_stats.fit(y, (x[:, :2], x[:, 2:2], x[:, 2:]))
     assert by_blocks[3] == rank and np.allclose(by_blocks[0], coef, rtol=0, atol=1e-12)
     assert by_blocks[2] == pytest.approx(rss, rel=1e-12)
+    a = rng.normal(size=(6, 2))
+    assert np.allclose(diagnosis_stats.times((x[:, :2], (x[:, 2:5],), x[:, 5:]), a), x @ a, rtol=0, atol=1e-12)
+
+
+def test_the_fields_whitening_from_its_own_points_rows_equals_whitening_the_whole_columns():
+    """`_whiten_mm` (the generalised least squares' columns beside a smooth field) reads only the field model's
+    points' rows of the model's columns: equal to `gls_whiten` of the whole columns turned to mm."""
+    from rrbc_core.analysis.diagnosis_field import MAX_POINTS, fit_field, gls_whiten
+    from rrbc_core.analysis.diagnosis_stats import Geometry
+    from rrbc_core.analysis.diagnosis_systematic import _whiten_mm, mm_cols
+
+    rng = np.random.default_rng(11)
+    n = MAX_POINTS + 150  # more points than the field model takes: a subsample
+    p = rng.uniform(0, 600, (n, 3))
+    g = Geometry(
+        p, rng.uniform(0, 100, n), rng.integers(1, 4, n).astype(float), np.array([[1, 0.2, 0], [0, 2, 0], [0, 0, 1.5]])
+    )
+    field = fit_field(p, np.sin(p / 150.0) + rng.normal(0, 0.05, (n, 3)))
+    assert len(field.index) < n
+    cols = (g.rigid(), g.drift())
+    want = gls_whiten(field, mm_cols(g, np.hstack(cols)))
+    assert np.allclose(_whiten_mm(field, g, cols), want, rtol=0, atol=1e-12 * np.abs(want).max())
