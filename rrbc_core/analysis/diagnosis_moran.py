@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rrbc_core.runtime.threads import query_workers
+
 BOOTSTRAP = 1999  # parametric bootstrap replicates for Moran's I
 # Above this many points the bootstrap's cost (replicates x N) would dominate: Moran's I is then a sum of N*k
 # locally dependent terms, close to normal, so the p-value is the normal tail with its exact null mean and spread
@@ -22,7 +24,7 @@ BOOTSTRAP_CHUNK_ELEMENTS = 1 << 20  # bootstrap draws held at once (8 MiB): memo
 def moran_weights(p: np.ndarray):
     """Indices (N, k) of each point's k nearest other points (k = min(KNN, N - 1))."""
     k = min(KNN, len(p) - 1)
-    _, nb = cKDTree(p).query(p, k=k + 1, workers=-1 if len(p) > 5000 else 1)  # many points: all cores
+    _, nb = cKDTree(p).query(p, k=k + 1, workers=query_workers(len(p)))
     return nb[:, 1:]
 
 

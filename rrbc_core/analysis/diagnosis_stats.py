@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 
 from rrbc_core.errors import InputError
 from rrbc_core.registration.strategies import least_squares
+from rrbc_core.runtime.threads import query_workers
 
 PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points are treated as coplanar
 
@@ -503,7 +504,7 @@ def loo_errors(sensor, robot, weights, k: int = 4, power: float = 2.0, evaluate=
     n = len(sensor)
     ev = np.ones(n, bool) if evaluate is None else np.asarray(evaluate, bool)
     kk = min(k, n - 1)
-    dist, nb = cKDTree(sensor).query(sensor, k=kk + 1, workers=-1 if n > 5000 else 1)  # many points: all cores
+    dist, nb = cKDTree(sensor).query(sensor, k=kk + 1, workers=query_workers(n))
     dist, nb = dist.reshape(n, -1), nb.reshape(n, -1)
     # drop each point itself (it is its own nearest unless another point coincides with it)
     self_col = nb == np.arange(n)[:, None]

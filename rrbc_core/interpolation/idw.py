@@ -18,6 +18,7 @@ from rrbc_core.interpolation.base import (
     check_positive_int,
 )
 from rrbc_core.option_specs import check_options, option
+from rrbc_core.runtime.threads import query_workers
 
 # ---------------------------------------------------------------------------------------------------------------
 # No correction
@@ -69,7 +70,7 @@ class _FittedIDW(Fitted):
         out = np.empty((m, 3))
         if m == 0:
             return out, None, None
-        d, idx = self.tree.query(q, k=k, workers=-1 if m > 5000 else 1)  # large query sets: all cores
+        d, idx = self.tree.query(q, k=k, workers=query_workers(m))
         d = np.asarray(d, dtype=float).reshape(m, k)
         idx = np.asarray(idx).reshape(m, k)
 

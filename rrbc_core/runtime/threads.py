@@ -101,3 +101,14 @@ def thread_limited(fn: Callable[_P, _R]) -> Callable[_P, _R]:
             return fn(*args, **kwargs)
 
     return wrapper
+
+
+#: k-d tree queries of more points than this use every core (scipy's `workers=-1`: its own threads, outside the BLAS
+#: policy above); fewer points are answered in the calling thread, where starting threads would cost more than it
+#: saves and a busy core would be waited for
+PARALLEL_QUERY_POINTS = 5000
+
+
+def query_workers(points: int) -> int:
+    """`workers` for a cKDTree query of `points` query points: -1 (all cores) above PARALLEL_QUERY_POINTS, else 1."""
+    return -1 if points > PARALLEL_QUERY_POINTS else 1
