@@ -155,6 +155,8 @@ class SceneNodes:
         """Where label `name` is drawn (robot frame, mm): its position, under its point's handle if it has one."""
         p = self._labels.position(name)
         parent = name.rsplit("/", 1)[0]
+        if parent.startswith("/frames/"):  # a frame's label: placed in the frame's own coordinates
+            return self._frames.to_robot(parent, p)
         if parent.endswith("/gizmo"):
             kind, pid = parent.strip("/").split("/")[:2]
             tc = self._gizmos.get((kind, pid))
@@ -212,7 +214,7 @@ class SceneNodes:
 
         # frames ---------------------------------------------------------------------------------------
         self._frames.build(self._extent_mm, session.sensor_to_robot, ev.registration.mapping, self._add_label)
-        self._frames.set_compact(self._labels.compact, self._labels.scale, self._assign)
+        self._frames.set_compact(self._labels.compact, self._labels.set_text)
 
         # registration points --------------------------------------------------------------------------
         n = len(ev.registration_ids)
@@ -347,7 +349,9 @@ class SceneNodes:
             self.set_selected(picture.selected)
         self.set_display(picture.display)
         mag = self._display.magnification
-        self._frames.show(picture.registered_wxyz, picture.registered_position, picture.frame_mag, self._assign)
+        self._frames.show(
+            picture.registered_wxyz, picture.registered_position, picture.frame_mag, self._labels.set_text
+        )
         reg = self._nodes.get("/registration/points")
         if reg is not None:  # registration points only move when moved from Python (no gizmo)
             reg.batched_positions = ev.registration_positions.astype(np.float32)
@@ -466,7 +470,7 @@ class SceneNodes:
         self._labels.set_scale(factor)
         self._show_labels()
         scale, compact = self._labels.scale, self._labels.compact
-        self._frames.set_compact(compact, scale, self._assign)
+        self._frames.set_compact(compact, self._labels.set_text)
         if self._arm is not None:
             self._arm.marks["label"].font_screen_scale = 0.75 * scale
             self._arm.marks["label"].anchor = "top-center" if compact else "bottom-left"

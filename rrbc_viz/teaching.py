@@ -40,7 +40,8 @@ class Step:
     focus: tuple[str, ...] = ("targets", "fiducials")
     see_through: bool = False  # the work cell drawn see-through: arrows may point into surfaces
     direction: tuple[float, float, float] | None = None  # the camera's viewing direction (None: camera.OBLIQUE)
-    #: the kinds of point ("registration", "fiducials", "targets") whose labels the step shows: what its text names
+    #: the kinds of point ("registration", "fiducials", "targets") or "frames" whose labels the step shows: what its
+    #: text names
     labels: tuple[str, ...] = ()
     #: the targets' regions drawn this many times larger at this step (None: as the View tab has them)
     region_zoom: float | None = None
@@ -292,7 +293,7 @@ STEPS: tuple[Step, ...] = (
         focus=("sensor", "registration"),  # the two sensor frames and the points the fit rests on
         direction=(0.7, -0.55, 0.15),  # from the work's side, level with the head: its mast is behind it
         see_through=True,  # the frames' origins lie inside the sensor's casing
-        labels=("registration",),
+        labels=("frames", "registration"),  # its text names the two sensor frames and the points
     ),
     Step(
         "Identify the targets",
