@@ -8,7 +8,7 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg, stats
+from scipy import linalg, special  # tails as scipy.stats computes them, without its import (about 1 s)
 from scipy.spatial import cKDTree
 
 from rrbc_core.errors import InputError
@@ -259,7 +259,7 @@ def ftest(y, x0: Columns, x1: Columns):
     if q <= 0 or nu <= 0 or rss1 <= 0:
         return 1.0, q, nu, 0.0, rss0, rss1, coef1
     f = ((rss0 - rss1) / q) / (rss1 / nu)
-    return float(stats.f.sf(f, q, nu)), q, nu, float(f), rss0, rss1, coef1
+    return float(special.fdtrc(q, nu, f)), q, nu, float(f), rss0, rss1, coef1
 
 
 RANK_RTOL = 1e-8  # a direction of a design's span counts if its singular value exceeds this fraction of the largest
@@ -441,7 +441,7 @@ def _esd_steps(q: np.ndarray, y: np.ndarray, kmax: int) -> list[tuple[int, float
         fj = np.where(s2 > 0, (dss / 3) / np.where(s2 > 0, s2, 1.0), np.inf)
         fj[~active] = -np.inf
         best_i = int(np.argmax(fj))
-        padj = min(1.0, float(stats.f.sf(float(fj[best_i]), 3, nu)) * left)
+        padj = min(1.0, float(special.fdtrc(3, nu, float(fj[best_i]))) * left)
         steps.append((best_i, padj))
         active[best_i] = False
         gram_out += qb[best_i].T @ qb[best_i]
@@ -457,7 +457,7 @@ def sphericity(s: np.ndarray, nu: float):
     lam = p * np.log(np.mean(ev)) - np.sum(np.log(ev))
     corr = 1 - (2 * p * p + p + 2) / (6 * p * nu)
     stat = max(0.0, nu * corr * lam)
-    return float(stats.chi2.sf(stat, p * (p + 1) // 2 - 1))
+    return float(special.chdtrc(p * (p + 1) // 2 - 1, stat))
 
 
 # ------------------------------------------------------------------------------------------------- LOO

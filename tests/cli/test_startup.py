@@ -32,3 +32,20 @@ def test_help_and_a_bad_flag_load_no_heavy_library():
     n, helped, bad, heavy = out.stdout.strip().splitlines()[-1].split(" ", 3)
     assert int(n) >= 10 and int(helped) == int(n) + 1  # every subcommand's --help exits 0
     assert bad == "2" and heavy == "[]", out.stdout[-500:]
+
+
+def test_diagnose_and_correct_do_not_import_scipy_stats(tmp_path):
+    """scipy.stats costs about a second to import (its distributions' documentation is built on import): `rrbc
+    diagnose` and `rrbc correct` take the few tails and quantiles they need from scipy.special, which computes them
+    the same way (issue 41: a 1000-point diagnosis under 1.5 s)."""
+    from tests.paths import EXAMPLE_CSV
+
+    probe = (
+        "import sys\n"
+        "from rrbc_core.cli import main\n"
+        f"main(['diagnose', {str(EXAMPLE_CSV)!r}, '--json'])\n"
+        f"main(['correct', {str(EXAMPLE_CSV)!r}, '--json'])\n"
+        "print('scipy.stats' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=tmp_path)
+    assert out.stdout.strip().splitlines()[-1] == "False", out.stdout[-300:]
