@@ -67,14 +67,31 @@ def _nll(z2: np.ndarray, d: np.ndarray, lam: np.ndarray) -> tuple[float, float]:
     return 3 * m * np.log(s2) + float(np.sum(np.log(den))), s2
 
 
-def _nll_many(z2: np.ndarray, d: np.ndarray, lams: np.ndarray) -> np.ndarray:
-    """`_nll`'s value (T,) for each row of lams (T, 3) at once (inf where σ̂² is not positive)."""
+def _ratios(z2: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The field-to-noise ratios lam (3,) on the grid _LAMBDAS minimising `_nll` by coordinate search (three rounds
+    over the axes, from 1). `_nll` is a sum over the axes of Σ_m z2/(λ d + 1) (inside the log) and Σ_m log(λ d + 1):
+    both are tabulated once per axis over the grid (T, 3) and (T,), so each step is a look-up."""
     m = len(d)
-    den = lams[:, None, :] * d[None, :, None] + 1.0  # (T, M, 3)
-    s2 = np.sum(z2[None] / den, axis=(1, 2)) / (3 * m)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out = 3 * m * np.log(s2) + np.sum(np.log(den), axis=(1, 2))
-    return np.where(s2 > 0, out, np.inf)
+    den = _LAMBDAS[:, None] * d[None, :] + 1.0  # (T, M)
+    s_tab = (1.0 / den) @ z2  # (T, 3): Σ_m z2[m, a] / (λ_t d_m + 1)
+    l_tab = np.sum(np.log(den), axis=1)  # (T,)
+    lam = np.ones(3)
+    at: list[int | None] = [None, None, None]  # each axis's grid index (None: its start value 1)
+
+    def parts(a: int) -> tuple[float, float]:
+        if at[a] is not None:
+            return float(s_tab[at[a], a]), float(l_tab[at[a]])
+        return float(np.sum(z2[:, a] / (lam[a] * d + 1.0))), float(np.sum(np.log(lam[a] * d + 1.0)))
+
+    for _ in range(3):
+        for a in range(3):
+            fixed = [parts(b) for b in range(3) if b != a]
+            s2 = (s_tab[:, a] + sum(f[0] for f in fixed)) / (3 * m)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                nll = np.where(s2 > 0, 3 * m * np.log(s2) + l_tab + sum(f[1] for f in fixed), np.inf)
+            at[a] = int(np.argmin(nll))
+            lam[a] = _LAMBDAS[at[a]]
+    return lam
 
 
 _EIGS_LOCK = threading.Lock()
@@ -118,12 +135,7 @@ def fit_field(points: np.ndarray, residuals: np.ndarray) -> FieldModel:
     for ell, d, u in _kernel_eigs(p):
         z = u.T @ r
         z2 = z**2
-        lam = np.ones(3)
-        for _ in range(3):  # coordinate search over the three ratios
-            for a in range(3):
-                trial = np.repeat(lam[None], len(_LAMBDAS), axis=0)
-                trial[:, a] = _LAMBDAS
-                lam[a] = _LAMBDAS[int(np.argmin(_nll_many(z2, d, trial)))]
+        lam = _ratios(z2, d)
         nll, s2 = _nll(z2, d, lam)
         if best is None or nll < best[0]:
             best = (nll, ell, lam.copy(), s2, u, d, z)

@@ -32,3 +32,26 @@ def test_a_diagnosis_names_the_same_with_and_without_the_stored_decompositions(m
     F._EIGS.clear()
     without = diagnose(m, robot="ur5", tool_mm=100.0).to_json()
     assert with_cache == without
+
+
+def test_the_tabulated_ratio_search_chooses_what_evaluating_the_likelihood_at_every_trial_chooses():
+    """`_ratios` tabulates the likelihood's per-axis sums over the grid once; the coordinate search it makes (three
+    rounds over the axes, from 1) must choose the same grid ratios as one evaluating `_nll` at every trial, on
+    residuals from pure noise to a field many times it, per axis and at every length scale of random point sets."""
+    rng = np.random.default_rng(12)
+    for _ in range(6):
+        p = rng.uniform(-400, 400, (int(rng.integers(20, 120)), 3))
+        size = 10.0 ** rng.uniform(-2, 2, 3)  # per axis: from far below the noise to far above it
+        r = np.sin(p / rng.uniform(80, 400)) * size + rng.normal(size=p.shape)
+        for _, d, u in F._kernel_eigs(np.ascontiguousarray(p)):
+            z2 = (u.T @ r) ** 2
+            lam = np.ones(3)
+            for _ in range(3):
+                for a in range(3):
+                    trials = []
+                    for value in F._LAMBDAS:
+                        trial = lam.copy()
+                        trial[a] = value
+                        trials.append(F._nll(z2, d, trial)[0])
+                    lam[a] = F._LAMBDAS[int(np.argmin(trials))]
+            assert np.array_equal(F._ratios(z2, d), lam)
