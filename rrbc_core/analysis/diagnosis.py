@@ -235,6 +235,8 @@ def diagnose(
         extra = arm.fields if arm.load_fields is None else np.concatenate([arm.fields, arm.load_fields])
 
     white = np.eye(3)
+    if n_all > MANY_POINTS:
+        release_memory()  # what reading and pairing the rows freed, given back before the outlier search's designs
     out_idx, p_out = outliers(d, use_time, a_each, white, extra)
     if n_all > MANY_POINTS:
         release_memory()  # the outlier search's designs, freed, given back before the systematic pass builds its own
