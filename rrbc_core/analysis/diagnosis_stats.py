@@ -4,19 +4,28 @@ leave-one-out RRBC (Moran's I: `diagnosis_moran`). Memory is linear in the numbe
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import linalg, special  # tails as scipy.stats computes them, without its import (about 1 s)
 from scipy.spatial import cKDTree
 
+from rrbc_core.analysis.diagnosis_columns import (  # noqa: F401 (Geometry, LazyColumns, as_array: this module's API)
+    PLANAR_RATIO,
+    Block,
+    Columns,
+    Geometry,
+    LazyColumns,
+    as_array,
+    column_blocks,
+    column_norms,
+    gram,
+    n_rows,
+    times,
+)
 from rrbc_core.errors import InputError
 from rrbc_core.registration.strategies import least_squares
 from rrbc_core.runtime.threads import query_workers
-
-PLANAR_RATIO = 1e-2  # smallest/largest principal spread below this: the points are treated as coplanar
-
 
 MAX_POINTS = 1_000_000  # distinct paired points diagnose accepts (issue 16: a stated limit, not minutes or gigabytes)
 
@@ -74,66 +83,6 @@ def paired(mset) -> Data:
 
 
 # ------------------------------------------------------------------------------------------ linear model
-class Geometry:
-    """Design columns of the linearised residual model at mapped points p (robot frame)."""
-
-    def __init__(self, p: np.ndarray, time: np.ndarray | None, weights: np.ndarray, white: np.ndarray | None = None):
-        self.white = np.eye(3) if white is None else white
-        self.center = p.mean(axis=0)
-        c = p - self.center
-        _, sv, vt = np.linalg.svd(c, full_matrices=False)
-        self.axes = vt  # rows: principal directions
-        self.planar = bool(sv[-1] <= PLANAR_RATIO * sv[0])
-        self.normal = vt[2]
-        self.scale = float(np.sqrt(np.mean(np.sum(c**2, axis=1)))) or 1.0
-        u = c / self.scale
-        if self.planar:  # exact rank deficiency on coplanar points: drop the normal coordinate
-            u = u - np.outer(u @ self.normal, self.normal)
-        self.u = u
-        self.n = len(p)
-        self.sw = np.repeat(np.sqrt(weights), 3)
-        self.time = time
-        self.tscale = float(np.std(time)) if time is not None else 1.0
-
-    def vec(self, arr: np.ndarray) -> np.ndarray:
-        """(N, 3) robot-frame vectors -> whitened, weighted (3N,)."""
-        return (arr @ self.white.T).reshape(-1) * self.sw
-
-    def _cols(self, fields, count: int | None = None) -> np.ndarray:
-        """fields (k, N, 3), or an iterable of `count` (N, 3) fields -> whitened, weighted (3N, k), column-major
-        (each column written in place: no (k, N, 3) copies of many points)."""
-        if count is None:
-            fields = list(fields) if not isinstance(fields, np.ndarray) else fields
-            count = len(fields)
-        out = np.empty((count, 3 * self.n)).T
-        for j, f in enumerate(fields):
-            np.multiply((np.asarray(f) @ self.white.T).reshape(-1), self.sw, out=out[:, j])
-        return out
-
-    def translations(self):
-        e = np.eye(3)
-        return self._cols((np.broadcast_to(e[k], (self.n, 3)) for k in range(3)), 3)
-
-    def rigid(self):
-        e = np.eye(3)
-        moves = (np.broadcast_to(e[k], (self.n, 3)) for k in range(3))
-        turns = (np.cross(e[k], self.u) for k in range(3))
-        return self._cols(itertools.chain(moves, turns), 6)
-
-    def scale_col(self):
-        return self._cols([self.u])
-
-    def linear(self):  # full 3x3 linear map: E_ab u
-        e = np.eye(3)
-        return self._cols((np.outer(self.u[:, b], e[a]) for a in range(3) for b in range(3)), 9)
-
-    def drift(self):
-        assert self.time is not None, "the drift column needs the rows' times"
-        tt = (self.time - self.time.mean()) / self.tscale
-        e = np.eye(3)
-        return self._cols((np.outer(tt, e[k]) for k in range(3)), 3)
-
-
 TIME_FOLLOWS_POSITION = 0.5  # R² of the rows' times on their positions beyond which time and position are confounded
 
 
@@ -149,54 +98,6 @@ def time_on_position(points: np.ndarray, time: np.ndarray) -> float:
     return float(1.0 - np.sum((t - x @ coef) ** 2) / np.sum((t - t.mean()) ** 2))
 
 
-Columns = np.ndarray | tuple | list  # a design (M, k), or its column blocks side by side (no copy made of them)
-
-
-def column_blocks(x: Columns) -> list[np.ndarray]:
-    """x's non-empty column blocks, in order (blocks of blocks flattened)."""
-    if not isinstance(x, (tuple, list)):
-        return [x] if x.shape[1] else []
-    return [b for part in x for b in column_blocks(part)]
-
-
-def as_array(x: Columns) -> np.ndarray:
-    """The design x as one array (M, k): its column blocks side by side (a copy only when there are several)."""
-    blocks = column_blocks(x)
-    return blocks[0] if len(blocks) == 1 else np.hstack(blocks) if blocks else np.zeros((_rows(x), 0))
-
-
-def _rows(x: Columns) -> int:
-    return len(x) if not isinstance(x, (tuple, list)) else _rows(x[0])
-
-
-def _gram(blocks: list[np.ndarray]) -> np.ndarray:
-    """xᵀx (k, k) of the column blocks side by side."""
-    edges = np.cumsum([0] + [b.shape[1] for b in blocks])
-    gram = np.empty((edges[-1], edges[-1]))
-    for i, bi in enumerate(blocks):
-        for j in range(i, len(blocks)):
-            part = bi.T @ blocks[j]
-            gram[edges[i] : edges[i + 1], edges[j] : edges[j + 1]] = part
-            gram[edges[j] : edges[j + 1], edges[i] : edges[i + 1]] = part.T
-    return gram
-
-
-def times(x: Columns, a: np.ndarray) -> np.ndarray:
-    """x @ a (M, j) for a design x (M, k) given as one array or as column blocks, without stacking the blocks: a block
-    of rows at a time."""
-    blocks = column_blocks(x)
-    if len(blocks) == 1:
-        return blocks[0] @ a
-    rows = _rows(x)
-    out = np.zeros((rows, a.shape[1]))
-    edges = np.cumsum([0] + [b.shape[1] for b in blocks])
-    for start in range(0, rows, QR_BLOCK_ROWS):
-        part = out[start : start + QR_BLOCK_ROWS]
-        for b, lo, hi in zip(blocks, edges[:-1], edges[1:]):
-            part += b[start : start + QR_BLOCK_ROWS] @ a[lo:hi]
-    return out
-
-
 def fit(y: np.ndarray, x: Columns):
     """Least squares of y on the columns x along the directions its rank counts (normalised columns, singular
     values above 1e-8 of the largest): the fit and the F-tests' degrees of freedom agree even for nearly dependent
@@ -207,7 +108,7 @@ def fit(y: np.ndarray, x: Columns):
     rows), then the truncated SVD of the small triangle: x = Q R_x, so x's singular values (and the truncated
     solution) are R_x's, and RSS = |R_x c − Qᵀy|² + ρ² with ρ the part of y outside x's span."""
     blocks = column_blocks(x)
-    norms = np.concatenate([np.sqrt(np.einsum("ij,ij->j", b, b)) for b in blocks]) if blocks else np.zeros(0)
+    norms = column_norms(blocks)
     coef = np.zeros(len(norms))
     ok = norms > 0
     rank = 0
@@ -219,11 +120,7 @@ def fit(y: np.ndarray, x: Columns):
         keep = sv > 1e-8 * sv[0]
         rank = int(keep.sum())
         coef[ok] = (vt[keep].T @ ((u[:, keep].T @ r_y) / sv[keep])) / norms[ok]
-    res = y.copy()
-    at = 0
-    for b in blocks:
-        res -= b @ coef[at : at + b.shape[1]]
-        at += b.shape[1]
+    res = y - times(blocks, coef[:, None])[:, 0] if blocks else y.copy()
     return coef, res, float(res @ res), rank
 
 
@@ -277,8 +174,8 @@ def orth_basis(x: Columns) -> tuple[np.ndarray, np.ndarray]:
     largest, far below the rule's 1e-8). The span and its projection equal the SVD's to rounding (a test holds it).
     x: a design or its column blocks (`fit`), never stacked."""
     blocks = column_blocks(x)
-    m, k = _rows(x), sum(b.shape[1] for b in blocks)
-    lam, v = np.linalg.eigh(_gram(blocks)) if k else (np.zeros(0), np.zeros((0, 0)))
+    m, k = n_rows(x), sum(b.shape[1] for b in blocks)
+    lam, v = np.linalg.eigh(gram(blocks)) if k else (np.zeros(0), np.zeros((0, 0)))
     if k == 0 or not lam[-1] > 0:
         return np.zeros((m, 0)), np.zeros((k, 0))
     big = lam > _GRAM_SPLIT * lam[-1]
@@ -318,7 +215,7 @@ def usable(base: Columns, cols: Columns, kept: float = 0.1, base_basis: np.ndarr
     kept per direction of cols' span, m (k, j)). `base_basis`: orth(base) when the caller has it. base and cols:
     designs or column blocks (`fit`)."""
     if not column_blocks(cols):
-        return np.zeros((_rows(cols), 0)), np.zeros(0), np.zeros((0, 0))
+        return np.zeros((n_rows(cols), 0)), np.zeros(0), np.zeros((0, 0))
     qc, to_q = orth_basis(cols)  # qc = cols @ to_q, orthonormal
     qb = orth(base) if base_basis is None else base_basis
     beside = qc - qb @ (qb.T @ qc)
@@ -330,7 +227,7 @@ def usable(base: Columns, cols: Columns, kept: float = 0.1, base_basis: np.ndarr
 DRIFT_KEPT = 0.1  # drift directions keeping less than this fraction of their energy beside the model: not testable
 
 
-def usable_drift(base: Columns, dcol: np.ndarray):
+def usable_drift(base: Columns, dcol: Columns):
     """Drift columns restricted to the directions not (almost) absorbed by the columns `base`.
 
     In raster order time is (nearly) linear in the coordinates, so some drift directions equal a rotation or linear

@@ -24,14 +24,17 @@ from rrbc_core.analysis.diagnosis_moran import (
 from rrbc_core.analysis.diagnosis_stats import (
     DRIFT_KEPT,
     TIME_FOLLOWS_POSITION,
+    Block,
     Columns,
     Geometry,
+    LazyColumns,
     as_array,
     column_blocks,
     fit,
     ftest,
     orth,
     time_on_position,
+    times,
     usable,
     usable_drift,
 )
@@ -182,8 +185,8 @@ def mm_cols(g: Geometry, cols: Columns, points: np.ndarray | None = None) -> np.
         c = as_array(cols) / g.sw[:, None]
     else:
         rows = (3 * np.asarray(points)[:, None] + np.arange(3)).reshape(-1)
-        blocks = column_blocks(cols)
-        c = (np.hstack([b[rows] for b in blocks]) if blocks else np.zeros((len(rows), 0))) / g.sw[rows, None]
+        blocks = [b.at_points(points) if isinstance(b, LazyColumns) else b[rows] for b in column_blocks(cols)]
+        c = (np.hstack(blocks) if blocks else np.zeros((len(rows), 0))) / g.sw[rows, None]
     return np.einsum("ab,nbk->nak", inv, c.reshape(-1, 3, c.shape[1])).reshape(len(c), -1)
 
 
@@ -205,7 +208,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
     tests: dict[str, float] = {}
     found: dict[str, Effect] = {}
     limits: list[str] = []
-    blocks = {"rigid": g.rigid()}
+    blocks: dict[str, Block] = {"rigid": g.rigid()}
     x_rigid = blocks["rigid"]
     if g.planar:
         limits.append(
@@ -393,7 +396,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
                 ck = coef[pos : pos + c.shape[1]]
                 pos += c.shape[1]
                 if k not in ("scale", "affine"):
-                    contrib += c @ ck
+                    contrib += times(c, ck[:, None])[:, 0]
                 if k == "drift":
                     rate = ck / g.tscale
                 if k == "kinematic":
@@ -462,7 +465,7 @@ def _drift_beside_field(g, p, y_mm, res_nl, kept: dict, dcols, found: dict, test
     tests["drift_beside_field"] = p_b
     if p_b >= a_each / 2:
         return res_nl, field
-    drift_mm = mm_cols(g, (dcols @ coef[-dcols.shape[1] :])[:, None])[:, 0]  # the fitted drift, mm (3n,)
+    drift_mm = mm_cols(g, times(dcols, coef[-dcols.shape[1] :, None]))[:, 0]  # the fitted drift, mm (3n,)
     found["drift"] = Effect(
         "drift",
         {"rate_mm_per_s": []},  # estimated with the field below

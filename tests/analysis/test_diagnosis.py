@@ -380,10 +380,11 @@ def test_orth_basis_spans_what_an_svd_keeps_and_maps_the_columns_onto_it(kind, m
     scale by up to 1e3 either way and are independent, exactly dependent (the rigid rotations inside the linear
     map), dependent up to 1e-6 (kept) or 1e-10 (dropped) of the largest singular value, or zero; given as one array
     or as column blocks side by side (never stacked: products a few rows at a time)."""
-    from rrbc_core.analysis import diagnosis_stats
+    from rrbc_core.analysis import diagnosis_columns, diagnosis_stats
     from rrbc_core.analysis.diagnosis_stats import orth_basis
 
     monkeypatch.setattr(diagnosis_stats, "QR_BLOCK_ROWS", 17)
+    monkeypatch.setattr(diagnosis_columns, "ROW_BLOCK", 17)
     rng = np.random.default_rng(["independent", "exactly dependent", "near the rank rule", "a zero column"].index(kind))
     for _ in range(40):
         m, k = int(rng.integers(30, 300)), int(rng.integers(3, 12))
@@ -439,10 +440,11 @@ def test_the_outlier_search_equals_refitting_the_model_without_the_points_remove
     and p-values of refitting everything on the points left at each step: the registration, the design (rigid +
     linear, drift on times, the arm's extra columns) and an SVD basis; on volumes and planes, weighted points,
     planted outliers; in blocks of a few points or all at once."""
-    from rrbc_core.analysis import diagnosis_stats
+    from rrbc_core.analysis import diagnosis_columns, diagnosis_stats
     from rrbc_core.analysis.diagnosis_stats import DRIFT_KEPT, Geometry, outliers, paired, usable
 
     monkeypatch.setattr(diagnosis_stats, "QR_BLOCK_ROWS", 7 if seed % 2 else 1 << 15)  # blocks of points, or one
+    monkeypatch.setattr(diagnosis_columns, "ROW_BLOCK", 8 if seed % 2 else 1 << 15)  # (rows made: not whole points)
     rng = np.random.default_rng(700 + seed)
     m, info = synth(700 + seed, n=int(rng.integers(30, 150)), planar=seed % 3 == 0, repeats=1 + seed % 2)
     n = info["n"]
@@ -492,9 +494,10 @@ def test_fit_by_blocks_of_rows_equals_one_least_squares_fit(block, monkeypatch):
     """`fit` factors [x y] a block of rows at a time (so no copy of a tall design is made): its coefficients, RSS and
     rank equal an SVD least-squares fit's, with an exactly dependent and a zero column, whatever the block (fewer rows
     than columns included)."""
-    from rrbc_core.analysis import diagnosis_stats
+    from rrbc_core.analysis import diagnosis_columns, diagnosis_stats
 
     monkeypatch.setattr(diagnosis_stats, "QR_BLOCK_ROWS", block)
+    monkeypatch.setattr(diagnosis_columns, "ROW_BLOCK", block)
     rng = np.random.default_rng(5)
     x = rng.normal(size=(200, 6)) * [1.0, 10.0, 0.1, 1.0, 1.0, 1.0]
     x[:, 3] = x[:, 0] - 2 * x[:, 1]
