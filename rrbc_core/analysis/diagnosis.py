@@ -361,7 +361,7 @@ def diagnose(
     for line in (
         hint,
         implausible_scale(effects, instrument, bool(joint_like_columns(mset))),
-        short_field(effects, reg.mapping.apply(d.sensor[inl])),
+        short_field(effects, ps.p, ps.spacing),
     ):
         if line is not None:
             limits.append(line)

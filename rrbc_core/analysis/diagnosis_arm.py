@@ -315,16 +315,18 @@ def implausible_scale(effects: dict, instrument: str | None, has_joints: bool) -
     )
 
 
-def short_field(effects: dict, points: np.ndarray) -> str | None:
+def short_field(effects: dict, points: np.ndarray, spacing: float | None = None) -> str | None:
     """A limit when the named smooth field's correlation length is shorter than the points' typical spacing (the
-    median distance to the nearest other point): neighbouring points do not share such a 'field', and no sensor
-    distorts its space that way. None when nothing applies."""
+    median distance to the nearest other point; `spacing` when the caller has it, `diagnosis_moran.neighbours`):
+    neighbouring points do not share such a 'field', and no sensor distorts its space that way. None when nothing
+    applies."""
     if "smooth_field" not in effects or len(points) < 3:
         return None
-    from scipy.spatial import cKDTree
-
     length = float(effects["smooth_field"].parameters.get("length_scale_mm", np.inf))
-    spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
+    if spacing is None:
+        from scipy.spatial import cKDTree
+
+        spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
     if not length < 0.5 * spacing:
         return None
     return (

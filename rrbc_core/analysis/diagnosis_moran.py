@@ -23,9 +23,15 @@ BOOTSTRAP_CHUNK_ELEMENTS = 1 << 20  # bootstrap draws held at once (8 MiB): memo
 # ---------------------------------------------------------------------------------------------- Moran's I
 def moran_weights(p: np.ndarray):
     """Indices (N, k) of each point's k nearest other points (k = min(KNN, N - 1))."""
+    return neighbours(p)[0]
+
+
+def neighbours(p: np.ndarray) -> tuple[np.ndarray, float]:
+    """`moran_weights` of p (N, 3) and the points' typical spacing from the same search: the median distance (mm)
+    to the nearest other point (what `diagnosis_arm.short_field` compares a field's length with)."""
     k = min(KNN, len(p) - 1)
-    _, nb = cKDTree(p).query(p, k=k + 1, workers=query_workers(len(p)))
-    return nb[:, 1:]
+    dist, nb = cKDTree(p).query(p, k=k + 1, workers=query_workers(len(p)))
+    return nb[:, 1:], float(np.median(dist[:, 1]))
 
 
 def _weights(nb: np.ndarray):

@@ -19,7 +19,7 @@ from rrbc_core.analysis.diagnosis_moran import (
     moran,
     moran_bootstrap,
     moran_null,
-    moran_weights,
+    neighbours,
 )
 from rrbc_core.analysis.diagnosis_stats import (
     DRIFT_KEPT,
@@ -82,6 +82,7 @@ class Pass:
     moran: tuple = ()  # (I, its mean under white noise, k)
     rejudged: tuple = ()  # names dropped beside the field or the arm, with their p-values
     c_delta: np.ndarray | None = None  # the load terms' scaled coefficients when compliance is accepted
+    spacing: float = 0.0  # the median distance (mm) from each of p to the nearest other (`diagnosis_moran.neighbours`)
 
 
 def _scale_rate(g: Geometry, y: np.ndarray, blocks: dict, found: dict, tests: dict, x_of, a_each, wsum, t_mean):
@@ -345,7 +346,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
     # smooth field: Moran's I of the residuals after the accepted model, parametric bootstrap under white noise
     qa = orth(x_of(blocks))
     res_acc = y - qa @ (qa.T @ y)
-    nb = moran_weights(p)
+    nb, spacing = neighbours(p)
     i_obs = float(moran(res_acc.reshape(n, 3), nb))
     if n > BOOTSTRAP_EXACT_POINTS:  # Moran's I of many points is close to normal: its exact null moments
         i_mean, i_sd = moran_null(qa, nb)
@@ -447,6 +448,7 @@ def systematic(d, inl, *, white, use_time, arm, a_each, rng) -> Pass:
         (i_obs, i_mean, nb.shape[1]),
         tuple(rejudged),
         c_delta,
+        spacing,
     )
 
 

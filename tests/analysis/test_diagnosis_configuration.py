@@ -131,6 +131,14 @@ def test_a_field_shorter_than_the_points_spacing_is_called_no_sensors_distortion
     assert short is not None and "(5 mm) is shorter than half the points' typical spacing (100 mm)" in short
     assert short_field(field(300.0), grid) is None
     assert short_field({}, grid) is None
+    # the spacing the diagnosis takes from Moran's neighbour search: the same answer
+    from rrbc_core.analysis.diagnosis_moran import neighbours
+
+    rng = np.random.default_rng(3)
+    cloud = rng.uniform(0, 800, (300, 3))
+    assert neighbours(grid)[1] == 100.0
+    for length in (5.0, 30.0, 300.0):
+        assert short_field(field(length), cloud, neighbours(cloud)[1]) == short_field(field(length), cloud)
 
 
 def test_fewer_poses_use_the_harmonics_without_the_base_joints_products():
