@@ -20,6 +20,7 @@ reproduce them.
 
 from __future__ import annotations
 
+import itertools
 import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -172,8 +173,9 @@ def check_statistics(ids: Sequence[str], robot_rigid, robot_rrbc, truth) -> Chec
         raise InputError("check statistics: positions must be finite")
     e_rigid, e_rrbc = a - t, b - t
     d_rigid, d_rrbc = np.linalg.norm(e_rigid, axis=1), np.linalg.norm(e_rrbc, axis=1)
-    worse = tuple(str(pid) for pid, x, y in zip(ids, d_rigid, d_rrbc) if y > x)
-    return CheckStatistics(tuple(str(i) for i in ids), _stats(e_rigid), _stats(e_rrbc), d_rigid, d_rrbc, worse)
+    names = tuple(map(str, ids))
+    worse = tuple(itertools.compress(names, (d_rrbc > d_rigid).tolist()))  # (no Python loop over a million checks)
+    return CheckStatistics(names, _stats(e_rigid), _stats(e_rrbc), d_rigid, d_rrbc, worse)
 
 
 @dataclass(frozen=True)
