@@ -27,6 +27,7 @@ class LessonContext:
     regions: dict = field(default_factory=dict)  # target id -> rrbc_core.io.scene.Region (scene mode)
     frame_magnification: float = 1.0  # the registered sensor frame's error is drawn this many times larger
     sensor_drawn: bool = False  # the sensor's body is drawn (a scene's sensor that is not the ground truth)
+    compact: bool = False  # presentation mode: the shorter text, readable without scrolling on a 1280x720 projector
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,15 @@ def _step2(ev: Evaluation, ctx: LessonContext) -> str:
     res = _norms(reg.residuals)
     worst = int(np.argmax(res)) if len(res) else 0
     t = np.asarray(reg.mapping.translation, float)
+    if ctx.compact:
+        worst_text = f" ({ev.registration_ids[worst]} worst, {res[worst]:.3f} mm)" if len(res) else ""
+        s = (
+            f"**{reg.method}** (R, t) takes sensor points to the robot frame, leaving **FRE {reg.fre_rms_mm:.3f} mm** "
+            f"RMS{worst_text}; a low FRE says nothing about the targets."
+        )
+        if ctx.kind == "scene":
+            s += f" Thin axes: the registered sensor frame, its error ×{ctx.frame_magnification:g}."
+        return s
     s = (
         f"**{reg.method}** registration gives (R, t) taking sensor points to the robot frame; t = {_v(t)} mm. "
         f"The fit leaves **FRE {reg.fre_rms_mm:.3f} mm** RMS over {len(res)} points"
@@ -178,6 +188,13 @@ def _step5(ev: Evaluation, ctx: LessonContext) -> str:
     b = ev.fiducial_readings.robot[i]
     s = ev.fiducial_readings.sensor[i]
     e = ev.corrections[i]
+    f = ev.fiducial_ids[i]
+    if ctx.compact:
+        return (
+            f"The robot's reading b of **{f}**, taken back with (R, t)⁻¹, lands **{float(np.linalg.norm(e)):.3f} mm** "
+            f"from the sensor's s: the rigid-body condition is broken there. Drawn above {f}: s placed by (R, t) "
+            f"(black) and b (orange), their offset ×{ctx.magnification:g}."
+        )
     return (
         f"The robot's fiducial readings are taken back into the sensor frame with (R, t)⁻¹. For "
         f"**{ev.fiducial_ids[i]}** the robot read b = {_v(b)} mm (robot frame); the sensor saw s = {_v(s)} mm "
@@ -268,11 +285,18 @@ def _step9(ev: Evaluation, ctx: LessonContext) -> str:
             "ones (vermillion). These data carry no truth for the targets, so the gain cannot be scored here; "
             "add check rows to score it."
         )
+    scored = f"{sm['scored']} scored {'checks' if ev.check_ids else 'targets'}"
+    if ctx.compact:
+        return (
+            "b̂ = R(x + ê(x)) + t. The bullseye beside the selected point: where the robot lands rigid-only "
+            f"(vermillion) and with RRBC (teal) around the truth. RMS over {scored}: "
+            f"**{_mm(sm['rmst_rigid_mm'])} → {_mm(sm['rmst_rrbc_mm'])}**."
+        )
     return (
         f"b̂ = R(x + ê(x)) + t: where the robot lands rigid-only (vermillion) versus with RRBC (teal), offsets "
         f"from the truth (the dark centre) on the bullseye beside the selected point, ring scale written beside it "
         f"(select another point to move it; the panel's bullseye shows the same at true size). Over "
-        f"{sm['scored']} scored {'checks' if ev.check_ids else 'targets'} the RMS error is "
+        f"{scored} the RMS error is "
         f"**{_mm(sm['rmst_rigid_mm'])} rigid → {_mm(sm['rmst_rrbc_mm'])} with RRBC** "
         f"(max {_mm(sm['max_rigid_mm'])} → {_mm(sm['max_rrbc_mm'])})."
     )

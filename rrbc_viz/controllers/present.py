@@ -118,4 +118,5 @@ class Presenter:
             dict(ctx.session.regions),
             self.picture().frame_mag,
             sensor_drawn=draws_sensor(ctx.session),
+            compact=ctx.state.presentation,
         )

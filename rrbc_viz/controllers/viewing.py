@@ -194,6 +194,9 @@ class ViewController:
                 marker = self.ctx.state.display.marker_mm * (PRESENTATION_MARKERS if on else 1 / PRESENTATION_MARKERS)
                 self.ctx.evaluate.set_display(marker_mm=float(marker))
                 self.ctx.state.initial_camera = self.ctx.camera.reframe_initial(self.current_view())
+                if self.ctx.state.lesson_index is not None:  # the step's text for this mode (shorter when presenting)
+                    ev, lesson = self.ctx.session.last, self.ctx.present.lesson_context()
+                    self.ctx.controls.learn.show_text(teaching.render(self.ctx.state.lesson_index, ev, lesson))
                 self.place_labels(self.ctx.camera.show(self.current_view()))
 
     def _legend(self) -> bool | None:

@@ -160,7 +160,7 @@ def test_every_tab_of_the_panel_can_be_scrolled_to_its_last_control(
             tops = page.evaluate(_JS_TAB_TOPS)
             assert len(tops) >= 8 and max(tops) - min(tops) < 2, tops
         page.get_by_role("tab", name="Learn", exact=True).click()
-        for k in range(9):
+        for k in range(10):  # the prompt, then steps 1 to 9
             nxt = page.get_by_role("button", name="Next")
             b = nxt.bounding_box()
             assert b is not None and 0 <= b["y"] and b["y"] + b["height"] <= height, (k, b)
@@ -171,7 +171,10 @@ def test_every_tab_of_the_panel_can_be_scrolled_to_its_last_control(
             if present and k > 0:  # issue 39: a step's text starts in the window's upper half on the projector
                 top = page.evaluate(_JS_TEXT_TOP, f"Step {k} of 9")
                 assert top is not None and top < height / 2, (k, top)
-            if k == 8:
+                # ... and is read whole without scrolling: the button below it is in the window
+                end = page.get_by_role("button", name="End lesson (restore layers)").bounding_box()
+                assert end is not None and end["y"] + end["height"] <= height, (k, end)
+            if k == 9:
                 break
             nxt.click()
             wait_for(

@@ -2,6 +2,7 @@
 camera presets' contents, lesson steps switching the see-through cell, the panel's bullseye numbers."""
 
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -117,6 +118,28 @@ def test_lesson_steps_frame_their_focus_and_switch_the_see_through_cell(app):
     app.views.lesson_stop()
     assert not app.state.see_through and app.nodes.handle("/mesh/cell").visible
     assert app.nodes.handle("/mesh/ghost") is None
+
+
+def test_presentation_mode_gives_each_lesson_step_its_shorter_text_and_the_step_open_changes_with_it(app):
+    """Issue 39: on a 1280x720 projector a step's text is read without scrolling (the browser test measures it):
+    presentation mode renders each step's compact text, never longer than the full one, and switching the mode
+    during a lesson re-renders the open step's text."""
+    for i in range(len(teaching.STEPS)):
+        ctx = app.present.lesson_context()
+        full = teaching.render(i, app.session.last, ctx)
+        short = teaching.render(i, app.session.last, replace(ctx, compact=True))
+        assert len(short) <= len(full), i
+    k = 1  # step 2: its compact text differs
+    app.views.lesson_go(k)
+    full = app.controls.learn.lesson.content
+    app.views.set_presentation(True)
+    try:
+        short = app.controls.learn.lesson.content
+        assert short != full and len(short) < len(full) and short.startswith(f"**Step {k + 1} of")
+    finally:
+        app.views.set_presentation(False)
+    assert app.controls.learn.lesson.content == full
+    app.views.lesson_stop()
 
 
 def test_the_step_that_names_the_regions_draws_them_at_a_visible_scale_and_gives_the_zoom_back(app):
