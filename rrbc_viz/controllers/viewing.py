@@ -45,6 +45,13 @@ PRESENTATION_LABEL_SCALE = 3.0  # labels' screen size in presentation mode: 0.75
 PRESENTATION_MARKERS = 1.5  # markers' size in presentation mode
 
 
+#: the Learn tab's text once Next has gone past the last step
+LESSON_FINISHED = (
+    "That was the ninth and last step: the layers are back as they were before the lesson. Press **Next** to start "
+    "again."
+)
+
+
 class ViewController:
     """`actions.ViewActions`: the camera, presentation mode, the see-through cell, the error slice, the selection and
     the lesson (module docstring)."""
@@ -376,10 +383,16 @@ class ViewController:
             self.ctx.nodes.declutter_lesson_labels(initial, DEFAULT_IMAGE, panel_px(self.ctx.state.presentation))
 
     def lesson_step(self, delta: int) -> str:
-        """Next (+1) or previous (-1) step; the first press of either starts the lesson at step 1."""
-        return self.lesson_go(0 if self.ctx.state.lesson_index is None else self.ctx.state.lesson_index + delta)
+        """Next (+1) or previous (-1) step; the first press of either starts the lesson at step 1, and Next after the
+        last step ends it (the layers restored, as *End lesson* does)."""
+        index = self.ctx.state.lesson_index
+        if index is not None and delta > 0 and index >= len(teaching.STEPS) - 1:
+            self.lesson_stop(LESSON_FINISHED)
+            return LESSON_FINISHED
+        return self.lesson_go(0 if index is None else index + delta)
 
-    def lesson_stop(self) -> None:
+    def lesson_stop(self, text: str = "Lesson ended. Press **Next** to start again.") -> None:
+        """End the lesson: the layers, region zoom and look as they were before it; `text` in the Learn tab."""
         with self.ctx.lock:
             saved = self.ctx.state.lesson_saved_layers
             zoom = self.ctx.state.lesson_saved_zoom
@@ -398,6 +411,6 @@ class ViewController:
                 self.ctx.nodes.set_arm_marks_visible(True)
                 self.set_see_through(False)
                 self.ctx.present.draw_scene(self.ctx.session.last)
-                self.ctx.controls.learn.show_text("Lesson ended. Press **Next** to start again.")
+                self.ctx.controls.learn.show_text(text)
                 self.show_selection(self.ctx.session.last)
                 self.place_labels(self.ctx.camera.show(self.current_view()))

@@ -297,17 +297,21 @@ def test_layers_lesson_and_heat_map(app):
         "Step 9 of 9" in c.learn.lesson.content and f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
     )
     assert c.view.layers["landing"].value
-    c.learn.lesson_nav.value = LESSON_NEXT  # the last step: Next stays there (the row never changes under a click)
-    assert "Step 9 of 9" in c.learn.lesson.content and tuple(c.learn.lesson_nav.options) == (
-        LESSON_PREVIOUS,
-        LESSON_NEXT,
-    )
     app.evaluate.handle_drag("targets", "H3", [410.0, 40.0, 15.0], "end")
     sm = app.session.last.summary
     assert f"{sm['rmst_rrbc_mm']:.3f} mm with RRBC" in c.learn.lesson.content
+    # Next after the last step ends the lesson as End lesson does (issue 39: it stayed on step 9 without a word);
+    # the row of buttons never changes under a click
+    c.learn.lesson_nav.value = LESSON_NEXT
+    assert app.state.lesson_index is None and "ninth and last step" in c.learn.lesson.content
+    assert tuple(c.learn.lesson_nav.options) == (LESSON_PREVIOUS, LESSON_NEXT)
+    assert c.view.layers["heatmap"].value and not c.view.layers["hull"].value
+    assert app.nodes.handle("/corrections/targets").visible
+    c.learn.lesson_nav.value = LESSON_NEXT  # and starts again
+    assert app.state.lesson_index == 0 and "Step 1 of 9" in c.learn.lesson.content
     c.learn.lesson_end.value = True
     assert app.state.lesson_index is None and c.view.layers["heatmap"].value and not c.view.layers["hull"].value
-    assert app.nodes.handle("/corrections/targets").visible
+    assert "Lesson ended" in c.learn.lesson.content
 
 
 def test_display_controls_and_heat_map_follow_drags(app):
