@@ -87,6 +87,11 @@ def _pose_from(
     return frame_points(view.points, view.direction, fov_y, aspect, panel_fraction=panel, margin=margin, top_margin=top)
 
 
+#: how far in from a view's edges (a fraction of its half-size) a dragged target and its bullseye must lie to count
+#: as seen (`CameraDirector.keep_in_view`)
+KEEP_MARGIN = 0.1
+
+
 class CameraDirector:
     """Moves the cameras of the server's tabs (or one tab's) to a `View`."""
 
@@ -149,17 +154,18 @@ class CameraDirector:
             out[client.client_id] = pose
         return out
 
-    def keep_in_view(self, point, context: np.ndarray, clients=None) -> dict[int, CameraPose]:
-        """Bring `point` (3,) robot frame, mm, back into the view of each tab (default: every connected one) that no
-        longer sees it beside the panel (a target dragged out of the frame): that tab's camera keeps its viewing
-        direction and frames `context` (N, 3) with the point. Tabs that see it are left as they are. Returns the
-        poses sent."""
-        p = np.asarray(point, float).reshape(1, 3)
+    def keep_in_view(self, points, context: np.ndarray, clients=None) -> dict[int, CameraPose]:
+        """Bring `points` (K, 3) robot frame, mm (a target dragged out of the frame, with its bullseye), back into the
+        view of each tab (default: every connected one) that no longer sees them all beside the panel and
+        `KEEP_MARGIN` in from its edges (a point at the very edge has its label and bullseye cut off): that tab's
+        camera keeps its viewing direction and frames `context` (N, 3) with the points. Tabs that see them are left
+        as they are. Returns the poses sent."""
+        p = np.asarray(points, float).reshape(-1, 3)
         out = {}
         for client, now in self._reported(clients).items():
             width = float(client.camera.image_width)
             panel = float(np.clip(self.panel_px / width, 0.0, 0.6))
-            if bool(in_view(p, now, panel, margin=0.02)[0]):
+            if bool(np.all(in_view(p, now, panel, margin=KEEP_MARGIN))):
                 continue
             view = View(np.vstack([np.asarray(context, float).reshape(-1, 3), p]), now.look_at - now.position)
             out.update(self.show(view, [client]))

@@ -113,8 +113,9 @@ class EvaluateController:
                 ctx.nodes.resnap(kind, pid)
             if end:
                 self._refused.discard(key)
-                if kind == "targets":  # a target dragged out of the frame is brought back into every tab's view
-                    ctx.camera.keep_in_view(ev.targets.positions[ev.targets.ids.index(pid)], ctx.views.work_points())
+                if kind == "targets":  # a target dragged out of the frame is brought back into every tab's view,
+                    # with its landing bullseye (ring included) when it shows one, clear of the view's edges
+                    ctx.camera.keep_in_view(_target_and_bullseye(ev, pid, st.landing), ctx.views.work_points())
         if end:
             ctx.montecarlo.request()
         return ev
@@ -236,3 +237,17 @@ class EvaluateController:
     @staticmethod
     def gizmo_name(kind: str, pid: str) -> str:
         return gizmo_name(KINDS.get(kind, kind), pid)
+
+
+def _target_and_bullseye(ev, pid: str, landing) -> np.ndarray:
+    """(K, 3) robot frame mm: target `pid`'s position and, when `landing` (a `LandingDisplay`) is its bullseye, the
+    bullseye's centre, landings and the ends of its ring along x and y."""
+    pts = [np.asarray(ev.targets.positions[ev.targets.ids.index(pid)], float)]
+    if landing is not None and landing.target == pid:
+        r = float(landing.ring_mm) * float(landing.scale)
+        centre = np.asarray(landing.anchor, float)
+        pts += [centre, np.asarray(landing.rigid, float), np.asarray(landing.rrbc, float)]
+        pts += [
+            centre + d for d in (np.array([r, 0, 0]), np.array([-r, 0, 0]), np.array([0, r, 0]), np.array([0, -r, 0]))
+        ]
+    return np.vstack(pts)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from rrbc_viz import teaching
-from rrbc_viz.camera import PANEL_WIDTH_PX
+from rrbc_viz.camera import PANEL_WIDTH_PX, PRESENTATION_PANEL_WIDTH_PX
 from rrbc_viz.serve import serve
 
 from .helpers import (
@@ -296,11 +296,15 @@ def test_clicking_selects_and_the_error_slice_changes_after_a_real_drag(viser_ap
     wait_for(slice_changed, 30.0, interval_s=0.5, message="the slice redrawn (over 2000 pixels changed)", page=page)
 
 
-def test_a_target_dragged_out_of_the_frame_comes_back_into_view(viser_app, page_for):
+@pytest.mark.parametrize("present", [False, True], ids=["1280x800", "projector 1280x720"])
+def test_a_target_dragged_out_of_the_frame_comes_back_into_view(viser_app, page_for, present):
     """Issue 39: a target dragged beyond what the camera shows is brought back into the view (beside the panel) at
-    the drag's end; the camera keeps its viewing direction."""
-    app = viser_app(lambda: serve(simple_arm=True, plain_light=True))
+    the drag's end, with its landing bullseye and clear of the view's edges (on the projector it stayed at the very
+    edge, its label and bullseye cut off); the camera keeps its viewing direction."""
+    app = viser_app(lambda: serve(simple_arm=True, plain_light=True, present=present))
     page, _ = page_for(app.url)
+    if present:
+        page.set_viewport_size({"width": 1280, "height": 720})
     app.views.select("targets", "H1")
     app.views.show_camera("selected point")  # a tight view of H1 and its bullseye
     wait_camera(page, app)
@@ -321,11 +325,22 @@ def test_a_target_dragged_out_of_the_frame_comes_back_into_view(viser_app, page_
     np.testing.assert_allclose(after.forward, before.forward, atol=1e-6)  # the same viewing direction
     wait_camera(page, app)
 
-    def seen() -> bool:
-        p = page.evaluate(_JS_PROJECT_MANY, [away.tolist()])["points"][0]
-        return bool(p["onCanvas"] and p["inFront"] and p["x"] < 1280 - PANEL_WIDTH_PX)
+    land = app.state.landing
+    assert land is not None and land.target == "H1"
+    r = land.ring_mm * land.scale
+    ring = [land.anchor + d for d in ([r, 0, 0], [-r, 0, 0], [0, r, 0], [0, -r, 0])]
+    shown = np.vstack([away, land.anchor, land.rigid, land.rrbc, *ring])
+    panel = PRESENTATION_PANEL_WIDTH_PX if present else PANEL_WIDTH_PX
 
-    wait_for(seen, 15.0, message="H1 in the page's view, left of the panel", page=page)
+    def seen() -> bool:  # H1 and its bullseye on the canvas, left of the panel, 30 px in from the view's edges
+        res = page.evaluate(_JS_PROJECT_MANY, shown.tolist())
+        left, top, w, h = res["canvas"]
+        return all(
+            p["inFront"] and left + 30 <= p["x"] <= left + w - panel - 30 and top + 30 <= p["y"] <= top + h - 30
+            for p in res["points"]
+        )
+
+    wait_for(seen, 15.0, message="H1 and its bullseye in the page's view, left of the panel", page=page)
 
 
 @pytest.mark.parametrize("size", [(1600, 900), (1280, 800)], ids=["1600x900", "1280x800"])
