@@ -388,9 +388,12 @@ class SceneNodes:
         t = ev.targets
         compact = self._labels.compact
         texts = target_labels(ev, compact=compact)
-        if compact:  # presentation mode: the selected target's numbers, the others (a lesson's) by name only
+        if compact:  # presentation mode: the selected target's numbers, the others (a lesson's) by name only; and
+            # all by name while a lesson step labels the targets (the selected one's long text hid its neighbours':
+            # its numbers are on its card and its bullseye)
+            numbers = () if self._labels.lesson_shows("targets") else (self._selected,)
             texts = [
-                x if self._selected == ("targets", pid) else pid + (" ⚠" if t.extrapolated[i] else "")
+                x if ("targets", pid) in numbers else pid + (" ⚠" if t.extrapolated[i] else "")
                 for i, (pid, x) in enumerate(zip(t.ids, texts))
             ]
         changed = {pid for pid, _ in picture.changed}  # a fiducial's drag marks the targets it changed most

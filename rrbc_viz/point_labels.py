@@ -125,6 +125,10 @@ class PointLabels:
         self._lesson_hidden = frozenset()
         self._unside(keep=self._reanchored)  # drawn on another side for the step before: back to the common anchor
 
+    def lesson_shows(self, kind: str) -> bool:
+        """Whether the lesson step shows the labels of this kind of point (`set_lesson`)."""
+        return kind in self._lesson_kinds
+
     def _unside(self, keep: str | None) -> None:
         """Put the labels drawn on another side back to the common anchor, all but `keep`'s."""
         for name in self._sided:

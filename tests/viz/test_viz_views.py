@@ -288,6 +288,13 @@ def test_presentation_mode_enlarges_text_markers_and_labels_and_goes_back(app):
     assert app.state.selected == ("targets", "H1")
     assert re.fullmatch(r"H1 \d+\.\d{3} → \d+\.\d{3} mm", label.text), label.text  # short texts
     assert app.nodes.handle("/targets/H2/gizmo/label").text == "H2"
+    # a lesson step that labels the targets names them all, the selected one too (its long text hid its
+    # neighbours' on the projector; its numbers are on its card and bullseye), and gives the numbers back after
+    k = next(i for i, step in enumerate(teaching.STEPS) if "targets" in step.labels)
+    app.views.lesson_go(k)
+    assert label.text == "H1" and app.nodes.handle("/targets/H2/gizmo/label").text == "H2"
+    app.views.lesson_stop()
+    assert re.fullmatch(r"H1 \d+\.\d{3} → \d+\.\d{3} mm", label.text), label.text
     app.views.set_presentation(True)  # idempotent
     assert app.state.display.marker_mm == pytest.approx(marker * PRESENTATION_MARKERS)
     app.controls.view.presentation.value = False
