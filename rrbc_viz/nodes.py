@@ -98,6 +98,7 @@ class SceneNodes:
         self._on_click = on_point_click
         # what this view last drew, set only through its verbs (`build`, `show`, `set_*`); never read by a controller
         self._selected: tuple[str, str] | None = None  # the point carrying the drag gizmo
+        self._changed_labels: frozenset[str] = frozenset()  # labels of the targets the last fiducial drag changed most
         self._see_through = False  # the work cell drawn see-through (ghost) instead of solid
         self._cell_mesh: Any = None  # the work cell's mesh (a trimesh.Trimesh), None without one
         self._arm: ArmNodes | None = None  # scenes with an arm (a DH arm or a URDF)
@@ -396,7 +397,13 @@ class SceneNodes:
                 x if ("targets", pid) in numbers else pid + (" ⚠" if t.extrapolated[i] else "")
                 for i, (pid, x) in enumerate(zip(t.ids, texts))
             ]
-        changed = {pid for pid, _ in picture.changed}  # a fiducial's drag marks the targets it changed most
+        changed = dict(picture.changed)  # a fiducial's drag marks the targets it changed most: larger, and labelled
+        # with the change (whatever the labels layer: issue 39, the size alone was easy to miss)
+        texts = [x + (f" · Δê {changed[pid]:.3f} mm" if pid in changed else "") for pid, x in zip(t.ids, texts)]
+        marked = frozenset(f"{gizmo_name('targets', pid)}/label" for pid in changed)
+        if marked != self._changed_labels:
+            self._changed_labels = marked
+            self._show_labels()
         for i, pid in enumerate(t.ids):
             self._assign(self._spheres[("targets", pid)], "scale", CHANGED_SCALE if pid in changed else 1.0)
             self._assign(
@@ -594,7 +601,7 @@ class SceneNodes:
 
     def _show_labels(self) -> None:
         # presentation mode: only the selected point's label and a lesson step's (large labels would overlap)
-        self._labels.show(bool(self._layers.get("labels")), self._selected_label())
+        self._labels.show(bool(self._layers.get("labels")), self._selected_label(), self._changed_labels)
 
     def _apply_sizes(self) -> None:
         """Marker size and region zoom changed: resize spheres, gizmos, arrows, regions."""

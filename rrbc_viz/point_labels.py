@@ -167,11 +167,13 @@ class PointLabels:
             self._handles[name].anchor = side  # type: ignore[assignment]
         return self._lesson_hidden
 
-    def show(self, layer_on: bool, mine: str | None) -> None:
+    def show(self, layer_on: bool, mine: str | None, also: frozenset[str] = frozenset()) -> None:
         """Make visible what should show (module docstring): `layer_on` the labels layer, `mine` the selected
-        point's label name (None without a selection)."""
+        point's label name (None without a selection), `also` labels shown whatever the layer (the targets a
+        fiducial's drag changed most)."""
         on = layer_on and not self.compact
         lesson = tuple(f"/{k}/" for k in self._lesson_kinds)
         hidden = self._lesson_hidden
         for name, h in self._handles.items():
-            self._assign(h, "visible", on or name == mine or (name.startswith(lesson) and name not in hidden))
+            shown = on or name == mine or name in also or (name.startswith(lesson) and name not in hidden)
+            self._assign(h, "visible", shown)

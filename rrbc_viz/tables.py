@@ -26,7 +26,7 @@ def changes_line(changed) -> str:
     if not changed:
         return ""
     said = ", ".join(f"**{pid}** {mm:.3f} mm" for pid, mm in changed)
-    return f"\n\nThe last fiducial drag changed these targets' corrections most (drawn larger): {said}."
+    return f"\n\nThe last fiducial drag changed these targets' corrections most (drawn larger and labelled with the change): {said}."
 
 
 def summary(ev: Evaluation, kind: str) -> str:

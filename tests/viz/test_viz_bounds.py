@@ -98,6 +98,7 @@ def test_a_fiducial_drag_marks_the_targets_whose_correction_it_changed_most(app)
     from rrbc_core.session.results import correction_changes, largest_changes
     from rrbc_viz.nodes import CHANGED_SCALE
 
+    app.controls.view.layers["labels"].value = False  # the marked targets are labelled all the same
     ev0 = app.session.last
     before = ev0.targets.correction_robot.copy()
     fid = app.session.layout["fiducials"].ids[0]
@@ -113,12 +114,20 @@ def test_a_fiducial_drag_marks_the_targets_whose_correction_it_changed_most(app)
         scale = np.atleast_1d(np.asarray(app.nodes.handle(f"/targets/{pid}/gizmo/sphere").scale, float))
         want = CHANGED_SCALE if pid in dict(marked) else 1.0
         assert np.allclose(scale, want), (pid, scale)
+        label = app.nodes.handle(f"/targets/{pid}/gizmo/label")
+        if pid in dict(marked):  # labelled with its change, the labels layer off
+            assert label.visible and label.text.endswith(f" · Δê {dict(marked)[pid]:.3f} mm"), label.text
+        else:
+            assert "Δê" not in label.text and label.visible == (app.state.selected == ("targets", pid))
     text = app.controls.explore.scale.content
     assert all(f"**{pid}** {mm:.3f} mm" in text for pid, mm in marked), text
     t0 = ev.targets.positions[0]
     app.evaluate.handle_drag("targets", ev.targets.ids[0], t0, phase="start")  # a target's drag clears the mark
     app.evaluate.handle_drag("targets", ev.targets.ids[0], t0 + np.array([1.0, 0.0, 0.0]), phase="end")
     assert "changed these targets" not in app.controls.explore.scale.content
+    for pid in ev.targets.ids:
+        label = app.nodes.handle(f"/targets/{pid}/gizmo/label")
+        assert "Δê" not in label.text and label.visible == (app.state.selected == ("targets", pid))
     assert all(
         np.allclose(np.asarray(app.nodes.handle(f"/targets/{p}/gizmo/sphere").scale, float), 1.0)
         for p in ev.targets.ids
