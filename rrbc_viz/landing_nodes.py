@@ -102,6 +102,23 @@ class LandingNodes:
             return None
         return np.asarray(node.position, float), str(node.text)
 
+    def ring_points(self) -> np.ndarray:
+        """The scale ring's points (RING_SEGMENTS, 3) robot frame mm as drawn (none before `build`), and its centre."""
+        rings = self.handles.get("/landing/rings")
+        if rings is None:
+            return np.zeros((0, 3))
+        return np.asarray(rings.points, float)[:RING_SEGMENTS, 0]
+
+    def ring_centre(self) -> np.ndarray | None:
+        node = self.handles.get("/landing/anchor")
+        return None if node is None else np.asarray(node.position, float)
+
+    def move_label(self, position) -> None:
+        """The ring label drawn at `position` (3,) robot frame mm."""
+        node = self.handles.get("/landing/scale")
+        if node is not None:
+            node.position = np.asarray(position, float)
+
     def set_label_anchor(self, anchor) -> None:
         """Draw the ring label with `anchor` (viser's label anchors: "bottom-left", "top-left", ...), or hide it
         (None: no side of its point is clear)."""
