@@ -7,7 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from rrbc_core.geometry.label_layout import sphere_boxes
+
 from . import colors
+from .lesson_labels import side_anchor
 from .node_values import RING_SEGMENTS, LandingDisplay
 
 #: Sphere radii of the bullseye's points, in marker radii.
@@ -103,21 +106,43 @@ class LandingNodes:
         return np.asarray(node.position, float), str(node.text)
 
     def ring_points(self) -> np.ndarray:
-        """The scale ring's points (RING_SEGMENTS, 3) robot frame mm as drawn (none before `build`), and its centre."""
+        """The scale ring's points (RING_SEGMENTS, 3) robot frame mm as drawn (none before `build`)."""
         rings = self.handles.get("/landing/rings")
         if rings is None:
             return np.zeros((0, 3))
         return np.asarray(rings.points, float)[:RING_SEGMENTS, 0]
 
-    def ring_centre(self) -> np.ndarray | None:
-        node = self.handles.get("/landing/anchor")
-        return None if node is None else np.asarray(node.position, float)
-
-    def move_label(self, position) -> None:
-        """The ring label drawn at `position` (3,) robot frame mm."""
+    def place_label(self, avoid, pose, image_px, panel_px: float, font_scale: float) -> None:
+        """The ring label where, seen by `pose` in an image of `image_px`, it meets neither the ring's line, the
+        bullseye's spheres, the boxes `avoid` ((K, 4) CSS px: the selected point's label) nor the panel
+        (`lesson_labels.side_anchor`): hung `RING_GAP_PX` below the ring's lowest point on screen, else above its
+        highest; hidden where no side of either is clear (issue 39: the ring ran through it)."""
         node = self.handles.get("/landing/scale")
-        if node is not None:
-            node.position = np.asarray(position, float)
+        if node is None:
+            return
+        text = str(node.text)
+        boxes = [np.asarray(avoid, float).reshape(-1, 4), sphere_boxes(*self.spheres(), pose, image_px)]
+        pts = self.ring_points()
+        hangs = [(np.asarray(node.position, float), "top-center")]
+        if len(pts):  # points along the ring, 4 a segment, avoided
+            seg = np.vstack([pts, pts[:1]])
+            t = np.linspace(0.0, 1.0, 4, endpoint=False)[None, :, None]
+            along = (seg[:-1, None] + t * np.diff(seg, axis=0)[:, None]).reshape(-1, 3)
+            dots = sphere_boxes(along, np.zeros(len(along)), pose, image_px)
+            boxes.append(dots)
+            if np.isfinite(dots).all():
+                y = dots[:, 3]
+                hangs = [
+                    (_beside(along[int(np.argmax(y))], -1.0, pose, image_px), "top-center"),
+                    (_beside(along[int(np.argmin(y))], 1.0, pose, image_px), "bottom-center"),
+                ]
+        for where, own in hangs:
+            anchor = side_anchor(where, text, np.vstack(boxes), pose, image_px, panel_px, font_scale, own)
+            if anchor is not None:
+                node.position = where
+                self.set_label_anchor(anchor)
+                return
+        self.set_label_anchor(None)
 
     def set_label_anchor(self, anchor) -> None:
         """Draw the ring label with `anchor` (viser's label anchors: "bottom-left", "top-left", ...), or hide it
@@ -135,3 +160,13 @@ class LandingNodes:
         if node is not None:
             node.font_screen_scale = 0.8 * factor
             node.anchor = "top-center" if factor > 1.0 else "bottom-left"
+
+
+#: the ring label hangs this far (CSS px) below the ring's lowest point on screen (or above its highest)
+RING_GAP_PX = 8.0
+
+
+def _beside(point, up: float, pose, image_px) -> np.ndarray:
+    """`point` (3,) moved `RING_GAP_PX` up (`up` 1) or down (-1) on screen, along the robot frame's z (mm)."""
+    per_mm = float(np.diff(sphere_boxes(np.reshape(point, (1, 3)), [1.0], pose, image_px)[0, [1, 3]])[0]) / 2.0
+    return np.asarray(point, float) + np.array([0.0, 0.0, up * RING_GAP_PX / max(per_mm, 1e-9)])

@@ -41,7 +41,6 @@ from typing import Any
 import numpy as np
 import viser
 
-from rrbc_core.geometry.label_layout import sphere_boxes
 from rrbc_core.session.evaluation import Evaluation
 from rrbc_core.session.explorer import ExplorerSession
 
@@ -51,7 +50,6 @@ from .check_error_nodes import CheckErrorNodes
 from .frame_nodes import FrameNodes
 from .heatmap_nodes import HeatMapNodes
 from .landing_nodes import LandingNodes
-from .lesson_labels import side_anchor
 from .mesh_nodes import GHOST_NODE, SOLID_NODE, add_cell_mesh
 from .node_values import (
     LAYERS,
@@ -81,8 +79,6 @@ DragCallback = Callable[..., object]
 ClickCallback = Callable[..., object]
 
 GIZMO_LIMITS = ((-1e7, 1e7),) * 3
-#: the bullseye's ring label hangs this far (CSS px) below the ring's lowest point on screen
-RING_GAP_PX = 8.0
 #: the targets whose correction the last fiducial drag changed most are drawn this much larger
 CHANGED_SCALE = 1.6
 
@@ -558,43 +554,9 @@ class SceneNodes:
         return hidden
 
     def _place_ring_label(self, mine: str | None, pose, image_px, panel_px: float) -> None:
-        """The bullseye's ring label where it meets neither the ring's line, its spheres, the selected point's label
-        nor the panel, seen by `pose` (`lesson_labels.side_anchor`): hung `RING_GAP_PX` below the ring's lowest point
-        on screen, else above its highest; hidden where no side of either is clear."""
-        ring = self._bullseye.label()
-        if ring is None:
-            return
-        avoid = [sphere_boxes(*self._bullseye.spheres(), pose, image_px)]  # (issue 39: step 9)
-        if mine is not None:
-            avoid.append(self._labels.box(mine, self.label_anchor(mine), pose, image_px))
-        scale = 0.8 * self._labels.scale
-        pts = self._bullseye.ring_points()
-        hangs = [(ring[0], "top-center")]
-        if len(pts):  # the ring's line ran through the label (issue 39): points along it, 4 a segment, avoided
-            seg = np.vstack([pts, pts[:1]])
-            t = np.linspace(0.0, 1.0, 4, endpoint=False)[None, :, None]
-            along = (seg[:-1, None] + t * np.diff(seg, axis=0)[:, None]).reshape(-1, 3)
-            dots = sphere_boxes(along, np.zeros(len(along)), pose, image_px)
-            avoid.append(dots)
-            if np.isfinite(dots).all():
-                y = dots[:, 3]
-                hangs = [
-                    (self._beside(along[int(np.argmax(y))], -1.0, pose, image_px), "top-center"),
-                    (self._beside(along[int(np.argmin(y))], 1.0, pose, image_px), "bottom-center"),
-                ]
-        for where, own in hangs:
-            anchor = side_anchor(where, ring[1], np.vstack(avoid), pose, image_px, panel_px, scale, own)
-            if anchor is not None:
-                self._bullseye.move_label(where)
-                self._bullseye.set_label_anchor(anchor)
-                return
-        self._bullseye.set_label_anchor(None)
-
-    @staticmethod
-    def _beside(point, up: float, pose, image_px) -> np.ndarray:
-        """`point` (3,) moved `RING_GAP_PX` up (`up` 1) or down (-1) on screen, along the robot frame's z (mm)."""
-        per_mm = float(np.diff(sphere_boxes(np.reshape(point, (1, 3)), [1.0], pose, image_px)[0, [1, 3]])[0]) / 2.0
-        return np.asarray(point, float) + np.array([0.0, 0.0, up * RING_GAP_PX / max(per_mm, 1e-9)])
+        """The bullseye's ring label clear of the selected point's label too (`LandingNodes.place_label`)."""
+        avoid = np.zeros((0, 4)) if mine is None else self._labels.box(mine, self.label_anchor(mine), pose, image_px)
+        self._bullseye.place_label(avoid, pose, image_px, panel_px, 0.8 * self._labels.scale)
 
     def drag_ended(self, kind: str, pid: str) -> None:
         """The user let go of a point's handle: the app places it again from now on."""
