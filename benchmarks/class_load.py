@@ -17,8 +17,10 @@ The server runs in this process, as `rrbc view` runs it; the clients on their ow
 from __future__ import annotations
 
 import gc
+import sys
 import threading
 import time
+import traceback
 from collections import Counter
 
 import numpy as np
@@ -143,11 +145,18 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
             )
 
         # a stopped tab's workers end once the job they are running returns (on a loaded machine a planning or a
-        # drag update can take seconds): wait for them, bounded as the callback threads are
-        deadline = time.monotonic() + worker_pool.IDLE_S + 15
+        # drag update can take seconds; beside a busy core and another test process, one callback thread was still
+        # running after 16 s): wait for them, bounded (a thread left for good fails the same, later)
+        deadline = time.monotonic() + worker_pool.IDLE_S + 45
         while (left := left_now()) and time.monotonic() < deadline:
             time.sleep(0.1)
         names_after = sorted(t.name for t in threading.enumerate() if t.name.startswith("rrbc-"))
+        frames = sys._current_frames()  # what a thread left behind is doing: its innermost calls
+        stacks = {
+            t.name: traceback.format_stack(frames[t.ident])[-4:]
+            for t in threading.enumerate()
+            if t.name in left and t.ident in frames
+        }
     finally:
         app.stop()
     return {
@@ -164,6 +173,7 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
         "threads_after": threads_after,
         "thread_names_after": names_after,
         "threads_left": left,
+        "threads_left_stacks": stacks,
     }
 
 

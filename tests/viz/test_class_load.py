@@ -33,4 +33,4 @@ def test_every_dragging_client_keeps_moving_and_a_click_after_is_answered(per_cl
     assert res["rss_after_mb"] <= 1.5 * res["rss_before_mb"], res
     # the threads the class started are gone again (issue 42, item 5; rrbc_viz.worker_pool), less the shared app's
     # own workers started when first needed (on a loaded machine a slow planning update starts the Plan tab's)
-    assert not res["threads_left"], res["thread_names_after"]
+    assert not res["threads_left"], (res["thread_names_after"], res["threads_left_stacks"])
