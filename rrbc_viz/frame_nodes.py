@@ -18,6 +18,8 @@ from .picture import AXES_SHARE
 MakeLabel = Callable[[str, str, Any], None]
 #: (name, text) -> None: a new text for a label the scene owns
 Relabel = Callable[[str, str], None]
+#: (name, position) -> None: a label the scene owns moved (its parent's frame, mm)
+Move = Callable[[str, Any], None]
 REGISTERED_LABEL = "/frames/sensor_registered/label"
 
 
@@ -31,42 +33,85 @@ class FrameNodes:
         self._magnified = False  # the registered frame is drawn beside a true pose, its error magnified
         self._mag = 1.0
         self._compact = False
+        self._zoom = 1.0  # the sensor's frames' axes drawn this many times their length (`zoom`)
+        self._sizes: dict[str, tuple[Any, float, float]] = {}  # frame name -> (handle, axes length, radius) at zoom 1
+        self._move: Move | None = None
 
-    def build(self, extent_mm: float, true_pose, registered, label: MakeLabel) -> None:
-        """The frames, their axes `AXES_SHARE` of the point sets' extent long; `true_pose` (a RigidTransform or None)
-        and `registered` (the registration's mapping) where they are, until `show`."""
+    def build(self, extent_mm: float, true_pose, registered, label: MakeLabel, move: Move) -> None:
+        """The frames, their axes `AXES_SHARE` of the point sets' extent long (the sensor's times the zoom, `zoom`); `true_pose`
+        (a RigidTransform or None) and `registered` (the registration's mapping) where they are, until `show`."""
         sc = self._scene
         axes = AXES_SHARE * extent_mm
-        sc.add_frame("/frames/robot", axes_length=axes, axes_radius=axes * 0.03)
-        self._poses = {"/frames/robot": (np.eye(3), np.zeros(3))}
-        label("/frames/robot/label", "robot base", (0.0, 0.0, axes * 0.2))
+        self._move = move
+        self._sizes = {}
+        self._poses = {}
+        poses = [("/frames/robot", np.eye(3), np.zeros(3), "robot base")]
         if true_pose is not None:
-            sc.add_frame(
-                "/frames/sensor_true",
-                axes_length=axes,
-                axes_radius=axes * 0.03,
-                wxyz=wxyz(true_pose.rotation),
-                position=np.asarray(true_pose.translation, float),
+            poses.append(
+                (
+                    "/frames/sensor_true",
+                    np.asarray(true_pose.rotation, float),
+                    np.asarray(true_pose.translation, float),
+                    "sensor (true pose)",
+                )
             )
-            self._poses["/frames/sensor_true"] = (
-                np.asarray(true_pose.rotation, float),
-                np.asarray(true_pose.translation, float),
+        for name, rot, origin, text in poses:
+            handle = sc.add_frame(
+                name,
+                axes_length=axes * self._scale(name),
+                axes_radius=axes * 0.03 * self._scale(name),
+                wxyz=wxyz(rot),
+                position=origin,
             )
-            label("/frames/sensor_true/label", "sensor (true pose)", (0.0, 0.0, axes * 0.2))
+            self._sizes[name] = (handle, axes, axes * 0.03)
+            self._poses[name] = (rot, origin)
+            label(name + "/label", text, self._label_position(name))
         self._registered = sc.add_frame(
             "/frames/sensor_registered",
-            axes_length=axes * 1.3,
-            axes_radius=axes * 0.012,
+            axes_length=axes * 1.3 * self._scale("/frames/sensor_registered"),
+            axes_radius=axes * 0.012 * self._scale("/frames/sensor_registered"),
             origin_color=(20, 20, 20),  # black: seen against the cell's light surfaces
             wxyz=wxyz(registered.rotation),
             position=np.asarray(registered.translation, float),
         )
+        self._sizes["/frames/sensor_registered"] = (self._registered, axes * 1.3, axes * 0.012)
         self._poses["/frames/sensor_registered"] = (
             np.asarray(registered.rotation, float),
             np.asarray(registered.translation, float),
         )
-        label(REGISTERED_LABEL, "sensor (registered)", (0.0, 0.0, -axes * 0.2))
+        label(REGISTERED_LABEL, "sensor (registered)", self._label_position("/frames/sensor_registered"))
         self._magnified = true_pose is not None
+
+    def zoom(self, factor: float) -> None:
+        """The sensor's frames' axes drawn `factor` times their length and thickness (the lesson step that talks
+        about them: high above the work they are a few pixels long), their labels kept clear of them."""
+        self._zoom = float(factor)
+        for name, (handle, length, radius) in self._sizes.items():
+            handle.axes_length = length * self._scale(name)
+            handle.axes_radius = radius * self._scale(name)
+        self._place_labels()
+
+    def _scale(self, name: str) -> float:
+        return 1.0 if name == "/frames/robot" else self._zoom
+
+    def _place_labels(self) -> None:
+        if self._move is not None:
+            for name in self._sizes:
+                self._move(name + "/label", self._label_position(name))
+
+    def _label_position(self, name: str) -> np.ndarray:
+        """Frame `name`'s label position in its own coordinates (mm): clear of its axes, which run from its origin in
+        any direction: above their highest tip (the robot's and the true sensor's) or below their lowest (the
+        registered sensor's, drawn beside the true one). Labels hang from their anchor upwards, so the one below
+        starts lower by about a label's height at the frames' own scale."""
+        rotation, _ = self._poses[name]
+        length = self._sizes[name][1] * self._scale(name)
+        heights = rotation[2] * length  # the axes' tips' heights above the origin (robot frame z up)
+        if name == "/frames/sensor_registered":
+            world = np.array([0.0, 0.0, min(0.0, float(heights.min())) - 0.6 * length])
+        else:
+            world = np.array([0.0, 0.0, max(0.0, float(heights.max())) + 0.15 * length])
+        return rotation.T @ world
 
     def show(self, registered_wxyz, registered_position, magnification: float, relabel: Relabel) -> None:
         """The registered frame where the picture draws it, its error `magnification` times larger (its label says
@@ -75,6 +120,8 @@ class FrameNodes:
         self._registered.position = registered_position
         rotation = vtf.SO3(np.asarray(registered_wxyz, float)).as_matrix()
         self._poses["/frames/sensor_registered"] = (rotation, np.asarray(registered_position, float))
+        if self._move is not None and "/frames/sensor_registered" in self._sizes:
+            self._move(REGISTERED_LABEL, self._label_position("/frames/sensor_registered"))
         self._mag = magnification
         if self._magnified:
             relabel(REGISTERED_LABEL, self._label_text())

@@ -212,7 +212,9 @@ class SceneNodes:
         self._show_arm_marks()  # its model-error mark as its layer says
 
         # frames ---------------------------------------------------------------------------------------
-        self._frames.build(self._extent_mm, session.sensor_to_robot, ev.registration.mapping, self._add_label)
+        self._frames.build(
+            self._extent_mm, session.sensor_to_robot, ev.registration.mapping, self._add_label, self._labels.move
+        )
         self._frames.set_compact(self._labels.compact, self._labels.set_text)
 
         # registration points --------------------------------------------------------------------------
@@ -570,6 +572,10 @@ class SceneNodes:
         """The sensor's lines of sight to `points` (N, 3) robot frame mm, or none (None); scene mode only."""
         if self._sensor is not None:
             self._sensor.show_sight_lines(points)
+
+    def set_frames_zoom(self, factor: float) -> None:
+        """The sensor's frames' axes drawn `factor` times their length (`AppState.frames_zoom`)."""
+        self._frames.zoom(factor)
 
     def set_arm_marks_visible(self, on: bool) -> None:
         """Let the arm's model-error mark show (its layer permitting) or hide it (a lesson hides it)."""

@@ -73,6 +73,9 @@ class AppState:
         The regions' zoom before the lesson started (a step may draw them larger; restored when it ends).
     lesson_labels : tuple of str
         Kinds of point whose labels the lesson step shows.
+    frames_zoom : float
+        The sensor's frames' axes are drawn this many times their length (the lesson step that names them; 1
+        otherwise).
     messages : list of str
         Every message shown (status line, notifications), oldest first.
     heat_map : HeatMap or None
@@ -130,6 +133,7 @@ class AppState:
     lesson_saved_layers: dict[str, bool] | None = None
     lesson_saved_zoom: float | None = None
     lesson_labels: tuple[str, ...] = ()
+    frames_zoom: float = 1.0
     messages: list[str] = field(default_factory=list)
     heat_map: HeatMap | None = None
     heat_time: float = 0.0

@@ -50,10 +50,14 @@ class Step:
     #: the points (kind, id) its text names by id: their labels are kept first where labels would overlap
     named: Callable[[Evaluation], tuple[tuple[str, str], ...]] | None = None
     readings: bool = False  # the first included fiducial's two readings, drawn beside it (`fiducial_readings`)
+    #: the sensor's frames' axes drawn this many times their length at this step (None: their own)
+    frames_zoom: float | None = None
 
 
 #: The regions' zoom at the step that names them.
 REGION_ZOOM = 10.0
+#: The sensor's frames' zoom at the step that names them.
+FRAMES_ZOOM = 3.0
 
 
 def _v(x) -> str:
@@ -307,7 +311,8 @@ STEPS: tuple[Step, ...] = (
         "Measure registration points",
         ("mesh", "arm", "sensor", "frames", "registration", "labels"),
         _step1,
-        focus=("registration", "robot"),
+        focus=("registration", "robot", "sensor"),  # its text: the robot and the sensor both measure them
+        see_through=True,  # seen with the sensor, some points lie behind its mast
         labels=("registration",),  # its text names R1-R6
     ),
     Step(
@@ -317,6 +322,7 @@ STEPS: tuple[Step, ...] = (
         focus=("sensor", "registration"),  # the two sensor frames and the points the fit rests on
         direction=(0.7, -0.55, 0.15),  # from the work's side, level with the head: its mast is behind it
         see_through=True,  # the frames' origins lie inside the sensor's casing
+        frames_zoom=FRAMES_ZOOM,  # high above the work, at their size in the cell they are a few pixels long
         labels=("frames", "registration"),  # its text names the two sensor frames and the points
     ),
     Step(

@@ -98,7 +98,7 @@ class ViewController:
                 parts.append(ev.targets.positions + mag * ev.targets.correction_robot)
         if "sensor" in names:
             # both sensor frames with their axes (a sphere of one axis length around each origin)
-            axes = AXES_SHARE * self.ctx.state.extent_mm * 1.3
+            axes = AXES_SHARE * self.ctx.state.extent_mm * 1.3 * self.ctx.state.frames_zoom
             d = np.vstack([np.eye(3), -np.eye(3)]) * axes
             for origin in (self.ctx.present.picture().registered_position, cell.sensor_position):
                 if origin is not None:
@@ -350,6 +350,8 @@ class ViewController:
                     self.ctx.evaluate.set_layer(name, name in step.layers)
                 self.ctx.state.target_arrows = step.target_arrows
                 self.ctx.state.lesson_labels = tuple(step.labels)
+                self.ctx.state.frames_zoom = float(step.frames_zoom or 1.0)
+                self.ctx.nodes.set_frames_zoom(self.ctx.state.frames_zoom)
                 named = step.named(self.ctx.session.last) if step.named is not None else ()
                 self.ctx.nodes.set_lesson_labels(step.labels, named)
                 self.ctx.nodes.set_arm_marks_visible(False)
@@ -407,6 +409,8 @@ class ViewController:
                     self.ctx.evaluate.set_layer(name, visible)
                 self.ctx.state.target_arrows = True
                 self.ctx.state.lesson_labels = ()
+                self.ctx.state.frames_zoom = 1.0
+                self.ctx.nodes.set_frames_zoom(1.0)
                 self.ctx.nodes.set_lesson_labels(())
                 self.ctx.nodes.set_arm_marks_visible(True)
                 self.set_see_through(False)

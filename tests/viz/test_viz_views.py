@@ -352,6 +352,62 @@ def test_the_bullseye_keeps_its_scale_during_a_drag_and_after_while_the_offsets_
         assert landing_display(t, 0, m, None, held).ring_mm == held  # during a drag: always kept
 
 
+def _frame_axes(app, name: str, samples: int = 9) -> np.ndarray:
+    """(3 * samples, 3) robot frame, mm: points along frame `name`'s three drawn axes, its origin left out."""
+    import viser.transforms as vtf
+
+    h = app.server.scene.get_handle_by_name(name)
+    rot = vtf.SO3(np.asarray(h.wxyz, float)).as_matrix()
+    t = np.linspace(0.1, 1.0, samples)[:, None, None] * h.axes_length
+    return (np.asarray(h.position, float) + t * rot.T[None]).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("present", [False, True])
+def test_the_step_that_names_the_frames_draws_the_sensors_larger_labelled_clear_of_their_axes(app, present):
+    """Issue 39: at step 2 the sensor's two frames, high above the work, were about 20 px long and their labels sat
+    on their own z axes (the robot base's was crossed by its axis). The step draws the sensor's frames
+    `teaching.FRAMES_ZOOM` times larger (the robot's as it is), in the view it frames every frame's label is clear
+    of every frame's axes, and the lesson's end gives the frames their size back."""
+    from rrbc_core.geometry.label_layout import label_boxes, sphere_boxes
+    from rrbc_viz.camera import FOV_Y, _pose_from, frame_margin, panel_px
+    from rrbc_viz.controllers.viewing import PRESENTATION_LABEL_SCALE
+
+    names = ("/frames/robot", "/frames/sensor_true", "/frames/sensor_registered")
+    scene = app.server.scene
+    before = {n: float(scene.get_handle_by_name(n).axes_length) for n in names}
+    app.views.set_presentation(present)
+    k = next(i for i, s in enumerate(teaching.STEPS) if s.frames_zoom)
+    assert "frames" in teaching.STEPS[k].labels and teaching.FRAMES_ZOOM >= 2
+    app.views.lesson_go(k)
+    after = {n: float(scene.get_handle_by_name(n).axes_length) for n in names}
+    assert after["/frames/robot"] == before["/frames/robot"]
+    for n in names[1:]:
+        assert after[n] == pytest.approx(teaching.FRAMES_ZOOM * before[n]), n
+    w, h = (1280, 720) if present else (1600, 900)
+    pose = _pose_from(app.views.current_view(), FOV_Y, w / h, w, panel_px(present), frame_margin(present))
+    axes = np.vstack([_frame_axes(app, n) for n in names])
+    ax = sphere_boxes(axes, np.full(len(axes), 1e-6), pose, (w, h))
+    ax_px = np.column_stack([(ax[:, 0] + ax[:, 2]) / 2, (ax[:, 1] + ax[:, 3]) / 2])
+    for n in names:
+        label = app.nodes.handle(n + "/label")
+        box = label_boxes(
+            np.array([app.nodes.label_anchor(n + "/label")]),
+            [str(label.text)],
+            pose,
+            (w, h),
+            0.75 * (PRESENTATION_LABEL_SCALE if present else 1.0),
+            label.anchor,
+        )[0]
+        inside = (ax_px[:, 0] > box[0]) & (ax_px[:, 0] < box[2]) & (ax_px[:, 1] > box[1]) & (ax_px[:, 1] < box[3])
+        assert not inside.any(), (n, box, ax_px[inside][:3])
+    app.views.lesson_go(k + 1)
+    assert all(float(scene.get_handle_by_name(n).axes_length) == pytest.approx(before[n]) for n in names)
+    app.views.lesson_go(k)
+    app.views.lesson_stop()
+    assert app.state.frames_zoom == 1.0
+    assert all(float(scene.get_handle_by_name(n).axes_length) == pytest.approx(before[n]) for n in names)
+
+
 @pytest.mark.parametrize(
     ("present", "image"),
     [(True, None), (False, None), (True, (1280, 720)), (False, (1280, 720)), (False, (1600, 900))],
