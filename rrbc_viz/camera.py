@@ -235,23 +235,23 @@ def _halo(points: np.ndarray, radius: float) -> np.ndarray:
 ASIDE_RAD = np.deg2rad(35.0)
 
 
-def facing_robot(work: np.ndarray, base=None) -> np.ndarray:
+def facing_robot(work: np.ndarray, base=None, down: np.ndarray = OBLIQUE) -> np.ndarray:
     """The work-area view's direction (camera -> scene, robot frame): looking from the work's far side towards the
-    robot's base `base` (3,) (default the origin), turned `ASIDE_RAD` to one side and tilted down as `OBLIQUE`, so
-    the arm is context behind the work and never the wrist in front of it. `OBLIQUE` where the base lies under the
-    work (no side to look from)."""
+    robot's base `base` (3,) (default the origin), turned `ASIDE_RAD` to one side and tilted down as `down` (the
+    close-up's: as `STEEP`), so the arm is context behind the work and never the wrist in front of it. `down` where
+    the base lies under the work (no side to look from)."""
     pts = np.asarray(work, float).reshape(-1, 3)
     if not len(pts):
-        return OBLIQUE
+        return down
     base = np.zeros(3) if base is None else np.asarray(base, float)
     lo, hi = pts.min(0), pts.max(0)
     toward = (base - 0.5 * (lo + hi))[:2]
     reach = float(np.linalg.norm(toward))
     if reach <= 0.25 * float(np.linalg.norm((hi - lo)[:2])):
-        return OBLIQUE
+        return down
     c, s = np.cos(ASIDE_RAD), np.sin(ASIDE_RAD)
     h = np.array([c * toward[0] - s * toward[1], s * toward[0] + c * toward[1]]) / reach
-    tilt = OBLIQUE[2] / np.linalg.norm(OBLIQUE[:2])
+    tilt = down[2] / np.linalg.norm(down[:2])
     return np.array([h[0], h[1], tilt])
 
 
@@ -274,8 +274,11 @@ def preset_view(name: str, cell: CellGeometry, selected=None, marker_mm: float =
         if selected is not None and len(selected):
             pts = np.vstack([pts, np.asarray(selected, float).reshape(-1, 3)])
         return View(_halo(pts, 2 * marker_mm), direction)
-    if name == "close-up":  # the targets and fiducials from above (the fixture plate)
-        return View(_halo(work, 2 * marker_mm), STEEP)
+    if name == "close-up":  # the targets and fiducials from above (the fixture plate); in a modelled cell from the
+        # work's far side as the work area is (issue 39: from the front the arm reaching a target filled a third of it)
+        return View(
+            _halo(work, 2 * marker_mm), facing_robot(work, down=STEEP) if cell.sensor_kind is not None else STEEP
+        )
     if name == "selected point":
         pts = work if selected is None or not len(selected) else np.asarray(selected, float).reshape(-1, 3)
         return View(_halo(pts, 4 * marker_mm), STEEP)

@@ -92,6 +92,10 @@ def test_camera_presets_show_what_they_name():
     toward_base = -centre[:2] / np.linalg.norm(centre[:2])
     horizontal = area.direction[:2] / np.linalg.norm(area.direction[:2])
     assert float(horizontal @ toward_base) > np.cos(np.deg2rad(60)) and area.direction[2] < 0
+    # the close-up too (issue 39: from the front the arm reaching a target filled a third of it), but from above
+    steep = work.direction / np.linalg.norm(work.direction)
+    horizontal = steep[:2] / np.linalg.norm(steep[:2])
+    assert float(horizontal @ toward_base) > np.cos(np.deg2rad(60)) and steep[2] < -0.8
     sel = preset_view("selected point", cell, selected=[cell.targets[0]], marker_mm=8.0)
     assert np.abs(sel.points - cell.targets[0]).max() == pytest.approx(32.0)
     no_sensor = CellGeometry(**{**cell.__dict__, "sensor_kind": "ground_truth"})
