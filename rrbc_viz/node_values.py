@@ -69,6 +69,12 @@ def label_heights(marker_mm: float) -> tuple[float, float]:
     return 1.6 * float(marker_mm), 1.1 * gizmo_size(marker_mm)
 
 
+def label_side(marker_mm: float) -> float:
+    """How far beside the vertical line through its point the selected point's label starts (mm): its drag handle's
+    up arrow and the arm's stylus (radius 4 mm) come down that line."""
+    return 4.0 + float(marker_mm)
+
+
 def node_key(pid: str) -> str:
     return str(pid).replace("/", "_") or "_"
 

@@ -61,6 +61,7 @@ from .node_values import (
     gizmo_size,
     identity_wxyzs,
     label_heights,
+    label_side,
     node_key,
     target_label,
     target_labels,
@@ -519,7 +520,8 @@ class SceneNodes:
             on = key == selected
             self._assign(tc, "disable_axes", not on)
             self._assign(tc, "disable_sliders", not on)
-        self._labels.raise_label(self._selected_label(), *label_heights(self._display.marker_mm))
+        r = self._display.marker_mm
+        self._labels.raise_label(self._selected_label(), *label_heights(r), label_side(r))
         self._show_labels()
 
     def applicable_layers(self) -> tuple[str, ...]:

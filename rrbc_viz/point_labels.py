@@ -15,6 +15,7 @@ from typing import Any, Literal
 import numpy as np
 import viser
 
+from rrbc_core.geometry.framing import camera_basis
 from rrbc_core.geometry.label_layout import label_boxes
 
 from . import lesson_labels
@@ -38,6 +39,7 @@ class PointLabels:
         self._raised: str | None = None  # the selected point's label, drawn above its drag handle
         self._sided: dict[str, str] = {}  # lesson labels drawn with another anchor (their own would meet a label)
         self._heights = (0.0, 0.0)  # point labels' heights above their point (mm): the others', the raised one's
+        self._side_mm = 0.0  # how far beside the line through its point the raised label starts (mm)
 
     @property
     def scale(self) -> float:
@@ -97,11 +99,12 @@ class PointLabels:
             if name.endswith("/gizmo/label"):
                 h.position = np.array([0.0, 0.0, self._heights[name == self._raised]])
 
-    def raise_label(self, mine: str | None, height_mm: float, raised_mm: float) -> None:
+    def raise_label(self, mine: str | None, height_mm: float, raised_mm: float, side_mm: float = 0.0) -> None:
         """The selected point's label `mine` (None: none) drawn `raised_mm` above its point, over its drag handle's up
         arrow, whose arrows and planes would cover it at the usual `height_mm` (issue 39); the one raised before
-        back down."""
+        back down. Seen by a camera (`declutter`), it starts `side_mm` beside the vertical line through its point."""
         self._heights = (float(height_mm), float(raised_mm))
+        self._side_mm = float(side_mm)
         if mine == self._raised:
             return
         if self._raised in self._handles:
@@ -148,7 +151,6 @@ class PointLabels:
         named = [n for n in self._lesson_named if n in names]
         names = named + [n for n in names if n not in named]  # what the text names is placed first
         anchor: Any = self._anchor()
-        labels = {n: (anchor_of(n), str(self._handles[n].text)) for n in names}
         scale = 0.75 * self._scale
         first_anchor: Any = None
         moved, self._reanchored = self._reanchored, None
@@ -156,16 +158,34 @@ class PointLabels:
             self._handles[moved].anchor = anchor
         self._unside(keep=mine)  # and an earlier step's labels drawn on another side
         if mine is not None and mine in self._handles:  # the selected point's label kept inside the view
-            text = str(self._handles[mine].text)
-            first_anchor = lesson_labels.inside_anchor(anchor_of(mine), text, pose, image_px, panel_px, scale, anchor)
-            self._handles[mine].anchor = first_anchor
+            first_anchor = self._beside_its_point(mine, anchor_of, pose, image_px, panel_px)
             self._reanchored = mine
+        labels = {n: (anchor_of(n), str(self._handles[n].text)) for n in names}
         self._lesson_hidden, self._sided = lesson_labels.declutter(
             labels, mine, pose, image_px, panel_px, scale, anchor, first_anchor
         )
         for name, side in self._sided.items():
             self._handles[name].anchor = side  # type: ignore[assignment]
         return self._lesson_hidden
+
+    def _beside_its_point(self, mine: str, anchor_of: Callable[[str], np.ndarray], pose, image_px, panel_px) -> str:
+        """The selected point's label `mine` drawn inside the view's free part (`lesson_labels.inside_anchor`) and
+        starting beside the vertical line through its point, not on it: its drag handle's up arrow and, at a target,
+        the arm's stylus come down that line (issue 39: they crossed the label's first characters). Its text runs
+        left or right from `side_mm` beside the line (a centred label, presentation mode's, is drawn from its side
+        too). Returns its anchor."""
+        h = self._handles[mine]
+        raised = np.array([0.0, 0.0, self._heights[1]]) if mine == self._raised else np.asarray(h.position, float)
+        h.position = raised
+        own = self._anchor()
+        own = "bottom-left" if own.endswith("center") and self._side_mm > 0 else own
+        scale = 0.75 * self._scale
+        first = lesson_labels.inside_anchor(anchor_of(mine), str(h.text), pose, image_px, panel_px, scale, own)
+        if self._side_mm > 0 and not first.endswith("center"):
+            right = camera_basis(pose.forward, pose.up)[1]
+            h.position = raised + (1.0 if first.endswith("left") else -1.0) * self._side_mm * right
+        h.anchor = first  # type: ignore[assignment]
+        return first
 
     def show(self, layer_on: bool, mine: str | None, also: frozenset[str] = frozenset()) -> None:
         """Make visible what should show (module docstring): `layer_on` the labels layer, `mine` the selected

@@ -232,7 +232,11 @@ SHOT_OPTIONS: dict[str, dict] = {
         "serve": {"source": str(ROOT / "rrbc_core" / "data" / "example_measurements.csv")},
         "mesh_node": "/registration/points",  # no work-cell mesh with this file: wait for the points instead
     },
-    "presentation_1280x720.png": {"serve": {"present": True}, "viewport": {"width": 1280, "height": 720}},
+    "presentation_1280x720.png": {
+        "serve": {"present": True},
+        "viewport": {"width": 1280, "height": 720},
+        **({"mesh_node_after": GHOST_NODE} if STEPS[0].see_through else {}),
+    },
     **{
         f"presentation_step{k}_1280x720.png": {
             "serve": {"present": True},

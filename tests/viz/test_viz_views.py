@@ -749,10 +749,13 @@ def test_the_last_steps_ring_label_keeps_clear_of_the_bullseyes_spheres_on_a_pro
 def test_the_ring_label_keeps_clear_of_the_selected_label_in_every_preset(app, preset):
     """Issue 39 (the first picture): the bullseye's "T1: ring 0.5 mm" and the selected target's own label were drawn
     over each other. For each camera preset (as the app's initial camera: no tab here) and each target in view,
-    selected in turn: the two labels' boxes (each as drawn, with its anchor) do not meet."""
-    from rrbc_core.geometry.framing import in_view
-    from rrbc_core.geometry.label_layout import label_boxes, overlap
+    selected in turn: the two labels' boxes (each as drawn, with its anchor) do not meet. And the selected label
+    starts beside the vertical line through its target, which the arm's stylus (radius 4 mm) and the drag handle's
+    up arrow come down (at 1600x900 they crossed its first characters)."""
+    from rrbc_core.geometry.framing import camera_basis, in_view
+    from rrbc_core.geometry.label_layout import label_boxes, overlap, sphere_boxes
     from rrbc_viz.camera import DEFAULT_IMAGE
+    from rrbc_viz.node_values import label_heights
 
     view = app.views.preset_view(preset)
     app.ctx.state.initial_camera = pose = app.ctx.camera.set_initial(view, near=1.0, far=1e5)
@@ -776,6 +779,17 @@ def test_the_ring_label_keeps_clear_of_the_selected_label_in_every_preset(app, p
         assert not ring.visible or not _ring_label_meets_its_ring(app, pose, DEFAULT_IMAGE, 0.8), (pid, ring.anchor)
         own = label_boxes(np.array([ring.position]), [ring.text], pose, DEFAULT_IMAGE, 0.8, "bottom-left")
         met += overlap(own[0], b[0])
+        # the stylus: its axis and its sides as seen (±4 mm across the view), from the target up past the label
+        r_mm = app.state.display.marker_mm
+        up = np.linspace(0.0, label_heights(r_mm)[1] + 4 * r_mm, 40)
+        right = camera_basis(pose.forward, pose.up)[1]
+        p = ev.targets.positions[ev.targets.ids.index(pid)]
+        line = np.vstack([p + np.outer(up, [0.0, 0.0, 1.0]) + s * 4.0 * right for s in (-1.0, 0.0, 1.0)])
+        px = sphere_boxes(line, np.full(len(line), 1e-6), pose, DEFAULT_IMAGE)
+        cx, cy = (px[:, 0] + px[:, 2]) / 2, (px[:, 1] + px[:, 3]) / 2
+        box = b[0]
+        crossed = (cx > box[0]) & (cx < box[2]) & (cy > box[1]) & (cy < box[3])
+        assert not crossed.any(), (pid, mine.anchor, box)
     if preset == "whole cell":  # from afar the ring is small: the case this is for (labels met without it)
         assert met > 0
     assert shown >= 0.75 * tried, (preset, shown, tried)  # and it is shown (hiding it would meet nothing)
