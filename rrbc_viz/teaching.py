@@ -309,7 +309,7 @@ def _step9(ev: Evaluation, ctx: LessonContext) -> str:
 STEPS: tuple[Step, ...] = (
     Step(
         "Measure registration points",
-        ("mesh", "arm", "sensor", "frames", "registration", "labels"),
+        ("mesh", "arm", "sensor", "registration", "labels"),
         _step1,
         focus=("registration", "robot", "sensor"),  # its text: the robot and the sensor both measure them
         see_through=True,  # seen with the sensor, some points lie behind its mast
