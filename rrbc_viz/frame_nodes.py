@@ -38,48 +38,47 @@ class FrameNodes:
         self._move: Move | None = None
 
     def build(self, extent_mm: float, true_pose, registered, label: MakeLabel, move: Move) -> None:
-        """The frames, their axes `AXES_SHARE` of the point sets' extent long (the sensor's times the zoom, `zoom`); `true_pose`
-        (a RigidTransform or None) and `registered` (the registration's mapping) where they are, until `show`."""
+        """The frames, their axes `AXES_SHARE` of the point sets' extent long (the sensor's times the zoom, `zoom`);
+        `true_pose` (a RigidTransform or None) and `registered` (the registration's mapping) where they are, until
+        `show`."""
         sc = self._scene
         axes = AXES_SHARE * extent_mm
         self._move = move
         self._sizes = {}
         self._poses = {}
-        poses = [("/frames/robot", np.eye(3), np.zeros(3), "robot base")]
+        # (name, rotation, origin, label, length and radius as shares of `axes`, more of its look)
+        frames: list[tuple[str, np.ndarray, np.ndarray, str, float, float, dict]] = [
+            ("/frames/robot", np.eye(3), np.zeros(3), "robot base", 1.0, 0.03, {})
+        ]
         if true_pose is not None:
-            poses.append(
-                (
-                    "/frames/sensor_true",
-                    np.asarray(true_pose.rotation, float),
-                    np.asarray(true_pose.translation, float),
-                    "sensor (true pose)",
-                )
+            rot, origin = np.asarray(true_pose.rotation, float), np.asarray(true_pose.translation, float)
+            frames.append(("/frames/sensor_true", rot, origin, "sensor (true pose)", 1.0, 0.03, {}))
+        rot, origin = np.asarray(registered.rotation, float), np.asarray(registered.translation, float)
+        # thin and longer, its origin black: seen against the cell's light surfaces
+        frames.append(
+            (
+                "/frames/sensor_registered",
+                rot,
+                origin,
+                "sensor (registered)",
+                1.3,
+                0.012,
+                {"origin_color": (20, 20, 20)},
             )
-        for name, rot, origin, text in poses:
+        )
+        for name, rot, origin, text, length, radius, look in frames:
             handle = sc.add_frame(
                 name,
-                axes_length=axes * self._scale(name),
-                axes_radius=axes * 0.03 * self._scale(name),
+                axes_length=axes * length * self._scale(name),
+                axes_radius=axes * radius * self._scale(name),
                 wxyz=wxyz(rot),
                 position=origin,
+                **look,
             )
-            self._sizes[name] = (handle, axes, axes * 0.03)
+            self._sizes[name] = (handle, axes * length, axes * radius)
             self._poses[name] = (rot, origin)
             label(name + "/label", text, self._label_position(name))
-        self._registered = sc.add_frame(
-            "/frames/sensor_registered",
-            axes_length=axes * 1.3 * self._scale("/frames/sensor_registered"),
-            axes_radius=axes * 0.012 * self._scale("/frames/sensor_registered"),
-            origin_color=(20, 20, 20),  # black: seen against the cell's light surfaces
-            wxyz=wxyz(registered.rotation),
-            position=np.asarray(registered.translation, float),
-        )
-        self._sizes["/frames/sensor_registered"] = (self._registered, axes * 1.3, axes * 0.012)
-        self._poses["/frames/sensor_registered"] = (
-            np.asarray(registered.rotation, float),
-            np.asarray(registered.translation, float),
-        )
-        label(REGISTERED_LABEL, "sensor (registered)", self._label_position("/frames/sensor_registered"))
+        self._registered = self._sizes["/frames/sensor_registered"][0]
         self._magnified = true_pose is not None
 
     def zoom(self, factor: float) -> None:
