@@ -34,6 +34,22 @@ def encode(type_name: str, **fields) -> bytes:
     return msgspec.msgpack.encode({"type": type_name, **fields})
 
 
+def camera_message(image_width: int = 1280) -> bytes:
+    """A browser tab's camera report (`image_width` x 800 pixels, looking at the cell from -y)."""
+    return encode(
+        "ViewerCameraMessage",
+        wxyz=[1.0, 0.0, 0.0, 0.0],
+        position=[0.0, -2000.0, 1500.0],
+        fov=0.87,
+        near=0.1,
+        far=100000.0,
+        image_height=800,
+        image_width=int(image_width),
+        look_at=[450.0, 0.0, 0.0],
+        up_direction=[0.0, 0.0, 1.0],
+    )
+
+
 @dataclass
 class ClientRecord:
     """What one client saw: arrival times (time.monotonic) of the server's frames, and whether it was closed."""
@@ -81,20 +97,7 @@ class ClientPool:
         self._sockets[k] = ws
         self._readers.append(asyncio.ensure_future(self._read(k, ws)))
         # a browser reports its camera at once (the server waits for it before it frames the tab's view)
-        await ws.send(
-            encode(
-                "ViewerCameraMessage",
-                wxyz=[1.0, 0.0, 0.0, 0.0],
-                position=[0.0, -2000.0, 1500.0],
-                fov=0.87,
-                near=0.1,
-                far=100000.0,
-                image_height=800,
-                image_width=1280,
-                look_at=[450.0, 0.0, 0.0],
-                up_direction=[0.0, 0.0, 1.0],
-            )
-        )
+        await ws.send(camera_message())
 
     async def _connect_all(self, open_timeout: float) -> None:
         for k in range(len(self.records)):  # one after the other, as tabs are opened
