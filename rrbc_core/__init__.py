@@ -16,7 +16,6 @@ The layers (subpackages) and where things live: docs/architecture.md.
 from __future__ import annotations
 
 import importlib
-from importlib import metadata as _metadata
 from typing import TYPE_CHECKING
 
 #: Each public name and the module that defines it. Loaded on first use (PEP 562), so `import rrbc_core` and the
@@ -68,7 +67,22 @@ if TYPE_CHECKING:  # what type checkers and editors see
     from rrbc_core.simulation.montecarlo import MonteCarloResult, simulate
 
 
+__version__: str  # the installed distribution's version, read on first use (importlib.metadata costs ~30 ms)
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("rrbc")
+    except metadata.PackageNotFoundError:  # a checkout on sys.path without installing
+        return "0+unknown"
+
+
 def __getattr__(name: str):
+    if name == "__version__":
+        globals()[name] = value = _version()
+        return value
     if name in _EXPORTS:
         value = getattr(importlib.import_module(_EXPORTS[name]), name)
         globals()[name] = value
@@ -77,13 +91,8 @@ def __getattr__(name: str):
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_EXPORTS))
+    return sorted(set(globals()) | set(_EXPORTS) | {"__version__"})
 
-
-try:
-    __version__ = _metadata.version("rrbc")
-except _metadata.PackageNotFoundError:  # a checkout on sys.path without installing
-    __version__ = "0+unknown"
 
 __all__ = [
     "__version__",
