@@ -67,8 +67,8 @@ def _zip_triangles(p: Path) -> int | None:
             total = sum(i.file_size for i in infos)
             if total > MESH_MAX_BYTES:
                 raise InputError(
-                    f"{p}: the 3MF archive unpacks to {total >> 20} MiB; at most {MESH_MAX_BYTES >> 20} MiB "
-                    "(decimate it first)"
+                    f"{p}: the 3MF archive unpacks to {total >> 20} MiB; at most {MESH_MAX_BYTES >> 20} MiB unpacked "
+                    "(export a decimated mesh; a small file that unpacks this far is not a mesh)"
                 )
             n = 0
             for info in infos:

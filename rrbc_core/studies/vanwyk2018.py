@@ -14,11 +14,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rrbc_core.errors import InputError
 from rrbc_core.runtime.threads import thread_limited
 from rrbc_core.studies import model_fit, reference_data, reproduction
 from rrbc_core.studies.reproduction import METHODS, MODELS, STATISTICS
 
 DEFAULT_REPLICATES = 200
+#: at most this many simulated experiments per model and direction (the default takes minutes; memory grows with it:
+#: 200 000 asked for 12 GB within a minute)
+MAX_REPLICATES = 2000
 CONFUSION_TABLES = 10
 CONFUSION_BIAS_TO_NOISE = 3.0
 CONFUSION_SIGMA_MM = 0.15
@@ -360,6 +364,8 @@ def run(
     confusion tables and each table's choice — are tasks of `runtime.tasks` (`scheduler`: this process, "local", a dask address, or
     "auto"); each carries its own fixed seed, so the result is the same wherever they run. `task_log`: a list
     that receives each stage's task seconds when they run in this process (benchmarks/reproduce_speed.py)."""
+    if isinstance(replicates, bool) or not 5 <= int(replicates) <= MAX_REPLICATES:
+        raise InputError(f"--replicates must be from 5 to {MAX_REPLICATES} for vanwyk2018, got {replicates}")
     from rrbc_core.runtime.tasks import task_runner
 
     t0 = time.perf_counter()

@@ -90,6 +90,7 @@ def test_report_files_are_written_and_link_their_figures(quick_report):
         (["reproduce", "nobody2099"], "invalid choice"),
         (["reproduce", "vanwyk2018", "--replicates", "2"], "at least 5"),
         (["reproduce", "vanwyk2018", "--replicates", "many"], "not an integer"),
+        (["reproduce", "vanwyk2018", "--replicates", "1000000000"], "from 5 to 2000"),  # 12 GB a minute, unbounded
         (["reproduce", "vanwyk2018", "--layouts", "A,Z"], "unknown layout"),
         (["reproduce", "vanwyk2018", "--layouts", ","], "at least one layout"),
     ],
