@@ -28,6 +28,7 @@ import sys
 import threading
 import time
 import typing
+import warnings
 from collections.abc import Callable
 
 import msgspec
@@ -224,4 +225,8 @@ def install() -> None:
             await handle_updates(self, client_id, message)
 
         _gui_api.GuiApi._handle_gui_updates = _checked_updates  # type: ignore[method-assign]
+        # viser warns (once per tab) when a message is queued for a tab that has gone or after the server stopped: a
+        # drag or an update in flight when a tab closes or Ctrl+C comes. The message is dropped either way, and what
+        # a tab does must not write to the log (issue 42)
+        warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning)
         _installed = True

@@ -12,6 +12,7 @@ import json
 import re
 import subprocess
 import sys
+import threading
 import time
 import urllib.request
 
@@ -21,10 +22,13 @@ import viser
 
 from rrbc_core.errors import InputError
 from rrbc_core.io.measurements import parse_measurements
+from rrbc_core.io.scene import default_scene_path
+from rrbc_core.io.scene_toml import load_scene
 from rrbc_core.session import figures
 from rrbc_viz import colors
 from rrbc_viz.app import RunningApp
 from rrbc_viz.controls import LESSON_NEXT, LESSON_PREVIOUS
+from rrbc_viz.node_values import gizmo_name
 from rrbc_viz.serve import serve
 from tests.paths import EXAMPLE_CSV
 from tests.viz.helpers import _gizmo_drag, _press
@@ -537,7 +541,7 @@ def test_cli_view_starts_and_prints_the_url(flags, mode):
     proc = subprocess.Popen(
         RRBC + ["view", "--port", "0", *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
-    pool = None
+    pool = dragging = None
     stopped_in = None
     try:
         line = proc.stdout.readline()
@@ -550,6 +554,18 @@ def test_cli_view_starts_and_prints_the_url(flags, mode):
         while not all(rec.arrivals for rec in pool.records) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert all(rec.arrivals for rec in pool.records)  # each tab is being sent its scene
+        # every tab drags the selected target while the server is stopped (a stop mid-drag once wrote viser's
+        # "Queued a ... on a closed connection" warning to the log)
+        scene = load_scene(default_scene_path())
+        h1 = np.asarray(scene.targets[0].position, float)
+        owners = [str(k) for k in range(3)] if "--per-client" in flags else None
+        dragging = threading.Thread(
+            target=pool.drag_all,
+            args=([gizmo_name("targets", "H1")] * 3, lambda k, t: h1 + [5.0 * t, 0.0, 0.0], 3.0, 20.0, owners),
+            daemon=True,
+        )
+        dragging.start()
+        time.sleep(1.0)  # the drags are under way (the stop is what is tested, at any moment of them)
     finally:
         t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)
@@ -559,10 +575,14 @@ def test_cli_view_starts_and_prints_the_url(flags, mode):
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+        if dragging is not None:
+            dragging.join(timeout=30)  # its last messages go nowhere: the server is gone
         if pool is not None:
             pool.close()
     assert stopped_in is not None, "Ctrl+C did not stop the server within 10 s"
     assert proc.returncode == 0
+    err = proc.stderr.read()
+    assert "Traceback" not in err and "Warning" not in err, err  # a quiet log, whatever the tabs were doing
 
 
 def test_ctrl_c_handed_to_another_thread_still_stops_the_server():
