@@ -7,9 +7,10 @@ records when the server's frames reach it. Measured:
 
 - the longest time any client waited for a frame while dragging (after the first second): goal at most 0.5 s;
 - once the drags stop, how long a click (selecting a target) waits for its answer: goal at most 1 s;
-- the server's resident memory when the clients have gone, against before they came (after one tab has come and
-  gone: what a process keeps for good once it has served a tab is not the class's): goal within 20 %; the
-  server's memory at start is reported beside it.
+- the server's resident memory when the clients have gone, against the server as started: goal within 30 % (issue
+  42). The per-client server prepares at start what every tab needs once (`per_client.PerClientApp._prepare`: the
+  compiled Monte Carlo kernels, the arm's mesh reader), as the shared one evaluates its session; the memory after one
+  tab has come and gone is reported beside it.
 
 The server runs in this process, as `rrbc view` runs it; the clients on their own event loop in a thread.
 """
@@ -30,7 +31,7 @@ DRAG_S = 10.0
 RATE_HZ = 20.0
 GAP_GOAL_S = 0.5
 CLICK_GOAL_S = 1.0
-RSS_GOAL = 1.2
+RSS_GOAL = 1.3
 #: the shared app's own worker threads: one each, started when first needed, kept for the app's life
 SHARED_APP_WORKERS = frozenset({"rrbc-drags", "rrbc-monte-carlo", "rrbc-planning"})
 
@@ -78,8 +79,8 @@ def class_run(per_client: bool, clients: int = CLIENTS, seconds: float = DRAG_S,
                 time.sleep(0.1)
             return sum(t.name.startswith("rrbc-") for t in threading.enumerate())
 
-        # one tab first, gone again: what a process keeps once it has served a tab (imported modules, compiled
-        # Monte Carlo kernels, the robot's meshes) is the baseline a class is judged against
+        # one tab first, gone again: its memory is reported beside the started server's (the goal's baseline), and
+        # the threads a served tab starts for good (the shared app's workers) are the threads' baseline
         warm = ClientPool(app.url, 1)
         t_w = time.monotonic()
         while per_client and not app.apps and time.monotonic() < t_w + 120:
@@ -217,11 +218,11 @@ def class_load(quick: bool) -> list[dict]:
                 met=loaded["click_s"] is not None and loaded["click_s"] <= CLICK_GOAL_S,
             )
         )
-        ratio = loaded["rss_after_mb"] / loaded["rss_before_mb"]
+        ratio = loaded["rss_after_mb"] / loaded["rss_started_mb"]
         rows.append(
             row(
                 f"class_{mode}_rss_after_ratio",
-                idle["rss_after_mb"] / idle["rss_before_mb"],
+                idle["rss_after_mb"] / idle["rss_started_mb"],
                 "ratio",
                 loaded=ratio,
                 goal=f"<= {RSS_GOAL:g}",

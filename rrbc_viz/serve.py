@@ -44,6 +44,20 @@ def light_plainly(server) -> None:
     server.scene.add_light_hemisphere("/plain_light", sky_color=sky, ground_color=ground, intensity=intensity)
 
 
+def prepare_once(session, arm_meshes: bool = True) -> None:
+    """What a server's first tab needs once per process, done at start: the session's evaluation, a first Monte
+    Carlo (its compiled kernels made) and the arm's URDF reader loaded. The first tab then opens as fast as the next,
+    and a class leaves behind nothing the started server did not hold (the first tab used to add 100-120 MB of
+    compiler and reader modules, kept for the process's life: issue 42, item 5)."""
+    from rrbc_core.session import figures
+
+    session.evaluate()
+    if session.kind == "scene":  # measured data have no Monte Carlo
+        figures.monte_carlo(session, trials=2, seed=0)
+    if arm_meshes:
+        import yourdfpy  # noqa: F401 - the reader of the arm's meshes
+
+
 def serve(
     source=None,
     host: str = "127.0.0.1",
@@ -87,6 +101,7 @@ def serve(
     elif tip is not None or base is not None or tool is not None:
         raise InputError("--tip, --base and --tool describe the robot of a URDF: give --urdf")
     _check_host(host)
+    prepare_once(loaded.session, arm_meshes=not simple_arm)
     library = sources.Library.of(data_dirs, source)
     out = io.StringIO() if quiet else None
     with contextlib.redirect_stdout(out) if quiet else contextlib.nullcontext():

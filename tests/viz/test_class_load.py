@@ -28,9 +28,9 @@ def test_every_dragging_client_keeps_moving_and_a_click_after_is_answered(per_cl
     assert len(res["gaps_s"]) == clients
     assert res["max_gap_s"] <= 4 * GAP_GOAL_S, res["gaps_s"]
     assert res["click_s"] is not None and res["click_s"] <= 4 * CLICK_GOAL_S, res
-    # memory: the class's sessions and buffers are given back (against the process after one tab, module docstring
-    # of benchmarks/class_load.py); a generous bound here, the benchmark holds the 20 % goal
-    assert res["rss_after_mb"] <= 1.5 * res["rss_before_mb"], res
+    # memory: the class's sessions and buffers are given back (against the server as started, module docstring of
+    # benchmarks/class_load.py); a generous bound here, the benchmark holds the 30 % goal
+    assert res["rss_after_mb"] <= 1.5 * res["rss_started_mb"], res
     # the threads the class started are gone again (issue 42, item 5; rrbc_viz.worker_pool), less the shared app's
     # own workers started when first needed (on a loaded machine a slow planning update starts the Plan tab's)
     assert not res["threads_left"], (res["thread_names_after"], res["threads_left_stacks"])
