@@ -53,7 +53,10 @@ def prepare_once(session, arm_meshes: bool = True) -> None:
 
     session.evaluate()
     if session.kind == "scene":  # measured data have no Monte Carlo
-        figures.monte_carlo(session, trials=2, seed=0)
+        try:
+            figures.monte_carlo(session, trials=2, seed=0)
+        except InputError:  # settings the Monte Carlo refuses: its tab says why, as before; the app starts
+            pass
     if arm_meshes:
         import yourdfpy  # noqa: F401 - the reader of the arm's meshes
 
@@ -86,7 +89,8 @@ def serve(
     (`access.AccessGuard`); `simple_arm`: draw a scene's arm as links and joints instead of its URDF meshes (much lighter where the browser
     renders in software: a drag redraws the whole cell); `plain_light`: light the cell with viser's default lights and
     a hemisphere light instead of its image-based environment map (`PLAIN_LIGHT`). Sets this process's BLAS/OpenMP pools to one thread (`rrbc_core.runtime.threads`, docs/threads.md): the
-    server's callbacks and workers then never wait for idle BLAS threads on a busy machine."""
+    server's callbacks and workers then never wait for idle BLAS threads on a busy machine. What the first tab needs once
+    is made before the server starts (`prepare_once`)."""
     apply_process_policy()
     message_guard.install()  # malformed client messages dropped without a traceback (issue 31)
     if isinstance(source, ExplorerSession):
