@@ -45,13 +45,12 @@ def light_plainly(server) -> None:
 
 
 def prepare_once(session, arm_meshes: bool = True) -> None:
-    """What a server's first tab needs once per process, done at start: the session's evaluation, a first Monte
-    Carlo (its compiled kernels made) and the arm's URDF reader loaded. The first tab no longer pays for them, and a
-    class leaves behind nothing the started server did not hold (the first tab used to add 100-120 MB of
+    """What a server's first tab needs once per process, done at start (the session, loaded, is evaluated already): a
+    first Monte Carlo (its compiled kernels made) and the arm's URDF reader loaded. The first tab no longer pays for
+    them, and a class leaves behind nothing the started server did not hold (the first tab used to add 100-120 MB of
     compiler and reader modules, kept for the process's life: issue 42, item 5)."""
     from rrbc_core.session import figures
 
-    session.evaluate()
     if session.kind == "scene":  # measured data have no Monte Carlo
         try:
             figures.monte_carlo(session, trials=2, seed=0)
